@@ -1,0 +1,85 @@
+"""Headless engine of napari-polarseg: plain functions on arrays, no napari or Qt.
+
+Stages (thesis section 4.5): :func:`polarisation_image` → :func:`zenith_from_dop` /
+:func:`azimuth_from_phase` → :func:`block_coefficients` → :func:`pca_features` →
+:func:`affinity_matrix` → :func:`recursive_ncut` → :func:`upsample_block_labels`, and
+:func:`reconstruct_intensity`. :class:`Pipeline` chains them with a per-stage cache.
+Angles are radians throughout the engine.
+"""
+
+from .errors import Cancelled, PolarsegError
+from .features import PCAResult, affinity_matrix, mahalanobis_sq, pca_features, whiten
+from .fresnel import (
+    ZenithEstimate,
+    azimuth_from_phase,
+    brewster_angle,
+    diffuse_dop,
+    diffuse_dop_ceiling,
+    diffuse_dop_fresnel,
+    fresnel_reflectance,
+    specular_dop,
+    specular_dop_fresnel,
+    zenith_from_diffuse_dop,
+    zenith_from_dop,
+    zenith_from_specular_dop,
+)
+from .harmonics import (
+    block_coefficients,
+    block_grid,
+    coefficient_index,
+    degree_order,
+    n_coefficients,
+    pixel_block_index,
+    real_sph_harm,
+    reconstruct_intensity,
+    upsample_block_labels,
+)
+from .ncut import CutTree, best_split, bipartition, fiedler_vector, recursive_ncut
+from .params import SegmentParams
+from .pipeline import STAGES, Pipeline, SegmentationResult, intensity_baseline, segment
+from .polarimage import PolarisationImage, distinct_angle_count, polarisation_image
+
+__all__ = [
+    "STAGES",
+    "Cancelled",
+    "CutTree",
+    "PCAResult",
+    "Pipeline",
+    "PolarisationImage",
+    "PolarsegError",
+    "SegmentParams",
+    "SegmentationResult",
+    "ZenithEstimate",
+    "affinity_matrix",
+    "azimuth_from_phase",
+    "best_split",
+    "bipartition",
+    "block_coefficients",
+    "block_grid",
+    "brewster_angle",
+    "coefficient_index",
+    "degree_order",
+    "diffuse_dop",
+    "diffuse_dop_ceiling",
+    "diffuse_dop_fresnel",
+    "distinct_angle_count",
+    "fiedler_vector",
+    "fresnel_reflectance",
+    "intensity_baseline",
+    "mahalanobis_sq",
+    "n_coefficients",
+    "pca_features",
+    "pixel_block_index",
+    "polarisation_image",
+    "real_sph_harm",
+    "reconstruct_intensity",
+    "recursive_ncut",
+    "segment",
+    "specular_dop",
+    "specular_dop_fresnel",
+    "upsample_block_labels",
+    "whiten",
+    "zenith_from_diffuse_dop",
+    "zenith_from_dop",
+    "zenith_from_specular_dop",
+]

@@ -1,0 +1,16 @@
+"""Exceptions raised by the engine.
+
+Every problem with the user's input or parameters is raised as :class:`PolarsegError`
+(a :class:`ValueError`), with a one-line message that names the bad argument. The command
+line prints that line without a traceback; the napari plugin shows it as a notification.
+"""
+
+from __future__ import annotations
+
+
+class PolarsegError(ValueError):
+    """Invalid input or parameters for a napari-polarseg computation."""
+
+
+class Cancelled(Exception):
+    """A pipeline run was cancelled between stages (not an error of the input)."""

@@ -1,0 +1,386 @@
+"""The segmentation pipeline of thesis section 4.5, with a per-stage cache.
+
+Stages, each a plain function of the engine, and the parameters each depends on::
+
+    polarisation   (stack, angles)                       → Î, ρ, φ          polarimage.py
+    normals        refractive_index, model, branch        → θ, azimuth       fresnel.py
+    harmonics      window, degree, coefficients, ridge    → block a_lm       harmonics.py
+    pca            variance                               → block features   features.py
+    affinity       scale                                  → S = exp(−D/s)    features.py
+    cut            min_segment_blocks, ncut_threshold     → cut tree         ncut.py
+    labels         n_segments                             → labels           ncut.py
+    reconstruction window, degree, ridge (after normals)  → Î rebuilt, error harmonics.py
+
+A stage is recomputed only when one of its own parameters or an upstream stage changed:
+changing ``n_segments`` re-reads the cached cut tree and never recomputes harmonics.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import Counter
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from . import features as feat
+from . import fresnel, harmonics, ncut, polarimage
+from .errors import Cancelled, PolarsegError
+from .params import SegmentParams
+
+#: Stage names in execution order.
+STAGES = (
+    "polarisation",
+    "normals",
+    "harmonics",
+    "pca",
+    "affinity",
+    "cut",
+    "labels",
+    "reconstruction",
+)
+
+#: Upstream stage of each stage.
+UPSTREAM = {
+    "polarisation": None,
+    "normals": "polarisation",
+    "harmonics": "normals",
+    "pca": "harmonics",
+    "affinity": "pca",
+    "cut": "affinity",
+    "labels": "cut",
+    "reconstruction": "normals",
+}
+
+#: Largest number of blocks for the dense affinity (n² float64 entries).
+MAX_DENSE_BLOCKS = 12_000
+
+
+def _own_key(stage: str, p: SegmentParams) -> tuple:
+    if stage == "normals":
+        branch = p.specular_branch if p.model == "specular" else None
+        return (p.refractive_index, p.model, branch)
+    if stage == "harmonics":
+        return (p.window, p.degree, p.coefficients, p.ridge if p.coefficients == "ridge" else None)
+    if stage == "pca":
+        return (p.variance,)
+    if stage == "affinity":
+        return (p.scale,)
+    if stage == "cut":
+        return (p.min_segment_blocks, p.ncut_threshold)
+    if stage == "labels":
+        return (p.n_segments,)
+    if stage == "reconstruction":
+        return (p.window, p.degree, p.ridge)
+    return ()
+
+
+@dataclass
+class Normals:
+    zenith: np.ndarray
+    azimuth: np.ndarray
+    clamped: np.ndarray
+
+
+@dataclass
+class Reconstruction:
+    intensity: np.ndarray
+    error: np.ndarray
+
+    @property
+    def mean_error(self) -> float:
+        return float(np.mean(self.error))
+
+
+@dataclass
+class SegmentationResult:
+    """Everything one pipeline run produced (arrays are H × W unless noted).
+
+    ``labels`` covers every input pixel (remainder strips take their nearest block's
+    label); ``block_labels`` is (H // w, W // w). Angles are radians.
+    """
+
+    params: SegmentParams
+    intensity: np.ndarray
+    dop: np.ndarray
+    phase: np.ndarray
+    residual: np.ndarray
+    zenith: np.ndarray
+    azimuth: np.ndarray
+    clamped: np.ndarray
+    coefficients: np.ndarray
+    features: np.ndarray
+    explained_variance_ratio: np.ndarray
+    block_labels: np.ndarray
+    labels: np.ndarray
+    ncut_values: list[float]
+    timings: dict[str, float]
+    reconstruction: np.ndarray | None = None
+    reconstruction_error: np.ndarray | None = None
+
+    @property
+    def n_segments(self) -> int:
+        return int(self.block_labels.max()) + 1
+
+    @property
+    def n_clamped(self) -> int:
+        return int(np.count_nonzero(self.clamped))
+
+    @property
+    def mean_reconstruction_error(self) -> float | None:
+        if self.reconstruction_error is None:
+            return None
+        return float(np.mean(self.reconstruction_error))
+
+    def summary(self) -> dict[str, Any]:
+        """JSON-ready figures of the run (stage seconds, segments, variance, error)."""
+        return {
+            "stage_seconds": {k: round(v, 6) for k, v in self.timings.items()},
+            "total_seconds": round(sum(self.timings.values()), 6),
+            "n_segments": self.n_segments,
+            "segment_pixels": np.bincount(self.labels.ravel()).tolist(),
+            "n_blocks": int(self.block_labels.size),
+            "block_grid": list(self.block_labels.shape),
+            "n_components": int(self.features.shape[1]),
+            "explained_variance": float(np.sum(self.explained_variance_ratio)),
+            "explained_variance_ratio": [float(v) for v in self.explained_variance_ratio],
+            "ncut_values": [float(v) for v in self.ncut_values],
+            "clamped_pixels": self.n_clamped,
+            "mean_reconstruction_error": self.mean_reconstruction_error,
+        }
+
+
+@dataclass
+class Pipeline:
+    """Cached pipeline over one angle stack.
+
+    Parameters
+    ----------
+    stack : array (N, H, W)
+        Angle stack.
+    angles : array (N,)
+        Polariser angles in radians.
+    params : SegmentParams
+        Initial parameters; assign ``pipeline.params`` (or call :meth:`update`) to change.
+
+    Examples
+    --------
+    >>> from napari_polarseg.engine import Pipeline, SegmentParams
+    >>> pipe = Pipeline(stack, angles, SegmentParams(n_segments=3))  # doctest: +SKIP
+    >>> result = pipe.run()                                          # doctest: +SKIP
+    >>> pipe.update(n_segments=4); pipe.run().n_segments             # doctest: +SKIP
+    4
+    """
+
+    stack: np.ndarray
+    angles: np.ndarray
+    params: SegmentParams = field(default_factory=SegmentParams)
+    calls: Counter = field(default_factory=Counter, init=False)
+    _cache: dict[str, tuple[tuple, Any]] = field(default_factory=dict, init=False)
+    _seconds: dict[str, float] = field(default_factory=dict, init=False)
+
+    def __post_init__(self) -> None:
+        self.stack, self.angles = polarimage.check_stack(self.stack, self.angles)
+        if not isinstance(self.params, SegmentParams):
+            raise PolarsegError("params must be a SegmentParams")
+
+    # -- parameters -------------------------------------------------------------------
+    def update(self, **changes: Any) -> SegmentParams:
+        """Change some parameters (validated); stale stages rerun on the next :meth:`run`."""
+        self.params = self.params.replace(**changes)
+        return self.params
+
+    def key(self, stage: str) -> tuple:
+        """Cache key of a stage: its own parameters plus its upstream stage's key."""
+        up = UPSTREAM[stage]
+        own = _own_key(stage, self.params)
+        return own if up is None else (own, self.key(up))
+
+    def is_fresh(self, stage: str) -> bool:
+        """True if ``stage`` is cached for the current parameters."""
+        entry = self._cache.get(stage)
+        return entry is not None and entry[0] == self.key(stage)
+
+    def stale_stages(self, reconstruction: bool = True) -> list[str]:
+        names = STAGES if reconstruction else STAGES[:-1]
+        return [s for s in names if not self.is_fresh(s)]
+
+    # -- stages -----------------------------------------------------------------------
+    def _compute(self, stage: str) -> Any:
+        p = self.params
+        if stage == "polarisation":
+            return polarimage.polarisation_image(self.stack, self.angles)
+        if stage == "normals":
+            pol = self.get("polarisation")
+            est = fresnel.zenith_from_dop(pol.dop, p.refractive_index, p.model, p.specular_branch)
+            azimuth = fresnel.azimuth_from_phase(pol.phase, p.model)
+            return Normals(est.zenith, azimuth, est.clamped)
+        if stage == "harmonics":
+            pol, nrm = self.get("polarisation"), self.get("normals")
+            harmonics.block_grid(pol.intensity.shape, p.window)  # validates w vs image
+            return harmonics.block_coefficients(
+                pol.intensity,
+                nrm.zenith,
+                nrm.azimuth,
+                p.window,
+                p.degree,
+                method=p.coefficients,
+                ridge=p.ridge,
+                weights=None if not pol.invalid.any() else ~pol.invalid,
+            )
+        if stage == "pca":
+            coef = self.get("harmonics")
+            if coef.shape[0] * coef.shape[1] < 2:
+                raise PolarsegError(
+                    f"window size {p.window} leaves fewer than 2 blocks in a "
+                    f"{self.stack.shape[1]} x {self.stack.shape[2]} image"
+                )
+            return feat.pca_features(coef, p.variance)
+        if stage == "affinity":
+            pca = self.get("pca")
+            n = pca.features.shape[0]
+            if n > MAX_DENSE_BLOCKS:
+                raise PolarsegError(
+                    f"{n} blocks is too many for a dense affinity (limit {MAX_DENSE_BLOCKS}); "
+                    "use a larger window"
+                )
+            return feat.affinity_matrix(pca.features, p.scale)
+        if stage == "cut":
+            return ncut.CutTree(
+                self.get("affinity"), min_size=p.min_segment_blocks, threshold=p.ncut_threshold
+            )
+        if stage == "labels":
+            tree = self.get("cut")
+            coef = self.get("harmonics")
+            block = tree.labels(p.n_segments).reshape(coef.shape[:2])
+            shape = self.stack.shape[1:]
+            return block, harmonics.upsample_block_labels(block, shape, p.window), tree.ncut_values
+        if stage == "reconstruction":
+            pol, nrm = self.get("polarisation"), self.get("normals")
+            rec = harmonics.reconstruct_intensity(
+                pol.intensity,
+                nrm.zenith,
+                nrm.azimuth,
+                p.window,
+                p.degree,
+                ridge=p.ridge,
+                weights=None if not pol.invalid.any() else ~pol.invalid,
+            )
+            return Reconstruction(rec, np.abs(rec - pol.intensity))
+        raise KeyError(stage)
+
+    def get(self, stage: str) -> Any:
+        """Value of a stage for the current parameters, computing it if stale."""
+        key = self.key(stage)
+        entry = self._cache.get(stage)
+        if entry is not None and entry[0] == key:
+            return entry[1]
+        t0 = time.perf_counter()
+        value = self._compute(stage)
+        self._seconds[stage] = time.perf_counter() - t0
+        self.calls[stage] += 1
+        self._cache[stage] = (key, value)
+        return value
+
+    # -- running ----------------------------------------------------------------------
+    def run_iter(self, reconstruction: bool = True) -> Iterator[tuple[str, int, int]]:
+        """Run stage by stage, yielding ``(stage, index, total)`` after each.
+
+        Stopping the iteration between yields cancels the run; cached stages stay valid.
+        """
+        names = STAGES if reconstruction else STAGES[:-1]
+        for i, name in enumerate(names):
+            self.get(name)
+            yield name, i + 1, len(names)
+
+    def run(
+        self,
+        reconstruction: bool = True,
+        progress: Callable[[str, int, int], None] | None = None,
+        cancel: Callable[[], bool] | None = None,
+    ) -> SegmentationResult:
+        """Run every stale stage and return the result.
+
+        Parameters
+        ----------
+        reconstruction : bool
+            Also rebuild Î from the harmonics and compute the error map.
+        progress : callable(stage, index, total), optional
+            Called after each stage.
+        cancel : callable() -> bool, optional
+            Checked between stages; returning True raises :class:`Cancelled`.
+        """
+        params = self.params
+        for name, i, n in self.run_iter(reconstruction):
+            if progress is not None:
+                progress(name, i, n)
+            if cancel is not None and cancel() and i < n:
+                raise Cancelled(f"cancelled after stage {name!r}")
+        return self.result(reconstruction, params)
+
+    def result(
+        self, reconstruction: bool = True, params: SegmentParams | None = None
+    ) -> SegmentationResult:
+        """Assemble the result from the cache (runs stale stages if needed)."""
+        if params is not None and params != self.params:
+            raise PolarsegError("parameters changed while the pipeline was running")
+        pol = self.get("polarisation")
+        nrm = self.get("normals")
+        coef = self.get("harmonics")
+        pca = self.get("pca")
+        block, labels, ncut_values = self.get("labels")
+        rec = self.get("reconstruction") if reconstruction else None
+        names = STAGES if reconstruction else STAGES[:-1]
+        return SegmentationResult(
+            params=self.params,
+            intensity=pol.intensity,
+            dop=pol.dop,
+            phase=pol.phase,
+            residual=pol.residual,
+            zenith=nrm.zenith,
+            azimuth=nrm.azimuth,
+            clamped=nrm.clamped,
+            coefficients=coef,
+            features=pca.features,
+            explained_variance_ratio=pca.explained_variance_ratio,
+            block_labels=block,
+            labels=labels,
+            ncut_values=ncut_values,
+            timings={s: self._seconds.get(s, 0.0) for s in names},
+            reconstruction=None if rec is None else rec.intensity,
+            reconstruction_error=None if rec is None else rec.error,
+        )
+
+
+def segment(
+    stack: np.ndarray, angles: np.ndarray, params: SegmentParams | None = None, **changes: Any
+) -> SegmentationResult:
+    """One-shot convenience: run the whole pipeline on a stack (angles in radians)."""
+    params = (
+        (params or SegmentParams()).replace(**changes) if changes else (params or SegmentParams())
+    )
+    return Pipeline(stack, angles, params).run()
+
+
+def intensity_baseline(
+    intensity: np.ndarray,
+    window: int,
+    n_segments: int,
+    scale: float = 1.0,
+    min_segment_blocks: int = 1,
+) -> np.ndarray:
+    """Intensity-only baseline: the same Mahalanobis affinity and recursive normalized
+    cuts on block mean and standard deviation of Î (no polarisation at all).
+
+    Returns pixel labels (H, W) covering the whole image.
+    """
+    nby, nbx = harmonics.block_grid(intensity.shape, window)
+    blocks = harmonics._blockify(intensity, window)  # (nby, nbx, w*w)
+    x = np.stack([blocks.mean(-1), blocks.std(-1)], axis=-1).reshape(-1, 2)
+    if not np.all(x.var(axis=0) > 0):
+        x = x + 1e-12 * np.arange(x.shape[0])[:, None]
+    W = feat.affinity_matrix(x, scale)
+    block = ncut.recursive_ncut(W, n_segments, min_size=min_segment_blocks).reshape(nby, nbx)
+    return harmonics.upsample_block_labels(block, intensity.shape, window)
