@@ -51,7 +51,7 @@ def fresnel_reflectance(n_ratio: float, theta_i: ArrayLike) -> tuple[np.ndarray,
     """
     theta_i = np.asarray(theta_i, dtype=float)
     sin_t = np.sin(theta_i) / n_ratio  # Snell's law, eq. 3.1
-    tir = sin_t >= 1.0
+    tir = sin_t > 1.0
     cos_t = np.sqrt(np.clip(1.0 - sin_t**2, 0.0, None))
     cos_i = np.cos(theta_i)
     r_perp = (cos_i - n_ratio * cos_t) / (cos_i + n_ratio * cos_t)

@@ -1,0 +1,145 @@
+"""The cached pipeline: stages rerun only when stale, full-size outputs, cancellation."""
+
+import numpy as np
+import pytest
+from sklearn.metrics import adjusted_rand_score
+
+from napari_polarseg.engine import (
+    STAGES,
+    Cancelled,
+    Pipeline,
+    PolarsegError,
+    SegmentParams,
+    diffuse_dop,
+    intensity_baseline,
+    segment,
+)
+
+ANGLES = np.deg2rad([0, 30, 60, 90, 120, 150, 180])
+
+
+def two_material_stack(shape=(57, 63), seed=0):
+    """Left half n = 1.3, right half n = 1.8; the same dome-shaped surface and albedo."""
+    rng = np.random.default_rng(seed)
+    h, w = shape
+    yy, xx = np.mgrid[:h, :w]
+    # a rippled surface gives every block a spread of normals
+    zen = 0.15 + 1.1 * (0.5 + 0.5 * np.sin(xx / 2.3) * np.cos(yy / 3.1))
+    azi = np.mod(np.arctan2(np.sin(yy / 4.0), np.cos(xx / 5.0)), np.pi)
+    n = np.where(xx < w // 2, 1.3, 1.8)
+    rho = np.where(n == 1.3, diffuse_dop(zen, 1.3), diffuse_dop(zen, 1.8))
+    intensity = 0.6 * np.cos(zen) + 0.2
+    stack = intensity * (1 + rho * np.cos(2 * ANGLES[:, None, None] - 2 * azi))
+    stack = stack + rng.normal(0, 1e-3, stack.shape)
+    truth = (xx >= w // 2).astype(int)
+    return stack, truth
+
+
+def test_run_produces_full_size_outputs_and_summary():
+    stack, truth = two_material_stack()
+    pipe = Pipeline(stack, ANGLES, SegmentParams(window=10, degree=4, n_segments=2))
+    res = pipe.run()
+    for name in ("intensity", "dop", "phase", "zenith", "labels", "reconstruction_error"):
+        assert getattr(res, name).shape == (57, 63), name
+    assert res.block_labels.shape == (5, 6)
+    assert res.labels.dtype.kind == "i" and res.labels.min() == 0
+    assert res.n_segments == 2
+    s = res.summary()
+    assert set(s["stage_seconds"]) == set(STAGES)
+    assert 0.95 <= s["explained_variance"] <= 1.0
+    assert s["n_segments"] == 2 and sum(s["segment_pixels"]) == 57 * 63
+    assert s["mean_reconstruction_error"] == pytest.approx(res.reconstruction_error.mean())
+
+
+def test_two_materials_separate_where_intensity_does_not():
+    stack, truth = two_material_stack((60, 80))
+    res = segment(stack, ANGLES, SegmentParams(window=10, degree=4, n_segments=2))
+    assert adjusted_rand_score(truth.ravel(), res.labels.ravel()) > 0.9
+
+
+def test_changing_segments_reuses_everything_upstream():
+    stack, _ = two_material_stack()
+    pipe = Pipeline(stack, ANGLES, SegmentParams(window=10, degree=4, n_segments=2))
+    pipe.run()
+    assert all(pipe.calls[s] == 1 for s in STAGES)
+    pipe.update(n_segments=3)
+    assert pipe.stale_stages() == ["labels"]
+    res = pipe.run()
+    assert pipe.calls["harmonics"] == 1 and pipe.calls["cut"] == 1
+    assert pipe.calls["reconstruction"] == 1 and pipe.calls["labels"] == 2
+    assert res.n_segments == 3
+
+
+@pytest.mark.parametrize(
+    ("change", "stale"),
+    [
+        ({"scale": 2.0}, ["affinity", "cut", "labels"]),
+        ({"variance": 0.9}, ["pca", "affinity", "cut", "labels"]),
+        ({"refractive_index": 1.6}, list(STAGES[1:])),
+        ({"window": 8}, ["harmonics", "pca", "affinity", "cut", "labels", "reconstruction"]),
+        ({"coefficients": "ridge"}, ["harmonics", "pca", "affinity", "cut", "labels"]),
+        ({"specular_branch": "above-brewster"}, []),  # irrelevant under the diffuse model
+    ],
+)
+def test_stale_stages_follow_dependencies(change, stale):
+    stack, _ = two_material_stack()
+    pipe = Pipeline(stack, ANGLES, SegmentParams(window=10, degree=3))
+    pipe.run()
+    pipe.update(**change)
+    assert pipe.stale_stages() == stale
+
+
+def test_cancel_between_stages_keeps_cache_valid():
+    stack, _ = two_material_stack()
+    pipe = Pipeline(stack, ANGLES, SegmentParams(window=10, degree=3))
+    seen = []
+
+    def progress(stage, i, n):
+        seen.append(stage)
+
+    with pytest.raises(Cancelled):
+        pipe.run(progress=progress, cancel=lambda: len(seen) >= 3)
+    assert seen == list(STAGES[:3])
+    assert pipe.calls["pca"] == 0
+    pipe.run()
+    assert pipe.calls["harmonics"] == 1  # not recomputed after the cancel
+
+
+def test_run_iter_yields_each_stage():
+    stack, _ = two_material_stack()
+    pipe = Pipeline(stack, ANGLES, SegmentParams(window=10, degree=3))
+    steps = list(pipe.run_iter(reconstruction=False))
+    assert [s for s, _, _ in steps] == list(STAGES[:-1])
+    assert steps[-1][1:] == (len(STAGES) - 1, len(STAGES) - 1)
+    assert pipe.result(reconstruction=False).reconstruction_error is None
+
+
+@pytest.mark.parametrize(
+    ("params", "match"),
+    [
+        ({"window": 100}, "larger than the image"),
+        ({"refractive_index": 1.0}, "refractive index"),
+        ({"degree": -1}, "degree"),
+        ({"degree": 99}, "degree"),
+        ({"variance": 0.0}, "variance"),
+        ({"n_segments": 0}, "segments"),
+        ({"model": "metal"}, "model"),
+    ],
+)
+def test_bad_parameters_raise_clear_errors(params, match):
+    stack, _ = two_material_stack()
+    with pytest.raises(PolarsegError, match=match):
+        Pipeline(stack, ANGLES, SegmentParams(degree=2).replace(**params)).run()
+
+
+def test_params_json_round_trip_and_unknown_keys():
+    p = SegmentParams(window=12, degree=8, refractive_index=1.6, n_segments=4)
+    assert SegmentParams.from_json(p.to_json()) == p
+    with pytest.raises(PolarsegError, match="unknown"):
+        SegmentParams.from_dict({"windw": 3})
+
+
+def test_intensity_baseline_full_size():
+    stack, _ = two_material_stack()
+    labels = intensity_baseline(stack.mean(0), 10, 2)
+    assert labels.shape == (57, 63) and set(np.unique(labels)) == {0, 1}

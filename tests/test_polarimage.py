@@ -1,0 +1,109 @@
+"""Polarisation image by linear least squares (replaces thesis eqs. 4.8-4.12)."""
+
+import numpy as np
+import pytest
+
+from napari_polarseg.engine import PolarsegError, distinct_angle_count, polarisation_image
+
+
+def render(intensity, dop, phase, angles):
+    return intensity * (1 + dop * np.cos(2 * angles[:, None, None] - 2 * phase))
+
+
+def known_image(shape=(64, 80), seed=0):
+    rng = np.random.default_rng(seed)
+    intensity = rng.uniform(0.3, 0.8, shape)
+    dop = rng.uniform(0.0, 0.4, shape)
+    phase = rng.uniform(0.0, np.pi, shape)
+    return intensity, dop, phase
+
+
+@pytest.mark.parametrize(
+    "angles_deg",
+    [
+        [0, 45, 90, 135],
+        [0, 30, 60, 90, 120, 150, 180],
+        list(range(0, 181, 10)),
+        [3, 47, 101],  # any 3 distinct angles
+        [10, 10, 80, 150, 150],  # repeats allowed
+    ],
+)
+def test_exact_recovery_without_noise(angles_deg):
+    intensity, dop, phase = known_image()
+    a = np.deg2rad(angles_deg)
+    p = polarisation_image(render(intensity, dop, phase, a), a)
+    np.testing.assert_allclose(p.intensity, intensity, atol=1e-12)
+    np.testing.assert_allclose(p.dop, dop, atol=1e-12)
+    dphi = np.angle(np.exp(2j * (p.phase - phase))) / 2
+    assert np.max(np.abs(dphi[dop > 1e-6])) < 1e-9
+    assert np.all((p.phase >= 0) & (p.phase < np.pi))
+    assert np.max(p.residual) < 1e-12
+
+
+def test_phase_covers_whole_half_turn():
+    # the thesis's arccos estimator folds phase into [0, pi/2]; the fit must not
+    phase = np.linspace(0, np.pi, 50, endpoint=False)[None, :]
+    a = np.deg2rad([0, 30, 60, 90, 120, 150])
+    p = polarisation_image(render(np.ones_like(phase), 0.3 * np.ones_like(phase), phase, a), a)
+    np.testing.assert_allclose(p.phase, phase, atol=1e-12)
+    assert p.phase.max() > 3.0
+
+
+def test_seven_angles_12bit_noise_acceptance():
+    """Median |error| of rho < 0.005 and of phi < 2 degrees (rho > 0.05), 12-bit noise."""
+    rng = np.random.default_rng(7)
+    intensity, dop, phase = known_image((200, 200), seed=3)
+    a = np.deg2rad([0, 30, 60, 90, 120, 150, 180])
+    full = 4095.0
+    stack = render(intensity, dop, phase, a) * full / 1.6
+    stack = stack + rng.normal(0, 0.002 * full, stack.shape)  # 0.2 % of full scale
+    stack = np.clip(np.round(stack), 0, full).astype(np.uint16)
+    p = polarisation_image(stack, a)
+    assert np.median(np.abs(p.dop - dop)) < 0.005
+    sel = dop > 0.05
+    dphi = np.abs(np.angle(np.exp(2j * (p.phase - phase))) / 2)
+    assert np.rad2deg(np.median(dphi[sel])) < 2.0
+    np.testing.assert_allclose(np.median(p.intensity / (intensity * full / 1.6)), 1, atol=2e-3)
+
+
+def test_thesis_moment_estimator_is_biased_by_sqrt_pi():
+    # documents the thesis error: eq. 4.9 with a mean over evenly spaced angles gives
+    # rho * sqrt(1/pi); the least-squares fit gives rho
+    a = np.deg2rad(np.arange(0, 180, 10))
+    rho = 0.3
+    x = rho * np.cos(2 * a - 0.8)
+    sigma = np.sqrt(np.mean(x**2))
+    assert np.sqrt(2 / np.pi) * sigma == pytest.approx(rho / np.sqrt(np.pi), rel=1e-9)
+    p = polarisation_image((1 + x)[:, None, None], a)
+    assert p.dop[0, 0] == pytest.approx(rho, abs=1e-12)
+
+
+def test_distinct_angle_count_mod_180():
+    assert distinct_angle_count(np.deg2rad([0, 180, 90])) == 2
+    assert distinct_angle_count(np.deg2rad([0, 30, 60, 90, 120, 150, 180])) == 6
+    assert distinct_angle_count(np.deg2rad([10, 10, 10])) == 1
+
+
+@pytest.mark.parametrize(
+    ("stack_shape", "angles_deg", "match"),
+    [
+        ((3, 8, 8), [0, 90, 180], "distinct"),
+        ((2, 8, 8), [0, 45], "distinct"),
+        ((4, 8, 8), [0, 45, 90], "frames"),
+        ((8, 8), [0, 45, 90], "3 dimensions"),
+    ],
+)
+def test_bad_stacks_raise(stack_shape, angles_deg, match):
+    with pytest.raises(PolarsegError, match=match):
+        polarisation_image(np.ones(stack_shape), np.deg2rad(angles_deg))
+
+
+def test_nan_only_stack_raises_and_nan_pixels_are_invalid():
+    a = np.deg2rad([0, 45, 90, 135])
+    with pytest.raises(PolarsegError, match="NaN"):
+        polarisation_image(np.full((4, 5, 5), np.nan), a)
+    stack = np.ones((4, 5, 5))
+    stack[2, 1, 1] = np.nan
+    p = polarisation_image(stack, a)
+    assert p.invalid[1, 1] and p.invalid.sum() == 1
+    assert np.all(np.isfinite(p.dop)) and np.all(np.isfinite(p.phase))
