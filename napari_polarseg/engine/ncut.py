@@ -56,8 +56,9 @@ def fiedler_vector(W) -> np.ndarray:
         M = W * d_is[:, None] * d_is[None, :]
     if n <= DENSE_EIGH_MAX or n < 4:
         dense = M.toarray() if sps.issparse(M) else M
-        _, vecs = scipy.linalg.eigh(dense, subset_by_index=[n - 2, n - 1])
-        z = vecs[:, 0]
+        # full decomposition: the subset driver can drop vectors of repeated eigenvalues
+        _, vecs = scipy.linalg.eigh(dense, driver="evd")
+        z = vecs[:, n - 2]
     else:
         v0 = np.random.default_rng(0).standard_normal(n)
         vals, vecs = eigsh(M, k=2, which="LA", v0=v0, tol=1e-8)

@@ -16,6 +16,7 @@ from .errors import PolarsegError
 MODELS = ("diffuse", "specular")
 SPECULAR_BRANCHES = ("below-brewster", "above-brewster")
 COEFFICIENT_METHODS = ("thesis", "ridge")
+SCALE_MODES = ("absolute", "median")
 MAX_DEGREE = 60
 
 
@@ -46,6 +47,10 @@ class SegmentParams:
         Share of variance the PCA keeps, in (0, 1] (thesis: 0.95).
     scale : float
         Affinity scale s in S = exp(-D / s) (thesis: 1).
+    scale_mode : {"absolute", "median"}
+        ``"absolute"``: s as given (thesis). ``"median"``: s is relative to the median
+        squared Mahalanobis distance between blocks, which keeps the graph connected
+        whatever the number of PCA components.
     n_segments : int
         Number of segments the recursive normalized cut stops at.
     ncut_threshold : float or None
@@ -63,6 +68,7 @@ class SegmentParams:
     ridge: float = 1e-3
     variance: float = 0.95
     scale: float = 1.0
+    scale_mode: str = "absolute"
     n_segments: int = 3
     ncut_threshold: float | None = None
     min_segment_blocks: int = 1
@@ -97,6 +103,8 @@ class SegmentParams:
             raise PolarsegError(f"variance share must be in (0, 1], got {self.variance!r}")
         if not math.isfinite(self.scale) or self.scale <= 0:
             raise PolarsegError(f"affinity scale must be a positive number, got {self.scale!r}")
+        if self.scale_mode not in SCALE_MODES:
+            raise PolarsegError(f"scale_mode must be one of {SCALE_MODES}, got {self.scale_mode!r}")
         if not isinstance(self.n_segments, int) or self.n_segments < 1:
             raise PolarsegError(
                 f"number of segments must be a positive integer, got {self.n_segments!r}"

@@ -6,7 +6,7 @@ Stages, each a plain function of the engine, and the parameters each depends on:
     normals        refractive_index, model, branch        → θ, azimuth       fresnel.py
     harmonics      window, degree, coefficients, ridge    → block a_lm       harmonics.py
     pca            variance                               → block features   features.py
-    affinity       scale                                  → S = exp(−D/s)    features.py
+    affinity       scale, scale_mode                      → S = exp(−D/s)    features.py
     cut            min_segment_blocks, ncut_threshold     → cut tree         ncut.py
     labels         n_segments                             → labels           ncut.py
     reconstruction window, degree, ridge (after normals)  → Î rebuilt, error harmonics.py
@@ -67,7 +67,7 @@ def _own_key(stage: str, p: SegmentParams) -> tuple:
     if stage == "pca":
         return (p.variance,)
     if stage == "affinity":
-        return (p.scale,)
+        return (p.scale, p.scale_mode)
     if stage == "cut":
         return (p.min_segment_blocks, p.ncut_threshold)
     if stage == "labels":
@@ -246,7 +246,7 @@ class Pipeline:
                     f"{n} blocks is too many for a dense affinity (limit {MAX_DENSE_BLOCKS}); "
                     "use a larger window"
                 )
-            return feat.affinity_matrix(pca.features, p.scale)
+            return feat.affinity_matrix(pca.features, p.scale, p.scale_mode)
         if stage == "cut":
             return ncut.CutTree(
                 self.get("affinity"), min_size=p.min_segment_blocks, threshold=p.ncut_threshold
