@@ -44,11 +44,11 @@ DESCRIPTIONS = {
         "distribution similar to the foliage's."
     ),
     "fruit": (
-        "A near-spherical fruit with a bruised, slightly dented patch on its visible "
-        "face, on a matte board; modelled on thesis section 5.3 (bruised before it "
-        "shows). Healthy and bruised skin share one albedo, so there is no intensity "
-        "edge at the bruise; its mean Î differs from the whole fruit's only through "
-        "shading (the fruit's mean includes its dark limb)."
+        "Close-up of a large near-spherical fruit that fills the frame, with a bruised, "
+        "slightly dented patch; modelled on the thesis's 240 x 240 inspection crops "
+        "(section 5.3, bruised before it shows). Healthy and bruised skin share one "
+        "albedo, so there is no intensity edge at the bruise; the task is healthy "
+        "against bruised skin on a strongly curved surface."
     ),
 }
 

@@ -301,7 +301,7 @@ def test_render_surface_rejects_bad_input():
 EXPECTED_NAMES = {
     "leaves": ["background", "natural", "plastic"],
     "camouflage": ["foliage", "net"],
-    "fruit": ["background", "fruit", "bruise"],
+    "fruit": ["fruit", "bruise"],
 }
 
 
@@ -384,7 +384,7 @@ def test_scene_stack_gives_back_ground_truth(scenes, name):
     # 0.3 % noise at Î ≈ 0.4 with 7 frames: σ(Î) ≈ 0.0011, σ(ρ) ≈ 0.004.
     assert np.abs(i_hat - sc.intensity).mean() < 0.002
     assert np.abs(rho - sc.dop).mean() < 0.006
-    strong = sc.dop > 0.05
+    strong = sc.dop > 0.03
     assert strong.sum() > 50
     assert np.median(np.abs(_axial_diff(phi, sc.phase))[strong]) < np.deg2rad(4.0)
 
@@ -425,9 +425,9 @@ def _shading(sc):
 
 def test_fruit_intensity_matched(scenes):
     sc = scenes["fruit"]
-    bg, fruit, bruise = (sc.labels == k for k in range(3))
-    # The fruit as a whole is as bright as the board on average.
-    assert sc.intensity[fruit | bruise].mean() == pytest.approx(sc.intensity[bg].mean(), rel=0.03)
+    fruit, bruise = (sc.labels == k for k in range(2))
+    # A close-up: the fruit fills the frame, the bruise is a patch of it.
+    assert 0.05 < bruise.mean() < 0.4
     # The bruise does not show yet: same albedo as the healthy skin, so once the shading
     # of the true normals is divided out, the two agree.
     mats = sc.params["materials"]

@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.linalg
 import scipy.sparse as sps
-from scipy.sparse.linalg import eigsh
+from scipy.sparse.linalg import ArpackNoConvergence, eigsh
 
 from .errors import PolarsegError
 
@@ -54,15 +54,21 @@ def fiedler_vector(W) -> np.ndarray:
         M = sps.diags(d_is) @ W @ sps.diags(d_is)
     else:
         M = W * d_is[:, None] * d_is[None, :]
-    if n <= DENSE_EIGH_MAX or n < 4:
+    z = None
+    if n > DENSE_EIGH_MAX and n >= 4:
+        v0 = np.random.default_rng(0).standard_normal(n)
+        try:
+            vals, vecs = eigsh(M, k=2, which="LA", v0=v0, tol=1e-8)
+            z = vecs[:, np.argsort(vals)[0]]
+        except ArpackNoConvergence:
+            # A graph that has fallen apart (many near-isolated nodes) has a highly
+            # degenerate top eigenvalue 1 where Lanczos stalls; solve it densely instead.
+            z = None
+    if z is None:
         dense = M.toarray() if sps.issparse(M) else M
         # full decomposition: the subset driver can drop vectors of repeated eigenvalues
         _, vecs = scipy.linalg.eigh(dense, driver="evd")
         z = vecs[:, n - 2]
-    else:
-        v0 = np.random.default_rng(0).standard_normal(n)
-        vals, vecs = eigsh(M, k=2, which="LA", v0=v0, tol=1e-8)
-        z = vecs[:, np.argsort(vals)[0]]
     y = z * d_is
     # fix the sign so results are reproducible
     pivot = np.argmax(np.abs(y))

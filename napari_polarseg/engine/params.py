@@ -11,6 +11,8 @@ import math
 from dataclasses import asdict, dataclass, fields
 from typing import Any
 
+import numpy as np
+
 from .errors import PolarsegError
 
 MODELS = ("diffuse", "specular")
@@ -51,6 +53,11 @@ class SegmentParams:
         ``"absolute"``: s as given (thesis). ``"median"``: s is relative to the median
         squared Mahalanobis distance between blocks, which keeps the graph connected
         whatever the number of PCA components.
+    spatial_radius : float
+        Radius, in blocks, of Shi & Malik's spatial term in the affinity; 0 (thesis)
+        switches it off and connects every pair of blocks.
+    spatial_sigma : float
+        Width σ_X, in blocks, of the spatial term exp(−‖X_i − X_j‖² / σ_X²).
     n_segments : int
         Number of segments the recursive normalized cut stops at.
     ncut_threshold : float or None
@@ -69,6 +76,8 @@ class SegmentParams:
     variance: float = 0.95
     scale: float = 1.0
     scale_mode: str = "absolute"
+    spatial_radius: float = 0.0
+    spatial_sigma: float = 2.0
     n_segments: int = 3
     ncut_threshold: float | None = None
     min_segment_blocks: int = 1
@@ -78,42 +87,42 @@ class SegmentParams:
 
     def validate(self) -> None:
         """Raise :class:`PolarsegError` naming the first parameter that is out of range."""
-        if not isinstance(self.window, int) or isinstance(self.window, bool) or self.window < 1:
+        if not _is_int(self.window) or self.window < 1:
             raise PolarsegError(f"window must be a positive integer, got {self.window!r}")
-        if not isinstance(self.degree, int) or not 0 <= self.degree <= MAX_DEGREE:
+        if not _is_int(self.degree) or not 0 <= self.degree <= MAX_DEGREE:
             raise PolarsegError(
                 f"degree must be an integer in 0..{MAX_DEGREE}, got {self.degree!r}"
             )
         n = self.refractive_index
-        if not isinstance(n, (int, float)) or not math.isfinite(n) or n <= 1.0:
+        if not _is_number(n) or n <= 1.0:
             raise PolarsegError(f"refractive index must be a finite number > 1, got {n!r}")
-        if self.model not in MODELS:
-            raise PolarsegError(f"model must be one of {MODELS}, got {self.model!r}")
-        if self.specular_branch not in SPECULAR_BRANCHES:
-            raise PolarsegError(
-                f"specular_branch must be one of {SPECULAR_BRANCHES}, got {self.specular_branch!r}"
-            )
-        if self.coefficients not in COEFFICIENT_METHODS:
-            raise PolarsegError(
-                f"coefficients must be one of {COEFFICIENT_METHODS}, got {self.coefficients!r}"
-            )
-        if not math.isfinite(self.ridge) or self.ridge <= 0:
+        _check_choice("model", self.model, MODELS)
+        _check_choice("specular_branch", self.specular_branch, SPECULAR_BRANCHES)
+        _check_choice("coefficients", self.coefficients, COEFFICIENT_METHODS)
+        _check_choice("scale_mode", self.scale_mode, SCALE_MODES)
+        if not _is_number(self.ridge) or self.ridge <= 0:
             raise PolarsegError(f"ridge must be a positive number, got {self.ridge!r}")
-        if not (0 < self.variance <= 1):
+        if not _is_number(self.variance) or not 0 < self.variance <= 1:
             raise PolarsegError(f"variance share must be in (0, 1], got {self.variance!r}")
-        if not math.isfinite(self.scale) or self.scale <= 0:
+        if not _is_number(self.scale) or self.scale <= 0:
             raise PolarsegError(f"affinity scale must be a positive number, got {self.scale!r}")
-        if self.scale_mode not in SCALE_MODES:
-            raise PolarsegError(f"scale_mode must be one of {SCALE_MODES}, got {self.scale_mode!r}")
-        if not isinstance(self.n_segments, int) or self.n_segments < 1:
+        if not _is_number(self.spatial_radius) or self.spatial_radius < 0:
+            raise PolarsegError(
+                f"spatial_radius must be a number >= 0, got {self.spatial_radius!r}"
+            )
+        if not _is_number(self.spatial_sigma) or self.spatial_sigma <= 0:
+            raise PolarsegError(f"spatial_sigma must be a number > 0, got {self.spatial_sigma!r}")
+        if not _is_int(self.n_segments) or self.n_segments < 1:
             raise PolarsegError(
                 f"number of segments must be a positive integer, got {self.n_segments!r}"
             )
-        if self.ncut_threshold is not None and not (self.ncut_threshold > 0):
+        if self.ncut_threshold is not None and (
+            not _is_number(self.ncut_threshold) or self.ncut_threshold <= 0
+        ):
             raise PolarsegError(
                 f"ncut_threshold must be positive or None, got {self.ncut_threshold!r}"
             )
-        if not isinstance(self.min_segment_blocks, int) or self.min_segment_blocks < 1:
+        if not _is_int(self.min_segment_blocks) or self.min_segment_blocks < 1:
             raise PolarsegError(
                 f"min_segment_blocks must be a positive integer, got {self.min_segment_blocks!r}"
             )
@@ -147,3 +156,20 @@ class SegmentParams:
         if not isinstance(data, dict):
             raise PolarsegError("parameters JSON must be an object")
         return cls.from_dict(data)
+
+
+def _is_int(v: Any) -> bool:
+    return isinstance(v, (int, np.integer)) and not isinstance(v, (bool, np.bool_))
+
+
+def _is_number(v: Any) -> bool:
+    return (
+        isinstance(v, (int, float, np.integer, np.floating))
+        and not isinstance(v, (bool, np.bool_))
+        and math.isfinite(float(v))
+    )
+
+
+def _check_choice(name: str, value: Any, choices: tuple[str, ...]) -> None:
+    if not isinstance(value, str) or value not in choices:
+        raise PolarsegError(f"{name} must be one of {', '.join(choices)}; got {value!r}")

@@ -6,7 +6,7 @@ Stages, each a plain function of the engine, and the parameters each depends on:
     normals        refractive_index, model, branch        → θ, azimuth       fresnel.py
     harmonics      window, degree, coefficients, ridge    → block a_lm       harmonics.py
     pca            variance                               → block features   features.py
-    affinity       scale, scale_mode                      → S = exp(−D/s)    features.py
+    affinity       scale, scale_mode, spatial_*           → S = exp(−D/s)    features.py
     cut            min_segment_blocks, ncut_threshold     → cut tree         ncut.py
     labels         n_segments                             → labels           ncut.py
     reconstruction window, degree, ridge (after normals)  → Î rebuilt, error harmonics.py
@@ -67,7 +67,8 @@ def _own_key(stage: str, p: SegmentParams) -> tuple:
     if stage == "pca":
         return (p.variance,)
     if stage == "affinity":
-        return (p.scale, p.scale_mode)
+        spatial = (p.spatial_radius, p.spatial_sigma) if p.spatial_radius > 0 else None
+        return (p.scale, p.scale_mode, spatial)
     if stage == "cut":
         return (p.min_segment_blocks, p.ncut_threshold)
     if stage == "labels":
@@ -246,7 +247,11 @@ class Pipeline:
                     f"{n} blocks is too many for a dense affinity (limit {MAX_DENSE_BLOCKS}); "
                     "use a larger window"
                 )
-            return feat.affinity_matrix(pca.features, p.scale, p.scale_mode)
+            W = feat.affinity_matrix(pca.features, p.scale, p.scale_mode)
+            if p.spatial_radius > 0:
+                grid = self.get("harmonics").shape[:2]
+                W *= feat.spatial_kernel(grid, p.spatial_radius, p.spatial_sigma)
+            return W
         if stage == "cut":
             return ncut.CutTree(
                 self.get("affinity"), min_size=p.min_segment_blocks, threshold=p.ncut_threshold

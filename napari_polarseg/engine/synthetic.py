@@ -391,12 +391,14 @@ MATERIALS: dict[str, Material] = {
         ),
         Material(
             "camouflage_net",
-            1.56,
-            0.45,
-            22.0,
-            "polyester / nylon fabric net with PU coating (n ~ 1.53-1.60); the weave is "
-            "rough below the pixel scale and multiple scattering between fibres "
-            "depolarises strongly",
+            1.58,
+            0.10,
+            15.0,
+            "polyester fabric net with a PU/PVC coating (n ~ 1.55-1.60): the coating gives "
+            "a smooth dielectric surface over the weave, so less volume scattering and "
+            "depolarisation than foliage. (An uncoated net that depolarises as much as "
+            "the leaves would have the same degree of polarisation as the foliage and "
+            "no polarisation method could tell them apart.)",
         ),
         Material(
             "fruit_skin",
@@ -813,59 +815,53 @@ def _camouflage_geometry(rng: np.random.Generator, grid: _Grid) -> Geometry:
 
 
 def _fruit_geometry(rng: np.random.Generator, grid: _Grid) -> Geometry:
-    """A near-spherical fruit with a bruised patch, on a matte board."""
+    """Close-up of a large near-spherical fruit with a bruised patch (inspection crop).
+
+    As in the thesis's 240 × 240 fruit sections, the fruit fills the frame: the task is
+    healthy against bruised skin, not fruit against background (which intensity alone
+    separates trivially).
+    """
     h, w = grid.shape
-    materials = [
-        MATERIALS["matte_board"],
-        MATERIALS["fruit_skin"],
-        MATERIALS["bruised_tissue"],
-    ]
-    p, q = _random_slopes(rng, grid, sigma_px=10.0, rms_slope=0.04)
-    p += rng.normal(0.0, 0.03)
-    q += rng.normal(0.0, 0.03)
-    mat = np.zeros(grid.ss_shape, dtype=np.intp)
+    materials = [MATERIALS["fruit_skin"], MATERIALS["bruised_tissue"]]
     yy, xx = grid.ys[:, None], grid.xs[None, :]
 
-    radius = 0.37 * min(h, w)
-    cy = h * (0.5 + rng.uniform(-0.04, 0.04))
-    cx = w * (0.5 + rng.uniform(-0.04, 0.04))
+    # The frame's corners stay inside the fruit's outline (zenith there ~ 50-65°).
+    radius = 0.62 * np.hypot(h, w) * rng.uniform(0.97, 1.03)
+    cy = h * (0.5 + rng.uniform(-0.05, 0.05))
+    cx = w * (0.5 + rng.uniform(-0.05, 0.05))
     ry = radius * rng.uniform(0.94, 1.0)
     rx = radius * rng.uniform(0.94, 1.0)
     dy, dx = (yy - cy) / ry, (xx - cx) / rx
     r2 = dx**2 + dy**2
-    fruit = r2 < 1.0
-    # Ellipsoid z = R sqrt(1 - r²); slopes bounded at the rim (zenith <= ~88°).
+    # Ellipsoid z = R sqrt(1 - r²).
     root = np.sqrt(np.clip(1.0 - r2, 1e-3, None))
-    fp = -radius * dx / rx / root
-    fq = -radius * dy / ry / root
+    p = -radius * dx / rx / root
+    q = -radius * dy / ry / root
     # Uneven shape (a fruit is not a sphere) and skin texture.
     ux, uy = _random_slopes(rng, grid, sigma_px=8.0 * grid.scale, rms_slope=0.08)
     tx, ty = _random_slopes(rng, grid, sigma_px=1.5, rms_slope=0.05)
-    fp += ux + tx
-    fq += uy + ty
+    p += ux + tx
+    q += uy + ty
 
-    # Bruise: an irregular patch on the visible face, slightly dented.
+    # Bruise: an irregular, slightly dented patch away from the frame centre.
     direction = rng.uniform(0.0, 2.0 * np.pi)
-    offset = rng.uniform(0.3, 0.45) * radius
+    offset = rng.uniform(0.18, 0.28) * min(h, w)
     by = cy + offset * np.sin(direction)
     bx = cx + offset * np.cos(direction)
-    rb = rng.uniform(0.34, 0.40) * radius
+    rb = rng.uniform(0.20, 0.26) * min(h, w)
     rr = np.hypot(yy - by, xx - bx)
-    bruise = fruit & (rr / rb + 0.15 * _unit_field(rng, grid, 3.0 * grid.scale) < 1.0)
-    bruise &= r2 < 0.85
+    bruise = rr / rb + 0.15 * _unit_field(rng, grid, 3.0 * grid.scale) < 1.0
     depth = 0.08 * rb
     sd = 0.6 * rb
     # Height -depth·exp(-r²/2sd²): its slope is depth·exp(...)·(x - bx)/sd² (and rows).
     dent = depth * np.exp(-(rr**2) / (2.0 * sd**2)) / sd**2
-    fp += dent * (xx - bx)
-    fq += dent * (yy - by)
+    p += dent * (xx - bx)
+    q += dent * (yy - by)
 
-    p = np.where(fruit, fp, p)
-    q = np.where(fruit, fq, q)
-    mat[fruit] = 1
-    mat[bruise] = 2
+    mat = np.zeros(grid.ss_shape, dtype=np.intp)
+    mat[bruise] = 1
     # Healthy and bruised skin share one albedo: the bruise does not show yet.
-    return p, q, mat, materials, [0, 1, 1]
+    return p, q, mat, materials, [0, 0]
 
 
 _GEOMETRIES: dict[str, Callable[[np.random.Generator, _Grid], Geometry]] = {
@@ -961,8 +957,8 @@ def make_scene(
           (labels background, natural_leaf, plastic_leaf), thesis figure 5.1/5.5;
         - ``"camouflage"``: a folded camouflage net with garnish cut-outs over dense
           foliage (labels foliage, camouflage_net), thesis figure 5.7;
-        - ``"fruit"``: a near-spherical fruit with a bruised, slightly dented patch on a
-          matte board (labels background, fruit, bruise), thesis section 5.3.
+        - ``"fruit"``: close-up of a near-spherical fruit filling the frame, with a
+          bruised, slightly dented patch (labels fruit, bruise), thesis section 5.3.
     shape : tuple of int, optional
         Image size (H, W) in pixels, each >= 32. Shapes scale with ``min(H, W) / 120``.
     angles_deg : sequence of float, optional
@@ -992,7 +988,7 @@ def make_scene(
     --------
     >>> scene = make_scene("fruit", shape=(64, 72))
     >>> scene.stack.shape, scene.stack.dtype.name, scene.material_names
-    ((7, 64, 72), 'uint16', ['background', 'fruit', 'bruise'])
+    ((7, 64, 72), 'uint16', ['fruit', 'bruise'])
     """
     if name not in _GEOMETRIES:
         raise PolarsegError(f"name must be one of {', '.join(SCENES)}; got {name!r}")

@@ -1,0 +1,507 @@
+"""The ``polarseg`` command line: outputs of ``segment`` and ``demo``, and bad input."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import tifffile
+from skimage import io as skio
+from sklearn.metrics import adjusted_rand_score
+
+import napari_polarseg
+from napari_polarseg import cli
+from napari_polarseg import io as pio
+from napari_polarseg.engine import SegmentParams, diffuse_dop
+from napari_polarseg.engine.mosaic import mosaic_superpixel
+
+ANGLES = np.arange(0.0, 180.0, 30.0)  # 6 frames
+H, W = 57, 63  # not multiples of the window
+FAST = ["--window", "10", "--degree", "4", "--segments", "2"]
+CONTRACT = {
+    "labels.tif",
+    "intensity.tif",
+    "dop.tif",
+    "phase.tif",
+    "zenith.tif",
+    "reconstruction_error.tif",
+    "params.json",
+    "summary.json",
+}
+FLOAT_MAPS = ["intensity.tif", "dop.tif", "phase.tif", "zenith.tif", "reconstruction_error.tif"]
+
+
+def two_material_scene(h=H, w=W, angles=ANGLES, seed=0, noise=0.5):
+    """Angle stack of a field of domes, left material Lambertian-like, right one not.
+
+    I(a) = I0 (1 + rho cos(2a - 2 phi)) with rho the diffuse Fresnel degree of
+    polarisation of the zenith at n = 1.45 and phi the azimuth mod pi.
+    Returns (stack float64, truth labels, (I0, rho, phi)).
+    """
+    rng = np.random.default_rng(seed)
+    yy, xx = np.mgrid[0:h, 0:w]
+    cy, cx = (yy % 10) - 4.5, (xx % 10) - 4.5
+    zenith = np.clip(np.hypot(cx, cy) / 6.0, 0, 1) * 1.3
+    azimuth = np.arctan2(cy, cx)
+    truth = (xx >= 30).astype(np.uint8)
+    i0 = np.where(
+        truth == 0,
+        100 + 80 * np.cos(zenith),
+        60 + 120 * np.sin(zenith) ** 2 * (1 + 0.5 * np.cos(azimuth)),
+    )
+    rho = diffuse_dop(zenith, 1.45)
+    phi = np.mod(azimuth, np.pi)
+    a = np.deg2rad(np.asarray(angles, dtype=float))[:, None, None]
+    stack = i0 * (1 + rho * np.cos(2 * a - 2 * phi)) + rng.normal(0, noise, (len(a), h, w))
+    return stack, truth, (i0, rho, phi)
+
+
+@pytest.fixture
+def scene_tif(tmp_path):
+    stack, truth, maps = two_material_scene()
+    path = tmp_path / "scene.tif"
+    pio.write_stack_tiff(path, np.round(stack).astype(np.uint16), ANGLES)
+    return path, truth, maps
+
+
+def run(capsys, *argv):
+    code = cli.main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def read_tif(path):
+    return tifffile.imread(path)
+
+
+# -- segment ------------------------------------------------------------------------------
+
+
+def test_segment_writes_the_contract_for_a_size_not_multiple_of_w(tmp_path, capsys, scene_tif):
+    path, truth, (i0, rho, phi) = scene_tif
+    out = tmp_path / "out"
+    code, stdout, err = run(capsys, "segment", path, "--out", out, *FAST)
+    assert code == 0, err
+    assert err == ""
+    assert set(os.listdir(out)) == CONTRACT
+    assert str(out) in stdout and "2 segments" in stdout
+
+    labels = read_tif(out / "labels.tif")
+    assert labels.shape == (H, W)
+    assert np.issubdtype(labels.dtype, np.integer)
+    assert set(np.unique(labels)) == {0, 1}  # every pixel labelled, 0 = first segment
+    assert adjusted_rand_score(truth.ravel(), labels.ravel()) > 0.9
+    for name in FLOAT_MAPS:
+        image = read_tif(out / name)
+        assert image.shape == (H, W) and image.dtype == np.float32, name
+    np.testing.assert_allclose(read_tif(out / "intensity.tif"), i0, rtol=0.02, atol=1.0)
+    np.testing.assert_allclose(read_tif(out / "dop.tif"), rho, atol=0.03)
+    phase = read_tif(out / "phase.tif")
+    assert phase.min() >= 0 and phase.max() < np.pi
+    zenith = read_tif(out / "zenith.tif")
+    assert zenith.min() >= 0 and zenith.max() <= np.pi / 2 + 1e-6
+
+    params = json.loads((out / "params.json").read_text())
+    assert params["polarseg_version"] == napari_polarseg.__version__
+    assert params["input"] == str(path.resolve())
+    assert params["angles_deg"] == ANGLES.tolist()
+    assert params["registration"] == {"ran": False, "reference_frame": None, "shifts_px": None}
+    assert params["params"]["window"] == 10 and params["params"]["degree"] == 4
+    assert params["params"]["n_segments"] == 2 and params["params"]["refractive_index"] == 1.45
+    assert params["output_shape"] == [H, W]
+
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["n_segments"] == 2
+    assert summary["block_grid"] == [5, 6]
+    assert sum(summary["segment_pixels"]) == H * W
+    error = read_tif(out / "reconstruction_error.tif")
+    assert summary["mean_reconstruction_error"] == pytest.approx(float(error.mean()), rel=1e-5)
+    assert 0 < summary["explained_variance"] <= 1
+    assert set(summary["stage_seconds"]) >= {"polarisation", "harmonics", "cut"}
+    assert set(summary["io_seconds"]) == {"read", "register", "write"}
+
+
+def test_segment_flags_override_params_file_and_params_json_reruns(tmp_path, capsys, scene_tif):
+    path, _, _ = scene_tif
+    pfile = tmp_path / "p.json"
+    pfile.write_text(json.dumps({"window": 10, "degree": 6, "n_segments": 3, "variance": 0.9}))
+    out = tmp_path / "a"
+    code, _, err = run(capsys, "segment", path, "--out", out, "--params", pfile, "--degree", "4")
+    assert code == 0, err
+    params = json.loads((out / "params.json").read_text())["params"]
+    assert (params["window"], params["degree"], params["n_segments"]) == (10, 4, 3)
+    assert params["variance"] == 0.9
+    # a params.json written by polarseg is accepted as --params and reproduces the run
+    again = tmp_path / "b"
+    code, _, err = run(capsys, "segment", path, "--out", again, "--params", out / "params.json")
+    assert code == 0, err
+    assert json.loads((again / "params.json").read_text())["params"] == params
+    np.testing.assert_array_equal(read_tif(again / "labels.tif"), read_tif(out / "labels.tif"))
+
+
+def test_segment_all_parameter_flags_reach_params_json(tmp_path, capsys, scene_tif):
+    path, _, _ = scene_tif
+    out = tmp_path / "out"
+    flags = [
+        *("--window", "9", "--degree", "5", "--refractive-index", "1.6", "--segments", "3"),
+        *("--model", "specular", "--specular-branch", "above-brewster"),
+        *("--coefficients", "ridge", "--ridge", "0.01", "--variance", "0.9", "--scale", "2"),
+        *("--scale-mode", "median", "--spatial-radius", "1.5", "--spatial-sigma", "3"),
+        *("--ncut-threshold", "0.8", "--min-segment-blocks", "2"),
+    ]
+    code, _, err = run(capsys, "segment", path, "--out", out, *flags)
+    assert code == 0, err
+    assert json.loads((out / "params.json").read_text())["params"] == {
+        "window": 9,
+        "degree": 5,
+        "refractive_index": 1.6,
+        "model": "specular",
+        "specular_branch": "above-brewster",
+        "coefficients": "ridge",
+        "ridge": 0.01,
+        "variance": 0.9,
+        "scale": 2.0,
+        "scale_mode": "median",
+        "spatial_radius": 1.5,
+        "spatial_sigma": 3.0,
+        "n_segments": 3,
+        "ncut_threshold": 0.8,
+        "min_segment_blocks": 2,
+    }
+
+
+def test_every_segment_parameter_has_a_named_option():
+    names = {f.name for f in dataclasses.fields(SegmentParams)}
+    assert set(cli.PARAM_OPTIONS) == names
+    flags = [flag for flag, _ in cli.PARAM_OPTIONS.values()]
+    help_text = cli.build_parser()._subparsers._group_actions[0].choices["segment"].format_help()
+    assert all(flag in help_text for flag in flags)
+
+
+def test_segment_folder_with_registration(tmp_path, capsys):
+    stack, truth, _ = two_material_scene()
+    frames = tmp_path / "frames"
+    frames.mkdir()
+    for k, angle in enumerate(ANGLES):
+        skio.imsave(frames / f"nir_{int(angle)}_aligned.png", np.round(stack[k]).astype(np.uint16))
+    out = tmp_path / "out"
+    code, _, err = run(capsys, "segment", frames, "--out", out, "--register", *FAST)
+    assert code == 0, err
+    params = json.loads((out / "params.json").read_text())
+    assert params["angles_deg"] == ANGLES.tolist() and params["angles_from"] == "folder"
+    assert params["registration"]["ran"] is True
+    shifts = np.array(params["registration"]["shifts_px"])
+    assert shifts.shape == (6, 2) and np.abs(shifts).max() < 0.2  # frames were aligned
+    assert read_tif(out / "labels.tif").shape == (H, W)
+
+
+def test_segment_mosaic_outputs_are_half_size(tmp_path, capsys):
+    layout = (90, 45, 135, 0)
+    stack, truth, _ = two_material_scene(h=29, w=32, angles=sorted(layout))
+    raw = mosaic_superpixel(np.round(stack).astype(np.uint16), layout)
+    path = tmp_path / "raw.tif"
+    tifffile.imwrite(path, raw, photometric="minisblack")
+    out = tmp_path / "out"
+    code, _, err = run(capsys, "segment", path, "--out", out, "--mosaic", "90,45,135,0", *FAST)
+    assert code == 0, err
+    assert read_tif(out / "labels.tif").shape == (29, 32)
+    assert read_tif(out / "dop.tif").shape == (29, 32)
+    params = json.loads((out / "params.json").read_text())
+    assert params["mosaic_layout_deg"] == [90.0, 45.0, 135.0, 0.0]
+    assert params["raw_shape"] == [58, 64] and params["angles_deg"] == [0.0, 45.0, 90.0, 135.0]
+
+
+def test_segment_overwrites_previous_results(tmp_path, capsys, scene_tif):
+    path, _, _ = scene_tif
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "labels.tif").write_bytes(b"old")
+    code, _, err = run(capsys, "segment", path, "--out", out, *FAST, "--overview")
+    assert code == 0, err
+    assert read_tif(out / "labels.tif").shape == (H, W)
+    assert set(os.listdir(out)) == CONTRACT | {"overview.png"}
+
+
+def test_console_script_in_a_subprocess(tmp_path, scene_tif):
+    path, _, _ = scene_tif
+    script = Path(sys.executable).with_name("polarseg")
+    assert script.exists(), "the polarseg console script is not installed in this environment"
+    out = tmp_path / "out"
+    done = subprocess.run(
+        [script, "segment", path, "--out", out, *FAST], capture_output=True, text=True
+    )
+    assert done.returncode == 0, done.stderr
+    assert done.stderr == ""
+    assert set(os.listdir(out)) == CONTRACT
+    assert "2 segments" in done.stdout
+
+
+def test_help_and_version(capsys):
+    assert cli.main(["--version"]) == 0
+    assert napari_polarseg.__version__ in capsys.readouterr().out
+    assert cli.main(["segment", "--help"]) == 0
+    assert "--refractive-index" in capsys.readouterr().out
+
+
+# -- demo ---------------------------------------------------------------------------------
+
+
+@pytest.fixture
+def toy_samples(tmp_path, monkeypatch):
+    stack, truth, _ = two_material_scene()
+    folder = tmp_path / "samples"
+    folder.mkdir()
+    np.savez(
+        folder / "toy.npz", stack=np.round(stack).astype(np.uint16), angles=ANGLES, labels=truth
+    )
+    monkeypatch.setattr(cli, "SAMPLE_DIR", folder)
+    return folder
+
+
+def test_demo_writes_outputs_overview_and_rand_index(tmp_path, capsys, toy_samples):
+    out = tmp_path / "demo"
+    code, stdout, err = run(capsys, "demo", "--out", out, "--scene", "toy", "--degree", "4")
+    assert code == 0, err
+    assert set(os.listdir(out)) == CONTRACT | {"overview.png"}
+    assert str(out) in stdout
+    assert "adjusted Rand index against the ground truth: 1.000" in stdout
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["n_segments"] == 2  # taken from the ground truth
+    assert summary["adjusted_rand_index"] == pytest.approx(1.0)
+    assert summary["scene"] == "toy"
+    figure = skio.imread(out / "overview.png")
+    assert figure.ndim == 3 and figure.shape[2] in (3, 4)
+    assert figure.shape[1] > 4 * figure.shape[0]  # six panels side by side
+    assert len(np.unique(figure.reshape(-1, figure.shape[2]), axis=0)) > 100
+
+
+def test_demo_with_sample_file_and_default_out(tmp_path, capsys, toy_samples, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    code, stdout, err = run(
+        capsys, "demo", "--sample", toy_samples / "toy.npz", "--degree", "4", "--segments", "3"
+    )
+    assert code == 0, err
+    out = tmp_path / "polarseg-demo"
+    assert set(os.listdir(out)) == CONTRACT | {"overview.png"}
+    assert json.loads((out / "summary.json").read_text())["n_segments"] == 3
+
+
+def test_demo_unknown_scene_lists_the_available_ones(tmp_path, capsys, toy_samples):
+    code, _, err = run(capsys, "demo", "--out", tmp_path / "d", "--scene", "nope")
+    assert code == 2
+    assert err.splitlines() == ["polarseg: error: no bundled sample scene 'nope' (available: toy)"]
+    assert not (tmp_path / "d").exists()
+
+
+@pytest.mark.skipif(
+    not (cli.SAMPLE_DIR / "leaves.npz").is_file(), reason="bundled sample data not installed"
+)
+def test_demo_on_the_bundled_leaves_scene(tmp_path, capsys):
+    out = tmp_path / "demo"
+    code, stdout, err = run(capsys, "demo", "--out", out, "--degree", "4")
+    assert code == 0, err
+    assert set(os.listdir(out)) == CONTRACT | {"overview.png"}
+    truth = np.load(cli.SAMPLE_DIR / "leaves.npz")["labels"]
+    labels = read_tif(out / "labels.tif")
+    assert labels.shape == truth.shape
+    ari = json.loads((out / "summary.json").read_text())["adjusted_rand_index"]
+    assert ari == pytest.approx(adjusted_rand_score(truth.ravel(), labels.ravel()))
+    assert f"adjusted Rand index against the ground truth: {ari:.3f}" in stdout
+
+
+# -- bad input ----------------------------------------------------------------------------
+
+
+def _stack_file(tmp_path, stack=None, angles=ANGLES, name="s.tif"):
+    stack = two_material_scene()[0] if stack is None else stack
+    path = tmp_path / name
+    pio.write_stack_tiff(path, np.asarray(stack, dtype=np.float32), angles)
+    return path
+
+
+def _truncated(tmp_path):
+    good = _stack_file(tmp_path)
+    raw = good.read_bytes()
+    bad = tmp_path / "cut.tif"
+    bad.write_bytes(raw[: len(raw) // 2])
+    return [bad]
+
+
+def _different_sizes(tmp_path):
+    folder = tmp_path / "frames"
+    folder.mkdir()
+    for angle in (0, 60, 120):
+        skio.imsave(folder / f"f_{angle}.png", np.full((20, 30), 9, np.uint8), check_contrast=False)
+    skio.imsave(folder / "f_150.png", np.full((20, 31), 9, np.uint8), check_contrast=False)
+    return [folder]
+
+
+def _text_as_tif(tmp_path):
+    path = tmp_path / "notes.tif"
+    path.write_text("these are my notes, not an image\n")
+    return [path]
+
+
+def _odd_mosaic(tmp_path):
+    path = tmp_path / "raw.png"
+    skio.imsave(path, np.full((41, 64), 100, np.uint8), check_contrast=False)
+    return [path, "--mosaic", "90,45,135,0"]
+
+
+def _nan_only(tmp_path):
+    return [_stack_file(tmp_path, np.full((6, 20, 20), np.nan))]
+
+
+def _npy_without_angles(tmp_path):
+    path = tmp_path / "s.npy"
+    np.save(path, np.ones((4, 8, 8)))
+    return [path]
+
+
+def _with_params_file(text):
+    def build(tmp_path):
+        path = tmp_path / "p.json"
+        path.write_text(text)
+        return [_stack_file(tmp_path), "--params", path]
+
+    return build
+
+
+BAD_INPUTS = {
+    # case: (builder of the arguments after "segment", words the error line must contain)
+    "missing file": (lambda t: [t / "nowhere.tif"], "nowhere.tif: no such file"),
+    "unreadable (truncated) file": (_truncated, "cut.tif: the TIFF file is truncated"),
+    "non-image file": (_text_as_tif, "notes.tif: cannot read the TIFF file"),
+    "unsupported file type": (
+        lambda t: [Path(__file__)],
+        "unsupported file type '.py'",
+    ),
+    "fewer than 3 distinct angles": (
+        lambda t: [_stack_file(t), "--angles", "0,90,180,270,0,90"],
+        "need at least 3 distinct polariser angles (modulo 180 degrees), got 2",
+    ),
+    "angle count differs from frame count": (
+        lambda t: [_stack_file(t), "--angles", "0,45,90,135"],
+        "6 frames but 4 angles",
+    ),
+    "frames of different sizes": (
+        _different_sizes,
+        "f_150.png: frame is 20 x 31 pixels but f_0.png is 20 x 30",
+    ),
+    "window larger than the image": (
+        lambda t: [_stack_file(t), "--window", "80"],
+        "window size 80 is larger than the image (57 x 63 pixels)",
+    ),
+    "window leaving one block": (
+        lambda t: [_stack_file(t), "--window", "40"],
+        "window size 40 leaves fewer than 2 blocks",
+    ),
+    "refractive index n = 1": (
+        lambda t: [_stack_file(t), "--refractive-index", "1.0"],
+        "refractive index must be a finite number > 1, got 1.0",
+    ),
+    "refractive index n < 1": (
+        lambda t: [_stack_file(t), "--refractive-index", "0.8"],
+        "refractive index must be a finite number > 1, got 0.8",
+    ),
+    "degree too high": (
+        lambda t: [_stack_file(t), "--degree", "61"],
+        "degree must be an integer in 0..60, got 61",
+    ),
+    "negative degree": (
+        lambda t: [_stack_file(t), "--degree", "-1"],
+        "degree must be an integer in 0..60, got -1",
+    ),
+    "NaN-only data": (_nan_only, "s.tif: the data has no finite values"),
+    "bad --angles syntax": (
+        lambda t: [_stack_file(t), "--angles", "0,30,sixty"],
+        "argument --angles: expected comma-separated numbers in degrees",
+    ),
+    "bad --mosaic syntax": (
+        lambda t: [_odd_mosaic(t)[0], "--mosaic", "90;45;135;0"],
+        "argument --mosaic: expected comma-separated numbers",
+    ),
+    "odd-size mosaic": (
+        _odd_mosaic,
+        "raw.png: a 2 x 2 polarisation mosaic needs an even height and width, got 41 x 64",
+    ),
+    "mosaic layout of 3 angles": (
+        lambda t: [_odd_mosaic(t)[0], "--mosaic", "0,45,90"],
+        "needs 4 finite angles",
+    ),
+    "no angles anywhere": (_npy_without_angles, "s.npy: no polariser angles in the file"),
+    "non-numeric parameter": (
+        lambda t: [_stack_file(t), "--window", "ten"],
+        "argument --window: invalid int value: 'ten'",
+    ),
+    "unknown model": (
+        lambda t: [_stack_file(t), "--model", "glossy"],
+        "argument --model: invalid choice: 'glossy'",
+    ),
+    "zero segments": (
+        lambda t: [_stack_file(t), "--segments", "0"],
+        "number of segments must be a positive integer, got 0",
+    ),
+    "params file with an unknown key": (
+        _with_params_file('{"windw": 5}'),
+        "p.json: unknown parameter(s): windw",
+    ),
+    "params file that is not JSON": (
+        _with_params_file("{"),
+        "p.json: parameters file is not valid JSON",
+    ),
+    "params file with a wrong type": (
+        _with_params_file('{"variance": "most"}'),
+        "p.json: variance share must be in (0, 1], got 'most'",
+    ),
+    "missing params file": (
+        lambda t: [_stack_file(t), "--params", t / "none.json"],
+        "none.json: cannot read the parameters file",
+    ),
+    "unknown option": (lambda t: [_stack_file(t), "--colour", "red"], "unrecognized arguments"),
+}
+
+
+@pytest.mark.parametrize("case", list(BAD_INPUTS))
+def test_bad_input_one_line_error_and_no_partial_file(tmp_path, capsys, case):
+    build, words = BAD_INPUTS[case]
+    inputs = tmp_path / "inputs"
+    inputs.mkdir()
+    args = build(inputs)
+    out = tmp_path / "out"
+    out.mkdir()
+    good = b"a good labels.tif from an earlier run"
+    (out / "labels.tif").write_bytes(good)
+    code, stdout, err = run(capsys, "segment", *args, "--out", out)
+    assert code == 2
+    lines = err.splitlines()
+    assert len(lines) == 1, err
+    assert lines[0].startswith("polarseg: error: ")
+    assert words in lines[0]
+    assert "Traceback" not in err + stdout
+    assert (out / "labels.tif").read_bytes() == good
+    assert os.listdir(out) == ["labels.tif"]
+
+
+def test_missing_out_and_missing_command(capsys):
+    code, _, err = run(capsys, "segment", "x.tif")
+    assert code == 2
+    assert err.splitlines() == ["polarseg: error: the following arguments are required: -o/--out"]
+    code, _, err = run(capsys)
+    assert code == 2 and len(err.splitlines()) == 1 and "required: COMMAND" in err
+
+
+def test_unwritable_output_is_exit_code_1(tmp_path, capsys, scene_tif):
+    path, _, _ = scene_tif
+    blocker = tmp_path / "file"
+    blocker.write_text("not a folder")
+    code, _, err = run(capsys, "segment", path, "--out", blocker, *FAST)
+    assert code == 1
+    assert len(err.splitlines()) == 1 and err.startswith(f"polarseg: error: cannot write {blocker}")
+    assert blocker.read_text() == "not a folder"

@@ -1,0 +1,466 @@
+"""Reading and writing stacks and results (napari_polarseg.io), mosaics and registration."""
+
+from __future__ import annotations
+
+import json
+import os
+
+import numpy as np
+import pytest
+import tifffile
+from scipy import ndimage
+from skimage import io as skio
+
+from napari_polarseg import io as pio
+from napari_polarseg.engine import PolarsegError, polarisation_image
+from napari_polarseg.engine.mosaic import demosaic_superpixel, mosaic_superpixel
+from napari_polarseg.engine.registration import estimate_shift, register_stack
+
+ANGLES = np.array([0.0, 30.0, 60.0, 90.0, 120.0, 150.0])
+
+
+def render(h=12, w=15, angles=ANGLES, seed=0, scale=1000.0):
+    """Stack from I(a) = I0 (1 + rho cos(2a - 2 phi)) with known per-pixel I0, rho, phi."""
+    rng = np.random.default_rng(seed)
+    i0 = scale * (1 + rng.random((h, w)))
+    rho = 0.05 + 0.5 * rng.random((h, w))
+    phi = np.pi * rng.random((h, w))
+    a = np.deg2rad(np.asarray(angles, dtype=float))[:, None, None]
+    return i0 * (1 + rho * np.cos(2 * a - 2 * phi)), (i0, rho, phi)
+
+
+def uint16_stack(**kw):
+    stack, truth = render(**kw)
+    return np.round(stack).astype(np.uint16), truth
+
+
+# -- parsing helpers --------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("name", "angle"),
+    [
+        ("leaf_030.png", 30.0),
+        ("nir_45_aligned.tif", 45.0),
+        ("scene-b_22.5deg.png", 22.5),
+        ("img2_090.jpeg", 90.0),
+        ("/some/dir_7/pol135.tiff", 135.0),
+        ("dark.png", None),
+    ],
+)
+def test_angle_from_name_takes_last_number_of_stem(name, angle):
+    assert pio.angle_from_name(name) == angle
+
+
+def test_parse_angles_good_and_bad():
+    assert pio.parse_angles(" 0,45 , 90,135.5").tolist() == [0.0, 45.0, 90.0, 135.5]
+    for bad in ["0,,90", "0,x,90", "", "0,nan,90", "0;45;90"]:
+        with pytest.raises(PolarsegError, match="comma-separated"):
+            pio.parse_angles(bad)
+
+
+def test_to_grey_uses_bt601_luma_or_one_channel():
+    rgb = np.array([[[100, 50, 200], [0, 255, 0]]], dtype=np.uint8)
+    grey = pio.to_grey(rgb)
+    assert grey[0, 0] == pytest.approx(0.299 * 100 + 0.587 * 50 + 0.114 * 200)
+    assert grey[0, 1] == pytest.approx(0.587 * 255)
+    assert pio.to_grey(np.dstack([rgb, np.full((1, 2), 7, np.uint8)]))[0, 0] == grey[0, 0]
+    assert pio.to_grey(rgb, channel=2).tolist() == [[200, 0]]
+    with pytest.raises(PolarsegError, match="channel 3"):
+        pio.to_grey(rgb, channel=3)
+
+
+# -- TIFF ----------------------------------------------------------------------------------
+
+
+def test_stack_tiff_round_trip_keeps_values_dtype_and_angles(tmp_path):
+    stack, _ = uint16_stack()
+    path = tmp_path / "stack.tif"
+    pio.write_stack_tiff(path, stack, ANGLES)
+    data = pio.read_stack(path)
+    assert data.stack.dtype == np.uint16
+    np.testing.assert_array_equal(data.stack, stack)
+    np.testing.assert_array_equal(data.angles_deg, ANGLES)
+    np.testing.assert_allclose(data.angles_rad, np.deg2rad(ANGLES))
+    assert data.source == str(path)
+    assert data.metadata["format"] == "tiff"
+    assert data.metadata["angles_from"] == "tiff"
+    # the angles are JSON in the ImageDescription, as tifffile's shaped metadata
+    with tifffile.TiffFile(path) as tif:
+        assert tif.shaped_metadata[0]["angles"] == ANGLES.tolist()
+        assert len(tif.pages) == len(ANGLES)
+
+
+def test_tiff_with_plain_json_description(tmp_path):
+    stack, _ = uint16_stack()
+    path = tmp_path / "plain.tiff"
+    tifffile.imwrite(
+        path,
+        stack,
+        photometric="minisblack",
+        metadata=None,
+        description=json.dumps({"angles": ANGLES.tolist()}),
+    )
+    data = pio.read_stack(path)
+    np.testing.assert_array_equal(data.angles_deg, ANGLES)
+    np.testing.assert_array_equal(data.stack, stack)
+
+
+def test_given_angles_override_metadata(tmp_path):
+    stack, _ = uint16_stack()
+    path = tmp_path / "stack.tif"
+    pio.write_stack_tiff(path, stack, ANGLES)
+    given = [10, 40, 70, 100, 130, 160]
+    data = pio.read_stack(path, angles_deg=given)
+    assert data.angles_deg.tolist() == [10.0, 40.0, 70.0, 100.0, 130.0, 160.0]
+    assert data.metadata["angles_from"] == "given"
+
+
+def test_tiff_without_angles_needs_them(tmp_path):
+    stack, _ = uint16_stack()
+    path = tmp_path / "bare.tif"
+    tifffile.imwrite(path, stack, photometric="minisblack", metadata=None)
+    with pytest.raises(PolarsegError, match=r"bare\.tif: no polariser angles"):
+        pio.read_stack(path)
+    assert pio.read_stack(path, angles_deg=ANGLES).stack.shape == stack.shape
+
+
+def test_colour_tiff_stack_becomes_luma(tmp_path):
+    rng = np.random.default_rng(3)
+    rgb = rng.integers(0, 255, (4, 6, 7, 3), dtype=np.uint8)
+    path = tmp_path / "rgb.tif"
+    tifffile.imwrite(path, rgb, photometric="rgb", metadata={"angles": [0, 45, 90, 135]})
+    data = pio.read_stack(path)
+    np.testing.assert_allclose(data.stack, rgb @ np.array([0.299, 0.587, 0.114]))
+    np.testing.assert_array_equal(pio.read_stack(path, channel=1).stack, rgb[..., 1])
+
+
+def test_truncated_tiff_is_an_error_naming_the_file(tmp_path):
+    stack, _ = uint16_stack(h=40, w=50)
+    good = tmp_path / "good.tif"
+    pio.write_stack_tiff(good, stack, ANGLES)
+    raw = good.read_bytes()
+    for cut in (0.3, 0.7, 0.99):
+        bad = tmp_path / f"cut{int(cut * 100)}.tif"
+        bad.write_bytes(raw[: int(len(raw) * cut)])
+        with pytest.raises(PolarsegError, match=rf"{bad.name}: .*(truncated|cannot read)"):
+            pio.read_stack(bad)
+
+
+@pytest.mark.parametrize(
+    ("name", "content", "match"),
+    [
+        ("notes.tif", b"hello, not a tiff\n", "cannot read the TIFF file"),
+        ("notes.txt", b"hello\n", "unsupported file type '.txt'"),
+        ("data.npz", b"not a zip file", "cannot read the NumPy file"),
+        ("frame.png", b"\x89PNG\r\n\x1a\n truncated", "single image is not an angle stack"),
+    ],
+)
+def test_non_image_files_are_errors(tmp_path, name, content, match):
+    path = tmp_path / name
+    path.write_bytes(content)
+    with pytest.raises(PolarsegError, match=match) as info:
+        pio.read_stack(path)
+    assert str(info.value).startswith(str(path))
+    assert "\n" not in str(info.value)
+
+
+def test_missing_file_is_an_error(tmp_path):
+    with pytest.raises(PolarsegError, match="no such file"):
+        pio.read_stack(tmp_path / "nope.tif")
+
+
+def test_angle_validation(tmp_path):
+    stack, _ = uint16_stack(angles=[0, 45, 90, 135])
+    path = tmp_path / "s.tif"
+    pio.write_stack_tiff(path, stack, [0, 45, 90, 135])
+    with pytest.raises(PolarsegError, match="4 frames but 3 angles"):
+        pio.read_stack(path, angles_deg=[0, 45, 90])
+    # 0 and 180 are one polariser state, so is 90 and 270
+    with pytest.raises(PolarsegError, match="at least 3 distinct .* got 2"):
+        pio.read_stack(path, angles_deg=[0, 180, 90, 270])
+    with pytest.raises(PolarsegError, match="finite"):
+        pio.read_stack(path, angles_deg=[0, 45, np.nan, 135])
+
+
+def test_nan_only_data_is_an_error(tmp_path):
+    path = tmp_path / "nan.tif"
+    pio.write_stack_tiff(path, np.full((4, 5, 6), np.nan, np.float32), [0, 45, 90, 135])
+    with pytest.raises(PolarsegError, match=r"nan\.tif: the data has no finite values"):
+        pio.read_stack(path)
+
+
+# -- npz -----------------------------------------------------------------------------------
+
+
+def test_npz_round_trip_with_ground_truth_and_params(tmp_path):
+    stack, _ = uint16_stack()
+    labels = (np.arange(stack.shape[2]) >= 7).astype(np.uint8)[None, :].repeat(stack.shape[1], 0)
+    path = tmp_path / "scene.npz"
+    np.savez(path, stack=stack, angles=ANGLES, labels=labels, params=json.dumps({"window": 4}))
+    data = pio.read_stack(path)
+    np.testing.assert_array_equal(data.stack, stack)
+    np.testing.assert_array_equal(data.angles_deg, ANGLES)
+    np.testing.assert_array_equal(data.ground_truth, labels)
+    assert data.metadata["params"] == {"window": 4}
+
+
+def test_npz_errors(tmp_path):
+    path = tmp_path / "nostack.npz"
+    np.savez(path, frames=np.zeros((3, 4, 4)), angles=[0, 60, 120])
+    with pytest.raises(PolarsegError, match="no array named 'stack'.*found: frames, angles"):
+        pio.read_stack(path)
+    pickled = tmp_path / "pickled.npz"
+    np.savez(pickled, stack=np.array([None, 1], dtype=object), angles=[0, 60])
+    with pytest.raises(PolarsegError, match="pickled.npz: cannot read"):
+        pio.read_stack(pickled)
+    single = tmp_path / "single.npz"
+    np.savez(single, stack=np.zeros((4, 4)), angles=[0, 60, 120])
+    with pytest.raises(PolarsegError, match=r"expected a stack of frames"):
+        pio.read_stack(single)
+
+
+def test_npy_needs_angles(tmp_path):
+    stack, _ = uint16_stack()
+    path = tmp_path / "s.npy"
+    np.save(path, stack)
+    with pytest.raises(PolarsegError, match="no polariser angles"):
+        pio.read_stack(path)
+    np.testing.assert_array_equal(pio.read_stack(path, angles_deg=ANGLES).stack, stack)
+
+
+# -- folders -------------------------------------------------------------------------------
+
+
+def test_folder_of_png_frames_sorted_by_angle_in_name(tmp_path):
+    stack, _ = uint16_stack()
+    folder = tmp_path / "frames"
+    folder.mkdir()
+    names = {}
+    for k in [3, 0, 5, 1, 4, 2]:  # written out of order; names are not zero-padded alike
+        name = f"leaf_{int(ANGLES[k])}deg.png" if k % 2 else f"leaf_{int(ANGLES[k]):03d}.png"
+        skio.imsave(folder / name, stack[k], check_contrast=False)
+        names[k] = name
+    (folder / "notes.txt").write_text("ignored")
+    (folder / ".hidden_999.png").write_bytes(b"ignored")
+    data = pio.read_stack(folder)
+    np.testing.assert_array_equal(data.angles_deg, ANGLES)
+    np.testing.assert_array_equal(data.stack, stack)
+    assert data.metadata["files"] == [names[k] for k in range(6)]
+
+
+def test_folder_with_given_angles_uses_natural_name_order(tmp_path):
+    stack, _ = uint16_stack(angles=[0, 45, 90, 135])
+    for k, name in enumerate(["f2.tif", "f10.tif", "f11.tif", "f100.tif"]):
+        tifffile.imwrite(tmp_path / name, stack[k], photometric="minisblack")
+    data = pio.read_stack(tmp_path, angles_deg=[0, 45, 90, 135])
+    np.testing.assert_array_equal(data.stack, stack)
+    assert data.metadata["files"] == ["f2.tif", "f10.tif", "f11.tif", "f100.tif"]
+
+
+def test_folder_of_colour_frames(tmp_path):
+    rng = np.random.default_rng(5)
+    rgb = rng.integers(0, 255, (3, 5, 6, 3), dtype=np.uint8)
+    for k, a in enumerate([0, 60, 120]):
+        skio.imsave(tmp_path / f"c_{a}.png", rgb[k], check_contrast=False)
+    data = pio.read_stack(tmp_path)
+    np.testing.assert_allclose(data.stack, rgb @ pio.LUMA_BT601)
+    np.testing.assert_array_equal(pio.read_stack(tmp_path, channel=0).stack, rgb[..., 0])
+
+
+def test_folder_errors(tmp_path):
+    stack, _ = uint16_stack(angles=[0, 45, 90])
+    for k, a in enumerate([0, 45, 90]):
+        skio.imsave(tmp_path / f"p_{a}.png", stack[k], check_contrast=False)
+    skio.imsave(tmp_path / "p_135.png", stack[0, :-1], check_contrast=False)
+    with pytest.raises(
+        PolarsegError, match=r"p_135\.png: frame is 11 x 15 pixels but p_0\.png is 12 x 15"
+    ):
+        pio.read_stack(tmp_path)
+    (tmp_path / "p_135.png").unlink()
+    skio.imsave(tmp_path / "dark.png", stack[0], check_contrast=False)
+    with pytest.raises(PolarsegError, match=r"dark\.png: no angle in the file name"):
+        pio.read_stack(tmp_path)
+    (tmp_path / "dark.png").unlink()
+    (tmp_path / "p_20.png").write_bytes(b"\x89PNG\r\n\x1a\n cut short")
+    with pytest.raises(PolarsegError, match=r"p_20\.png: cannot read the image"):
+        pio.read_stack(tmp_path)
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    with pytest.raises(PolarsegError, match="no image frames"):
+        pio.read_stack(empty)
+
+
+# -- mosaic --------------------------------------------------------------------------------
+
+
+def test_demosaic_matches_explicit_slicing_and_sorts_by_angle():
+    rng = np.random.default_rng(7)
+    raw = rng.integers(0, 4096, (6, 8), dtype=np.uint16)
+    stack, angles = demosaic_superpixel(raw, (90, 45, 135, 0))
+    assert angles.tolist() == [0.0, 45.0, 90.0, 135.0]
+    assert stack.shape == (4, 3, 4) and stack.dtype == np.uint16
+    # independent decoding: the pixel at (2i + di, 2j + dj) belongs to layout[2 di + dj]
+    expected = {
+        0.0: raw[1::2, 1::2],
+        45.0: raw[0::2, 1::2],
+        90.0: raw[0::2, 0::2],
+        135.0: raw[1::2, 0::2],
+    }
+    for frame, angle in zip(stack, angles, strict=True):
+        np.testing.assert_array_equal(frame, expected[angle])
+    for i in range(3):
+        for j in range(4):
+            assert stack[2, i, j] == raw[2 * i, 2 * j]  # 90 degrees: top-left
+            assert stack[0, i, j] == raw[2 * i + 1, 2 * j + 1]  # 0 degrees: bottom-right
+    np.testing.assert_array_equal(mosaic_superpixel(stack, (90, 45, 135, 0)), raw)
+
+
+def test_demosaic_errors():
+    with pytest.raises(PolarsegError, match="even height and width, got 5 x 8"):
+        demosaic_superpixel(np.zeros((5, 8)))
+    with pytest.raises(PolarsegError, match="4 finite angles"):
+        demosaic_superpixel(np.zeros((4, 4)), (0, 45, 90))
+    with pytest.raises(PolarsegError, match="2-D"):
+        demosaic_superpixel(np.zeros((2, 4, 4)))
+
+
+def test_mosaic_file_recovers_polarisation(tmp_path):
+    layout = (90, 45, 135, 0)
+    stack, (i0, rho, phi) = render(h=10, w=12, angles=sorted(layout))
+    raw = mosaic_superpixel(np.round(stack).astype(np.uint16), layout)
+    path = tmp_path / "raw.png"
+    skio.imsave(path, raw, check_contrast=False)
+    data = pio.read_stack(path, mosaic=layout)
+    assert data.stack.shape == (4, 10, 12)
+    assert data.metadata["raw_shape"] == [20, 24]
+    pol = polarisation_image(data.stack, data.angles_rad)
+    np.testing.assert_allclose(pol.intensity, i0, rtol=1e-3)
+    np.testing.assert_allclose(pol.dop, rho, atol=2e-3)
+    dphi = np.angle(np.exp(2j * (pol.phase - phi))) / 2
+    assert np.max(np.abs(dphi)) < 0.01
+
+
+def test_mosaic_file_errors(tmp_path):
+    path = tmp_path / "odd.tif"
+    tifffile.imwrite(path, np.zeros((7, 8), np.uint16), photometric="minisblack")
+    with pytest.raises(PolarsegError, match=r"odd\.tif: .*even height and width, got 7 x 8"):
+        pio.read_stack(path, mosaic=(90, 45, 135, 0))
+    with pytest.raises(PolarsegError, match="not both"):
+        pio.read_stack(path, angles_deg=[0, 45, 90, 135], mosaic=(90, 45, 135, 0))
+    with pytest.raises(PolarsegError, match="not a folder"):
+        pio.read_stack(tmp_path, mosaic=(90, 45, 135, 0))
+
+
+# -- registration --------------------------------------------------------------------------
+
+
+def test_registration_recovers_subpixel_shifts():
+    rng = np.random.default_rng(11)
+    big = ndimage.gaussian_filter(rng.random((140, 150)), 2.0)
+    true = np.array([[0, 0], [1.5, -2.25], [0.3, 0.7], [-3.4, 1.1], [2.6, -0.45]])
+    # moving frames: the same scene displaced by `true`, with other brightness and noise,
+    # cut from a larger field so the edges are not periodic
+    frames = []
+    for k, d in enumerate(true):
+        moved = ndimage.shift(big, d, order=5)[40:97, 40:103]
+        frames.append((0.5 + 0.2 * k) * moved + 0.1 * k + rng.normal(0, 0.003, moved.shape))
+    stack = np.stack(frames)
+    registered, shifts = register_stack(stack)
+    assert shifts.shape == (5, 2)
+    np.testing.assert_allclose(shifts, -true, atol=0.2)
+    assert np.all(shifts[0] == 0)
+    np.testing.assert_array_equal(registered[0], stack[0])
+    # after registration the interiors line up (up to the brightness change)
+    inner = (slice(6, -6), slice(6, -6))
+    for k in range(1, 5):
+        r = np.corrcoef(registered[k][inner].ravel(), registered[0][inner].ravel())[0, 1]
+        before = np.corrcoef(stack[k][inner].ravel(), stack[0][inner].ravel())[0, 1]
+        assert r > 0.975 and r > before + 0.04  # limited by the added noise
+
+
+def test_registration_edge_cases():
+    flat = np.ones((3, 16, 16))
+    registered, shifts = register_stack(flat)
+    assert np.all(shifts == 0)
+    np.testing.assert_array_equal(registered, flat)
+    assert estimate_shift(np.zeros((8, 8)), np.ones((8, 8))).tolist() == [0.0, 0.0]
+    with pytest.raises(PolarsegError, match="reference frame 3"):
+        register_stack(flat, reference=3)
+    with pytest.raises(PolarsegError, match="upsample"):
+        register_stack(flat, upsample=0)
+    with pytest.raises(PolarsegError, match="shape"):
+        register_stack(np.ones((4, 4)))
+
+
+# -- writers -------------------------------------------------------------------------------
+
+
+def test_write_tiff_round_trip_with_metadata(tmp_path):
+    array = np.linspace(0, 1, 35, dtype=np.float32).reshape(5, 7)
+    path = tmp_path / "dop.tif"
+    pio.write_tiff(path, array, {"unit": "1"})
+    with tifffile.TiffFile(path) as tif:
+        np.testing.assert_array_equal(tif.asarray(), array)
+        assert tif.shaped_metadata[0]["unit"] == "1"
+    assert sorted(os.listdir(tmp_path)) == ["dop.tif"]
+
+
+def test_write_json_converts_numpy_and_non_finite(tmp_path):
+    path = tmp_path / "s.json"
+    pio.write_json(path, {"a": np.float32(1.5), "b": np.arange(3), "c": float("nan"), "d": (1, 2)})
+    assert json.loads(path.read_text()) == {"a": 1.5, "b": [0, 1, 2], "c": None, "d": [1, 2]}
+
+
+def test_write_png_round_trip(tmp_path):
+    image = np.arange(12, dtype=np.uint16).reshape(3, 4) * 1000
+    path = tmp_path / "a.png"
+    pio.write_png(path, image)
+    np.testing.assert_array_equal(skio.imread(path), image)
+    with pytest.raises(PolarsegError, match="uint8 or uint16"):
+        pio.write_png(path, image.astype(float))
+
+
+def _failing_writer(*args, **kwargs):
+    """Write half a file to the target, then fail like a full disk."""
+    target = args[0] if args else kwargs.get("fname") or kwargs.get("file")
+    with open(target, "wb") as handle:
+        handle.write(b"partial")
+    raise OSError(28, "No space left on device")
+
+
+def test_atomic_writers_leave_the_old_file_intact(tmp_path, monkeypatch):
+    tif, js, png = tmp_path / "labels.tif", tmp_path / "params.json", tmp_path / "o.png"
+    pio.write_tiff(tif, np.ones((4, 4), np.uint16))
+    pio.write_json(js, {"good": True})
+    pio.write_png(png, np.ones((4, 4), np.uint8))
+    before = {p: p.read_bytes() for p in (tif, js, png)}
+
+    monkeypatch.setattr(tifffile, "imwrite", _failing_writer)
+    with pytest.raises(OSError, match="No space"):
+        pio.write_tiff(tif, np.zeros((8, 8), np.uint16))
+    with pytest.raises(OSError, match="No space"):
+        pio.write_stack_tiff(tif, np.zeros((3, 8, 8)), [0, 60, 120])
+    monkeypatch.setattr(skio, "imsave", _failing_writer)
+    with pytest.raises(OSError, match="No space"):
+        pio.write_png(png, np.zeros((8, 8), np.uint8))
+    with pytest.raises(TypeError):
+        pio.write_json(js, {"not serialisable": object()})
+
+    for p, content in before.items():
+        assert p.read_bytes() == content
+    assert sorted(os.listdir(tmp_path)) == ["labels.tif", "o.png", "params.json"]  # no temp files
+
+
+def test_atomic_output_replaces_only_on_success(tmp_path):
+    path = tmp_path / "x.txt"
+    path.write_text("old")
+    with pytest.raises(RuntimeError), pio.atomic_output(path) as tmp:
+        assert tmp.parent == tmp_path and tmp.suffix == ".txt"
+        tmp.write_text("new but broken")
+        raise RuntimeError("boom")
+    assert path.read_text() == "old"
+    with pio.atomic_output(path) as tmp:
+        tmp.write_text("new")
+    assert path.read_text() == "new"
+    assert os.listdir(tmp_path) == ["x.txt"]
