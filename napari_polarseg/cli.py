@@ -54,7 +54,9 @@ from . import io as pio
 from .engine.errors import PolarsegError
 from .engine.params import (
     COEFFICIENT_METHODS,
+    FEATURE_KINDS,
     MODELS,
+    RECOMMENDED,
     SCALE_MODES,
     SPECULAR_BRANCHES,
     SegmentParams,
@@ -136,6 +138,10 @@ PARAM_OPTIONS: dict[str, tuple[str, dict[str, Any]]] = {
         {"choices": COEFFICIENT_METHODS, "help": "block coefficient estimator"},
     ),
     "ridge": ("--ridge", {"type": float, "help": "ridge penalty of the 'ridge' estimator"}),
+    "features": (
+        "--features",
+        {"choices": FEATURE_KINDS, "help": "block features: all, zonal (m=0) or energies"},
+    ),
     "variance": ("--variance", {"type": float, "help": "share of variance the PCA keeps"}),
     "scale": ("--scale", {"type": float, "help": "affinity scale s in exp(-D/s)"}),
     "scale_mode": (
@@ -173,10 +179,21 @@ def _param_options() -> dict[str, tuple[str, dict[str, Any]]]:
     return options
 
 
-def _add_param_options(parser: argparse.ArgumentParser) -> None:
+PRESETS = {"thesis": SegmentParams(), "recommended": RECOMMENDED}
+
+
+def _add_param_options(parser: argparse.ArgumentParser, preset: str = "thesis") -> None:
     defaults = SegmentParams()
     group = parser.add_argument_group(
-        "segmentation parameters", "explicit flags override --params; defaults in brackets"
+        "segmentation parameters",
+        "start from --preset, then --params, then explicit flags; thesis defaults in brackets",
+    )
+    group.add_argument(
+        "--preset",
+        choices=sorted(PRESETS),
+        default=preset,
+        help="starting parameters: the thesis defaults, or those that score best on the "
+        f"synthetic scenes (README, 'Segmentation quality') [{preset}]",
     )
     group.add_argument(
         "--params",
@@ -252,7 +269,7 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument(
         "--sample", metavar="FILE.npz", help="use this .npz (stack, angles, labels) instead"
     )
-    _add_param_options(demo)
+    _add_param_options(demo, preset="recommended")
     demo.set_defaults(func=_cmd_demo, overview=True)
     return parser
 
@@ -280,7 +297,8 @@ def _params_from_args(
     args: argparse.Namespace, base: dict[str, Any] | None = None
 ) -> SegmentParams:
     """SegmentParams from ``base``, then ``--params``, then explicit flags (validated)."""
-    values: dict[str, Any] = dict(base or {})
+    values: dict[str, Any] = PRESETS[getattr(args, "preset", "thesis")].to_dict()
+    values.update(base or {})
     source = "parameters"
     if args.params:
         source = args.params

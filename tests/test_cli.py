@@ -152,6 +152,7 @@ def test_segment_all_parameter_flags_reach_params_json(tmp_path, capsys, scene_t
         *("--window", "9", "--degree", "5", "--refractive-index", "1.6", "--segments", "3"),
         *("--model", "specular", "--specular-branch", "above-brewster"),
         *("--coefficients", "ridge", "--ridge", "0.01", "--variance", "0.9", "--scale", "2"),
+        *("--features", "zonal"),
         *("--scale-mode", "median", "--spatial-radius", "1.5", "--spatial-sigma", "3"),
         *("--ncut-threshold", "0.8", "--min-segment-blocks", "2"),
     ]
@@ -165,6 +166,7 @@ def test_segment_all_parameter_flags_reach_params_json(tmp_path, capsys, scene_t
         "specular_branch": "above-brewster",
         "coefficients": "ridge",
         "ridge": 0.01,
+        "features": "zonal",
         "variance": 0.9,
         "scale": 2.0,
         "scale_mode": "median",

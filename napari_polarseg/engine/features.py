@@ -10,6 +10,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from .errors import PolarsegError
+from .harmonics import degree_order
+
+FEATURE_KINDS = ("thesis", "zonal", "energy")
 
 
 @dataclass(frozen=True)
@@ -38,6 +41,41 @@ class PCAResult:
     def explained_variance(self) -> float:
         """Total share of variance kept."""
         return float(self.explained_variance_ratio.sum())
+
+
+def harmonic_features(coefficients: np.ndarray, kind: str = "thesis") -> np.ndarray:
+    """Block feature vectors from spherical-harmonic coefficients.
+
+    Parameters
+    ----------
+    coefficients : array (..., (L+1)²)
+        Block coefficients in thesis order (eq. 4.21).
+    kind : {"thesis", "zonal", "energy"}
+        ``"thesis"``: every coefficient a_lm (thesis section 4.5).
+        ``"zonal"``: the m = 0 coefficients a_l0 = mean(Î Y_l0(θ)) only. They depend on
+        how Î is distributed over the zenith alone, not on the surface azimuth, whose
+        block-to-block variation otherwise dominates the PCA while saying nothing about
+        the material (the 180° azimuth ambiguity makes it noisier still).
+        ``"energy"``: rotation-invariant energy per degree, √(Σ_m a_lm²).
+
+    Returns
+    -------
+    ndarray (n_blocks, n_features)
+    """
+    c = np.asarray(coefficients, dtype=float)
+    c = c.reshape(-1, c.shape[-1])
+    degree = int(round(np.sqrt(c.shape[1]))) - 1
+    if (degree + 1) ** 2 != c.shape[1]:
+        raise PolarsegError(f"{c.shape[1]} coefficients is not (L+1)² for any degree L")
+    if kind == "thesis":
+        return c
+    ls, ms = degree_order(degree)
+    if kind == "zonal":
+        return c[:, ms == 0]
+    if kind == "energy":
+        sq = c * c
+        return np.sqrt(np.stack([sq[:, ls == l].sum(axis=1) for l in range(degree + 1)], 1))  # noqa: E741
+    raise PolarsegError(f"feature kind must be one of {', '.join(FEATURE_KINDS)}; got {kind!r}")
 
 
 def pca_features(vectors: np.ndarray, variance: float = 0.95) -> PCAResult:

@@ -19,6 +19,7 @@ MODELS = ("diffuse", "specular")
 SPECULAR_BRANCHES = ("below-brewster", "above-brewster")
 COEFFICIENT_METHODS = ("thesis", "ridge")
 SCALE_MODES = ("absolute", "median")
+FEATURE_KINDS = ("thesis", "zonal", "energy")
 MAX_DEGREE = 60
 
 
@@ -45,6 +46,9 @@ class SegmentParams:
         ridge least-squares fit.
     ridge : float
         Ridge penalty, relative to the mean diagonal of the block Gram matrix.
+    features : {"thesis", "zonal", "energy"}
+        Block features fed to the PCA: every coefficient (thesis), the azimuth-invariant
+        m = 0 coefficients, or the rotation-invariant energy per degree.
     variance : float
         Share of variance the PCA keeps, in (0, 1] (thesis: 0.95).
     scale : float
@@ -73,6 +77,7 @@ class SegmentParams:
     specular_branch: str = "below-brewster"
     coefficients: str = "thesis"
     ridge: float = 1e-3
+    features: str = "thesis"
     variance: float = 0.95
     scale: float = 1.0
     scale_mode: str = "absolute"
@@ -100,6 +105,7 @@ class SegmentParams:
         _check_choice("specular_branch", self.specular_branch, SPECULAR_BRANCHES)
         _check_choice("coefficients", self.coefficients, COEFFICIENT_METHODS)
         _check_choice("scale_mode", self.scale_mode, SCALE_MODES)
+        _check_choice("features", self.features, FEATURE_KINDS)
         if not _is_number(self.ridge) or self.ridge <= 0:
             raise PolarsegError(f"ridge must be a positive number, got {self.ridge!r}")
         if not _is_number(self.variance) or not 0 < self.variance <= 1:
@@ -173,3 +179,20 @@ def _is_number(v: Any) -> bool:
 def _check_choice(name: str, value: Any, choices: tuple[str, ...]) -> None:
     if not isinstance(value, str) or value not in choices:
         raise PolarsegError(f"{name} must be one of {', '.join(choices)}; got {value!r}")
+
+
+#: Parameters that beat the thesis defaults on the bundled synthetic scenes (chosen with
+#: ``benchmarks/evaluate.py --sweep``; README "Segmentation quality" has the table).
+#: The thesis's absolute affinity scale s = 1 with 10-20 PCA components gives affinities
+#: near e^-30: the graph falls apart and the cut peels off single blocks, so the scale is
+#: relative to the median distance here; the azimuth-invariant zonal coefficients drop
+#: the surface-azimuth variation that dominates the raw coefficients; a minimum segment
+#: size stops the cut from isolating a few odd blocks.
+RECOMMENDED = SegmentParams(
+    window=12,
+    degree=8,
+    features="zonal",
+    scale=2.0,
+    scale_mode="median",
+    min_segment_blocks=4,
+)

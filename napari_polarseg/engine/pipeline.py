@@ -5,7 +5,7 @@ Stages, each a plain function of the engine, and the parameters each depends on:
     polarisation   (stack, angles)                       → Î, ρ, φ          polarimage.py
     normals        refractive_index, model, branch        → θ, azimuth       fresnel.py
     harmonics      window, degree, coefficients, ridge    → block a_lm       harmonics.py
-    pca            variance                               → block features   features.py
+    pca            features, variance                     → block features   features.py
     affinity       scale, scale_mode, spatial_*           → S = exp(−D/s)    features.py
     cut            min_segment_blocks, ncut_threshold     → cut tree         ncut.py
     labels         n_segments                             → labels           ncut.py
@@ -65,7 +65,7 @@ def _own_key(stage: str, p: SegmentParams) -> tuple:
     if stage == "harmonics":
         return (p.window, p.degree, p.coefficients, p.ridge if p.coefficients == "ridge" else None)
     if stage == "pca":
-        return (p.variance,)
+        return (p.features, p.variance)
     if stage == "affinity":
         spatial = (p.spatial_radius, p.spatial_sigma) if p.spatial_radius > 0 else None
         return (p.scale, p.scale_mode, spatial)
@@ -238,7 +238,7 @@ class Pipeline:
                     f"window size {p.window} leaves fewer than 2 blocks in a "
                     f"{self.stack.shape[1]} x {self.stack.shape[2]} image"
                 )
-            return feat.pca_features(coef, p.variance)
+            return feat.pca_features(feat.harmonic_features(coef, p.features), p.variance)
         if stage == "affinity":
             pca = self.get("pca")
             n = pca.features.shape[0]
