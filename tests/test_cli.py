@@ -268,7 +268,9 @@ def toy_samples(tmp_path, monkeypatch):
 
 def test_demo_writes_outputs_overview_and_rand_index(tmp_path, capsys, toy_samples):
     out = tmp_path / "demo"
-    code, stdout, err = run(capsys, "demo", "--out", out, "--scene", "toy", "--degree", "4")
+    code, stdout, err = run(
+        capsys, "demo", "--out", out, "--scene", "toy", "--preset", "thesis", "--degree", "4"
+    )
     assert code == 0, err
     assert set(os.listdir(out)) == CONTRACT | {"overview.png"}
     assert str(out) in stdout
