@@ -143,3 +143,32 @@ def test_intensity_baseline_full_size():
     stack, _ = two_material_stack()
     labels = intensity_baseline(stack.mean(0), 10, 2)
     assert labels.shape == (57, 63) and set(np.unique(labels)) == {0, 1}
+
+
+def test_known_normals_come_back_through_the_pipeline():
+    """A dome rendered with known normals and n gives its zenith and azimuth back."""
+    from napari_polarseg.engine.synthetic import diffuse_dop_from_transmission, render_stack
+
+    h = w = 96
+    yy, xx = np.mgrid[:h, :w] - 47.5
+    r2 = (xx**2 + yy**2) / 60.0**2
+    # hemisphere-like cap: slopes from its height field z = 60 sqrt(1 - r^2)
+    inside = r2 < 0.95
+    root = np.sqrt(np.clip(1 - r2, 0.05, None))
+    # dz/dcol, dz/drow of the cap; flat board outside it
+    p = np.where(inside, -xx / 60.0 / root, 0.0)
+    q = np.where(inside, -yy / 60.0 / root, 0.0)
+    zenith = np.arctan(np.hypot(p, q))
+    azimuth = np.mod(np.arctan2(-q, -p), np.pi)
+    n = 1.5
+    rho = diffuse_dop_from_transmission(zenith, n)
+    intensity = 0.3 + 0.3 * np.cos(zenith)
+    stack = render_stack(intensity, rho, azimuth, ANGLES, noise_sigma=0.001, bit_depth=12, rng=1)
+    pipe = Pipeline(stack, ANGLES, SegmentParams(window=8, degree=2, refractive_index=n))
+    nrm = pipe.get("normals")
+    strong = rho > 0.05
+    assert strong.sum() > 1000
+    err = np.abs(nrm.zenith - zenith)[strong]
+    assert np.rad2deg(np.median(err)) < 1.0
+    dphi = np.abs(np.angle(np.exp(2j * (nrm.azimuth - azimuth)))) / 2
+    assert np.rad2deg(np.median(dphi[strong])) < 1.0
