@@ -1,0 +1,153 @@
+"""npe2 reader: polarisation angle stacks as one napari image layer.
+
+Handles (the reading itself is :func:`napari_polarseg.io.read_stack`):
+
+- a multi-page TIFF whose metadata holds the polariser angles (``"angles"`` in tifffile's
+  shaped JSON metadata or in a JSON ImageDescription, as
+  :func:`napari_polarseg.io.write_stack_tiff` writes it);
+- an ``.npz`` with arrays ``stack`` (N, H, W) and ``angles`` (degrees);
+- a folder of at least three frames whose file names carry the angle (the last number in
+  the name: ``leaf_030.png`` is 30 degrees).
+
+The layer's ``metadata["angles_deg"]`` holds the angles in degrees, one per frame, which
+the plugin's widgets read. Anything else (single images, TIFFs without angles, ``.npz``
+without ``angles``, folders of other files) gets ``None`` from :func:`get_reader`, so
+napari can try its other readers. This module imports neither napari nor Qt.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import tifffile
+
+from .engine.polarimage import distinct_angle_count
+from .io import FRAME_SUFFIXES, angle_from_name, read_stack
+
+LayerData = tuple[Any, dict[str, Any], str]
+ReaderFunction = Callable[[str | list[str]], list[LayerData]]
+
+
+def _single_path(path: str | list[str]) -> Path | None:
+    if isinstance(path, (list, tuple)):
+        if len(path) != 1:
+            return None
+        path = path[0]
+    return Path(os.fspath(path))
+
+
+def _enough_angles(angles: Any) -> bool:
+    try:
+        values = np.asarray(angles, dtype=float).ravel()
+    except (TypeError, ValueError):
+        return False
+    return bool(np.all(np.isfinite(values))) and distinct_angle_count(np.deg2rad(values)) >= 3
+
+
+def _npz_has_stack(path: Path) -> bool:
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            return "stack" in data.files and "angles" in data.files
+    except Exception:
+        return False
+
+
+def _tiff_angles(path: Path) -> Any:
+    """The ``angles`` entry of a TIFF's JSON metadata, or None (never raises)."""
+    try:
+        with tifffile.TiffFile(path) as tif:
+            if len(tif.pages) < 1:
+                return None
+            shaped = tif.shaped_metadata
+            if shaped:
+                return dict(shaped[0]).get("angles")
+            description = tif.pages[0].description or ""
+            if description.lstrip().startswith("{"):
+                meta = json.loads(description)
+                return meta.get("angles") if isinstance(meta, dict) else None
+    except Exception:
+        return None
+    return None
+
+
+def _folder_angles(path: Path) -> list[float] | None:
+    frames = [
+        f
+        for f in path.iterdir()
+        if f.is_file() and not f.name.startswith(".") and f.suffix.lower() in FRAME_SUFFIXES
+    ]
+    angles = [angle_from_name(f.name) for f in frames]
+    if len(frames) < 3 or any(a is None for a in angles) or not _enough_angles(angles):
+        return None
+    return angles
+
+
+def get_reader(path: str | list[str]) -> ReaderFunction | None:
+    """Return :func:`read_angle_stack` if ``path`` is an angle stack this plugin reads.
+
+    Only cheap checks are made here (file type, the names of the arrays in an ``.npz``,
+    the TIFF's metadata, the names of a folder's files); the data is read by the
+    returned function.
+
+    Parameters
+    ----------
+    path : str or list of str
+        What napari was asked to open (a list must hold exactly one path).
+
+    Returns
+    -------
+    callable or None
+        The reader function, or None for paths this plugin does not handle.
+    """
+    p = _single_path(path)
+    if p is None or not p.exists():
+        return None
+    if p.is_dir():
+        return read_angle_stack if _folder_angles(p) is not None else None
+    suffix = p.suffix.lower()
+    if suffix == ".npz":
+        return read_angle_stack if _npz_has_stack(p) else None
+    if suffix in (".tif", ".tiff"):
+        angles = _tiff_angles(p)
+        return read_angle_stack if angles is not None and _enough_angles(angles) else None
+    return None
+
+
+def stack_layer_data(data: Any, name: str | None = None) -> LayerData:
+    """napari layer data tuple of a :class:`napari_polarseg.io.StackData`."""
+    angles = [float(a) for a in np.asarray(data.angles_deg, dtype=float).ravel()]
+    source = str(data.source)
+    info = {k: v for k, v in data.metadata.items() if k != "warnings"}
+    metadata = {"angles_deg": angles, "source": source, "reader": _plain(info)}
+    layer_name = name or Path(source).stem or Path(source).name
+    return (data.stack, {"name": layer_name, "metadata": metadata, "colormap": "gray"}, "image")
+
+
+def read_angle_stack(path: str | list[str]) -> list[LayerData]:
+    """Read an angle stack into one image layer with ``metadata["angles_deg"]``.
+
+    Raises :class:`napari_polarseg.engine.PolarsegError` with a one-line message naming
+    the file for input that cannot be used (napari shows it as an error notification).
+    """
+    p = _single_path(path)
+    if p is None:
+        raise ValueError("napari-polarseg reads one angle stack (file or folder) at a time")
+    return [stack_layer_data(read_stack(p))]
+
+
+def _plain(obj: Any) -> Any:
+    """Metadata as plain Python types (numpy scalars/arrays become numbers/lists)."""
+    if isinstance(obj, dict):
+        return {str(k): _plain(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_plain(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, np.generic):
+        return obj.item()
+    return obj

@@ -1,0 +1,14 @@
+"""napari widgets of napari-polarseg (need napari and a Qt binding).
+
+- :class:`PolarisationWidget` ("Polarisation image"): Î, ρ, φ and zenith θ layers.
+- :class:`SegmentWidget` ("Segment by material"): the segmentation pipeline with live
+  parameters, ``segments`` and ``reconstruction error`` layers.
+
+Both are thin: they read the chosen angle-stack layer, call the engine in a napari worker
+thread and show the results. ``import napari_polarseg`` does not import this package.
+"""
+
+from .polarisation import PolarisationWidget
+from .segment import SegmentWidget
+
+__all__ = ["PolarisationWidget", "SegmentWidget"]

@@ -1,0 +1,189 @@
+"""What both widgets share: the angle-stack chooser, the angles field, Run/Cancel, status."""
+
+from __future__ import annotations
+
+import contextlib
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from magicgui.widgets import ComboBox, Container, Label, LineEdit, PushButton
+from napari.layers import Image
+from napari.utils.notifications import show_error
+
+from ..engine import PolarsegError
+from ._layers import ANGLES_KEY, find_output, layer_tag, source_key
+from ._runner import WorkerSlot, format_angles, parse_angles
+
+if TYPE_CHECKING:
+    import napari
+    from napari.layers import Layer
+
+
+def is_angle_stack(layer: Layer) -> bool:
+    """True for an image layer that can be an angle stack (3-D, grey, not our output)."""
+    return (
+        isinstance(layer, Image)
+        and not layer.rgb
+        and not layer.multiscale
+        and layer.ndim == 3
+        and layer_tag(layer) is None
+    )
+
+
+class StackWidget(Container):
+    """Base of the plugin's widgets: stack layer, polariser angles, Run, Cancel, status.
+
+    Subclasses add their parameter widgets with :meth:`_add_parameters`, implement
+    :meth:`run`, and call :meth:`_submit` with an engine job.
+    """
+
+    #: Text of the Run button.
+    run_text = "Run"
+    #: Description of the progress bar.
+    progress_desc = "napari-polarseg"
+
+    def __init__(self, viewer: napari.viewer.Viewer) -> None:
+        super().__init__(labels=True)
+        self._viewer = viewer
+        self.stack_layer = ComboBox(
+            label="angle stack",
+            choices=self._stack_choices,
+            nullable=True,
+            tooltip="Image layer holding the angle stack (angles, rows, columns)",
+        )
+        self.angles = LineEdit(
+            label="angles (deg)",
+            tooltip="Polariser angle of each frame in degrees, comma-separated; "
+            f"filled from the layer's metadata[{ANGLES_KEY!r}] when present",
+        )
+        self.run_button = PushButton(text=self.run_text)
+        self.cancel_button = PushButton(text="Cancel", enabled=False)
+        self.status = Label(value="")
+        self.status.native.setWordWrap(True)
+        self.extend([self.stack_layer, self.angles])
+        self._slot = WorkerSlot(
+            self.progress_desc, on_status=self._set_status, on_idle=self._on_idle
+        )
+
+        self.stack_layer.changed.connect(self._on_stack_changed)
+        self.run_button.changed.connect(self.run)
+        self.cancel_button.changed.connect(self.cancel)
+        events = viewer.layers.events
+        events.inserted.connect(self._on_layers_changed)
+        events.removed.connect(self._on_layers_changed)
+        slot, on_layers = self._slot, self._on_layers_changed
+
+        def _closed(*_: Any) -> None:
+            slot.cancel()
+            for emitter in (events.inserted, events.removed):
+                with contextlib.suppress(Exception):
+                    emitter.disconnect(on_layers)
+
+        self.native.destroyed.connect(_closed)
+        self._on_layers_changed()
+
+    # -- building ---------------------------------------------------------------------
+    def _add_parameters(self, widgets: list[Any]) -> None:
+        """Append the parameter widgets, then the buttons and the status line."""
+        self.extend([*widgets, self.run_button, self.cancel_button, self.status])
+
+    # -- stack and angles -------------------------------------------------------------
+    def _stack_choices(self, _widget: Any = None) -> list[tuple[str, Layer]]:
+        return [(layer.name, layer) for layer in self._viewer.layers if is_angle_stack(layer)]
+
+    def _on_layers_changed(self, *_: Any) -> None:
+        try:
+            self._refresh_stacks()
+        except RuntimeError:  # the Qt widgets are gone (viewer closing)
+            return
+        self._forget({source_key(layer) for layer in self._viewer.layers})
+
+    def _refresh_stacks(self) -> None:
+        self.stack_layer.reset_choices()
+        if self.stack_layer.value is None:
+            choices = [c for c in self.stack_layer.choices if c is not None]
+            if choices:
+                self.stack_layer.value = choices[-1]
+
+    def _forget(self, keep: set[str]) -> None:
+        """Subclasses: drop state kept for stack layers whose key is not in ``keep``."""
+
+    def _on_stack_changed(self, layer: Layer | None) -> None:
+        if layer is None:
+            return
+        angles = layer.metadata.get(ANGLES_KEY) if isinstance(layer.metadata, dict) else None
+        if angles is not None and np.size(angles) == layer.data.shape[0]:
+            self.angles.value = format_angles(angles)
+        elif self.angles.value:
+            try:
+                if parse_angles(self.angles.value).size != layer.data.shape[0]:
+                    self.angles.value = ""
+            except PolarsegError:
+                self.angles.value = ""
+
+    def current_stack(self) -> tuple[Layer, np.ndarray]:
+        """The chosen stack layer and its angles in degrees (raises PolarsegError)."""
+        layer = self.stack_layer.value
+        if layer is None:
+            raise PolarsegError("choose an angle-stack image layer (angles, rows, columns)")
+        return layer, parse_angles(self.angles.value)
+
+    def output(self, role: str, source: Layer | None = None) -> Layer | None:
+        """The plugin's ``role`` layer (e.g. ``"segments"``) for ``source`` or the chosen stack."""
+        source = source if source is not None else self.stack_layer.value
+        return None if source is None else find_output(self._viewer, role, source)
+
+    # -- running ----------------------------------------------------------------------
+    @property
+    def busy(self) -> bool:
+        """True while a computation runs or waits to run."""
+        return self._slot.busy
+
+    @property
+    def worker(self) -> Any:
+        """The running napari worker, if any."""
+        return self._slot.worker
+
+    @property
+    def last_error(self) -> str | None:
+        """Message of the last error of a run (also shown as a notification)."""
+        return self._slot.last_error
+
+    def run(self, *_: Any) -> None:  # pragma: no cover - overridden
+        raise NotImplementedError
+
+    def cancel(self, *_: Any) -> None:
+        """Stop the running computation at its next stage boundary; drop queued runs."""
+        self._slot.cancel()
+
+    def wait(self, timeout: float | None = 60.0) -> bool:
+        """Process events until no computation runs or waits (scripts and tests)."""
+        return self._slot.wait(timeout, extra=self._waiting)
+
+    def _waiting(self) -> bool:
+        """Subclasses: True while a run is scheduled but not yet submitted."""
+        return False
+
+    def _submit(self, job: Any, args: tuple[Any, ...], total: int, on_result: Any) -> None:
+        self.cancel_button.enabled = True
+        self._slot.submit(job, args, total, on_result)
+
+    def _set_status(self, text: str) -> None:
+        try:
+            self.status.value = text
+        except RuntimeError:  # the widget was deleted while a worker ended
+            pass
+
+    def _on_idle(self) -> None:
+        try:
+            self.cancel_button.enabled = False
+        except RuntimeError:
+            pass
+
+    def _fail(self, exc: PolarsegError) -> None:
+        """Report a problem found before starting a worker."""
+        self._set_status(f"error: {exc}")
+        show_error(str(exc))
+
+    def _done(self, text: str) -> None:
+        self._set_status(text)

@@ -1,0 +1,151 @@
+"""Naming, styling and in-place replacement of the layers the plugin adds.
+
+Every layer the plugin adds carries a tag in its metadata,
+``layer.metadata["napari_polarseg"] = {"role": ..., "source": ...}``, where ``role`` is one
+of :data:`ROLES` and ``source`` the ``unique_id`` of the angle-stack layer it was computed
+from. A rerun looks the layer up by that tag (not by name, which the user may change or
+reuse for a layer of their own) and replaces its data in place; a layer without the tag is
+never touched.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from napari.layers import Image, Labels
+
+if TYPE_CHECKING:
+    import napari
+    from napari.layers import Layer
+
+#: Metadata key of the plugin's tag on its own layers.
+TAG = "napari_polarseg"
+
+#: Metadata key holding the polariser angles (degrees) of an angle-stack layer.
+ANGLES_KEY = "angles_deg"
+
+
+@dataclass(frozen=True)
+class LayerStyle:
+    """Name, type and display of one kind of output layer.
+
+    ``limits`` is either a fixed ``(low, high)`` contrast range or ``None`` for a range
+    fitted to the data between the ``percentiles``.
+    """
+
+    name: str
+    layer_type: str = "image"
+    colormap: str | None = None
+    limits: tuple[float, float] | None = None
+    percentiles: tuple[float, float] = (1.0, 99.0)
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+#: Output layers by role.
+ROLES: dict[str, LayerStyle] = {
+    "intensity": LayerStyle("Î intensity", colormap="gray", percentiles=(0.5, 99.5)),
+    "dop": LayerStyle("ρ degree of polarisation", colormap="viridis"),
+    "phase": LayerStyle("φ phase", colormap="twilight", limits=(0.0, math.pi)),
+    "zenith": LayerStyle("θ zenith", colormap="magma"),
+    "segments": LayerStyle("segments", layer_type="labels", extra={"opacity": 0.6}),
+    "error": LayerStyle("reconstruction error", colormap="inferno", extra={"visible": False}),
+}
+
+
+def source_key(layer: Layer) -> str:
+    """Stable identifier of an input layer for the tags of its outputs."""
+    return str(layer.unique_id)
+
+
+def layer_tag(layer: Layer) -> dict[str, Any] | None:
+    """The plugin's tag of ``layer``, or None for a layer the plugin did not add."""
+    tag = layer.metadata.get(TAG) if isinstance(layer.metadata, dict) else None
+    return tag if isinstance(tag, dict) and "role" in tag else None
+
+
+def find_output(viewer: napari.Viewer, role: str, source: Layer) -> Layer | None:
+    """The plugin's ``role`` layer computed from ``source`` in ``viewer``, if any."""
+    key = source_key(source)
+    for layer in viewer.layers:
+        tag = layer_tag(layer)
+        if tag is not None and tag.get("role") == role and tag.get("source") == key:
+            return layer
+    return None
+
+
+def fitted_limits(data: np.ndarray, percentiles: tuple[float, float]) -> tuple[float, float]:
+    """Contrast limits between two percentiles of the finite values (never empty)."""
+    values = np.asarray(data, dtype=float)
+    values = values[np.isfinite(values)]
+    if values.size == 0:
+        return 0.0, 1.0
+    lo, hi = (float(v) for v in np.percentile(values, percentiles))
+    if not hi > lo:
+        lo, hi = float(values.min()), float(values.max())
+    if not hi > lo:
+        hi = lo + (abs(lo) * 1e-6 or 1.0)
+    return lo, hi
+
+
+def contrast_for(role: str, data: np.ndarray) -> tuple[float, float]:
+    """Contrast limits the ``role`` layer gets for ``data``."""
+    style = ROLES[role]
+    return style.limits if style.limits is not None else fitted_limits(data, style.percentiles)
+
+
+def _image_style(role: str, data: np.ndarray) -> dict[str, Any]:
+    style = ROLES[role]
+    return {"colormap": style.colormap, "contrast_limits": contrast_for(role, data), **style.extra}
+
+
+def show_output(
+    viewer: napari.Viewer,
+    role: str,
+    data: np.ndarray,
+    source: Layer,
+    metadata: dict[str, Any] | None = None,
+) -> Layer:
+    """Add the ``role`` layer for ``source``, or replace the data of the existing one.
+
+    The layer takes the scale and translation of the last two axes of ``source`` so it
+    overlays the stack. On a rerun only the data, the contrast limits (for images) and
+    the plugin's metadata change; the user's other settings (visibility, opacity,
+    colormap, name, position in the layer list) are kept.
+    """
+    style = ROLES[role]
+    tag = {"role": role, "source": source_key(source)}
+    meta = {TAG: tag, **(metadata or {})}
+    layer = find_output(viewer, role, source)
+    wanted = Labels if style.layer_type == "labels" else Image
+    if layer is not None and isinstance(layer, wanted):
+        layer.data = data
+        if style.layer_type == "image":
+            lo, hi = contrast_for(role, data)
+            finite = np.asarray(data, dtype=float)[np.isfinite(data)]
+            dmin, dmax = (finite.min(), finite.max()) if finite.size else (lo, hi)
+            layer.contrast_limits_range = (min(lo, float(dmin)), max(hi, float(dmax)))
+            layer.contrast_limits = (lo, hi)
+        layer.metadata = {**layer.metadata, **meta}
+        return layer
+    if layer is not None:  # same tag but another type (should not happen): replace it
+        viewer.layers.remove(layer)
+    placement = {"scale": tuple(source.scale[-2:]), "translate": tuple(source.translate[-2:])}
+    if style.layer_type == "labels":
+        return viewer.add_labels(data, name=style.name, metadata=meta, **placement, **style.extra)
+    return viewer.add_image(
+        data, name=style.name, metadata=meta, **placement, **_image_style(role, data)
+    )
+
+
+def own_layers(viewer: napari.Viewer, source: Layer | None = None) -> list[Layer]:
+    """All layers the plugin added to ``viewer`` (for ``source`` only, if given)."""
+    key = None if source is None else source_key(source)
+    out = []
+    for layer in viewer.layers:
+        tag = layer_tag(layer)
+        if tag is not None and (key is None or tag.get("source") == key):
+            out.append(layer)
+    return out

@@ -1,0 +1,338 @@
+"""Running engine work off the GUI thread: one worker at a time, newest request wins.
+
+A widget hands :class:`WorkerSlot` a *job*: a generator function that calls the engine
+and yields ``(stage, index, total)`` between stages. The slot runs it in a napari
+generator worker (``napari.qt.threading.create_worker``) with a progress bar in the
+viewer, and guarantees:
+
+- at most one worker per slot; a request while one is running asks it to stop at its
+  next stage boundary (``worker.quit()``) and runs the newest request when it has ended
+  (older queued requests are dropped);
+- every run gets a number; results of a run that is no longer the newest are dropped;
+- errors raised in the worker arrive in the GUI thread as a napari error notification
+  carrying the engine's one-line message (never as an exception in the event loop).
+
+:class:`PipelineStore` keeps one :class:`~napari_polarseg.engine.Pipeline` per
+angle-stack layer so that a rerun only recomputes the stages a parameter change made
+stale.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import re
+import threading
+import time
+from collections.abc import Callable, Generator, Iterator
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from napari.qt.threading import GeneratorWorker, create_worker
+from napari.utils.notifications import show_error
+from qtpy.QtCore import QCoreApplication
+
+from ..engine import Pipeline, PolarsegError, SegmentParams
+
+Stage = tuple[str, int, int]
+Job = Callable[..., Generator[Stage, None, Any]]
+
+
+class StageFailed(Exception):
+    """An unexpected error inside a worker (re-raised so the worker reports it).
+
+    superqt's generator worker swallows ``RuntimeError`` raised by the generator (it
+    takes it for a deleted Qt object); wrapping keeps such errors visible.
+    """
+
+
+class _BlasShare:
+    """Leave a core to the GUI thread while workers compute.
+
+    OpenBLAS threads spin while they wait for work; on a machine with few cores they
+    compete with the GUI thread (and with Xvfb/Mesa) and slowed a worker's stages here by
+    up to 15 times while freezing the event loop for a third of a second. While at least
+    one worker runs, BLAS pools are limited to ``cpu_count - 1`` threads (at least 1);
+    the original limits come back when the last worker ends. Needs ``threadpoolctl``
+    (a scikit-learn dependency); without it nothing is changed.
+    """
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._users = 0
+        self._saved: Any = None
+
+    @contextlib.contextmanager
+    def __call__(self) -> Iterator[None]:
+        with self._lock:
+            self._users += 1
+            if self._users == 1:
+                self._saved = self._limit()
+        try:
+            yield
+        finally:
+            with self._lock:
+                self._users -= 1
+                if self._users == 0 and self._saved is not None:
+                    with contextlib.suppress(Exception):
+                        self._saved.restore_original_limits()
+                    self._saved = None
+
+    @staticmethod
+    def _limit() -> Any:
+        try:
+            from threadpoolctl import threadpool_limits
+        except ImportError:  # pragma: no cover - scikit-learn brings it
+            return None
+        return threadpool_limits(limits=max(1, (os.cpu_count() or 2) - 1), user_api="blas")
+
+
+blas_share = _BlasShare()
+
+
+def guarded(job: Job, *args: Any) -> Generator[Stage, None, Any]:
+    """Run ``job(*args)`` as a generator with BLAS threads limited (:class:`_BlasShare`),
+    turning a ``RuntimeError`` into :class:`StageFailed`."""
+    with blas_share():
+        try:
+            result = yield from job(*args)
+        except RuntimeError as exc:
+            raise StageFailed(f"{type(exc).__name__}: {exc}") from exc
+    return result
+
+
+def error_message(exc: BaseException) -> str:
+    """The one line shown to the user: the engine's message, or type and message."""
+    if isinstance(exc, (PolarsegError, StageFailed)):
+        return str(exc)
+    return f"{type(exc).__name__}: {exc}"
+
+
+def parse_angles(text: str) -> np.ndarray:
+    """Polariser angles in degrees from ``"0, 45, 90, 135"`` (commas, semicolons or spaces).
+
+    Raises :class:`PolarsegError` naming the bad entry.
+    """
+    parts = [p for p in re.split(r"[,;\s]+", text.strip()) if p]
+    if not parts:
+        raise PolarsegError(
+            "give the polariser angles in degrees, one per frame (e.g. 0,45,90,135)"
+        )
+    out = []
+    for p in parts:
+        try:
+            out.append(float(p))
+        except ValueError:
+            raise PolarsegError(f"angles must be numbers in degrees, got {p!r}") from None
+    return np.asarray(out, dtype=float)
+
+
+def format_angles(angles_deg: Any) -> str:
+    """``[0.0, 45.0]`` -> ``"0, 45"``."""
+    return ", ".join(f"{float(a):g}" for a in np.asarray(angles_deg, dtype=float).ravel())
+
+
+@dataclass
+class _Entry:
+    data: Any
+    angles: tuple[float, ...]
+    pipeline: Pipeline
+
+
+class PipelineStore:
+    """One cached :class:`Pipeline` per angle-stack layer (keyed by the layer's id).
+
+    The pipeline is rebuilt when the layer's data object or the angles change; otherwise
+    the same object is reused so cached stages survive parameter changes. Safe to call
+    from a worker thread (the slot runs one worker at a time; a lock guards the dict).
+    """
+
+    def __init__(self) -> None:
+        self._entries: dict[str, _Entry] = {}
+        self._lock = threading.Lock()
+
+    def get(self, key: str) -> Pipeline | None:
+        """The pipeline kept for ``key``, if any."""
+        with self._lock:
+            entry = self._entries.get(key)
+        return None if entry is None else entry.pipeline
+
+    def obtain(
+        self, key: str, data: Any, angles_rad: np.ndarray, params: SegmentParams
+    ) -> Pipeline:
+        """The pipeline for ``key`` set to ``params``, built if missing or out of date."""
+        angles = tuple(float(a) for a in np.asarray(angles_rad, dtype=float).ravel())
+        with self._lock:
+            entry = self._entries.get(key)
+        if entry is None or entry.data is not data or entry.angles != angles:
+            entry = _Entry(data, angles, Pipeline(np.asarray(data), np.asarray(angles), params))
+            with self._lock:
+                self._entries[key] = entry
+        entry.pipeline.params = params
+        return entry.pipeline
+
+    def discard(self, keep: set[str]) -> None:
+        """Forget the pipelines of every key not in ``keep`` (layers that were removed)."""
+        with self._lock:
+            for key in set(self._entries) - keep:
+                del self._entries[key]
+
+    def __len__(self) -> int:
+        with self._lock:
+            return len(self._entries)
+
+
+class WorkerSlot:
+    """Runs one job at a time in a napari worker; the newest request wins.
+
+    Parameters
+    ----------
+    desc : str
+        Description of the progress bar.
+    on_status : callable(str), optional
+        Receives short status texts ("running: harmonics", "cancelled", errors).
+    on_idle : callable(), optional
+        Called when the last worker has ended and nothing waits to run.
+    """
+
+    def __init__(
+        self,
+        desc: str,
+        on_status: Callable[[str], None] | None = None,
+        on_idle: Callable[[], None] | None = None,
+    ) -> None:
+        self.desc = desc
+        self.on_status = on_status or (lambda text: None)
+        self.on_idle = on_idle or (lambda: None)
+        self.run_id = 0
+        self.worker: GeneratorWorker | None = None
+        self._pending: Callable[[], None] | None = None
+        self.last_error: str | None = None
+
+    @property
+    def busy(self) -> bool:
+        """True while a worker runs or a request waits for it to end."""
+        return self.worker is not None or self._pending is not None
+
+    def submit(
+        self,
+        job: Job,
+        args: tuple[Any, ...],
+        total: int,
+        on_result: Callable[[int, Any], None],
+    ) -> None:
+        """Run ``job(*args)`` now, or as soon as the running worker has stopped.
+
+        ``on_result(run_id, value)`` receives the job's return value in the GUI thread;
+        compare ``run_id`` with :attr:`run_id` to drop results of superseded runs.
+        """
+
+        def launch() -> None:
+            self._launch(job, args, total, on_result)
+
+        if self.worker is not None:
+            self._pending = launch  # replaces any older queued request
+            self.worker.quit()
+            self.on_status("stopping the previous run…")
+        else:
+            launch()
+
+    def cancel(self) -> None:
+        """Drop a queued request and ask the running worker to stop after its stage."""
+        self._pending = None
+        if self.worker is not None:
+            self.worker.quit()
+            self.on_status("cancelling…")
+
+    def _launch(
+        self, job: Job, args: tuple[Any, ...], total: int, on_result: Callable[[int, Any], None]
+    ) -> None:
+        self.run_id += 1
+        run_id = self.run_id
+        worker = create_worker(
+            guarded,
+            job,
+            *args,
+            _start_thread=False,
+            _ignore_errors=True,
+            _progress={"total": total, "desc": self.desc},
+        )
+
+        # Handlers may be re-entered: updating napari's progress bar can process pending
+        # events, so a later stage (or the result) can be handled before an earlier one
+        # finishes. ``ended`` makes stage messages that arrive after the end harmless.
+        ended = False
+
+        def yielded(value: Stage) -> None:
+            stage, index, n = value
+            if ended or run_id != self.run_id:
+                return
+            self.on_status(f"running: {stage} ({index}/{n})")
+            pbar = getattr(worker, "pbar", None)
+            if pbar is not None:
+                pbar.set_description(f"{self.desc}: {stage}")
+
+        def returned(value: Any) -> None:
+            nonlocal ended
+            ended = True
+            if run_id == self.run_id and self._pending is None:
+                on_result(run_id, value)
+
+        def errored(exc: BaseException) -> None:
+            nonlocal ended
+            ended = True
+            if run_id != self.run_id or self._pending is not None:
+                return  # a newer run is queued; it reports its own problems
+            message = error_message(exc)
+            self.last_error = message
+            self.on_status(f"error: {message}")
+            show_error(message)
+
+        def aborted() -> None:
+            nonlocal ended
+            ended = True
+            if run_id == self.run_id and self._pending is None:
+                self.on_status("cancelled")
+
+        def finished() -> None:
+            # close a generator stopped between stages now (not at garbage collection), so
+            # its ``finally`` clauses (the BLAS limit) run at once
+            with contextlib.suppress(Exception):
+                gen = getattr(worker, "_gen", None)
+                if gen is not None:
+                    gen.close()
+            if self.worker is worker:
+                self.worker = None
+            if self._pending is not None and self.worker is None:
+                pending, self._pending = self._pending, None
+                pending()
+            elif self.worker is None:
+                self.on_idle()
+
+        worker.yielded.connect(yielded)
+        worker.returned.connect(returned)
+        worker.errored.connect(errored)
+        worker.aborted.connect(aborted)
+        worker.finished.connect(finished)
+        self.worker = worker
+        self.last_error = None
+        worker.start()
+
+    def wait(self, timeout: float | None = None, extra: Callable[[], bool] | None = None) -> bool:
+        """Process Qt events until idle (and ``extra()`` is False); True if idle in time.
+
+        For scripts and tests that drive the widgets without a user: the results are
+        delivered through the Qt event loop, which this keeps turning.
+        """
+        app = QCoreApplication.instance()
+        deadline = None if timeout is None else time.monotonic() + timeout
+        while self.busy or (extra is not None and extra()):
+            if deadline is not None and time.monotonic() > deadline:
+                return False
+            if app is not None:
+                app.processEvents()
+            time.sleep(0.005)
+        if app is not None:
+            app.processEvents()
+        return True

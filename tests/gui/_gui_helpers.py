@@ -1,0 +1,49 @@
+"""Helpers shared by the GUI tests (clicking, waiting, engine reference results)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from napari.utils.notifications import notification_manager
+from qtpy.QtCore import Qt
+
+from napari_polarseg.engine import Pipeline, SegmentParams
+
+PLUGIN = "napari-polarseg"
+#: Sample keys of the plugin's manifest and the shape of their stacks.
+SAMPLES = {
+    "leaves": (7, 120, 130),
+    "camouflage": (7, 120, 130),
+    "fruit": (7, 120, 130),
+    "fruits_camera": (4, 256, 256),
+}
+#: Worker timeout for waits (milliseconds).
+TIMEOUT_MS = 120_000
+
+
+def click(qtbot: Any, button: Any) -> None:
+    """Click a magicgui push button with the mouse."""
+    qtbot.mouseClick(button.native, Qt.MouseButton.LeftButton)
+
+
+def run_and_wait(qtbot: Any, widget: Any, timeout: int = TIMEOUT_MS) -> None:
+    """Click the widget's Run button and wait until its worker has ended."""
+    click(qtbot, widget.run_button)
+    wait_idle(qtbot, widget, timeout)
+
+
+def wait_idle(qtbot: Any, widget: Any, timeout: int = TIMEOUT_MS) -> None:
+    """Wait until the widget has no worker running or queued."""
+    qtbot.waitUntil(lambda: not widget.busy and not widget._waiting(), timeout=timeout)
+
+
+def engine_result(layer: Any, params: SegmentParams) -> Any:
+    """The engine's result for the same input, computed without the plugin."""
+    angles = np.deg2rad(layer.metadata["angles_deg"])
+    return Pipeline(np.asarray(layer.data), angles, params).run()
+
+
+def error_messages() -> list[str]:
+    """Messages of the error notifications dispatched so far in this test."""
+    return [str(n.message) for n in notification_manager.records if n.severity == "error"]
