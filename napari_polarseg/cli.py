@@ -2,9 +2,12 @@
 
 ::
 
-    polarseg segment INPUT --out DIR [--angles 0,30,60,...] [--mosaic 90,45,135,0]
-                         [--register] [--window W] [--degree L] [--refractive-index N]
-                         [--segments K] [--params FILE.json] [...]
+    polarseg segment INPUT [INPUT ...] --out DIR [--angles 0,30,60,...]
+                         [--mosaic 90,45,135,0 [--demosaic interpolated]]
+                         [--dark-frame FILE] [--offset V] [--saturation LEVEL]
+                         [--dark-level LEVEL] [--mask FILE] [--register] [--fit robust]
+                         [--window W] [--degree L] [--refractive-index N]
+                         [--segments K] [--params FILE.json] [--max-memory GIB] [...]
     polarseg demo [--out DIR] [--scene leaves]
 
 Angles are **degrees** on the command line and in every file (comma-separated, one per
@@ -17,16 +20,36 @@ frame, in frame order); the engine gets radians. ``segment`` writes into DIR:
 ``phase.tif``               phase φ (float32, radians in [0, π))
 ``zenith.tif``              zenith angle θ (float32, radians in [0, π/2])
 ``reconstruction_error.tif`` \\|Î − Î rebuilt from the harmonics\\| (float32, input units)
+``residual.tif``            RMS residual of the sinusoid fit per pixel (float32, input
+                            units): large where a frame disagrees (motion, glints)
+``mask.tif``                pixels the fit and the features used (uint8, 1 = used, 0 =
+                            saturated or black in a frame, not finite, outside --mask,
+                            or with no positive intensity); usable again as --mask
 ``params.json``             every parameter, the input, its angles, the package version,
-                            whether registration ran and its shifts (pixels)
+                            whether registration ran and its shifts (pixels), the
+                            demosaicing, dark frame/offset, saturation and dark levels,
+                            the mask file and the repeated angles that were averaged
 ``summary.json``            the run's figures (per-stage seconds, number of segments,
-                            explained variance, mean reconstruction error) and the
-                            seconds spent reading, registering and writing
+                            explained variance, mean reconstruction error over the used
+                            pixels, the pixel counts per exclusion reason under
+                            ``mask``) and the seconds spent reading, registering and
+                            writing
 =========================== ==========================================================
 
 All images are H × W of the angle stack the engine sees: the input's size, except with
 ``--mosaic``, where a raw H × W camera frame becomes a stack of H/2 × W/2 frames and so do
-the outputs. ``demo`` (and ``segment --overview``) also writes ``overview.png``.
+the outputs (full size with ``--demosaic interpolated``). ``demo`` (and ``segment
+--overview``) also writes ``overview.png``.
+
+Real captures: saturated samples (at or above ``--saturation``, default the integer
+type's maximum) and black ones (at or below ``--dark-level``, default 0) are left out of
+the fit and the features and counted; ``--dark-frame``/``--offset`` are subtracted after
+saturation is found; ``--mask`` restricts the segmentation to a region (a labels image,
+non-zero = use); frames at a repeated angle (modulo 180 degrees) are averaged before the
+fit; ``--fit robust`` resists a wrong frame (5 or more distinct angles). Before any work
+the memory a run needs is estimated from the stack's shape, the window and the degree,
+and a run above the limit (8 GiB, ``--max-memory`` or ``$POLARSEG_MAX_BYTES``) is refused
+with the size it would need.
 
 Everything (parameters, reading, registration, the whole pipeline, the figure) is done
 before the first file is written, and every file is written atomically, so bad input
@@ -52,9 +75,12 @@ import numpy as np
 from . import __version__
 from . import io as pio
 from .engine.errors import PolarsegError
+from .engine.limits import check_pipeline_memory, memory_limit
+from .engine.mosaic import DEMOSAIC_METHODS
 from .engine.params import (
     COEFFICIENT_METHODS,
     FEATURE_KINDS,
+    FIT_METHODS,
     MODELS,
     RECOMMENDED,
     SCALE_MODES,
@@ -62,6 +88,7 @@ from .engine.params import (
     SegmentParams,
 )
 from .engine.pipeline import Pipeline, SegmentationResult
+from .engine.polarimage import PixelMask, duplicate_angle_frames, validity_mask
 from .engine.registration import register_stack
 
 PROG = "polarseg"
@@ -79,6 +106,10 @@ FLOAT_OUTPUTS = {
     "reconstruction_error.tif": (
         "reconstruction_error",
         {"quantity": "absolute reconstruction error of the mean intensity", "unit": "input units"},
+    ),
+    "residual.tif": (
+        "residual",
+        {"quantity": "RMS residual of the sinusoid fit", "unit": "input units"},
     ),
 }
 
@@ -108,6 +139,45 @@ def _angles_arg(text: str) -> np.ndarray:
         raise argparse.ArgumentTypeError(
             f"expected comma-separated numbers in degrees (e.g. 0,45,90,135), got {text!r}"
         ) from None
+
+
+def _level_arg(text: str) -> float | str:
+    word = text.strip().lower()
+    if word in ("none", "auto"):
+        return word
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not np.isfinite(value):
+        raise argparse.ArgumentTypeError(f"expected a number, 'auto' or 'none', got {text!r}")
+    return value
+
+
+def _dark_level_arg(text: str) -> float | str:
+    if text.strip().lower() == "none":
+        return "none"
+    try:
+        return _number_arg(text)
+    except argparse.ArgumentTypeError:
+        raise argparse.ArgumentTypeError(f"expected a number or 'none', got {text!r}") from None
+
+
+def _number_arg(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not np.isfinite(value):
+        raise argparse.ArgumentTypeError(f"expected a finite number, got {text!r}")
+    return value
+
+
+def _gib_arg(text: str) -> float:
+    value = _number_arg(text)
+    if value <= 0:
+        raise argparse.ArgumentTypeError(f"expected a positive number of GiB, got {text!r}")
+    return value
 
 
 def _threshold_arg(text: str) -> float | str:
@@ -163,6 +233,22 @@ PARAM_OPTIONS: dict[str, tuple[str, dict[str, Any]]] = {
     "min_segment_blocks": (
         "--min-segment-blocks",
         {"type": int, "metavar": "B", "help": "smallest segment, in blocks"},
+    ),
+    "fit": (
+        "--fit",
+        {
+            "choices": FIT_METHODS,
+            "help": "polarisation-image fit: least squares, or robust IRLS that resists "
+            "outlying frames (needs 5 or more distinct angles to make a difference)",
+        },
+    ),
+    "affinity_graph": (
+        "--affinity-graph",
+        {
+            "choices": ("auto", "dense", "sparse"),
+            "help": "block affinity: every pair (dense), k nearest neighbours or the spatial "
+            "neighbourhood (sparse), or dense up to 6000 blocks (auto)",
+        },
     ),
 }
 
@@ -228,7 +314,12 @@ def build_parser() -> argparse.ArgumentParser:
         description="Segment an angle stack (multi-page TIFF, .npz, folder of frames, or a "
         "raw polarisation-camera frame with --mosaic) and write the results into --out.",
     )
-    seg.add_argument("input", metavar="INPUT", help="TIFF, .npz/.npy, folder, or raw frame")
+    seg.add_argument(
+        "input",
+        metavar="INPUT",
+        nargs="+",
+        help="TIFF, .npz/.npy, folder, raw frame, or several frame files (one per angle)",
+    )
     seg.add_argument("-o", "--out", required=True, metavar="DIR", help="output folder")
     seg.add_argument(
         "--angles",
@@ -242,7 +333,55 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="A,B,C,D",
         help="INPUT is one raw polarisation-camera frame; the 2x2 super-pixel angles in "
         "row-major order (Sony IMX250MZR: 90,45,135,0). Outputs are then half the raw "
-        "frame's height and width",
+        "frame's height and width (full size with --demosaic interpolated)",
+    )
+    seg.add_argument(
+        "--demosaic",
+        choices=DEMOSAIC_METHODS,
+        default="superpixel",
+        help="mosaic decoding: one output pixel per 2x2 super-pixel, or full resolution by "
+        "bilinear interpolation of each angle [superpixel]",
+    )
+    seg.add_argument(
+        "--dark-frame",
+        metavar="FILE",
+        help="dark frame (lens capped) subtracted from every frame, or from the raw mosaic",
+    )
+    seg.add_argument(
+        "--offset",
+        type=_number_arg,
+        metavar="V",
+        help="constant black level subtracted from every sample (after --dark-frame)",
+    )
+    seg.add_argument(
+        "--saturation",
+        type=_level_arg,
+        default="auto",
+        metavar="LEVEL",
+        help="samples at or above LEVEL (in the file's units, before --dark-frame/--offset) "
+        "are saturated and their pixels left out; 'auto' = the integer type's maximum (255, "
+        "65535; 4095 for a 12-bit TIFF), 'none' = no check [auto]",
+    )
+    seg.add_argument(
+        "--dark-level",
+        type=_dark_level_arg,
+        default=0.0,
+        metavar="LEVEL",
+        help="samples at or below LEVEL (after subtraction) are black and their pixels left "
+        "out; 'none' = no check [0]",
+    )
+    seg.add_argument(
+        "--mask",
+        metavar="FILE",
+        help="a region (labels image: TIFF, PNG, .npy; non-zero = use): only its pixels "
+        "enter the fit and the block features",
+    )
+    seg.add_argument(
+        "--max-memory",
+        type=_gib_arg,
+        metavar="GIB",
+        help="refuse inputs and runs that would need more memory than this many GiB "
+        "[$POLARSEG_MAX_BYTES or 8]",
     )
     seg.add_argument(
         "--channel", type=int, metavar="C", help="colour channel to use (default: BT.601 luma)"
@@ -250,7 +389,8 @@ def build_parser() -> argparse.ArgumentParser:
     seg.add_argument(
         "--register",
         action="store_true",
-        help="align the frames to the first by sub-pixel cross-correlation first",
+        help="align the frames to the first by sub-pixel phase correlation first (shifts "
+        "are reported and written to params.json)",
     )
     _add_param_options(seg)
     seg.set_defaults(func=_cmd_segment)
@@ -271,6 +411,98 @@ def build_parser() -> argparse.ArgumentParser:
     )
     _add_param_options(demo, preset="recommended")
     demo.set_defaults(func=_cmd_demo, overview=True)
+
+    bat = sub.add_parser(
+        "batch",
+        help="segment many scenes with the same parameters, in parallel (Dask)",
+        description="Segment every INPUT (stack file, folder of frames, raw mosaic frame with "
+        "--mosaic, or a glob pattern) with the same parameters, each into OUT/<scene>/ as "
+        "'segment' would, in parallel on a local Dask cluster (one single-threaded worker "
+        "process per core) or on a running dask.distributed scheduler (--scheduler). "
+        "Writes OUT/batch_summary.csv and OUT/batch_summary.json. A rerun skips the scenes "
+        "already complete for the same input and parameters. Exit code 3 if a scene failed.",
+    )
+    bat.add_argument(
+        "input", metavar="INPUT", nargs="+", help="scene files, folders or glob patterns"
+    )
+    bat.add_argument("-o", "--out", required=True, metavar="DIR", help="output folder")
+    bat.add_argument(
+        "--scheduler",
+        metavar="ADDRESS",
+        help="address of a running dask.distributed scheduler (tcp://host:port); its workers "
+        "must see INPUT and DIR under the same paths. 'inline': no Dask, one scene after "
+        "the other in this process [a new local cluster]",
+    )
+    bat.add_argument(
+        "--workers",
+        type=int,
+        metavar="N",
+        help="worker processes of the local cluster [number of cores, at most one per scene]",
+    )
+    bat.add_argument(
+        "--memory-limit",
+        metavar="SIZE",
+        default="auto",
+        help="memory limit of each local worker, e.g. 4GiB; a scene estimated to need more "
+        "than 80%% of it is refused [auto: the machine's memory shared out]",
+    )
+    bat.add_argument(
+        "--no-resume",
+        dest="resume",
+        action="store_false",
+        help="redo every scene, also those already complete",
+    )
+    bat.add_argument(
+        "--angles", type=_angles_arg, metavar="A,B,...", help="polariser angles of every scene"
+    )
+    bat.add_argument(
+        "--mosaic", type=_angles_arg, metavar="A,B,C,D", help="every INPUT is a raw mosaic frame"
+    )
+    bat.add_argument("--demosaic", choices=DEMOSAIC_METHODS, default="superpixel")
+    bat.add_argument("--channel", type=int, metavar="C", help="colour channel to use")
+    bat.add_argument("--register", action="store_true", help="align the frames of each scene")
+    bat.add_argument(
+        "--max-memory", type=_gib_arg, metavar="GIB", help="memory limit of one scene, GiB"
+    )
+    _add_param_options(bat)
+    bat.set_defaults(func=_cmd_batch)
+
+    ts = sub.add_parser(
+        "timeseries",
+        help="segment scenes of one view over time in a shared basis, with change maps",
+        description="Segment INPUT1 INPUT2 ... (the same view on consecutive days, in time "
+        "order) with block features in one shared PCA basis, so that a segment means the "
+        "same material every day, and map the blocks that changed segment between "
+        "consecutive days. Writes labels_01.tif, labels_02.tif, ... (one per day), "
+        "change_01.tif (day 1 -> 2), ... (uint8, 1 = changed), distance_01.tif, ... "
+        "(feature distance of each block between the two days), params.json and "
+        "summary.json into --out.",
+    )
+    ts.add_argument(
+        "input", metavar="INPUT", nargs="+", help="one angle stack per day, in time order"
+    )
+    ts.add_argument("-o", "--out", required=True, metavar="DIR", help="output folder")
+    ts.add_argument(
+        "--method",
+        choices=("reference", "joint"),
+        default="reference",
+        help="cut day 1 and give later blocks the nearest segment, or one cut over all "
+        "days' blocks [reference]",
+    )
+    ts.add_argument(
+        "--angles", type=_angles_arg, metavar="A,B,...", help="polariser angles of every day"
+    )
+    ts.add_argument(
+        "--mosaic", type=_angles_arg, metavar="A,B,C,D", help="every INPUT is a raw mosaic frame"
+    )
+    ts.add_argument("--demosaic", choices=DEMOSAIC_METHODS, default="superpixel")
+    ts.add_argument("--channel", type=int, metavar="C", help="colour channel to use")
+    ts.add_argument("--register", action="store_true", help="align the frames of each day")
+    ts.add_argument(
+        "--max-memory", type=_gib_arg, metavar="GIB", help="memory limit of one day, GiB"
+    )
+    _add_param_options(ts, preset="recommended")
+    ts.set_defaults(func=_cmd_timeseries)
     return parser
 
 
@@ -327,6 +559,7 @@ class Run:
     result: SegmentationResult
     shifts: np.ndarray | None
     seconds: dict[str, float] = field(default_factory=dict)
+    mask: PixelMask | None = None
 
 
 def _progress(verbose: bool):
@@ -339,22 +572,76 @@ def _progress(verbose: bool):
     return report
 
 
-def _segment(data: pio.StackData, params: SegmentParams, register: bool, verbose: bool) -> Run:
+def _max_bytes(args: argparse.Namespace) -> int:
+    gib = getattr(args, "max_memory", None)
+    return memory_limit(None if gib is None else gib * 2**30)
+
+
+def _pixel_mask(data: pio.StackData, args: argparse.Namespace) -> PixelMask:
+    """Validity mask: the reader's saturated samples, black samples, the user's region."""
+    region = None
+    if getattr(args, "mask", None):
+        superpixel = data.metadata.get("demosaic") == "superpixel"
+        raw_shape = data.metadata.get("raw_shape") if superpixel else None
+        region = pio.read_mask(args.mask, data.stack.shape[1:], raw_shape)
+    dark_level = getattr(args, "dark_level", 0.0)
+    return validity_mask(
+        data.stack,
+        saturation=data.metadata.get("saturation_level"),
+        dark_level=None if dark_level == "none" else dark_level,
+        region=region,
+        saturated=data.saturated,
+    )
+
+
+def _segment(
+    data: pio.StackData,
+    params: SegmentParams,
+    register: bool,
+    verbose: bool,
+    mask: PixelMask | None = None,
+    max_bytes: int | None = None,
+) -> Run:
     seconds: dict[str, float] = {}
     stack, shifts = data.stack, None
+    check_pipeline_memory(stack.shape, params, max_bytes)
+    if mask is None:
+        mask = validity_mask(
+            stack, saturation=data.metadata.get("saturation_level"), saturated=data.saturated
+        )
     if register:
         t0 = time.perf_counter()
         stack, shifts = register_stack(stack)
+        mask = mask.shifted(shifts)
         seconds["register"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    result = Pipeline(stack, data.angles_rad, params).run(progress=_progress(verbose))
+    pipe = Pipeline(stack, data.angles_rad, params, mask=mask)
+    result = pipe.run(progress=_progress(verbose))
     seconds["segment"] = time.perf_counter() - t0
-    return Run(data, params, stack, result, shifts, seconds)
+    return Run(data, params, stack, result, shifts, seconds, mask)
+
+
+MASK_META = {
+    "quantity": "pixels used by the fit and the features",
+    "values": "1 used, 0 excluded (saturated, black, not finite, outside the mask, or no "
+    "positive intensity)",
+}
+
+
+def _used_pixels(result: SegmentationResult) -> np.ndarray:
+    valid = result.valid
+    if valid is None:
+        return np.ones(result.labels.shape, np.uint8)
+    return np.asarray(valid, dtype=np.uint8)
 
 
 def _labels_image(labels: np.ndarray) -> np.ndarray:
     dtype = np.uint16 if labels.max(initial=0) < 2**16 else np.uint32
     return labels.astype(dtype)
+
+
+def _resolved(name: str | None) -> str | None:
+    return None if name in (None, "array") else str(Path(name).resolve())
 
 
 def _run_info(run: Run, command: str, args: argparse.Namespace) -> dict[str, Any]:
@@ -372,6 +659,21 @@ def _run_info(run: Run, command: str, args: argparse.Namespace) -> dict[str, Any
         "mosaic_layout_deg": data.metadata.get("mosaic_layout_deg"),
         "raw_shape": data.metadata.get("raw_shape"),
         "channel": getattr(args, "channel", None),
+        "demosaic": data.metadata.get("demosaic"),
+        "dark_frame": _resolved(data.metadata.get("dark_frame")),
+        "offset": data.metadata.get("offset"),
+        "saturation_level": None if run.mask is None else run.mask.saturation_level,
+        "bits_per_sample": data.metadata.get("bits_per_sample"),
+        "dark_level": None if run.mask is None else run.mask.dark_level,
+        "mask_file": _resolved(getattr(args, "mask", None)),
+        "duplicate_angles": [
+            {
+                "angle_deg": float(data.angles_deg[frames[0]]),
+                "frames": frames,
+                "handling": "averaged before the fit",
+            }
+            for frames in duplicate_angle_frames(data.angles_rad)
+        ],
         "registration": {
             "ran": run.shifts is not None,
             "reference_frame": 0 if run.shifts is not None else None,
@@ -401,6 +703,9 @@ def _write_outputs(
             name = str(out / fname)
             pio.write_tiff(out / fname, np.asarray(getattr(run.result, attr), np.float32), meta)
             written.append(fname)
+        name = str(out / "mask.tif")
+        pio.write_tiff(out / "mask.tif", _used_pixels(run.result), MASK_META)
+        written.append("mask.tif")
         if overview is not None:
             name = str(out / "overview.png")
             pio.write_png(out / "overview.png", overview)
@@ -438,6 +743,33 @@ def _report(out: Path, run: Run, written: list[str]) -> None:
         f"{PROG}: {result.n_segments} segments over {h} x {w} pixels, "
         f"mean reconstruction error {err_text}"
     )
+    if run.shifts is not None:
+        biggest = float(np.max(np.hypot(run.shifts[:, 0], run.shifts[:, 1])))
+        print(
+            f"{PROG}: registered {len(run.shifts)} frames to frame 0, largest shift "
+            f"{biggest:.2f} px (rows, columns per frame in params.json)"
+        )
+    counts = result.mask_counts
+    if counts.get("masked_pixels"):
+        reasons = [
+            f"{counts[key]} {label}"
+            for key, label in (
+                ("saturated_pixels", "saturated"),
+                ("dark_pixels", "black"),
+                ("nonfinite_pixels", "not finite"),
+                ("outside_region_pixels", "outside the mask"),
+            )
+            if counts.get(key)
+        ]
+        print(
+            f"{PROG}: left out {counts['masked_pixels']} of {h * w} pixels "
+            f"({', '.join(reasons)}; see mask.tif)"
+        )
+    for frames in result.duplicate_angle_frames:
+        print(
+            f"{PROG}: frames {', '.join(map(str, frames))} share a polariser angle "
+            f"(modulo 180 degrees) and were averaged before the fit"
+        )
     print(f"{PROG}: wrote {', '.join(written)} to {out}")
 
 
@@ -451,7 +783,8 @@ def _job(
     extra: dict[str, Any] | None = None,
 ) -> tuple[Run, dict[str, Any]]:
     """Segment, render and write: everything is computed before the first file is written."""
-    run = _segment(data, params, register, args.verbose)
+    mask = _pixel_mask(data, args)
+    run = _segment(data, params, register, args.verbose, mask, _max_bytes(args))
     summary = {**_summary(run, read_seconds), **(extra or {})}
     if data.ground_truth is not None:
         summary["adjusted_rand_index"] = adjusted_rand_index(data.ground_truth, run.result.labels)
@@ -464,9 +797,20 @@ def _job(
 
 def _cmd_segment(args: argparse.Namespace) -> int:
     params = _params_from_args(args)
+    if args.mosaic is None and args.demosaic != "superpixel":
+        raise PolarsegError("--demosaic applies to a raw mosaic frame: give --mosaic too")
+    saturation = {"auto": "auto", "none": None}.get(args.saturation, args.saturation)
     t0 = time.perf_counter()
     data = pio.read_stack(
-        args.input, angles_deg=args.angles, mosaic=args.mosaic, channel=args.channel
+        args.input[0] if len(args.input) == 1 else args.input,
+        angles_deg=args.angles,
+        mosaic=args.mosaic,
+        channel=args.channel,
+        demosaic=args.demosaic,
+        dark=args.dark_frame,
+        offset=args.offset,
+        saturation=saturation,
+        max_bytes=_max_bytes(args),
     )
     _job(args, "segment", data, time.perf_counter() - t0, params, args.register)
     return 0
@@ -606,6 +950,197 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 130
     except SystemExit as exc:  # --help and --version
         return exc.code if isinstance(exc.code, int) else 0
+
+
+# -- batch and time series ------------------------------------------------------------------
+
+#: ``batch`` options passed on to ``segment`` for every scene: dest -> flag.
+BATCH_FORWARD = {
+    "angles": "--angles",
+    "mosaic": "--mosaic",
+    "demosaic": "--demosaic",
+    "channel": "--channel",
+    "max_memory": "--max-memory",
+}
+
+
+def _batch_segment_args(args: argparse.Namespace) -> list[str]:
+    """The ``segment`` options a ``batch`` command line gives every scene."""
+    out: list[str] = []
+    for dest, flag in BATCH_FORWARD.items():
+        value = getattr(args, dest, None)
+        if value is None or (dest == "demosaic" and value == "superpixel"):
+            continue
+        if isinstance(value, np.ndarray):
+            value = ",".join(f"{v:g}" for v in value)
+        out += [flag, str(value)]
+    if args.register:
+        out.append("--register")
+    if args.overview:
+        out.append("--overview")
+    return out
+
+
+def _cmd_batch(args: argparse.Namespace) -> int:
+    from . import batch
+
+    params = _params_from_args(args)
+    if args.workers is not None and args.workers < 1:
+        raise PolarsegError(f"--workers must be at least 1, got {args.workers}")
+    scenes = batch.plan(args.input, args.out)
+    if not scenes:
+        raise PolarsegError("no input scenes (every INPUT is inside --out)")
+    t0 = time.perf_counter()
+
+    def started(n_run: int, n_skip: int, label: str) -> None:
+        where = f" on {label}" if n_run else ""
+        print(
+            f"{PROG}: {len(scenes)} scene(s) into {args.out}: {n_run} to segment{where}, "
+            f"{n_skip} already complete",
+            file=sys.stderr,
+            flush=True,
+        )
+
+    def progress(index: int, total: int, row: dict[str, Any]) -> None:
+        status = row["status"]
+        if status == "done":
+            ari = row.get("adjusted_rand_index")
+            extra = "" if ari is None else f", adjusted Rand index {ari:.3f}"
+            text = f"done in {row['task_seconds']:.2f} s ({row['n_segments']} segments{extra})"
+        elif status == "skipped":
+            text = "skipped (complete)"
+        else:
+            text = f"{status}: {row.get('error')}"
+        print(f"{PROG}: [{index}/{total}] {row['scene']}: {text}", file=sys.stderr, flush=True)
+        if args.verbose and row.get("log"):
+            print(row["log"].rstrip(), file=sys.stderr, flush=True)
+
+    result = batch.run_batch(
+        scenes,
+        args.out,
+        params,
+        segment_args=_batch_segment_args(args),
+        scheduler=args.scheduler,
+        n_workers=args.workers,
+        memory_limit=args.memory_limit,
+        resume=args.resume,
+        progress=progress,
+        on_start=started,
+    )
+    rate = result.scenes_per_second
+    rate_text = "" if rate is None else f", {rate:.3g} scenes/s"
+    print(
+        f"{PROG}: {result.count('done')} done, {result.count('skipped')} skipped, "
+        f"{result.count('failed')} failed, {result.count('cancelled')} cancelled in "
+        f"{time.perf_counter() - t0:.1f} s{rate_text}; summary in "
+        f"{Path(args.out) / batch.SUMMARY_CSV}"
+    )
+    return 0 if result.ok else 3
+
+
+def _cmd_timeseries(args: argparse.Namespace) -> int:
+    from .batch import expand_inputs
+    from .engine.timeseries import segment_timeseries
+
+    params = _params_from_args(args)
+    paths = expand_inputs(args.input)
+    if len(paths) < 2:
+        raise PolarsegError(f"a time series needs at least 2 inputs, got {len(paths)}")
+    t0 = time.perf_counter()
+    days: list[pio.StackData] = []
+    stacks, masks = [], []
+    for path in paths:
+        data = pio.read_stack(
+            path,
+            angles_deg=args.angles,
+            mosaic=args.mosaic,
+            channel=args.channel,
+            demosaic=args.demosaic,
+            max_bytes=_max_bytes(args),
+        )
+        check_pipeline_memory(data.stack.shape, params, _max_bytes(args))
+        stack = data.stack
+        mask = validity_mask(
+            stack, saturation=data.metadata.get("saturation_level"), saturated=data.saturated
+        )
+        if args.register:
+            stack, shifts = register_stack(stack)
+            mask = mask.shifted(shifts)
+        days.append(data)
+        stacks.append(stack)
+        masks.append(mask)
+    read_seconds = time.perf_counter() - t0
+    result = segment_timeseries(
+        stacks,
+        [d.angles_rad for d in days],
+        params,
+        method=args.method,
+        masks=masks,
+        progress=_progress(args.verbose),
+    )
+    summary = result.summary()
+    summary["io_seconds"] = {"read": round(read_seconds, 6)}
+    aris = [
+        None if d.ground_truth is None else adjusted_rand_index(d.ground_truth, labels)
+        for d, labels in zip(days, result.labels, strict=True)
+    ]
+    if any(a is not None for a in aris):
+        summary["adjusted_rand_index"] = aris
+    info = {
+        "polarseg_version": __version__,
+        "command": "timeseries",
+        "inputs": [str(Path(d.source).resolve()) for d in days],
+        "angles_deg": [d.angles_deg.tolist() for d in days],
+        "method": args.method,
+        "registered": bool(args.register),
+        "files": {
+            "labels": "labels_DD.tif: segment of every pixel on day DD (0 = first segment, "
+            "the same numbering every day)",
+            "change": "change_DD.tif: 1 where the block changed segment from day DD to DD+1",
+            "distance": "distance_DD.tif: Mahalanobis distance of the block's features "
+            "between day DD and DD+1 (shared basis)",
+        },
+        "params": params.to_dict(),
+    }
+    out = Path(args.out)
+    written: list[str] = []
+    name = str(out)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        for t, labels in enumerate(result.labels):
+            name = str(out / f"labels_{t + 1:02d}.tif")
+            meta = {"quantity": "segment labels", "first_label": 0, "day": t + 1}
+            pio.write_tiff(name, _labels_image(labels), meta)
+            written.append(Path(name).name)
+        pairs = zip(result.changes, result.feature_distance, strict=True)
+        for t, (change, dist) in enumerate(pairs):
+            name = str(out / f"change_{t + 1:02d}.tif")
+            meta = {"quantity": "segment changed", "from_day": t + 1, "to_day": t + 2}
+            pio.write_tiff(name, change.astype(np.uint8), meta)
+            written.append(Path(name).name)
+            name = str(out / f"distance_{t + 1:02d}.tif")
+            meta = {"quantity": "feature distance (Mahalanobis)", "from_day": t + 1}
+            pio.write_tiff(name, dist.astype(np.float32), {**meta, "to_day": t + 2})
+            written.append(Path(name).name)
+        name = str(out / "params.json")
+        pio.write_json(name, info)
+        name = str(out / "summary.json")
+        pio.write_json(name, summary)
+        written += ["params.json", "summary.json"]
+    except OSError as exc:
+        raise OutputError(f"cannot write {name}: {exc.strerror or exc}") from exc
+    h, w = result.labels.shape[1:]
+    print(
+        f"{PROG}: {result.n_days} days of {h} x {w} pixels, {result.n_segments} segments "
+        f"({args.method}, {summary['n_components']} shared PCA components)"
+    )
+    for t, frac in enumerate(result.changed_fraction()):
+        print(f"{PROG}: day {t + 1} -> {t + 2}: {frac:.1%} of the blocks changed segment")
+    for t, ari in enumerate(aris):
+        if ari is not None:
+            print(f"{PROG}: day {t + 1}: adjusted Rand index against the ground truth {ari:.3f}")
+    print(f"{PROG}: wrote {', '.join(written)} to {out}")
+    return 0
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -10,23 +10,51 @@ Inputs :func:`read_stack` understands
   from the ``angles_deg`` argument or else from the file's ImageDescription: either
   tifffile's shaped JSON metadata (as :func:`write_stack_tiff` writes it,
   ``tifffile.imwrite(path, stack, metadata={"angles": [...]})``) or a plain JSON object
-  with an ``"angles"`` key.
+  with an ``"angles"`` key, or else from ImageJ slice labels that end in the angle
+  (``pol_045`` → 45, the file-name rule below).
 - **NumPy** ``.npz`` with arrays ``stack`` (N, H, W) and ``angles`` (degrees), optionally
   ``labels`` (H, W ground truth) and ``params`` (a JSON string of segmentation
   parameters); loaded with ``allow_pickle=False``. A plain ``.npy`` stack needs the angles.
-- **A folder of frames** (``.png``, ``.tif``, ``.tiff``, ``.jpg``, ``.jpeg``; hidden
-  files are skipped). Unless the angles are given, each frame's angle in degrees is **the
-  last number in its file name without the extension**: ``leaf_030.png`` → 30,
-  ``nir_45_aligned.tif`` → 45, ``scene-b_22.5deg.png`` → 22.5 (digits with an optional
-  decimal part; no sign). Frames are then sorted by angle. With explicit angles the frames
-  are taken in natural file-name order (``f2`` before ``f10``).
+- **A folder of frames, or a list of frame files** (``.png``, ``.tif``, ``.tiff``,
+  ``.jpg``, ``.jpeg``; hidden files in a folder are skipped). Unless the angles are given,
+  each frame's angle in degrees is **the last number in its file name without the
+  extension**: ``leaf_030.png`` → 30, ``nir_45_aligned.tif`` → 45,
+  ``scene-b_22.5deg.png`` → 22.5 (digits with an optional decimal part; no sign). Frames
+  are then sorted by angle. With explicit angles (one per file) the frames of a folder
+  are taken in natural file-name order (``f2`` before ``f10``), those of a list in the
+  order given.
 - **A raw polarisation-camera frame** (any of the image types above) with ``mosaic`` set:
   the four polariser angles of the 2 × 2 super-pixel in row-major order (Sony IMX250MZR:
-  90, 45, 135, 0). It is split into four frames at **half resolution** by
-  :func:`napari_polarseg.engine.mosaic.demosaic_superpixel`.
+  90, 45, 135, 0). It is split into four frames at **half resolution**
+  (``demosaic="superpixel"``) or interpolated to **full resolution**
+  (``demosaic="interpolated"``, bilinear), see :mod:`napari_polarseg.engine.mosaic`.
 
 Colour frames (H, W, 3 or 4) become grey by the ITU-R BT.601 luma weights
 0.299 R + 0.587 G + 0.114 B (alpha ignored) unless ``channel`` picks one channel.
+
+Bit depth, saturation and black level
+-------------------------------------
+8-bit and 16-bit integer data (a 12-bit camera's frames are usually stored as 16-bit)
+and float data are read as they are. Saturated samples are found on the data as
+recorded, before any conversion: at or above ``saturation`` — by default (``"auto"``)
+the integer dtype's maximum, or 2**bits − 1 when a TIFF declares fewer bits per sample
+(12-bit TIFFs), and none for float data — and returned as :attr:`StackData.saturated`
+for :func:`~napari_polarseg.engine.polarimage.validity_mask`. A dark frame (``dark``: an
+image of the same size as the raw frames, or an array) and/or a constant ``offset`` are
+then subtracted and negative results set to 0 (the stack becomes float64).
+
+Repeated angles (the same angle modulo 180°) are kept as separate frames here; the
+engine averages them before the fit.
+
+Checks
+------
+After reading: angles present, one per frame, finite, at least 3 distinct modulo 180°;
+frames of one size; no negative intensity (light through a polariser is never negative:
+subtract less, or shift the data with ``offset``); no frame without a finite value or
+constant over the whole frame (a blank, black or fully saturated capture). Before
+reading, the size announced by the file's header is checked against the memory limit of
+:mod:`napari_polarseg.engine.limits`, so an absurd size is refused with the memory it
+would need instead of exhausting the machine.
 
 Writers
 -------
@@ -45,6 +73,7 @@ import math
 import os
 import re
 import uuid
+import zipfile
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -54,8 +83,15 @@ import numpy as np
 import tifffile
 
 from .engine.errors import PolarsegError
-from .engine.mosaic import IMX250MZR_LAYOUT, demosaic_superpixel
-from .engine.polarimage import distinct_angle_count
+from .engine.limits import check_bytes, memory_limit
+from .engine.mosaic import (
+    DEMOSAIC_METHODS,
+    IMX250MZR_LAYOUT,
+    demosaic,
+    demosaic_flags,
+    subtract_dark,
+)
+from .engine.polarimage import auto_saturation_level, distinct_angle_count
 
 PathLike = str | os.PathLike
 
@@ -63,6 +99,8 @@ PathLike = str | os.PathLike
 FRAME_SUFFIXES = (".png", ".tif", ".tiff", ".jpg", ".jpeg")
 #: File types read as whole stacks.
 STACK_SUFFIXES = (".tif", ".tiff", ".npz", ".npy")
+#: File types read as masks (:func:`read_mask`).
+MASK_SUFFIXES = (".png", ".tif", ".tiff", ".npy", ".npz")
 #: ITU-R BT.601 luma weights of R, G, B.
 LUMA_BT601 = np.array([0.299, 0.587, 0.114])
 #: Default 2 x 2 super-pixel layout (degrees, row-major) of a polarisation camera.
@@ -80,16 +118,23 @@ class StackData:
     Attributes
     ----------
     stack : ndarray (N, H, W)
-        Grey frames, real numbers (the file's dtype where no conversion was needed).
+        Grey frames, real numbers (the file's dtype where no conversion was needed;
+        float64 after dark subtraction, interpolated demosaicing or luma conversion).
     angles_deg : ndarray (N,) float64
         Polariser angle of each frame, degrees.
     source : str
-        The file or folder read.
+        The file or folder read (the first file, for a list of files).
     metadata : dict
-        What else was learned: ``format``, and per format ``files`` (folder),
-        ``mosaic_layout_deg`` and ``raw_shape`` (mosaic), ``params`` (npz), ``warnings``.
+        What else was learned: ``format``, ``saturation_level`` (None: not checked),
+        ``bits_per_sample`` (TIFF), and per format ``files`` (folder, list), ``demosaic``,
+        ``mosaic_layout_deg`` and ``raw_shape`` (mosaic), ``params`` (npz), ``dark_frame``
+        and ``offset`` (when subtracted), ``warnings``.
     ground_truth : ndarray (H, W) or None
         Reference labels shipped with the stack (``labels`` in an ``.npz``), if any.
+    saturated : ndarray (N, H, W) of bool or None
+        Samples at or above the saturation level in the data as recorded (for a mosaic:
+        the demosaiced samples that draw on a saturated raw pixel); None when no level
+        applies (float data with ``saturation="auto"``, or ``saturation=None``).
     """
 
     stack: np.ndarray
@@ -97,11 +142,28 @@ class StackData:
     source: str
     metadata: dict[str, Any] = field(default_factory=dict)
     ground_truth: np.ndarray | None = None
+    saturated: np.ndarray | None = None
 
     @property
     def angles_rad(self) -> np.ndarray:
         """Polariser angles in radians, for the engine."""
         return np.deg2rad(self.angles_deg)
+
+
+@dataclass
+class _Options:
+    """Reading options shared by the format readers."""
+
+    channel: int | None = None
+    saturation: float | str | None = "auto"
+    limit: int = 0
+    dark: np.ndarray | None = None
+    dark_name: str | None = None
+    offset: float | None = None
+
+    @property
+    def subtracts(self) -> bool:
+        return self.dark is not None or self.offset is not None
 
 
 # -- small helpers ------------------------------------------------------------------------
@@ -118,6 +180,20 @@ def _first_line(exc: BaseException) -> str:
 
 def _fmt(values: Sequence[float]) -> str:
     return ", ".join(f"{float(v):g}" for v in values)
+
+
+def _finite_number(value: Any, name: str) -> float:
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        number = math.nan
+    if not math.isfinite(number):
+        raise PolarsegError(f"{name} must be a finite number, got {value!r}")
+    return number
+
+
+def _dims(shape: Sequence[int]) -> str:
+    return " x ".join(str(int(v)) for v in shape)
 
 
 def parse_angles(text: str, option: str = "--angles") -> np.ndarray:
@@ -226,6 +302,27 @@ def to_grey(image: np.ndarray, channel: int | None = None) -> np.ndarray:
     raise PolarsegError(f"cannot make a grey image from {n_channels} colour channels")
 
 
+def _saturation_level(
+    saturation: float | str | None, dtype: np.dtype, bits: int | None = None
+) -> float | None:
+    if saturation is None:
+        return None
+    if isinstance(saturation, str):
+        return auto_saturation_level(dtype, bits)
+    return float(saturation)
+
+
+def _check_read_size(path: Path, shape: Sequence[int], dtype: Any, limit: int) -> None:
+    """Refuse (before reading) data whose decoded size and float64 copy exceed the limit."""
+    count = float(np.prod([float(v) for v in shape])) if len(shape) else 1.0
+    itemsize = np.dtype(dtype).itemsize if dtype is not None else 8
+    check_bytes(
+        count * (itemsize + 8),
+        f"{os.fspath(path)}: reading {_dims(shape)} values of {np.dtype(dtype).name}",
+        limit,
+    )
+
+
 # -- low-level readers ----------------------------------------------------------------------
 
 
@@ -263,10 +360,16 @@ def _json_description(tif: tifffile.TiffFile) -> dict[str, Any]:
             data = json.loads(description)
             if isinstance(data, dict):
                 return data
+    with contextlib.suppress(Exception):
+        labels = (tif.imagej_metadata or {}).get("Labels")
+        if labels:
+            angles = [angle_from_name(str(label)) for label in labels]
+            if all(a is not None for a in angles):
+                return {"angles": angles, "angles_from_labels": True}
     return {}
 
 
-def _read_tiff(path: Path) -> tuple[np.ndarray, str, dict[str, Any]]:
+def _read_tiff(path: Path, limit: int = 0) -> tuple[np.ndarray, str, dict[str, Any]]:
     """Array, axes string and JSON metadata of the first series of a TIFF."""
     with _tifffile_messages() as messages:
         try:
@@ -274,6 +377,10 @@ def _read_tiff(path: Path) -> tuple[np.ndarray, str, dict[str, Any]]:
                 if not tif.series:
                     raise _error(path, "the TIFF file holds no image")
                 series = tif.series[0]
+                _check_read_size(path, series.shape, series.dtype, limit or memory_limit())
+                bits = None
+                with contextlib.suppress(Exception):
+                    bits = int(series.keyframe.bitspersample)
                 data = series.asarray()
                 axes = series.axes
                 meta = _json_description(tif)
@@ -288,14 +395,40 @@ def _read_tiff(path: Path) -> tuple[np.ndarray, str, dict[str, Any]]:
         if any(hint in message.lower() for hint in _CORRUPT_HINTS):
             raise _error(path, f"the TIFF file is truncated or corrupt ({message})")
     meta = {"description": meta}
+    if bits is not None and data.dtype.kind in "ui" and bits < data.dtype.itemsize * 8:
+        meta["bits_per_sample"] = bits
     if messages:
         meta["warnings"] = list(messages)
     return data, axes, meta
 
 
-def _read_picture(path: Path) -> np.ndarray:
+def _picture_header(path: Path) -> tuple[tuple[int, ...], np.dtype] | None:
+    """Shape and dtype a PNG/JPEG decodes to, from its header (None if unknown)."""
+    try:
+        from PIL import Image
+
+        cap = Image.MAX_IMAGE_PIXELS
+        Image.MAX_IMAGE_PIXELS = None  # only the header is read; the size is checked below
+        try:
+            with Image.open(path) as image:
+                width, height = image.size
+                bands = len(image.getbands())
+                mode = image.mode
+        finally:
+            Image.MAX_IMAGE_PIXELS = cap
+    except Exception:
+        return None
+    itemsize = {"I;16": 2, "I;16B": 2, "I;16L": 2, "I": 4, "F": 4}.get(mode, 1)
+    shape = (height, width) if bands == 1 else (height, width, bands)
+    return shape, np.dtype(f"u{itemsize}") if itemsize < 4 else np.dtype(np.float32)
+
+
+def _read_picture(path: Path, limit: int = 0) -> np.ndarray:
     from skimage import io as skio
 
+    header = _picture_header(path)
+    if header is not None:
+        _check_read_size(path, header[0], header[1], limit or memory_limit())
     try:
         return np.asarray(skio.imread(path))
     except Exception as exc:
@@ -307,6 +440,33 @@ def _colour_last(data: np.ndarray, axes: str) -> tuple[np.ndarray, bool]:
     if "S" not in axes:
         return data, False
     return np.moveaxis(data, axes.index("S"), -1), True
+
+
+def _load_frame(path: Path, limit: int) -> tuple[np.ndarray, bool, int | None]:
+    """One image file as (data, has a colour axis, TIFF bits per sample)."""
+    if not path.is_file():
+        raise _error(path, "no such file")
+    suffix = path.suffix.lower()
+    if suffix not in FRAME_SUFFIXES:
+        raise _error(path, f"not an image file type ({', '.join(FRAME_SUFFIXES)})")
+    bits = None
+    if suffix in (".tif", ".tiff"):
+        data, axes, meta = _read_tiff(path, limit)
+        bits = meta.get("bits_per_sample")
+        data, colour = _colour_last(data, axes)
+        extra = data.ndim - (3 if colour else 2)
+        if extra > 0 and int(np.prod(data.shape[:extra])) == 1:
+            data = data.reshape(data.shape[extra:])
+        elif extra > 0:
+            raise _error(
+                path,
+                f"the TIFF holds {int(np.prod(data.shape[:extra]))} frames; a single image "
+                "was expected",
+            )
+    else:
+        data = _read_picture(path, limit)
+        colour = data.ndim == 3 and data.shape[-1] in (2, 3, 4)
+    return data, colour, bits
 
 
 def read_frame(path: PathLike, channel: int | None = None) -> np.ndarray:
@@ -331,33 +491,43 @@ def read_frame(path: PathLike, channel: int | None = None) -> np.ndarray:
         ``channel`` is given for a grey image or is out of range.
     """
     path = Path(path)
-    if not path.is_file():
-        raise _error(path, "no such file")
-    suffix = path.suffix.lower()
-    if suffix not in FRAME_SUFFIXES:
-        raise _error(path, f"not an image file type ({', '.join(FRAME_SUFFIXES)})")
-    if suffix in (".tif", ".tiff"):
-        data, axes, _ = _read_tiff(path)
-        data, colour = _colour_last(data, axes)
-        extra = data.ndim - (3 if colour else 2)
-        if extra > 0 and int(np.prod(data.shape[:extra])) == 1:
-            data = data.reshape(data.shape[extra:])
-        elif extra > 0:
-            raise _error(
-                path,
-                f"the TIFF holds {int(np.prod(data.shape[:extra]))} frames; a single image "
-                "was expected",
-            )
-    else:
-        data = _read_picture(path)
-        colour = data.ndim == 3 and data.shape[-1] in (2, 3, 4)
-    return _grey_frames(path, data, colour, channel, frames=False)
+    data, colour, _ = _load_frame(path, memory_limit())
+    return _grey_frames(path, data, colour, channel, frames=False)[0]
 
 
 def _grey_frames(
-    path: Path, data: np.ndarray, colour: bool, channel: int | None, frames: bool
-) -> np.ndarray:
-    """Apply colour conversion and check the dimensions: (H, W) or (N, H, W) if frames."""
+    path: Path,
+    data: np.ndarray,
+    colour: bool,
+    channel: int | None,
+    frames: bool,
+    level: float | None = None,
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """Colour conversion and dimension check: (H, W) or (N, H, W) if frames.
+
+    Returns the grey data and, if ``level`` is given, the samples at or above it in the
+    data as recorded (for colour: in the chosen channel, or in any of R, G, B).
+    """
+    want = 3 if frames else 2
+    shape = data.shape[:-1] if colour else data.shape
+    if len(shape) != want:
+        what = "a stack of frames (frames, rows, columns)" if frames else "a single 2-D image"
+        raise _error(path, f"expected {what}, got an array of shape {data.shape}")
+    if data.dtype == np.bool_:
+        data = data.astype(np.uint8)
+    if not np.issubdtype(data.dtype, np.number) or np.iscomplexobj(data):
+        raise _error(path, f"image data must be real numbers, got dtype {data.dtype}")
+    saturated = None
+    if level is not None:
+        with np.errstate(invalid="ignore"):
+            hits = data >= level
+        if colour:
+            n_channels = data.shape[-1]
+            if channel is not None and 0 <= channel < n_channels:
+                hits = hits[..., channel]
+            else:
+                hits = hits[..., : 3 if n_channels >= 3 else 1].any(axis=-1)
+        saturated = hits
     if colour:
         try:
             data = to_grey(data, channel)
@@ -365,15 +535,7 @@ def _grey_frames(
             raise _error(path, str(exc)) from None
     elif channel is not None:
         raise _error(path, f"channel {channel} was chosen but the image is grey")
-    want = 3 if frames else 2
-    if data.ndim != want:
-        what = "a stack of frames (frames, rows, columns)" if frames else "a single 2-D image"
-        raise _error(path, f"expected {what}, got an array of shape {data.shape}")
-    if not (np.issubdtype(data.dtype, np.number) or data.dtype == np.bool_) or np.iscomplexobj(
-        data
-    ):
-        raise _error(path, f"image data must be real numbers, got dtype {data.dtype}")
-    return data.astype(np.uint8) if data.dtype == np.bool_ else data
+    return data, saturated
 
 
 # -- stack readers --------------------------------------------------------------------------
@@ -390,8 +552,20 @@ def _metadata_angles(path: Path, meta: dict[str, Any]) -> np.ndarray | None:
     return values
 
 
-def _read_tiff_stack(path: Path, channel: int | None) -> StackData:
-    data, axes, meta = _read_tiff(path)
+def _finish(
+    path: Path, stack: np.ndarray, saturated: np.ndarray | None, opts: _Options
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """Subtract the dark frame / offset (after saturation was found on the raw data)."""
+    if not opts.subtracts:
+        return stack, saturated
+    try:
+        return subtract_dark(stack, opts.dark, opts.offset), saturated
+    except PolarsegError as exc:
+        raise _error(opts.dark_name or path, str(exc)) from None
+
+
+def _read_tiff_stack(path: Path, opts: _Options) -> StackData:
+    data, axes, meta = _read_tiff(path, opts.limit)
     data, colour = _colour_last(data, axes)
     if data.ndim == (3 if colour else 2):
         raise _error(
@@ -399,15 +573,45 @@ def _read_tiff_stack(path: Path, channel: int | None) -> StackData:
             "the TIFF holds a single image, not an angle stack "
             "(for a raw polarisation-camera frame give the mosaic layout, --mosaic)",
         )
-    stack = _grey_frames(path, data, colour, channel, frames=True)
+    bits = meta.get("bits_per_sample")
+    level = _saturation_level(opts.saturation, data.dtype, bits)
+    stack, saturated = _grey_frames(path, data, colour, opts.channel, True, level)
+    stack, saturated = _finish(path, stack, saturated, opts)
     info = {"format": "tiff", **{k: v for k, v in meta.items() if k != "description"}}
+    info["saturation_level"] = level
     angles = _metadata_angles(path, meta["description"])
-    return StackData(stack, angles, os.fspath(path), info)
+    if meta["description"].get("angles_from_labels"):
+        info["angles_from"] = "imagej labels"
+    return StackData(stack, angles, os.fspath(path), info, saturated=saturated)
 
 
-def _read_array_stack(path: Path, channel: int | None) -> StackData:
+def _npy_header(handle: Any) -> tuple[tuple[int, ...], np.dtype]:
+    version = np.lib.format.read_magic(handle)
+    if version == (1, 0):
+        shape, _, dtype = np.lib.format.read_array_header_1_0(handle)
+    else:
+        shape, _, dtype = np.lib.format.read_array_header_2_0(handle)
+    return tuple(shape), dtype
+
+
+def _array_header(path: Path) -> tuple[tuple[int, ...], np.dtype] | None:
+    """Shape and dtype of the stack in an ``.npy``/``.npz`` from its header, or None."""
+    try:
+        if path.suffix.lower() == ".npy":
+            with open(path, "rb") as handle:
+                return _npy_header(handle)
+        with zipfile.ZipFile(path) as archive, archive.open("stack.npy") as handle:
+            return _npy_header(handle)
+    except Exception:
+        return None  # np.load reports the problem
+
+
+def _read_array_stack(path: Path, opts: _Options) -> StackData:
     info: dict[str, Any] = {"format": path.suffix.lower().lstrip(".")}
     angles = ground_truth = None
+    header = _array_header(path)
+    if header is not None:
+        _check_read_size(path, header[0], header[1], opts.limit)
     try:
         loaded = np.load(path, allow_pickle=False)
         if isinstance(loaded, np.ndarray):
@@ -428,15 +632,20 @@ def _read_array_stack(path: Path, channel: int | None) -> StackData:
     except Exception as exc:
         raise _error(path, f"cannot read the NumPy file ({_first_line(exc)})") from exc
     colour = data.ndim == 4 and data.shape[-1] in (2, 3, 4)
-    stack = _grey_frames(path, data, colour, channel, frames=True)
+    level = _saturation_level(opts.saturation, data.dtype)
+    stack, saturated = _grey_frames(path, data, colour, opts.channel, True, level)
+    stack, saturated = _finish(path, stack, saturated, opts)
+    info["saturation_level"] = level
     if angles is not None:
+        if angles.dtype.kind not in "uif":
+            raise _error(path, f"the 'angles' array must hold numbers, got dtype {angles.dtype}")
         angles = _metadata_angles(path, {"angles": angles.tolist()})
     if ground_truth is not None and ground_truth.shape != stack.shape[1:]:
         raise _error(
             path,
             f"ground-truth labels are {ground_truth.shape} but the frames are {stack.shape[1:]}",
         )
-    return StackData(stack, angles, os.fspath(path), info, ground_truth)
+    return StackData(stack, angles, os.fspath(path), info, ground_truth, saturated)
 
 
 def _folder_frames(folder: Path) -> list[Path]:
@@ -450,8 +659,9 @@ def _folder_frames(folder: Path) -> list[Path]:
     return sorted(files, key=lambda f: _natural_key(f.name))
 
 
-def _read_folder(folder: Path, angles_given: bool, channel: int | None) -> StackData:
-    files = _folder_frames(folder)
+def _read_frame_files(
+    source: Path, files: list[Path], angles_given: bool, opts: _Options, kind: str
+) -> StackData:
     angles = None
     if not angles_given:
         named = [angle_from_name(f) for f in files]
@@ -465,34 +675,74 @@ def _read_folder(folder: Path, angles_given: bool, channel: int | None) -> Stack
         order = np.argsort(named, kind="stable")
         files = [files[i] for i in order]
         angles = np.asarray(named, dtype=np.float64)[order]
-    frames = []
+    frames, flags, levels = [], [], []
+    budget = opts.limit
     for f in files:
-        frame = read_frame(f, channel)
+        data, colour, bits = _load_frame(f, budget)
+        level = _saturation_level(opts.saturation, data.dtype, bits)
+        frame, saturated = _grey_frames(f, data, colour, opts.channel, False, level)
         if frames and frame.shape != frames[0].shape:
             raise _error(
                 f,
                 f"frame is {frame.shape[0]} x {frame.shape[1]} pixels but {files[0].name} is "
                 f"{frames[0].shape[0]} x {frames[0].shape[1]}; all frames must have one size",
             )
+        if not frames:  # the whole stack and its float64 copy, before reading the rest
+            check_bytes(
+                len(files) * frame.size * 16.0,
+                f"{os.fspath(source)}: reading {len(files)} frames of {_dims(frame.shape)} pixels",
+                opts.limit,
+            )
         frames.append(frame)
-    info = {"format": "folder", "files": [f.name for f in files]}
-    return StackData(np.stack(frames), angles, os.fspath(folder), info)
+        flags.append(saturated)
+        levels.append(level)
+    stack = np.stack(frames)
+    saturated = None
+    if all(s is not None for s in flags):
+        saturated = np.stack(flags)
+    stack, saturated = _finish(source, stack, saturated, opts)
+    info = {"format": kind, "files": [f.name if kind == "folder" else os.fspath(f) for f in files]}
+    known = [lv for lv in levels if lv is not None]
+    info["saturation_level"] = min(known) if known else None
+    return StackData(stack, angles, os.fspath(source), info, saturated=saturated)
 
 
-def _read_mosaic(path: Path, layout: Sequence[float], channel: int | None) -> StackData:
+def _read_mosaic(path: Path, layout: Sequence[float], method: str, opts: _Options) -> StackData:
     if path.is_dir():
         raise _error(path, "a mosaic layout needs a single raw frame, not a folder")
-    raw = read_frame(path, channel)
+    data, colour, bits = _load_frame(path, opts.limit)
+    level = _saturation_level(opts.saturation, data.dtype, bits)
+    raw, saturated_raw = _grey_frames(path, data, colour, opts.channel, False, level)
+    if method == "interpolated":
+        check_bytes(
+            raw.size * 8.0 * 10,
+            f"{os.fspath(path)}: interpolating a {_dims(raw.shape)} mosaic",
+            opts.limit,
+        )
+    if opts.subtracts:
+        try:
+            raw = subtract_dark(raw, opts.dark, opts.offset)
+        except PolarsegError as exc:
+            raise _error(opts.dark_name or path, str(exc)) from None
     try:
-        stack, angles = demosaic_superpixel(raw, layout)
+        stack, angles = demosaic(raw, layout, method)
+        saturated = None if saturated_raw is None else demosaic_flags(saturated_raw, layout, method)
     except PolarsegError as exc:
         raise _error(path, str(exc)) from None
     info = {
         "format": "mosaic",
+        "demosaic": method,
         "mosaic_layout_deg": [float(a) for a in np.asarray(layout, dtype=float).ravel()],
         "raw_shape": list(raw.shape),
+        "saturation_level": level,
     }
-    return StackData(stack, angles, os.fspath(path), info)
+    if bits is not None:
+        info["bits_per_sample"] = bits
+    return StackData(stack, angles, os.fspath(path), info, saturated=saturated)
+
+
+def _frame_label(k: int, angles: np.ndarray) -> str:
+    return f"frame {k} ({angles[k]:g} degrees)"
 
 
 def _check_stack_data(path: Path, data: StackData) -> StackData:
@@ -518,49 +768,125 @@ def _check_stack_data(path: Path, data: StackData) -> StackData:
         )
     if min(stack.shape[1:]) < 1:
         raise _error(path, f"the frames are empty (shape {stack.shape})")
-    if stack.dtype.kind == "f" and not np.isfinite(stack).any():
-        raise _error(path, "the data has no finite values (all NaN or infinite)")
+    flat = stack.reshape(n, -1)
+    if stack.dtype.kind == "f":
+        finite = np.isfinite(flat)
+        if not finite.any():
+            raise _error(path, "the data has no finite values (all NaN or infinite)")
+        empty = np.flatnonzero(~finite.any(axis=1))
+        if empty.size:
+            raise _error(
+                path,
+                f"{_frame_label(int(empty[0]), angles)} has no finite values (all NaN or infinite)",
+            )
+        with np.errstate(invalid="ignore"):
+            lo = np.nanmin(np.where(finite, flat, np.nan), axis=1)
+            hi = np.nanmax(np.where(finite, flat, np.nan), axis=1)
+    else:
+        lo, hi = flat.min(axis=1), flat.max(axis=1)
+    negative = np.flatnonzero(lo < 0)
+    if negative.size:
+        k = int(negative[0])
+        raise _error(
+            path,
+            f"negative intensities (down to {float(lo[k]):g} in {_frame_label(k, angles)}): "
+            "light through a polariser is never negative; subtract a smaller offset or dark "
+            "frame, or shift the data with a negative --offset",
+        )
+    if flat.shape[1] > 1:
+        constant = np.flatnonzero(lo == hi)
+        if constant.size:
+            k = int(constant[0])
+            raise _error(
+                path,
+                f"{_frame_label(k, angles)} is constant (every pixel is {float(lo[k]):g}): "
+                "a blank, black or fully saturated capture?",
+            )
     data.angles_deg = angles
     return data
 
 
+def _resolve_dark(dark: Any, channel: int | None) -> tuple[np.ndarray | None, str | None]:
+    """The dark frame as an array and, when read from a file, its name."""
+    if dark is None:
+        return None, None
+    if isinstance(dark, (str, os.PathLike)):
+        p = Path(dark)
+        if p.suffix.lower() == ".npy":
+            if not p.is_file():
+                raise _error(p, "no such file")
+            try:
+                array = np.load(p, allow_pickle=False)
+            except Exception as exc:
+                raise _error(p, f"cannot read the NumPy file ({_first_line(exc)})") from exc
+        else:
+            array = read_frame(p, channel)
+        array = np.asarray(array)
+        if array.ndim != 2 or array.dtype.kind not in "biuf":
+            raise _error(p, f"a dark frame must be one 2-D image, got an array of {array.shape}")
+        return array, os.fspath(p)
+    array = np.asarray(dark)
+    if array.ndim != 2 or array.dtype.kind not in "biuf":
+        raise PolarsegError(f"a dark frame must be one 2-D image, got an array of {array.shape}")
+    return array, None
+
+
 def read_stack(
-    path: PathLike,
+    path: PathLike | Sequence[PathLike],
     angles_deg: Sequence[float] | np.ndarray | None = None,
     mosaic: Sequence[float] | None = None,
     channel: int | None = None,
+    *,
+    demosaic: str = "superpixel",
+    dark: PathLike | np.ndarray | None = None,
+    offset: float | None = None,
+    saturation: float | str | None = "auto",
+    max_bytes: int | None = None,
 ) -> StackData:
-    """Read an angle stack from a TIFF, an ``.npz``/``.npy``, a folder or a raw mosaic.
+    """Read an angle stack from a TIFF, an ``.npz``/``.npy``, a folder, files or a mosaic.
 
-    See the module docstring for the formats and the file-name rule of folders.
+    See the module docstring for the formats, the file-name rule and the checks.
 
     Parameters
     ----------
-    path : str or path
-        File or folder.
+    path : str or path, or a sequence of them
+        File or folder; or a list of frame files (one per angle).
     angles_deg : sequence of float, optional
-        Polariser angle of each frame in degrees, in frame order (for a folder: natural
-        file-name order). Overrides angles stored in the file.
+        Polariser angle of each frame in degrees, in frame order (folder: natural
+        file-name order; list of files: the order given). Overrides stored angles.
     mosaic : sequence of 4 floats, optional
         Read ``path`` as one raw polarisation-camera frame with this 2 × 2 super-pixel
-        layout (degrees, row-major; :data:`DEFAULT_MOSAIC` for the Sony IMX250MZR). The
-        result has half the height and width of the raw frame.
+        layout (degrees, row-major; :data:`DEFAULT_MOSAIC` for the Sony IMX250MZR).
     channel : int, optional
         Colour channel to use for colour images (default: ITU-R BT.601 luma).
+    demosaic : {"superpixel", "interpolated"}
+        For a mosaic: half resolution, or full resolution by bilinear interpolation.
+    dark : path or array (H, W), optional
+        Dark frame subtracted from every frame (from the raw frame, for a mosaic) after
+        saturation was detected; negative results become 0.
+    offset : float, optional
+        Constant black level subtracted the same way.
+    saturation : float, "auto" or None
+        Level at or above which a recorded sample is saturated (:attr:`StackData.saturated`):
+        ``"auto"`` = the integer dtype's maximum (2**bits − 1 for TIFFs with fewer bits
+        per sample), nothing for float data; None = do not check.
+    max_bytes : int, optional
+        Memory limit for reading (default: :func:`~napari_polarseg.engine.limits.memory_limit`).
 
     Returns
     -------
     StackData
-        The stack (N, H, W), angles in degrees (N,), source, metadata and, for an
-        ``.npz`` with ``labels``, the ground truth.
+        The stack (N, H, W), angles in degrees (N,), source, metadata, the saturated
+        samples and, for an ``.npz`` with ``labels``, the ground truth.
 
     Raises
     ------
     PolarsegError
         With one line naming the file and the problem: missing, unreadable, truncated or
-        non-image file; angles missing, not matching the frame count, or fewer than 3
-        distinct modulo 180 degrees; frames of different sizes; data with no finite value;
-        an odd-sized mosaic; angles and a mosaic both given.
+        non-image file; too large for the memory limit; angles missing, not matching the
+        frame count, or fewer than 3 distinct modulo 180 degrees; frames of different
+        sizes; data with no finite value, negative values or a constant frame; an
+        odd-sized mosaic; angles and a mosaic both given; a bad option.
 
     Examples
     --------
@@ -568,36 +894,165 @@ def read_stack(
     >>> data.stack.shape, data.angles_deg                             # doctest: +SKIP
     ((4, 480, 640), array([  0.,  45.,  90., 135.]))
     """
-    p = Path(path)
-    if not p.exists():
-        raise _error(p, "no such file or folder")
-    if angles_deg is not None and mosaic is not None:
-        raise _error(p, "give either the polariser angles or a mosaic layout, not both")
-    if mosaic is not None:
-        data = _read_mosaic(p, mosaic, channel)
-    elif p.is_dir():
-        data = _read_folder(p, angles_deg is not None, channel)
-    else:
-        suffix = p.suffix.lower()
-        if suffix in (".tif", ".tiff"):
-            data = _read_tiff_stack(p, channel)
-        elif suffix in (".npz", ".npy"):
-            data = _read_array_stack(p, channel)
-        elif suffix in FRAME_SUFFIXES:
-            raise _error(
-                p,
-                "a single image is not an angle stack: give a multi-page TIFF, an .npz, a "
-                "folder of frames, or a mosaic layout for a raw polarisation-camera frame",
-            )
+    files: list[Path] | None = None
+    if isinstance(path, (list, tuple)):
+        if not path:
+            raise PolarsegError("no input files given")
+        files = [Path(os.fspath(f)) for f in path]
+        if len(files) == 1:
+            p, files = files[0], None
         else:
-            kinds = ", ".join(sorted(set(STACK_SUFFIXES + FRAME_SUFFIXES)))
-            raise _error(p, f"unsupported file type {suffix or '(none)'!r} (expected {kinds})")
+            p = files[0]
+    else:
+        p = Path(os.fspath(path))
+    if demosaic not in DEMOSAIC_METHODS:
+        raise PolarsegError(
+            f"demosaic method must be one of {', '.join(DEMOSAIC_METHODS)}; got {demosaic!r}"
+        )
+    if isinstance(saturation, str) and saturation != "auto":
+        raise PolarsegError(f"saturation must be a number, 'auto' or None; got {saturation!r}")
+    if saturation is not None and not isinstance(saturation, str):
+        saturation = _finite_number(saturation, "the saturation level")
+    if offset is not None:
+        offset = _finite_number(offset, "the offset")
+    dark_array, dark_name = _resolve_dark(dark, channel)
+    opts = _Options(
+        channel=channel,
+        saturation=saturation,
+        limit=memory_limit(max_bytes),
+        dark=dark_array,
+        dark_name=dark_name,
+        offset=None if offset is None else float(offset),
+    )
+    if files is not None:
+        for f in files:
+            if not f.exists():
+                raise _error(f, "no such file")
+            if f.is_dir():
+                raise _error(f, "a list of frames must name image files, not folders")
+        if mosaic is not None:
+            raise _error(p, "a mosaic layout needs a single raw frame, not a list of files")
+        if angles_deg is not None and len(np.ravel(angles_deg)) != len(files):
+            raise _error(p, f"{len(files)} files but {len(np.ravel(angles_deg))} angles")
+        data = _read_frame_files(p, files, angles_deg is not None, opts, "files")
+    else:
+        if not p.exists():
+            raise _error(p, "no such file or folder")
+        if angles_deg is not None and mosaic is not None:
+            raise _error(p, "give either the polariser angles or a mosaic layout, not both")
+        if mosaic is not None:
+            data = _read_mosaic(p, mosaic, demosaic, opts)
+        elif p.is_dir():
+            data = _read_frame_files(p, _folder_frames(p), angles_deg is not None, opts, "folder")
+        else:
+            suffix = p.suffix.lower()
+            if suffix in (".tif", ".tiff"):
+                data = _read_tiff_stack(p, opts)
+            elif suffix in (".npz", ".npy"):
+                data = _read_array_stack(p, opts)
+            elif suffix in FRAME_SUFFIXES:
+                raise _error(
+                    p,
+                    "a single image is not an angle stack: give a multi-page TIFF, an .npz, "
+                    "a folder of frames, or a mosaic layout for a raw polarisation-camera frame",
+                )
+            else:
+                kinds = ", ".join(sorted(set(STACK_SUFFIXES + FRAME_SUFFIXES)))
+                raise _error(p, f"unsupported file type {suffix or '(none)'!r} (expected {kinds})")
+    if dark_array is not None:
+        data.metadata["dark_frame"] = dark_name or "array"
+    if offset is not None:
+        data.metadata["offset"] = float(offset)
     if angles_deg is not None:
         data.angles_deg = np.asarray(angles_deg, dtype=np.float64).ravel()
         data.metadata["angles_from"] = "given"
     else:
-        data.metadata.setdefault("angles_from", data.metadata["format"])
+        kind = data.metadata["format"]
+        data.metadata.setdefault("angles_from", "names" if kind == "files" else kind)
     return _check_stack_data(p, data)
+
+
+def read_mask(
+    path: PathLike, shape: Sequence[int], raw_shape: Sequence[int] | None = None
+) -> np.ndarray:
+    """Read a user mask (a labels image): non-zero = segment here, 0 = leave out.
+
+    Parameters
+    ----------
+    path : str or path
+        ``.tif``/``.tiff``/``.png`` (a napari labels layer saved as an image; colour
+        images count a pixel as set if any channel is non-zero), ``.npy``, or ``.npz``
+        (the array ``mask`` or ``labels``, or its only array).
+    shape : (H, W)
+        Size of the frames the mask applies to.
+    raw_shape : (2H, 2W), optional
+        Size of the raw mosaic the frames come from by super-pixel demosaicing; a mask of
+        this size is reduced to the frames' size (a super-pixel is used only if all four
+        of its pixels are set).
+
+    Returns
+    -------
+    ndarray (H, W) of bool
+
+    Raises
+    ------
+    PolarsegError
+        If the file is missing or unreadable, not a single 2-D image, or of another size.
+    """
+    p = Path(path)
+    if not p.is_file():
+        raise _error(p, "no such file")
+    suffix = p.suffix.lower()
+    if suffix not in MASK_SUFFIXES:
+        raise _error(p, f"unsupported mask file type {suffix!r} ({', '.join(MASK_SUFFIXES)})")
+    limit = memory_limit()
+    if suffix in (".npy", ".npz"):
+        header = _array_header(p) if suffix == ".npy" else None
+        if header is not None:
+            _check_read_size(p, header[0], header[1], limit)
+        try:
+            loaded = np.load(p, allow_pickle=False)
+            if isinstance(loaded, np.ndarray):
+                data = loaded
+            else:
+                with loaded:
+                    names = loaded.files
+                    pick = [n for n in ("mask", "labels") if n in names] or (
+                        names if len(names) == 1 else []
+                    )
+                    if not pick:
+                        raise _error(
+                            p, f"no array named 'mask' or 'labels' (found: {', '.join(names)})"
+                        )
+                    data = loaded[pick[0]]
+        except PolarsegError:
+            raise
+        except Exception as exc:
+            raise _error(p, f"cannot read the NumPy file ({_first_line(exc)})") from exc
+        colour = False
+    else:
+        data, colour, _ = _load_frame(p, limit)
+    data = np.asarray(data)
+    if data.dtype.kind not in "biuf":
+        raise _error(p, f"a mask must hold numbers, got dtype {data.dtype}")
+    with np.errstate(invalid="ignore"):
+        keep = np.nan_to_num(data.astype(np.float64)) != 0 if data.dtype.kind == "f" else data != 0
+    if colour:
+        keep = keep.any(axis=-1)
+    while keep.ndim > 2 and keep.shape[0] == 1:
+        keep = keep[0]
+    if keep.ndim != 2:
+        raise _error(p, f"a mask must be one 2-D image, got an array of shape {data.shape}")
+    h, w = (int(v) for v in shape)
+    if keep.shape == (h, w):
+        return keep
+    if raw_shape is not None and keep.shape == tuple(int(v) for v in raw_shape):
+        if keep.shape == (2 * h, 2 * w):
+            return keep.reshape(h, 2, w, 2).all(axis=(1, 3))
+    raise _error(
+        p,
+        f"the mask is {keep.shape[0]} x {keep.shape[1]} pixels but the frames are {h} x {w}",
+    )
 
 
 # -- writers --------------------------------------------------------------------------------

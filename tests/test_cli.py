@@ -31,10 +31,19 @@ CONTRACT = {
     "phase.tif",
     "zenith.tif",
     "reconstruction_error.tif",
+    "residual.tif",
+    "mask.tif",
     "params.json",
     "summary.json",
 }
-FLOAT_MAPS = ["intensity.tif", "dop.tif", "phase.tif", "zenith.tif", "reconstruction_error.tif"]
+FLOAT_MAPS = [
+    "intensity.tif",
+    "dop.tif",
+    "phase.tif",
+    "zenith.tif",
+    "reconstruction_error.tif",
+    "residual.tif",
+]
 
 
 def two_material_scene(h=H, w=W, angles=ANGLES, seed=0, noise=0.5):
@@ -154,7 +163,8 @@ def test_segment_all_parameter_flags_reach_params_json(tmp_path, capsys, scene_t
         *("--coefficients", "ridge", "--ridge", "0.01", "--variance", "0.9", "--scale", "2"),
         *("--features", "zonal"),
         *("--scale-mode", "median", "--spatial-radius", "1.5", "--spatial-sigma", "3"),
-        *("--ncut-threshold", "0.8", "--min-segment-blocks", "2"),
+        *("--ncut-threshold", "0.8", "--min-segment-blocks", "2", "--fit", "robust"),
+        *("--affinity-graph", "sparse"),
     ]
     code, _, err = run(capsys, "segment", path, "--out", out, *flags)
     assert code == 0, err
@@ -175,6 +185,8 @@ def test_segment_all_parameter_flags_reach_params_json(tmp_path, capsys, scene_t
         "n_segments": 3,
         "ncut_threshold": 0.8,
         "min_segment_blocks": 2,
+        "fit": "robust",
+        "affinity_graph": "sparse",
     }
 
 

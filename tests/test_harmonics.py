@@ -135,3 +135,35 @@ def test_window_larger_than_image():
     theta, phi = random_normals((8, 12))
     with pytest.raises(PolarsegError, match="larger than the image"):
         block_coefficients(np.ones((8, 12)), theta, phi, 10, 2)
+
+
+@pytest.mark.parametrize("L", [0, 1, 2, 7, 12, 30])
+def test_recurrence_matches_scipy_sph_harm_y_to_1e10(L):
+    """The hand-written recurrence against scipy's complex Y_l^m for every (l, m)."""
+    rng = np.random.default_rng(L)
+    theta = np.concatenate([[0.0, np.pi / 2, np.pi, 1e-9], rng.uniform(0, np.pi, 60)])
+    phi = np.concatenate([[0.3, 2.0, 5.0, 0.0], rng.uniform(0, 2 * np.pi, 60)])
+    Y = real_sph_harm(L, theta, phi)
+    assert Y.shape == (theta.size, n_coefficients(L))
+    for l in range(L + 1):  # noqa: E741
+        for m in range(-l, l + 1):
+            c = sp.sph_harm_y(l, abs(m), theta, phi)
+            if m > 0:
+                want = np.sqrt(2) * (-1.0) ** m * c.real
+            elif m < 0:
+                want = np.sqrt(2) * (-1.0) ** m * c.imag
+            else:
+                want = c.real
+            np.testing.assert_allclose(Y[:, coefficient_index(l, m)], want, rtol=0, atol=1e-10)
+
+
+def test_chunked_and_threaded_evaluation_equals_small_calls():
+    """Large inputs go through chunks on several threads; values must not depend on it."""
+    rng = np.random.default_rng(7)
+    theta, phi = rng.uniform(0, np.pi / 2, (300, 330)), rng.uniform(0, np.pi, (300, 330))
+    intensity = rng.uniform(0.2, 1.0, (300, 330))
+    big = block_coefficients(intensity, theta, phi, 10, 6)
+    part = block_coefficients(intensity[:10, :20], theta[:10, :20], phi[:10, :20], 10, 6)
+    np.testing.assert_allclose(big[:1, :2], part, rtol=1e-13, atol=1e-15)
+    Y = real_sph_harm(6, theta, phi)
+    np.testing.assert_allclose(Y[5, 7], real_sph_harm(6, theta[5, 7], phi[5, 7]), atol=1e-14)

@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import io
 import json
 import os
+import re
+import zipfile
 
 import numpy as np
 import pytest
@@ -464,3 +467,101 @@ def test_atomic_output_replaces_only_on_success(tmp_path):
         tmp.write_text("new")
     assert path.read_text() == "new"
     assert os.listdir(tmp_path) == ["x.txt"]
+
+
+# -- real-input checks: saturation, masks, header sizes, bad values ------------------------
+
+
+def test_colour_frames_flag_saturation_per_channel(tmp_path):
+    rng = np.random.default_rng(9)
+    rgb = rng.integers(10, 200, (3, 6, 7, 3), dtype=np.uint8)
+    rgb[1, 2, 3, 0] = 255  # red saturated: the luma is not 255, the sample is still bad
+    rgb[2, 4, 4, 2] = 255
+    for k, a in enumerate([0, 60, 120]):
+        skio.imsave(tmp_path / f"c_{a}.png", rgb[k], check_contrast=False)
+    data = pio.read_stack(tmp_path)
+    assert data.metadata["saturation_level"] == 255.0
+    assert data.stack[1, 2, 3] < 255
+    assert np.argwhere(data.saturated).tolist() == [[1, 2, 3], [2, 4, 4]]
+    green = pio.read_stack(tmp_path, channel=1)  # only the chosen channel counts
+    assert not green.saturated.any()
+    assert pio.read_stack(tmp_path, saturation=None).saturated is None
+
+
+def test_read_mask_formats_and_errors(tmp_path):
+    labels = np.zeros((6, 8), np.uint16)
+    labels[1:4, 2:6] = 7
+    tifffile.imwrite(tmp_path / "m.tif", labels)
+    np.save(tmp_path / "m.npy", labels.astype(float))
+    np.savez(tmp_path / "m.npz", labels=labels)
+    skio.imsave(tmp_path / "m.png", np.dstack([labels > 0] * 3).astype(np.uint8) * 255)
+    for name in ("m.tif", "m.npy", "m.npz", "m.png"):
+        keep = pio.read_mask(tmp_path / name, (6, 8))
+        np.testing.assert_array_equal(keep, labels > 0, err_msg=name)
+    with pytest.raises(PolarsegError, match=r"m\.tif: the mask is 6 x 8 pixels but the frames"):
+        pio.read_mask(tmp_path / "m.tif", (5, 8))
+    with pytest.raises(PolarsegError, match="no such file"):
+        pio.read_mask(tmp_path / "none.tif", (6, 8))
+    (tmp_path / "m.txt").write_text("1 0")
+    with pytest.raises(PolarsegError, match="unsupported mask file type"):
+        pio.read_mask(tmp_path / "m.txt", (6, 8))
+
+
+def test_header_sizes_are_checked_before_reading(tmp_path):
+    path = tmp_path / "big.npz"
+    header = io.BytesIO()
+    np.lib.format.write_array_header_1_0(
+        header, {"descr": "<f8", "fortran_order": False, "shape": (7, 90000, 90000)}
+    )
+    with zipfile.ZipFile(path, "w") as archive:
+        archive.writestr("stack.npy", header.getvalue())
+        archive.writestr("angles.npy", b"")
+    with pytest.raises(PolarsegError, match=r"big\.npz: reading 7 x 90000 x 90000 values of "):
+        pio.read_stack(path)
+    stack, _ = uint16_stack()
+    small = tmp_path / "s.tif"
+    pio.write_stack_tiff(small, stack, ANGLES)
+    with pytest.raises(PolarsegError, match=r"s\.tif: reading 6 x 12 x 15 values of uint16"):
+        pio.read_stack(small, max_bytes=1000)
+    assert pio.read_stack(small, max_bytes=10**6).stack.shape == (6, 12, 15)
+
+
+def test_reader_refuses_negative_blank_and_constant_data(tmp_path):
+    stack, _ = render(h=6, w=7, angles=[0, 45, 90, 135])
+    cases = {
+        "neg": (stack - stack.min() - 1.0, "negative intensities (down to -1 in frame"),
+        "blank": (np.concatenate([stack[:3], np.zeros((1, 6, 7))]), "frame 3 (135 degrees) is "),
+        "nanframe": (
+            np.concatenate([stack[:1], np.full((1, 6, 7), np.nan), stack[2:]]),
+            "frame 1 (45 degrees) has no finite values",
+        ),
+    }
+    for name, (data, match) in cases.items():
+        path = tmp_path / f"{name}.tif"
+        pio.write_stack_tiff(path, data.astype(np.float32), [0, 45, 90, 135])
+        with pytest.raises(PolarsegError, match=re.escape(match)):
+            pio.read_stack(path)
+    # an offset large enough to go negative is clipped at 0 instead (counted as black later)
+    path = tmp_path / "ok.tif"
+    pio.write_stack_tiff(path, stack.astype(np.float32), [0, 45, 90, 135])
+    shifted = pio.read_stack(path, offset=float(np.median(stack)))
+    assert shifted.stack.min() == 0.0 and shifted.metadata["offset"] == float(np.median(stack))
+    with pytest.raises(PolarsegError, match="too large to process"):
+        polarisation_image(np.full((3, 2, 2), 1e200), np.deg2rad([0, 60, 120]))
+
+
+def test_mosaic_reader_options(tmp_path):
+    layout = (90, 45, 135, 0)
+    stack, _ = render(h=10, w=12, angles=sorted(layout))
+    raw = mosaic_superpixel(np.round(stack).astype(np.uint16), layout)
+    path = tmp_path / "raw.tif"
+    tifffile.imwrite(path, raw, photometric="minisblack")
+    full = pio.read_stack(path, mosaic=layout, demosaic="interpolated")
+    assert full.stack.shape == (4, 20, 24) and full.stack.dtype == np.float64
+    assert full.metadata["demosaic"] == "interpolated"
+    with pytest.raises(PolarsegError, match="demosaic method must be one of"):
+        pio.read_stack(path, mosaic=layout, demosaic="bicubic")
+    with pytest.raises(PolarsegError, match="saturation must be a number"):
+        pio.read_stack(path, mosaic=layout, saturation="max")
+    with pytest.raises(PolarsegError, match="a mosaic layout needs a single raw frame"):
+        pio.read_stack([path, path], mosaic=layout)

@@ -34,16 +34,27 @@ from .harmonics import (
     reconstruct_intensity,
     upsample_block_labels,
 )
+from .limits import check_pipeline_memory, estimate_pipeline_bytes
+from .mosaic import demosaic, demosaic_interpolated, demosaic_superpixel, subtract_dark
 from .ncut import CutTree, best_split, bipartition, fiedler_vector, recursive_ncut
 from .params import SegmentParams
 from .pipeline import STAGES, Pipeline, SegmentationResult, intensity_baseline, segment
-from .polarimage import PolarisationImage, distinct_angle_count, polarisation_image
+from .polarimage import (
+    PixelMask,
+    PolarisationImage,
+    average_duplicate_angles,
+    distinct_angle_count,
+    polarisation_image,
+    validity_mask,
+)
+from .registration import register_stack
 
 __all__ = [
     "STAGES",
     "Cancelled",
     "CutTree",
     "PCAResult",
+    "PixelMask",
     "Pipeline",
     "PolarisationImage",
     "PolarsegError",
@@ -51,18 +62,24 @@ __all__ = [
     "SegmentationResult",
     "ZenithEstimate",
     "affinity_matrix",
+    "average_duplicate_angles",
     "azimuth_from_phase",
     "best_split",
     "bipartition",
     "block_coefficients",
     "block_grid",
     "brewster_angle",
+    "check_pipeline_memory",
+    "demosaic",
+    "demosaic_interpolated",
+    "demosaic_superpixel",
     "coefficient_index",
     "degree_order",
     "diffuse_dop",
     "diffuse_dop_ceiling",
     "diffuse_dop_fresnel",
     "distinct_angle_count",
+    "estimate_pipeline_bytes",
     "fiedler_vector",
     "fresnel_reflectance",
     "intensity_baseline",
@@ -72,12 +89,15 @@ __all__ = [
     "pixel_block_index",
     "polarisation_image",
     "real_sph_harm",
+    "register_stack",
     "reconstruct_intensity",
     "recursive_ncut",
     "segment",
     "specular_dop",
     "specular_dop_fresnel",
+    "subtract_dark",
     "upsample_block_labels",
+    "validity_mask",
     "whiten",
     "zenith_from_diffuse_dop",
     "zenith_from_dop",

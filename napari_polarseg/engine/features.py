@@ -102,19 +102,26 @@ def pca_features(vectors: np.ndarray, variance: float = 0.95) -> PCAResult:
     total = x.var(axis=0).sum()
     if not total > 1e-300:
         raise PolarsegError("all blocks have identical features: nothing to segment")
-    from sklearn.decomposition import PCA  # imported here: it costs ~1 s at start-up
-
+    # Eigendecomposition of the covariance (what scikit-learn's "covariance_eigh" solver
+    # does): (L+1)² × (L+1)² instead of an SVD of the n_blocks × (L+1)² data, ~10 times
+    # faster here, and no 1 s scikit-learn import on the first run.
+    centred = x - x.mean(axis=0)
+    evals, evecs = np.linalg.eigh(centred.T @ centred)
+    evals, evecs = np.clip(evals[::-1], 0.0, None), evecs[:, ::-1]
+    # scikit-learn's sign convention: the largest |entry| of each component is positive
+    pivot = np.argmax(np.abs(evecs), axis=0)
+    evecs = evecs * np.sign(evecs[pivot, np.arange(evecs.shape[1])])
     n_max = min(x.shape)
-    pca = PCA(n_components=n_max, svd_solver="full")
-    scores = pca.fit_transform(x)
-    ratio = pca.explained_variance_ratio_
-    # keep the fewest components whose cumulative share reaches the target
+    evals, evecs = evals[:n_max], evecs[:, :n_max]
+    ratio = evals / evals.sum()
+    # keep the fewest components whose cumulative share reaches the target; shares at
+    # the round-off level of the eigensolver count as zero variance
     keep = int(np.searchsorted(np.cumsum(ratio), variance - 1e-12) + 1)
-    keep = max(1, min(keep, int(np.count_nonzero(ratio > 1e-15)) or 1))
+    keep = max(1, min(keep, int(np.count_nonzero(ratio > 1e-12)) or 1))
     return PCAResult(
-        features=scores[:, :keep],
+        features=centred @ evecs[:, :keep],
         explained_variance_ratio=ratio[:keep],
-        components=pca.components_[:keep],
+        components=evecs[:, :keep].T,
     )
 
 
@@ -135,21 +142,63 @@ def whiten(features: np.ndarray) -> np.ndarray:
     return centred @ (evecs * inv_sqrt)
 
 
+def _sq_distances(z: np.ndarray, scale: float | None = None) -> np.ndarray:
+    """‖z_i − z_j‖² for all pairs (n × n), optionally turned into exp(−D / s) in place.
+
+    One fused pass per chunk of rows (matrix product, then in-place additions, clipping
+    and exponential while the chunk is in cache), chunks spread over the cores.
+    """
+    from .harmonics import run_chunks
+
+    n = z.shape[0]
+    sq = np.einsum("ij,ij->i", z, z)
+    out = np.empty((n, n))
+
+    def work(a: int, b: int) -> None:
+        blk = out[a:b]
+        np.matmul(z[a:b], z.T, out=blk)
+        blk *= -2.0
+        blk += sq[a:b, None]
+        blk += sq[None, :]
+        np.maximum(blk, 0.0, out=blk)
+        blk[np.arange(b - a), np.arange(a, b)] = 0.0
+        if scale is not None:
+            blk *= -1.0 / scale
+            np.exp(blk, out=blk)
+
+    step = max(1, 2**16 // max(n, 1))
+    run_chunks([(a, min(n, a + step)) for a in range(0, n, step)], work, n * n // 8)
+    return out
+
+
 def mahalanobis_sq(features: np.ndarray) -> np.ndarray:
     """Dense matrix of squared Mahalanobis distances D_k1k2 between blocks (eq. 4.27, Σ⁻¹).
 
     D = (A_k1 − A_k2)ᵀ Σ⁻¹ (A_k1 − A_k2), computed as ‖z_i‖² + ‖z_j‖² − 2 z_i·z_j on the
-    whitened features z (a matrix product instead of a pairwise loop).
+    whitened features z (a matrix product instead of a pairwise loop). Dimensionless.
     """
-    z = whiten(features)
-    sq = np.einsum("ij,ij->i", z, z)
-    d = sq[:, None] + sq[None, :] - 2.0 * (z @ z.T)
-    np.maximum(d, 0.0, out=d)
-    np.fill_diagonal(d, 0.0)
-    return d
+    return _sq_distances(whiten(features))
+
+
+def _median_offdiagonal(d: np.ndarray) -> float:
+    """Median of the off-diagonal entries of a symmetric matrix, from its upper triangle.
+
+    Every off-diagonal value appears twice, so the median of the strict upper triangle is
+    the median of all off-diagonal entries; gathering it row by row avoids an n × n mask.
+    """
+    n = d.shape[0]
+    upper = np.concatenate([d[i, i + 1 :] for i in range(n - 1)])
+    return float(np.median(upper))
 
 
 SCALE_MODES = ("absolute", "median")
+
+
+def _check_scale(scale: float, scale_mode: str) -> None:
+    if not scale > 0:
+        raise PolarsegError(f"affinity scale must be positive, got {scale!r}")
+    if scale_mode not in SCALE_MODES:
+        raise PolarsegError(f"scale mode must be one of {SCALE_MODES}, got {scale_mode!r}")
 
 
 def affinity_matrix(
@@ -158,6 +207,7 @@ def affinity_matrix(
     """Block affinity S(k1, k2) = exp(−D_k1k2 / s) (thesis section 4.5; s = 1 there).
 
     D is the squared Mahalanobis distance of eq. 4.27 (a quadratic form, as printed).
+    Dense: n_blocks² float64 values (see :func:`knn_affinity` for large block counts).
 
     Parameters
     ----------
@@ -171,17 +221,161 @@ def affinity_matrix(
         s = 1 gives affinities of e^−30 and a graph that falls apart into single blocks;
         the median makes s dimensionless (s = 1: a typical pair has affinity 1/e).
     """
-    if not scale > 0:
-        raise PolarsegError(f"affinity scale must be positive, got {scale!r}")
-    if scale_mode not in SCALE_MODES:
-        raise PolarsegError(f"scale mode must be one of {SCALE_MODES}, got {scale_mode!r}")
-    d = mahalanobis_sq(features)
-    if scale_mode == "median" and d.shape[0] > 1:
-        off = d[~np.eye(d.shape[0], dtype=bool)]
-        med = float(np.median(off))
-        scale = scale * (med if med > 0 else 1.0)
-    d /= -scale
+    _check_scale(scale, scale_mode)
+    z = whiten(features)
+    if scale_mode == "absolute" or z.shape[0] < 2:
+        return _sq_distances(z, scale)
+    d = _sq_distances(z)
+    med = _median_offdiagonal(d)
+    scale = scale * (med if med > 0 else 1.0)
+    d *= -1.0 / scale
     return np.exp(d, out=d)
+
+
+#: Neighbours per block of the sparse feature-space affinity (:func:`knn_affinity`).
+#: 30 reproduces the dense cut (ARI 1.000) on the three 120 × 130 sample scenes at the
+#: thesis scale, where 10–20 miss a few blocks on one of them; on a 19,584-block camera
+#: frame it costs 1.1 s of Lanczos against 0.6 s for 15.
+KNN_NEIGHBORS = 30
+#: Block pairs sampled to estimate the median distance for a sparse affinity.
+MEDIAN_SAMPLE_PAIRS = 200_000
+
+
+def _sampled_median_sq(z: np.ndarray, seed: int = 0) -> float:
+    """Median of ‖z_i − z_j‖² over i ≠ j, estimated from random pairs (seeded).
+
+    With 200,000 pairs the estimate is within ~0.5 % of the exact median (its standard
+    error is about 1.25 σ / √pairs relative to the density at the median); exact for
+    graphs small enough to hold every pair.
+    """
+    n = z.shape[0]
+    if n * (n - 1) // 2 <= MEDIAN_SAMPLE_PAIRS:
+        i, j = np.triu_indices(n, 1)
+    else:
+        rng = np.random.default_rng(seed)
+        i = rng.integers(0, n, MEDIAN_SAMPLE_PAIRS)
+        j = (i + rng.integers(1, n, MEDIAN_SAMPLE_PAIRS)) % n  # never equal to i
+    diff = z[i] - z[j]
+    return float(np.median(np.einsum("ij,ij->i", diff, diff)))
+
+
+def _sparse_from_pairs(n: int, rows: np.ndarray, cols: np.ndarray, vals: np.ndarray):
+    """Symmetric CSR matrix with unit diagonal from (i, j, value) pairs with i != j.
+
+    A pair present in both directions keeps one value (the same value either way), so
+    the result is the union of the neighbourhoods (max(W, Wᵀ) for k nearest neighbours).
+    """
+    import scipy.sparse as sps
+
+    off = sps.coo_matrix((vals, (rows, cols)), shape=(n, n)).tocsr()
+    off.sum_duplicates()
+    off = off.maximum(off.T)
+    return (off + sps.identity(n, format="csr")).tocsr()
+
+
+def knn_affinity(
+    features: np.ndarray,
+    scale: float = 1.0,
+    scale_mode: str = "absolute",
+    n_neighbors: int = KNN_NEIGHBORS,
+):
+    """Sparse block affinity: exp(−D / s) between each block and its k nearest neighbours.
+
+    The same affinity as :func:`affinity_matrix` (thesis section 4.5, D the squared
+    Mahalanobis distance of eq. 4.27), kept only for the ``n_neighbors`` nearest blocks
+    of each block in feature space (``sklearn.neighbors.NearestNeighbors`` on the
+    whitened features, where Euclidean distance is Mahalanobis distance), symmetrised
+    as the union of the neighbourhoods, with the unit self-affinity on the diagonal.
+    Memory and time grow like n_blocks · k instead of n_blocks², which is what lets a
+    polarisation-camera frame (≈ 20,000 blocks) be segmented.
+
+    The pairs left out are the farther ones, whose affinities are the smallest; with the
+    thesis scale (s = 1, 10–20 components) they are ~e^−30 anyway, and the normalized
+    cut is the dense one. With a *wide* kernel (``scale_mode="median"``, or s of the order
+    of the distances) every block is strongly tied to most others, which no k-nearest-
+    neighbour graph represents: the cut then differs from the dense one (adjusted Rand
+    index 0.2–0.5 between them on the sample scenes). Use a spatial term
+    (:func:`spatial_affinity`, exact) or the dense affinity where that matters.
+    ``scale_mode="median"`` uses the median distance of a seeded random sample of block
+    pairs (:data:`MEDIAN_SAMPLE_PAIRS`) instead of all pairs.
+
+    Returns
+    -------
+    scipy.sparse.csr_matrix (n_blocks, n_blocks)
+    """
+    _check_scale(scale, scale_mode)
+    from sklearn.neighbors import NearestNeighbors
+
+    z = whiten(features)
+    n = z.shape[0]
+    k = int(min(max(n_neighbors, 1), n - 1))
+    if scale_mode == "median":
+        med = _sampled_median_sq(z)
+        scale = scale * (med if med > 0 else 1.0)
+    # brute force (BLAS distance blocks): 1.0 s for 19,584 blocks in 15 dimensions, where
+    # the default k-d tree takes 1.8 s and a ball tree 2.8 s
+    dist, ind = NearestNeighbors(n_neighbors=k + 1, algorithm="brute").fit(z).kneighbors(z)
+    rows = np.repeat(np.arange(n), k + 1)
+    cols = ind.ravel()
+    keep = rows != cols
+    vals = np.exp(-(dist.ravel()[keep] ** 2) / scale)
+    return _sparse_from_pairs(n, rows[keep], cols[keep], vals)
+
+
+def _grid_offsets(radius: float) -> list[tuple[int, int]]:
+    r = int(np.floor(radius))
+    return [
+        (dr, dc)
+        for dr in range(-r, r + 1)
+        for dc in range(-r, r + 1)
+        if (dr or dc) and dr * dr + dc * dc <= radius * radius
+    ]
+
+
+def spatial_affinity(
+    features: np.ndarray,
+    grid: tuple[int, int],
+    radius: float,
+    sigma: float,
+    scale: float = 1.0,
+    scale_mode: str = "absolute",
+):
+    """Sparse exp(−D / s) · exp(−‖X_i − X_j‖² / σ_X²) for blocks closer than ``radius``.
+
+    Exactly :func:`affinity_matrix` times :func:`spatial_kernel` (Shi & Malik eq. 11;
+    thesis section 4.5), stored only where the spatial term is non-zero: about π r²
+    entries per block, so it needs neither the dense matrix nor any approximation.
+    ``grid`` is the (rows, cols) block grid of the features (row-major); ``radius`` and
+    ``sigma`` are in blocks. ``scale_mode="median"`` uses all pairs up to
+    :data:`MEDIAN_SAMPLE_PAIRS`, else a seeded random sample of them.
+    """
+    _check_scale(scale, scale_mode)
+    if not radius > 0 or not sigma > 0:
+        raise PolarsegError(f"spatial radius and sigma must be positive, got {radius}, {sigma}")
+    z = whiten(features)
+    nr, nc = grid
+    n = nr * nc
+    if z.shape[0] != n:
+        raise PolarsegError(f"{z.shape[0]} feature vectors do not fill a {nr} x {nc} grid")
+    if scale_mode == "median":
+        med = _sampled_median_sq(z)
+        scale = scale * (med if med > 0 else 1.0)
+    rr, cc = np.divmod(np.arange(n), nc)
+    rows, cols, vals = [], [], []
+    for dr, dc in _grid_offsets(radius):
+        ok = (rr + dr >= 0) & (rr + dr < nr) & (cc + dc >= 0) & (cc + dc < nc)
+        i = np.flatnonzero(ok)
+        j = i + dr * nc + dc
+        diff = z[i] - z[j]
+        d2 = np.einsum("ij,ij->i", diff, diff)
+        rows.append(i)
+        cols.append(j)
+        vals.append(np.exp(-d2 / scale - (dr * dr + dc * dc) / (sigma * sigma)))
+    if not rows:
+        import scipy.sparse as sps
+
+        return sps.identity(n, format="csr")
+    return _sparse_from_pairs(n, np.concatenate(rows), np.concatenate(cols), np.concatenate(vals))
 
 
 def spatial_kernel(grid: tuple[int, int], radius: float, sigma: float) -> np.ndarray:

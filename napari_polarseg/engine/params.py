@@ -20,6 +20,8 @@ SPECULAR_BRANCHES = ("below-brewster", "above-brewster")
 COEFFICIENT_METHODS = ("thesis", "ridge")
 SCALE_MODES = ("absolute", "median")
 FEATURE_KINDS = ("thesis", "zonal", "energy")
+FIT_METHODS = ("lsq", "robust")
+AFFINITY_GRAPHS = ("auto", "dense", "sparse")
 MAX_DEGREE = 60
 
 
@@ -68,6 +70,17 @@ class SegmentParams:
         Stop splitting earlier when the best cut's Ncut value exceeds this.
     min_segment_blocks : int
         Smallest segment, in blocks, a cut may produce.
+    fit : {"lsq", "robust"}
+        Fit of the polarisation image: exact linear least squares (optimal for Gaussian
+        noise), or a robust IRLS fit (Tukey's biweight from a trimmed start) that
+        resists outlying frames; see :func:`~napari_polarseg.engine.polarisation_image`.
+    affinity_graph : {"auto", "dense", "sparse"}
+        How the block affinity is stored. ``"dense"``: every pair of blocks (the thesis;
+        n_blocks² values). ``"sparse"``: with a spatial term, the pairs within
+        ``spatial_radius`` (exact); without one, each block's k nearest neighbours in
+        feature space (:data:`~napari_polarseg.engine.features.KNN_NEIGHBORS`).
+        ``"auto"``: sparse with a spatial term (it is exact) or above
+        :data:`~napari_polarseg.engine.pipeline.DENSE_MAX_BLOCKS` blocks, else dense.
     """
 
     window: int = 10
@@ -86,6 +99,8 @@ class SegmentParams:
     n_segments: int = 3
     ncut_threshold: float | None = None
     min_segment_blocks: int = 1
+    fit: str = "lsq"
+    affinity_graph: str = "auto"
 
     def __post_init__(self) -> None:
         self.validate()
@@ -106,6 +121,8 @@ class SegmentParams:
         _check_choice("coefficients", self.coefficients, COEFFICIENT_METHODS)
         _check_choice("scale_mode", self.scale_mode, SCALE_MODES)
         _check_choice("features", self.features, FEATURE_KINDS)
+        _check_choice("fit", self.fit, FIT_METHODS)
+        _check_choice("affinity_graph", self.affinity_graph, AFFINITY_GRAPHS)
         if not _is_number(self.ridge) or self.ridge <= 0:
             raise PolarsegError(f"ridge must be a positive number, got {self.ridge!r}")
         if not _is_number(self.variance) or not 0 < self.variance <= 1:

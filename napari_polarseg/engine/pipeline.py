@@ -6,7 +6,7 @@ Stages, each a plain function of the engine, and the parameters each depends on:
     normals        refractive_index, model, branch        → θ, azimuth       fresnel.py
     harmonics      window, degree, coefficients, ridge    → block a_lm       harmonics.py
     pca            features, variance                     → block features   features.py
-    affinity       scale, scale_mode, spatial_*           → S = exp(−D/s)    features.py
+    affinity       scale, scale_mode, spatial_*, graph    → S = exp(−D/s)    features.py
     cut            min_segment_blocks, ncut_threshold     → cut tree         ncut.py
     labels         n_segments                             → labels           ncut.py
     reconstruction window, degree, ridge (after normals)  → Î rebuilt, error harmonics.py
@@ -20,7 +20,7 @@ from __future__ import annotations
 import time
 from collections import Counter
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -54,11 +54,37 @@ UPSTREAM = {
     "reconstruction": "normals",
 }
 
-#: Largest number of blocks for the dense affinity (n² float64 entries).
+#: Largest number of blocks for a dense affinity even when asked for (n² float64 entries).
 MAX_DENSE_BLOCKS = 12_000
+#: Above this many blocks ``affinity_graph="auto"`` switches to the sparse k-nearest-
+#: neighbour affinity. The dense cut is exact for any kernel width, the kNN one only for
+#: narrow kernels (features.knn_affinity), so dense is kept while it is affordable: at
+#: 6,000 blocks the matrix is 288 MB (plus a 144 MB float32 copy for the eigensolver)
+#: and one product ~5 ms, a cut ~0.5 s. The reference 720 × 660 image at w = 10 (4,752
+#: blocks) stays dense; a polarisation-camera frame at w = 8 (19,584 blocks: 3 GB dense)
+#: goes sparse.
+DENSE_MAX_BLOCKS = 6_000
+
+
+def affinity_graph_kind(n_blocks: int, p: SegmentParams) -> str:
+    """``"dense"``, ``"knn"`` or ``"spatial"``: how the affinity stage stores the graph.
+
+    ``affinity_graph="auto"`` picks the exact sparse spatial graph when there is a spatial
+    term, the dense matrix up to :data:`DENSE_MAX_BLOCKS` blocks, else k nearest
+    neighbours.
+    """
+    if p.affinity_graph == "dense":
+        return "dense"
+    if p.spatial_radius > 0:
+        return "spatial"
+    if p.affinity_graph == "sparse" or n_blocks > DENSE_MAX_BLOCKS:
+        return "knn"
+    return "dense"
 
 
 def _own_key(stage: str, p: SegmentParams) -> tuple:
+    if stage == "polarisation":
+        return (p.fit,)
     if stage == "normals":
         branch = p.specular_branch if p.model == "specular" else None
         return (p.refractive_index, p.model, branch)
@@ -68,7 +94,7 @@ def _own_key(stage: str, p: SegmentParams) -> tuple:
         return (p.features, p.variance)
     if stage == "affinity":
         spatial = (p.spatial_radius, p.spatial_sigma) if p.spatial_radius > 0 else None
-        return (p.scale, p.scale_mode, spatial)
+        return (p.scale, p.scale_mode, spatial, p.affinity_graph)
     if stage == "cut":
         return (p.min_segment_blocks, p.ncut_threshold)
     if stage == "labels":
@@ -100,7 +126,13 @@ class SegmentationResult:
     """Everything one pipeline run produced (arrays are H × W unless noted).
 
     ``labels`` covers every input pixel (remainder strips take their nearest block's
-    label); ``block_labels`` is (H // w, W // w). Angles are radians.
+    label); ``block_labels`` is (H // w, W // w). Angles are radians. ``residual`` is the
+    RMS residual of the sinusoid fit. ``valid`` marks the pixels the block features and
+    the reconstruction fit used (inside the pixel mask and with Î > 0); ``mask_counts``
+    holds the pixel counts per exclusion reason
+    (:meth:`~napari_polarseg.engine.polarimage.PixelMask.counts`);
+    ``duplicate_angle_frames`` lists the frames taken at a repeated polariser angle
+    (modulo π), which were averaged before the fit.
     """
 
     params: SegmentParams
@@ -120,6 +152,9 @@ class SegmentationResult:
     timings: dict[str, float]
     reconstruction: np.ndarray | None = None
     reconstruction_error: np.ndarray | None = None
+    valid: np.ndarray | None = None
+    mask_counts: dict[str, Any] = field(default_factory=dict)
+    duplicate_angle_frames: list[list[int]] = field(default_factory=list)
 
     @property
     def n_segments(self) -> int:
@@ -131,8 +166,11 @@ class SegmentationResult:
 
     @property
     def mean_reconstruction_error(self) -> float | None:
+        """Mean absolute reconstruction error over the used pixels (``valid``)."""
         if self.reconstruction_error is None:
             return None
+        if self.valid is not None and not self.valid.all():
+            return float(np.mean(self.reconstruction_error[self.valid]))
         return float(np.mean(self.reconstruction_error))
 
     def summary(self) -> dict[str, Any]:
@@ -150,6 +188,9 @@ class SegmentationResult:
             "ncut_values": [float(v) for v in self.ncut_values],
             "clamped_pixels": self.n_clamped,
             "mean_reconstruction_error": self.mean_reconstruction_error,
+            "fit": self.params.fit,
+            "mask": dict(self.mask_counts),
+            "averaged_duplicate_angles": [list(g) for g in self.duplicate_angle_frames],
         }
 
 
@@ -165,6 +206,17 @@ class Pipeline:
         Polariser angles in radians.
     params : SegmentParams
         Initial parameters; assign ``pipeline.params`` (or call :meth:`update`) to change.
+    mask : array (H, W) or PixelMask, optional
+        Which pixels the fit and the block features use. An (H, W) array is the user's
+        region (non-zero = segment here), combined with the samples flagged by
+        :func:`~napari_polarseg.engine.polarimage.validity_mask` with its defaults
+        (saturated at the integer dtype's maximum, black at or below 0, not finite). A
+        :class:`~napari_polarseg.engine.polarimage.PixelMask` is used as it is (e.g. with
+        another saturation level, or found by the reader before dark subtraction). None:
+        the default flags over the whole image. Fixed for the pipeline's lifetime.
+        Excluded pixels still get values and labels (their block's), but are left out of
+        the sinusoid fit of their own pixel where possible, of the block coefficients and
+        of the reconstruction fit; counts are in :meth:`SegmentationResult.summary`.
 
     Examples
     --------
@@ -178,14 +230,24 @@ class Pipeline:
     stack: np.ndarray
     angles: np.ndarray
     params: SegmentParams = field(default_factory=SegmentParams)
+    mask: np.ndarray | polarimage.PixelMask | None = None
     calls: Counter = field(default_factory=Counter, init=False)
     _cache: dict[str, tuple[tuple, Any]] = field(default_factory=dict, init=False)
     _seconds: dict[str, float] = field(default_factory=dict, init=False)
 
     def __post_init__(self) -> None:
+        raw = self.stack
         self.stack, self.angles = polarimage.check_stack(self.stack, self.angles)
         if not isinstance(self.params, SegmentParams):
             raise PolarsegError("params must be a SegmentParams")
+        if not isinstance(self.mask, polarimage.PixelMask):
+            self.mask = polarimage.validity_mask(raw, region=self.mask)
+        elif self.mask.flags.shape != self.stack.shape:
+            raise PolarsegError(
+                f"the pixel mask covers {self.mask.flags.shape} samples but the stack is "
+                f"{self.stack.shape}"
+            )
+        polarimage.check_usable(self.stack, self.mask)
 
     # -- parameters -------------------------------------------------------------------
     def update(self, **changes: Any) -> SegmentParams:
@@ -212,7 +274,17 @@ class Pipeline:
     def _compute(self, stage: str) -> Any:
         p = self.params
         if stage == "polarisation":
-            return polarimage.polarisation_image(self.stack, self.angles)
+            mask = self.mask
+            flagged = bool(np.any(mask.flags))
+            pol = polarimage.polarisation_image(
+                self.stack,
+                self.angles,
+                robust=p.fit == "robust",
+                weights=mask.sample_weights if flagged else None,
+            )
+            if flagged or mask.region is not None:
+                pol = replace(pol, invalid=pol.invalid | ~mask.valid)
+            return pol
         if stage == "normals":
             pol = self.get("polarisation")
             est = fresnel.zenith_from_dop(pol.dop, p.refractive_index, p.model, p.specular_branch)
@@ -242,19 +314,33 @@ class Pipeline:
         if stage == "affinity":
             pca = self.get("pca")
             n = pca.features.shape[0]
+            kind = affinity_graph_kind(n, p)
+            grid = self.get("harmonics").shape[:2]
+            if kind == "knn":
+                return feat.knn_affinity(pca.features, p.scale, p.scale_mode)
+            if kind == "spatial":
+                return feat.spatial_affinity(
+                    pca.features, grid, p.spatial_radius, p.spatial_sigma, p.scale, p.scale_mode
+                )
             if n > MAX_DENSE_BLOCKS:
                 raise PolarsegError(
                     f"{n} blocks is too many for a dense affinity (limit {MAX_DENSE_BLOCKS}); "
-                    "use a larger window"
+                    "use a larger window or affinity_graph 'sparse'"
                 )
             W = feat.affinity_matrix(pca.features, p.scale, p.scale_mode)
             if p.spatial_radius > 0:
-                grid = self.get("harmonics").shape[:2]
                 W *= feat.spatial_kernel(grid, p.spatial_radius, p.spatial_sigma)
             return W
         if stage == "cut":
+            W = self.get("affinity")
+            # warm start: eigenvectors of the previous tree on the same blocks (e.g. when
+            # only the affinity scale changed) start the solves of identical segments
+            old = self._cache.get("cut")
+            warm = None
+            if old is not None and old[1].W.shape == W.shape:
+                warm = old[1].fiedler_vectors()
             return ncut.CutTree(
-                self.get("affinity"), min_size=p.min_segment_blocks, threshold=p.ncut_threshold
+                W, min_size=p.min_segment_blocks, threshold=p.ncut_threshold, warm=warm
             )
         if stage == "labels":
             tree = self.get("cut")
@@ -356,6 +442,9 @@ class Pipeline:
             timings={s: self._seconds.get(s, 0.0) for s in names},
             reconstruction=None if rec is None else rec.intensity,
             reconstruction_error=None if rec is None else rec.error,
+            valid=~pol.invalid,
+            mask_counts=self.mask.counts(),
+            duplicate_angle_frames=polarimage.duplicate_angle_frames(self.angles),
         )
 
 

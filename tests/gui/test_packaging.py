@@ -39,6 +39,8 @@ def test_manifest_is_valid_and_complete():
     assert {w.display_name for w in contributions.widgets} == {
         "Polarisation image",
         "Segment by material",
+        "Batch over a folder",
+        "Time series change map",
     }
     assert {s.key for s in contributions.sample_data} == {
         "leaves",

@@ -117,8 +117,14 @@ def test_thesis_defaults_run_off_the_gui_thread(
     """Thesis defaults (w = 10, L = 12): Run returns at once; the event loop keeps turning."""
     from threadpoolctl import threadpool_info
 
+    from napari_polarseg.engine.synthetic import make_scene
+
     blas_threads = {pool["filepath"]: pool["num_threads"] for pool in threadpool_info()}
-    stack = open_sample("leaves")
+    # large enough that the computation takes a while even with the fast engine
+    scene = make_scene("leaves", shape=(480, 520))
+    stack = viewer.add_image(
+        scene.stack, name="big leaves", metadata={"angles_deg": list(scene.angles_deg)}
+    )
     widget = add_widget("Segment by material")
     assert widget.params() == SegmentParams()  # the widget starts at the thesis defaults
     delivered: list[float] = []

@@ -1,0 +1,153 @@
+"""Memory limits: refuse work that would exhaust memory *before* allocating it.
+
+A mistyped size, a huge TIFF or a tiny window on a large image can ask for more memory
+than the machine has; numpy would then either raise a bare ``MemoryError`` or push the
+machine into swap. Instead, readers check a file's header and the command line estimates
+the pipeline's peak memory from the stack's shape and the parameters, and both refuse
+with a :class:`PolarsegError` that says how much would be needed.
+
+The limit is :data:`DEFAULT_MAX_BYTES` (8 GiB), or the number of bytes in the environment
+variable :data:`ENV_VAR` (``POLARSEG_MAX_BYTES``, e.g. ``32e9`` or ``32GiB``), or the
+``limit`` argument (``polarseg segment --max-memory GIB``).
+"""
+
+from __future__ import annotations
+
+import os
+import re
+
+from .errors import PolarsegError
+from .params import SegmentParams
+
+#: Default largest memory (bytes) a read or a run may need.
+DEFAULT_MAX_BYTES = 8 * 2**30
+#: Environment variable overriding :data:`DEFAULT_MAX_BYTES`.
+ENV_VAR = "POLARSEG_MAX_BYTES"
+#: Harmonics evaluation chunk assumed by the estimate (engine/harmonics.py).
+HARMONICS_CHUNK_BYTES = 64 * 2**20
+
+_UNITS = {"": 1, "B": 1, "K": 2**10, "M": 2**20, "G": 2**30, "T": 2**40}
+
+
+def parse_bytes(text: str) -> int:
+    """Bytes from ``"8e9"``, ``"512MiB"``, ``"16G"`` or ``"2GB"`` (binary multiples).
+
+    Raises
+    ------
+    PolarsegError
+        If the text is not a positive size.
+    """
+    match = re.fullmatch(r"\s*([0-9.eE+]+)\s*([KMGT]?)(?:i?B)?\s*", str(text), re.IGNORECASE)
+    try:
+        value = float(match.group(1)) * _UNITS[match.group(2).upper()] if match else -1.0
+    except ValueError:
+        value = -1.0
+    if not value > 0 or value == float("inf"):
+        raise PolarsegError(f"a memory size must be a positive number of bytes, got {text!r}")
+    return int(value)
+
+
+def memory_limit(limit: int | float | None = None) -> int:
+    """The memory limit in bytes: ``limit``, else ``$POLARSEG_MAX_BYTES``, else 8 GiB."""
+    if limit is not None:
+        if not limit > 0:
+            raise PolarsegError(f"the memory limit must be positive, got {limit!r}")
+        return int(limit)
+    env = os.environ.get(ENV_VAR)
+    if env:
+        try:
+            return parse_bytes(env)
+        except PolarsegError:
+            raise PolarsegError(f"{ENV_VAR}={env!r} is not a memory size") from None
+    return DEFAULT_MAX_BYTES
+
+
+def format_bytes(n: float) -> str:
+    """Human-readable size: ``format_bytes(3 * 2**30) == '3.0 GiB'``."""
+    for unit in ("B", "KiB", "MiB", "GiB", "TiB", "PiB"):
+        if abs(n) < 1024 or unit == "PiB":
+            return f"{n:.0f} {unit}" if unit == "B" else f"{n:.1f} {unit}"
+        n /= 1024.0
+    return f"{n:.1f} PiB"  # pragma: no cover
+
+
+def check_bytes(needed: float, what: str, limit: int | float | None = None) -> None:
+    """Raise if ``needed`` bytes exceed the memory limit.
+
+    Parameters
+    ----------
+    needed : float
+        Estimated bytes.
+    what : str
+        What needs them, for the message (e.g. ``"reading a 40000 x 40000 x 19 stack"``).
+    limit : float, optional
+        Limit in bytes (default: :func:`memory_limit`).
+
+    Raises
+    ------
+    PolarsegError
+        ``"<what> would need 37.2 GiB of memory, more than the limit of 8.0 GiB (set
+        POLARSEG_MAX_BYTES or --max-memory to allow more)"``.
+    """
+    cap = memory_limit(limit)
+    if needed > cap:
+        raise PolarsegError(
+            f"{what} would need {format_bytes(needed)} of memory, more than the limit of "
+            f"{format_bytes(cap)} (set {ENV_VAR} or --max-memory to allow more)"
+        )
+
+
+def _graph_kind(blocks: int, params: SegmentParams) -> str:
+    """How the pipeline will store the block graph ("dense", "knn" or "spatial")."""
+    try:
+        from .pipeline import affinity_graph_kind
+    except ImportError:  # pragma: no cover - older pipeline: always dense
+        return "dense"
+    return affinity_graph_kind(blocks, params)
+
+
+def estimate_pipeline_bytes(shape: tuple[int, int, int], params: SegmentParams) -> int:
+    """Rough peak memory (bytes) of one pipeline run on a stack of ``shape`` (N, H, W).
+
+    Counts the float64 copy of the stack and the temporaries of the sinusoid fit (about
+    6 N × H × W values), about 24 float64 maps of H × W (Î, ρ, φ, residual, θ, azimuth,
+    masks, labels, reconstruction, error and their temporaries), the block coefficients
+    and features ((L + 1)² per block, a few copies), one chunk of harmonic evaluations,
+    and the block graph: for a dense affinity its distance matrix and eigen-solver
+    workspace (about 5 n_blocks² values); for a sparse one (k nearest neighbours or the
+    spatial neighbourhood) a few copies of its non-zeros and the Lanczos vectors.
+    """
+    n, h, w = (int(v) for v in shape)
+    pixels = h * w
+    win = max(int(params.window), 1)
+    blocks = (h // win) * (w // win)
+    k = (int(params.degree) + 1) ** 2
+    kind = _graph_kind(blocks, params)
+    if kind == "dense":
+        graph = 5 * blocks * blocks
+    else:
+        radius = float(getattr(params, "spatial_radius", 0.0))
+        neighbours = 30 if kind == "knn" else int(3.2 * (radius + 1) ** 2)
+        graph = 6 * blocks * neighbours + 40 * blocks
+    total = 8 * (6 * n * pixels + 24 * pixels + 4 * blocks * k + graph)
+    return int(total + 2 * HARMONICS_CHUNK_BYTES)
+
+
+def check_pipeline_memory(
+    shape: tuple[int, int, int], params: SegmentParams, limit: int | float | None = None
+) -> int:
+    """Refuse a run whose :func:`estimate_pipeline_bytes` exceeds the limit.
+
+    Returns the estimate (bytes). Raises :class:`PolarsegError` naming the stack size, the
+    window and the memory it would need.
+    """
+    needed = estimate_pipeline_bytes(shape, params)
+    n, h, w = shape
+    blocks = (h // params.window) * (w // params.window)
+    check_bytes(
+        needed,
+        f"segmenting {n} frames of {h} x {w} pixels with window {params.window} "
+        f"({blocks} blocks) and degree {params.degree}",
+        limit,
+    )
+    return needed

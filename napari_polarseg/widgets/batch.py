@@ -1,0 +1,464 @@
+"""Batch and time-series widgets: the batch engine over a folder, change maps as layers.
+
+- :class:`BatchWidget` ("Batch over a folder"): applies the current segmentation
+  parameters (those of a docked *Segment by material* widget, a preset or a JSON file)
+  to every scene of a folder through :func:`napari_polarseg.batch.iter_batch` (a local
+  Dask cluster, a running scheduler, or inline), in a napari worker thread with a
+  progress bar and *Cancel*, and shows the summary as a table.
+- :class:`TimeSeriesWidget` ("Time series change map"): segments several angle-stack
+  layers (days, in the chosen order) in one shared basis
+  (:func:`napari_polarseg.engine.timeseries.segment_timeseries`) and adds the per-day
+  segments and the change maps as Labels layers (:func:`add_timeseries_layers`).
+
+Both are thin: the work is done by the engine; nothing here is needed by the CLI.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Generator
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from magicgui.widgets import (
+    CheckBox,
+    ComboBox,
+    Container,
+    FileEdit,
+    Label,
+    LineEdit,
+    PushButton,
+    Select,
+    SpinBox,
+    Table,
+)
+from napari.utils.notifications import show_error
+
+from .. import batch as batch_engine
+from ..engine import PolarsegError, SegmentParams
+from ..engine.params import RECOMMENDED
+from ..engine.timeseries import METHODS, TimeSeriesResult, segment_timeseries
+from ._base import is_angle_stack
+from ._layers import ANGLES_KEY
+from ._runner import WorkerSlot, parse_angles
+
+if TYPE_CHECKING:
+    import napari
+    from napari.layers import Layer
+
+#: Where the batch parameters come from.
+PARAM_SOURCES = ("Segment by material widget", "recommended", "thesis", "JSON file")
+#: Columns of the summary table in the widget.
+TABLE_COLUMNS = (
+    "scene",
+    "status",
+    "n_segments",
+    "adjusted_rand_index",
+    "task_seconds",
+    "mean_reconstruction_error",
+    "error",
+)
+
+
+def summary_table(rows: list[dict[str, Any]]) -> dict[str, list[Any]]:
+    """Table data (column -> values) of a batch summary's scene rows."""
+
+    def cell(value: Any) -> Any:
+        if value is None:
+            return ""
+        if isinstance(value, float):
+            return round(value, 4)
+        return value
+
+    return {col: [cell(r.get(col)) for r in rows] for col in TABLE_COLUMNS}
+
+
+def batch_job(
+    scenes: list[batch_engine.Scene],
+    out: Path,
+    params: SegmentParams,
+    options: dict[str, Any],
+    stop: threading.Event,
+) -> Generator[tuple[str, int, int], None, batch_engine.BatchResult]:
+    """Worker job: run the batch, yielding ``(scene: status, index, total)`` per scene."""
+    gen = batch_engine.iter_batch(scenes, out, params, cancel=stop.is_set, **options)
+    index = 0
+    while True:
+        try:
+            row = next(gen)
+        except StopIteration as stop_iteration:
+            return stop_iteration.value
+        index += 1
+        yield f"{row['scene']}: {row['status']}", index, len(scenes)
+
+
+def params_from(viewer: napari.viewer.Viewer, source: str, path: Any = None) -> SegmentParams:
+    """Parameters from one of :data:`PARAM_SOURCES` (raises PolarsegError).
+
+    ``"Segment by material widget"``: the values of the first such widget docked in
+    ``viewer``; a preset; or a SegmentParams JSON file at ``path``.
+    """
+    if source == "recommended":
+        return RECOMMENDED
+    if source == "thesis":
+        return SegmentParams()
+    if source == "JSON file":
+        try:
+            text = Path(path).read_text(encoding="utf-8")
+        except (OSError, TypeError) as exc:
+            raise PolarsegError(f"{path}: cannot read the parameters file ({exc})") from None
+        return SegmentParams.from_json(text)
+    from .segment import SegmentWidget
+
+    for widget in viewer.window.dock_widgets.values():
+        if isinstance(widget, SegmentWidget):
+            return widget.params()
+    raise PolarsegError(
+        "no 'Segment by material' widget is open: open it, or choose a preset or a JSON "
+        "file as the parameters"
+    )
+
+
+class BatchWidget(Container):
+    """Apply the current parameters to every scene of a folder (the batch engine).
+
+    Scenes are the stack files (``.tif``, ``.npz``, …) and sub-folders of the input
+    folder, or the entries matching *pattern*. Each goes to ``OUT/<scene>/`` as with
+    ``polarseg segment``; ``OUT/batch_summary.csv`` and ``.json`` list the results,
+    which the table shows. *scheduler* empty: a local Dask cluster of *workers*
+    processes (0 = one per core); ``inline``: no Dask; else a scheduler address.
+
+    Parameters
+    ----------
+    viewer : napari.viewer.Viewer
+        The viewer (its *Segment by material* widget supplies the parameters).
+    """
+
+    def __init__(self, viewer: napari.viewer.Viewer) -> None:
+        super().__init__(labels=True)
+        self._viewer = viewer
+        self.folder = FileEdit(label="input folder", mode="d")
+        self.pattern = LineEdit(
+            label="pattern",
+            tooltip="Glob inside the folder, e.g. *.npz; empty: every stack file and sub-folder",
+        )
+        self.out = FileEdit(label="output folder", mode="d")
+        self.source = ComboBox(label="parameters", choices=list(PARAM_SOURCES))
+        self.params_file = FileEdit(label="JSON file", mode="r", filter="*.json", visible=False)
+        self.scheduler = LineEdit(
+            label="scheduler",
+            tooltip="Empty: a local Dask cluster; 'inline': no Dask (one scene after the "
+            "other); or the address of a running dask.distributed scheduler",
+        )
+        self.workers = SpinBox(label="workers", value=0, min=0, max=256, tooltip="0: auto")
+        self.resume = CheckBox(text="skip complete scenes (resume)", value=True)
+        self.run_button = PushButton(text="Run batch")
+        self.cancel_button = PushButton(text="Cancel", enabled=False)
+        self.load_button = PushButton(text="Load summary")
+        self.status = Label(value="")
+        self.status.native.setWordWrap(True)
+        self.table = Table(value=summary_table([]))
+        self.extend(
+            [
+                self.folder,
+                self.pattern,
+                self.out,
+                self.source,
+                self.params_file,
+                self.scheduler,
+                self.workers,
+                self.resume,
+                self.run_button,
+                self.cancel_button,
+                self.load_button,
+                self.status,
+                self.table,
+            ]
+        )
+        self._stop = threading.Event()
+        self.result: batch_engine.BatchResult | None = None
+        self._slot = WorkerSlot("Batch", on_status=self._set_status, on_idle=self._on_idle)
+        self.source.changed.connect(self._on_source)
+        self.run_button.changed.connect(self.run)
+        self.cancel_button.changed.connect(self.cancel)
+        self.load_button.changed.connect(self.load_summary)
+        stop, slot = self._stop, self._slot
+
+        def _closed(*_: Any) -> None:
+            stop.set()
+            slot.cancel()
+
+        self.native.destroyed.connect(_closed)
+
+    # -- inputs -----------------------------------------------------------------------
+    def _on_source(self, value: str) -> None:
+        self.params_file.visible = value == "JSON file"
+
+    def params(self) -> SegmentParams:
+        """The parameters the batch will use (raises PolarsegError)."""
+        return params_from(self._viewer, self.source.value, self.params_file.value)
+
+    def scenes(self) -> list[batch_engine.Scene]:
+        """The scenes the batch would run (raises PolarsegError)."""
+        folder, out = self._folder(self.folder, "input"), self._folder(self.out, "output")
+        pattern = self.pattern.value.strip()
+        inputs = [str(folder / pattern)] if pattern else batch_engine.folder_inputs(folder)
+        scenes = batch_engine.plan(inputs, out)
+        if not scenes:
+            raise PolarsegError(f"{folder}: no scenes (stack files or sub-folders) found")
+        return scenes
+
+    @staticmethod
+    def _folder(edit: FileEdit, what: str) -> Path:
+        value = str(edit.value or "").strip()
+        if value in ("", "."):
+            raise PolarsegError(f"choose the {what} folder")
+        return Path(value)
+
+    # -- running ----------------------------------------------------------------------
+    @property
+    def busy(self) -> bool:
+        return self._slot.busy
+
+    def run(self, *_: Any) -> None:
+        """Start the batch in a worker thread; returns at once."""
+        try:
+            params = self.params()
+            scenes = self.scenes()
+        except PolarsegError as exc:
+            self._set_status(f"error: {exc}")
+            show_error(str(exc))
+            return
+        options = {
+            "scheduler": self.scheduler.value.strip() or None,
+            "n_workers": int(self.workers.value) or None,
+            "resume": bool(self.resume.value),
+        }
+        out = self._folder(self.out, "output")
+        self._stop = threading.Event()
+        self.cancel_button.enabled = True
+        self.run_button.enabled = False
+        self._set_status(f"running {len(scenes)} scene(s)…")
+
+        def on_result(run_id: int, result: batch_engine.BatchResult) -> None:
+            self._show(result)
+
+        self._slot.submit(
+            batch_job, (scenes, out, params, options, self._stop), len(scenes), on_result
+        )
+
+    def cancel(self, *_: Any) -> None:
+        """Stop the batch: running scenes are abandoned, the summary is still written."""
+        self._stop.set()
+        if self._slot.busy:
+            self._set_status("cancelling…")
+
+    def wait(self, timeout: float | None = 120.0) -> bool:
+        """Process events until the batch has ended (scripts and tests)."""
+        return self._slot.wait(timeout)
+
+    def load_summary(self, *_: Any) -> None:
+        """Show ``batch_summary.json`` of the output folder in the table."""
+        try:
+            data = batch_engine.read_summary(self._folder(self.out, "output"))
+        except PolarsegError as exc:
+            self._set_status(f"error: {exc}")
+            show_error(str(exc))
+            return
+        self.table.value = summary_table(data.get("scenes", []))
+        counts = data.get("counts", {})
+        self._set_status(", ".join(f"{v} {k}" for k, v in counts.items()))
+
+    def _show(self, result: batch_engine.BatchResult) -> None:
+        self.result = result
+        self.table.value = summary_table(result.records)
+        rate = result.scenes_per_second
+        self._set_status(
+            f"{result.count('done')} done, {result.count('skipped')} skipped, "
+            f"{result.count('failed')} failed, {result.count('cancelled')} cancelled"
+            + ("" if rate is None else f" · {rate:.2g} scenes/s")
+            + f" · {result.out / batch_engine.SUMMARY_CSV}"
+        )
+
+    def _set_status(self, text: str) -> None:
+        try:
+            self.status.value = text
+        except RuntimeError:  # the widget is gone
+            pass
+
+    def _on_idle(self) -> None:
+        try:
+            self.cancel_button.enabled = False
+            self.run_button.enabled = True
+        except RuntimeError:
+            pass
+
+
+# -- time series ----------------------------------------------------------------------------
+
+
+def read_timeseries_folder(folder: str | Path) -> dict[str, np.ndarray]:
+    """Labels, change and distance maps of a ``polarseg timeseries`` output folder.
+
+    Returns ``{"labels": (T, H, W), "changes": (T − 1, H, W), "distance": (T − 1, H, W)}``.
+    """
+    import tifffile
+
+    root = Path(folder)
+    labels = sorted(root.glob("labels_*.tif"))
+    if not labels:
+        raise PolarsegError(f"{root}: no labels_XX.tif (not a polarseg timeseries folder)")
+    out = {"labels": np.stack([tifffile.imread(p) for p in labels]).astype(np.int32)}
+    for key, pattern in (("changes", "change_*.tif"), ("distance", "distance_*.tif")):
+        files = sorted(root.glob(pattern))
+        if files:
+            out[key] = np.stack([tifffile.imread(p) for p in files])
+    return out
+
+
+def add_timeseries_layers(
+    viewer: napari.viewer.Viewer,
+    result: TimeSeriesResult | str | Path,
+    name: str = "time series",
+    source: Layer | None = None,
+) -> list[Layer]:
+    """Add a time series' segments and change maps to ``viewer``.
+
+    Layers: ``<name> segments`` (Labels, days × H × W; segment k is label k + 1, the
+    same on every day), ``<name> change`` (Labels, (days − 1) × H × W; 1 where the block
+    changed segment from one day to the next, slider position t = day t + 1 → t + 2) and
+    ``<name> feature distance`` (Image, hidden).
+
+    Parameters
+    ----------
+    viewer : napari.viewer.Viewer
+    result : TimeSeriesResult, or a folder written by ``polarseg timeseries``
+    name : str
+        Prefix of the layer names.
+    source : Layer, optional
+        A layer whose last two axes' scale and translation the new layers take.
+    """
+    if isinstance(result, TimeSeriesResult):
+        labels, changes = result.labels, result.changes
+        distance: np.ndarray | None = result.feature_distance
+    else:
+        data = read_timeseries_folder(result)
+        labels, changes = data["labels"], data.get("changes")
+        distance = data.get("distance")
+        if changes is None:
+            changes = labels[1:] != labels[:-1]
+    place: dict[str, Any] = {}
+    if source is not None:
+        place = {"scale": tuple(source.scale[-2:]), "translate": tuple(source.translate[-2:])}
+    layers = [
+        viewer.add_labels(
+            np.asarray(labels, np.int32) + 1, name=f"{name} segments", opacity=0.6, **place
+        ),
+        viewer.add_labels(np.asarray(changes, np.uint8), name=f"{name} change", **place),
+    ]
+    if distance is not None:
+        layers.append(
+            viewer.add_image(
+                np.asarray(distance, np.float32),
+                name=f"{name} feature distance",
+                colormap="magma",
+                visible=False,
+                **place,
+            )
+        )
+    return layers
+
+
+def timeseries_job(
+    stacks: list[np.ndarray], angles: list[np.ndarray], params: SegmentParams, method: str
+) -> Generator[tuple[str, int, int], None, TimeSeriesResult]:
+    """Worker job: the time-series engine, yielding after each step."""
+    steps: list[tuple[str, int, int]] = []
+    result = segment_timeseries(
+        stacks, angles, params, method=method, progress=lambda *s: steps.append(s)
+    )
+    yield from steps
+    return result
+
+
+class TimeSeriesWidget(Container):
+    """Segment several angle-stack layers (days of one view) and map what changed.
+
+    Select the day layers in time order (the list order), choose the method and the
+    parameters (as in :class:`BatchWidget`), press *Run*: adds the layers of
+    :func:`add_timeseries_layers`.
+    """
+
+    def __init__(self, viewer: napari.viewer.Viewer) -> None:
+        super().__init__(labels=True)
+        self._viewer = viewer
+        self.days = Select(label="days (in order)", choices=self._stack_choices)
+        self.method = ComboBox(label="method", choices=list(METHODS), value="reference")
+        self.source = ComboBox(label="parameters", choices=list(PARAM_SOURCES[:3]))
+        self.run_button = PushButton(text="Run")
+        self.status = Label(value="")
+        self.status.native.setWordWrap(True)
+        self.result: TimeSeriesResult | None = None
+        self.extend([self.days, self.method, self.source, self.run_button, self.status])
+        self._slot = WorkerSlot("Time series", on_status=self._set_status)
+        self.run_button.changed.connect(self.run)
+        events = viewer.layers.events
+        events.inserted.connect(self._refresh)
+        events.removed.connect(self._refresh)
+        self.native.destroyed.connect(lambda *_: self._slot.cancel())
+
+    def _stack_choices(self, _widget: Any = None) -> list[tuple[str, Layer]]:
+        return [(layer.name, layer) for layer in self._viewer.layers if is_angle_stack(layer)]
+
+    def _refresh(self, *_: Any) -> None:
+        try:
+            self.days.reset_choices()
+        except RuntimeError:
+            pass
+
+    @property
+    def busy(self) -> bool:
+        return self._slot.busy
+
+    def wait(self, timeout: float | None = 120.0) -> bool:
+        return self._slot.wait(timeout)
+
+    def params(self) -> SegmentParams:
+        """Parameters from the Segment widget or a preset (raises PolarsegError)."""
+        return params_from(self._viewer, self.source.value)
+
+    def run(self, *_: Any) -> None:
+        layers = list(self.days.value)
+        try:
+            if len(layers) < 2:
+                raise PolarsegError("select at least two angle-stack layers (the days)")
+            angles = []
+            for layer in layers:
+                meta = layer.metadata.get(ANGLES_KEY) if isinstance(layer.metadata, dict) else None
+                if meta is None:
+                    raise PolarsegError(f"layer {layer.name!r} has no polariser angles")
+                angles.append(np.deg2rad(parse_angles(",".join(str(a) for a in meta))))
+            params = self.params()
+        except PolarsegError as exc:
+            self._set_status(f"error: {exc}")
+            show_error(str(exc))
+            return
+        stacks = [np.asarray(layer.data) for layer in layers]
+
+        def on_result(run_id: int, result: TimeSeriesResult) -> None:
+            self.result = result
+            add_timeseries_layers(self._viewer, result, source=layers[0])
+            changed = ", ".join(f"{f:.0%}" for f in result.changed_fraction())
+            self._set_status(
+                f"{result.n_days} days, {result.n_segments} segments; blocks changed: {changed}"
+            )
+
+        args = (stacks, angles, params, self.method.value)
+        self._slot.submit(timeseries_job, args, len(layers) + 4, on_result)
+
+    def _set_status(self, text: str) -> None:
+        try:
+            self.status.value = text
+        except RuntimeError:
+            pass

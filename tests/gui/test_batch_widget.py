@@ -1,0 +1,127 @@
+"""The batch and time-series widgets in a real napari viewer (run under Xvfb)."""
+
+from __future__ import annotations
+
+import numpy as np
+import tifffile
+from _gui_helpers import click
+
+from napari_polarseg import batch, cli
+from napari_polarseg.engine.params import RECOMMENDED
+from napari_polarseg.engine.synthetic import make_scene
+from napari_polarseg.engine.timeseries import segment_timeseries
+from napari_polarseg.widgets.batch import (
+    BatchWidget,
+    TimeSeriesWidget,
+    add_timeseries_layers,
+)
+
+SHAPE = (64, 72)
+
+
+def write_scenes(folder, names=("leaves", "fruit")):
+    folder.mkdir()
+    for seed, name in enumerate(names):
+        scene = make_scene(name, shape=SHAPE, seed=seed)
+        np.savez(folder / f"{name}.npz", stack=scene.stack, angles=scene.angles_deg)
+    return folder
+
+
+def test_batch_widget_applies_segment_widget_params_to_a_folder(
+    viewer, add_widget, qtbot, tmp_path
+):
+    folder = write_scenes(tmp_path / "in")
+    (folder / "broken.npz").write_bytes(b"not a zip")
+    out = tmp_path / "out"
+    segment = add_widget("Segment by material")
+    segment.set_params(RECOMMENDED, window=8, n_segments=2)
+    widget = add_widget("Batch over a folder")
+    assert isinstance(widget, BatchWidget)
+    widget.folder.value = folder
+    widget.out.value = out
+    widget.scheduler.value = "inline"
+    assert widget.params() == RECOMMENDED.replace(window=8, n_segments=2)
+    click(qtbot, widget.run_button)
+    assert widget.wait(120)
+    table = widget.table.to_dict("list")
+    assert table["scene"] == ["broken", "fruit", "leaves"]
+    assert table["status"] == ["failed", "done", "done"]
+    assert "broken.npz" in table["error"][0]
+    assert "2 done" in widget.status.value and "1 failed" in widget.status.value
+    for name in ("fruit", "leaves"):
+        assert batch.is_complete(out / name)
+        assert tifffile.imread(out / name / "labels.tif").shape == SHAPE
+    assert batch.read_summary(out)["params"]["window"] == 8
+    # again: the complete scenes are skipped; the table can be reloaded from disk
+    click(qtbot, widget.run_button)
+    assert widget.wait(120)
+    assert widget.table.to_dict("list")["status"] == ["failed", "skipped", "skipped"]
+    widget.table.value = {"scene": []}
+    click(qtbot, widget.load_button)
+    assert widget.table.to_dict("list")["scene"] == ["broken", "fruit", "leaves"]
+
+
+def test_batch_widget_cancel_and_bad_input(viewer, add_widget, qtbot, tmp_path):
+    folder = write_scenes(tmp_path / "in", ("leaves", "fruit", "camouflage"))
+    out = tmp_path / "out"
+    widget = add_widget("Batch over a folder")
+    widget.run()  # no folder chosen: an error in the status line, nothing started
+    assert widget.status.value.startswith("error") and not widget.busy
+    widget.folder.value = folder
+    widget.out.value = out
+    widget.scheduler.value = "inline"
+    widget.source.value = "recommended"
+    widget.run()
+    widget.cancel()
+    assert widget.wait(120)
+    statuses = widget.table.to_dict("list")["status"]
+    assert "cancelled" in statuses and len(statuses) == 3
+    assert batch.read_summary(out)["counts"]["cancelled"] >= 1
+    assert not any(p.name.startswith(".") and p.is_dir() for p in out.iterdir())
+
+
+def fruit_days():
+    day1 = make_scene("fruit", shape=SHAPE, seed=0)
+    day2 = make_scene("fruit", shape=SHAPE, seed=0, noise_sigma=0.004)
+    return day1, day2
+
+
+def test_timeseries_widget_adds_segments_and_change_layers(viewer, add_widget, qtbot):
+    day1, day2 = fruit_days()
+    layers = [
+        viewer.add_image(d.stack, name=f"day {i}", metadata={"angles_deg": d.angles_deg})
+        for i, d in enumerate((day1, day2), start=1)
+    ]
+    widget = add_widget("Time series change map")
+    assert isinstance(widget, TimeSeriesWidget)
+    widget.source.value = "recommended"
+    widget.days.value = layers
+    click(qtbot, widget.run_button)
+    assert widget.wait(120)
+    expected = segment_timeseries(
+        [day1.stack, day2.stack], day1.angles, RECOMMENDED, method=widget.method.value
+    )
+    seg = viewer.layers["time series segments"]
+    change = viewer.layers["time series change"]
+    assert seg.data.shape == (2, *SHAPE) and change.data.shape == (1, *SHAPE)
+    np.testing.assert_array_equal(seg.data, expected.labels + 1)
+    np.testing.assert_array_equal(change.data[0], expected.changes[0])
+    assert "2 days" in widget.status.value
+
+
+def test_add_timeseries_layers_from_a_cli_folder(viewer, tmp_path):
+    paths = []
+    for i, day in enumerate(fruit_days(), start=1):
+        paths.append(tmp_path / f"day{i}.npz")
+        np.savez(paths[-1], stack=day.stack, angles=day.angles_deg)
+    out = tmp_path / "series"
+    assert cli.main(["timeseries", *map(str, paths), "--out", str(out), "--window", "8"]) == 0
+    layers = add_timeseries_layers(viewer, out, name="cli")
+    assert [layer.name for layer in layers] == [
+        "cli segments",
+        "cli change",
+        "cli feature distance",
+    ]
+    labels = tifffile.imread(out / "labels_02.tif")
+    np.testing.assert_array_equal(layers[0].data[1], labels + 1)
+    np.testing.assert_array_equal(layers[1].data[0], tifffile.imread(out / "change_01.tif"))
