@@ -473,12 +473,17 @@ def test_repeated_angles_are_averaged_before_the_fit():
     stack = sinusoid_stack(i0, rho, phi, angles)
     stack[4] += 30.0  # the repeated shots differ (noise, drift)
     stack[5] -= 10.0
-    merged, merged_angles, _ = average_duplicate_angles(stack, np.deg2rad(angles))
+    merged, merged_angles, counts = average_duplicate_angles(stack, np.deg2rad(angles))
     assert merged.shape[0] == 4
     np.testing.assert_allclose(merged[0], (stack[0] + stack[4] + stack[5]) / 3)
-    direct = polarisation_image(merged, merged_angles)
+    np.testing.assert_allclose(counts[:, 0, 0], [3, 1, 1, 1])  # the average weighs 3 shots
     p = polarisation_image(stack, np.deg2rad(angles))
-    np.testing.assert_allclose(p.dop, direct.dop)
+    # ... so the fit equals ordinary least squares over all six frames
+    a = np.deg2rad(angles)
+    design = np.stack([np.ones_like(a), np.cos(2 * a), np.sin(2 * a)], axis=1)
+    coef = np.linalg.lstsq(design, stack.reshape(6, -1), rcond=None)[0]
+    np.testing.assert_allclose(p.intensity.ravel(), coef[0], rtol=1e-10)
+    np.testing.assert_allclose(p.dop.ravel(), np.hypot(coef[1], coef[2]) / coef[0], atol=1e-12)
     result = Pipeline(stack, np.deg2rad(angles), SegmentParams(window=3, degree=1)).run()
     assert result.summary()["averaged_duplicate_angles"] == [[0, 4, 5]]
 

@@ -14,8 +14,10 @@ Levenberg–Marquardt optimum the thesis refines towards.
 Three refinements for real captures:
 
 - **Repeated angles**: frames at the same polariser state (the same angle modulo π, e.g.
-  0° and 180°, or two shots at 90°) are *averaged* before the fit, so each state counts
-  once whatever the number of shots (:func:`angle_groups`, :func:`average_duplicate_angles`).
+  0° and 180°, or two shots at 90°) are *averaged* before the fit, and the average
+  weighs as many samples as it holds (:func:`angle_groups`,
+  :func:`average_duplicate_angles`): for the linear model this gives exactly the
+  least-squares fit of all frames, the minimum-variance estimate under Gaussian noise.
 - **Missing samples**: a sample that is not finite, or whose weight is 0 (saturated or
   black, see :func:`validity_mask`), is left out of its pixel's fit. The pixel is fitted
   from the remaining samples (weighted least squares, one 3 × 3 solve per pixel) if at
@@ -181,7 +183,8 @@ def average_duplicate_angles(
     angles : ndarray (G,)
         The angle of the first frame of each state.
     weights : ndarray (G, ...) float64
-        Per state the mean weight of its usable samples (0 where it has none).
+        Per state the summed weight of its usable samples (0 where it has none), so
+        that a weighted fit of the averages equals the fit of all the frames.
     """
     data = np.asarray(stack, dtype=np.float64)
     angles = np.asarray(angles, dtype=float).ravel()
@@ -198,10 +201,9 @@ def average_duplicate_angles(
     used = onehot @ (flat_w > 0)
     with np.errstate(divide="ignore", invalid="ignore"):
         mean = np.where(wsum > 0, (onehot @ (flat_w * flat_y)) / wsum, 0.0)
-        mean_w = np.where(used > 0, wsum / np.maximum(used, 1), 0.0)
     first = np.array([np.flatnonzero(groups == g)[0] for g in range(n_groups)])
     shape = (n_groups,) + data.shape[1:]
-    return mean.reshape(shape), angles[first], mean_w.reshape(shape)
+    return mean.reshape(shape), angles[first], np.where(used > 0, wsum, 0.0).reshape(shape)
 
 
 def sinusoid_design(angles: np.ndarray) -> np.ndarray:
