@@ -172,3 +172,34 @@ def test_known_normals_come_back_through_the_pipeline():
     assert np.rad2deg(np.median(err)) < 1.0
     dphi = np.abs(np.angle(np.exp(2j * (nrm.azimuth - azimuth)))) / 2
     assert np.rad2deg(np.median(dphi[strong])) < 1.0
+
+
+def test_summary_separates_recomputed_stages_from_cached_ones():
+    stack, _ = two_material_stack()
+    pipe = Pipeline(stack, ANGLES, SegmentParams(window=10, degree=3, n_segments=2))
+    first = pipe.run().summary()
+    assert first["recomputed_stages"] == list(STAGES)
+    pipe.update(n_segments=3)
+    again = pipe.run().summary()
+    assert again["recomputed_stages"] == ["labels"]
+    assert again["total_seconds"] == pytest.approx(again["stage_seconds"]["labels"], abs=1e-6)
+    assert again["total_seconds"] < first["total_seconds"]
+
+
+def test_parameters_are_read_once_per_stage():
+    """A change made while a stage computes (another thread) cannot poison the cache."""
+    stack, _ = two_material_stack()
+    pipe = Pipeline(stack, ANGLES, SegmentParams(window=10, degree=3))
+    original = pipe._compute
+
+    def compute_and_meddle(stage):
+        value = original(stage)
+        if stage == "harmonics":
+            pipe.params = pipe.params.replace(degree=5)  # as a GUI thread might
+        return value
+
+    pipe._compute = compute_and_meddle
+    coef = pipe.get("harmonics")
+    assert coef.shape[-1] == 16  # computed with degree 3 ...
+    pipe._compute = original
+    assert pipe.get("harmonics").shape[-1] == 36  # ... and not served for degree 5

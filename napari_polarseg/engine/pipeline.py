@@ -150,6 +150,7 @@ class SegmentationResult:
     labels: np.ndarray
     ncut_values: list[float]
     timings: dict[str, float]
+    recomputed: list[str] = field(default_factory=list)
     reconstruction: np.ndarray | None = None
     reconstruction_error: np.ndarray | None = None
     valid: np.ndarray | None = None
@@ -177,7 +178,9 @@ class SegmentationResult:
         """JSON-ready figures of the run (stage seconds, segments, variance, error)."""
         return {
             "stage_seconds": {k: round(v, 6) for k, v in self.timings.items()},
-            "total_seconds": round(sum(self.timings.values()), 6),
+            # stages this run computed (the others came from the cache) and their time
+            "recomputed_stages": list(self.recomputed),
+            "total_seconds": round(sum(self.timings[s] for s in self.recomputed), 6),
             "n_segments": self.n_segments,
             "segment_pixels": np.bincount(self.labels.ravel()).tolist(),
             "n_blocks": int(self.block_labels.size),
@@ -234,6 +237,8 @@ class Pipeline:
     calls: Counter = field(default_factory=Counter, init=False)
     _cache: dict[str, tuple[tuple, Any]] = field(default_factory=dict, init=False)
     _seconds: dict[str, float] = field(default_factory=dict, init=False)
+    _active: SegmentParams | None = field(default=None, init=False, repr=False)
+    _recomputed: list[str] = field(default_factory=list, init=False, repr=False)
 
     def __post_init__(self) -> None:
         raw = self.stack
@@ -255,10 +260,14 @@ class Pipeline:
         self.params = self.params.replace(**changes)
         return self.params
 
+    def _p(self) -> SegmentParams:
+        """Parameters in force: a snapshot while a stage computes, else ``self.params``."""
+        return self._active if self._active is not None else self.params
+
     def key(self, stage: str) -> tuple:
         """Cache key of a stage: its own parameters plus its upstream stage's key."""
         up = UPSTREAM[stage]
-        own = _own_key(stage, self.params)
+        own = _own_key(stage, self._p())
         return own if up is None else (own, self.key(up))
 
     def is_fresh(self, stage: str) -> bool:
@@ -272,7 +281,7 @@ class Pipeline:
 
     # -- stages -----------------------------------------------------------------------
     def _compute(self, stage: str) -> Any:
-        p = self.params
+        p = self._p()
         if stage == "polarisation":
             mask = self.mask
             flagged = bool(np.any(mask.flags))
@@ -363,17 +372,30 @@ class Pipeline:
         raise KeyError(stage)
 
     def get(self, stage: str) -> Any:
-        """Value of a stage for the current parameters, computing it if stale."""
-        key = self.key(stage)
-        entry = self._cache.get(stage)
-        if entry is not None and entry[0] == key:
-            return entry[1]
-        t0 = time.perf_counter()
-        value = self._compute(stage)
-        self._seconds[stage] = time.perf_counter() - t0
-        self.calls[stage] += 1
-        self._cache[stage] = (key, value)
-        return value
+        """Value of a stage for the current parameters, computing it if stale.
+
+        The parameters are read once per call (a snapshot used for the cache key and by
+        every upstream stage it needs), so a change made from another thread while the
+        stage computes can never store a value under the wrong key.
+        """
+        outer = self._active is None
+        if outer:
+            self._active = self.params
+        try:
+            key = self.key(stage)
+            entry = self._cache.get(stage)
+            if entry is not None and entry[0] == key:
+                return entry[1]
+            t0 = time.perf_counter()
+            value = self._compute(stage)
+            self._seconds[stage] = time.perf_counter() - t0
+            self.calls[stage] += 1
+            self._recomputed.append(stage)
+            self._cache[stage] = (key, value)
+            return value
+        finally:
+            if outer:
+                self._active = None
 
     # -- running ----------------------------------------------------------------------
     def run_iter(self, reconstruction: bool = True) -> Iterator[tuple[str, int, int]]:
@@ -382,6 +404,7 @@ class Pipeline:
         Stopping the iteration between yields cancels the run; cached stages stay valid.
         """
         names = STAGES if reconstruction else STAGES[:-1]
+        self._recomputed = []
         for i, name in enumerate(names):
             self.get(name)
             yield name, i + 1, len(names)
@@ -440,6 +463,7 @@ class Pipeline:
             labels=labels,
             ncut_values=ncut_values,
             timings={s: self._seconds.get(s, 0.0) for s in names},
+            recomputed=[s for s in names if s in self._recomputed],
             reconstruction=None if rec is None else rec.intensity,
             reconstruction_error=None if rec is None else rec.error,
             valid=~pol.invalid,
