@@ -203,3 +203,20 @@ def test_parameters_are_read_once_per_stage():
     assert coef.shape[-1] == 16  # computed with degree 3 ...
     pipe._compute = original
     assert pipe.get("harmonics").shape[-1] == 36  # ... and not served for degree 5
+
+
+def test_masked_out_blocks_are_no_graph_nodes_and_take_their_neighbours_label():
+    stack, truth = two_material_stack((70, 100))
+    region = np.ones((70, 100), dtype=bool)
+    region[40:, :] = False  # the user restricts the segmentation to the top 40 rows
+    params = SegmentParams(window=10, degree=4, n_segments=2, scale_mode="median")
+    pipe = Pipeline(stack, ANGLES, params, mask=region)
+    res = pipe.run()
+    valid = pipe.block_valid().reshape(res.block_labels.shape)
+    assert valid[:4].all() and not valid[4:].any()
+    assert pipe.get("cut").W.shape == (40, 40)  # 4 x 10 blocks, not 7 x 10
+    # the masked blocks copy the label of the nearest segmented block (row 3)
+    np.testing.assert_array_equal(res.block_labels[4:], np.repeat(res.block_labels[3:4], 3, 0))
+    # and the two materials inside the region are still told apart
+    assert adjusted_rand_score(truth[region], res.labels[region]) > 0.8
+    assert res.summary()["mask"]  # counts reported

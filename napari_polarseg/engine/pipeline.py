@@ -24,6 +24,7 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
+from scipy import ndimage
 
 from . import features as feat
 from . import fresnel, harmonics, ncut, polarimage
@@ -56,6 +57,9 @@ UPSTREAM = {
 
 #: Largest number of blocks for a dense affinity even when asked for (n² float64 entries).
 MAX_DENSE_BLOCKS = 12_000
+
+#: Share of a block's pixels that must be usable for the block to be segmented.
+MIN_VALID_BLOCK_FRACTION = 0.25
 #: Above this many blocks ``affinity_graph="auto"`` switches to the sparse k-nearest-
 #: neighbour affinity. The dense cut is exact for any kernel width, the kNN one only for
 #: narrow kernels (features.knn_affinity), so dense is kept while it is affordable: at
@@ -279,6 +283,18 @@ class Pipeline:
         names = STAGES if reconstruction else STAGES[:-1]
         return [s for s in names if not self.is_fresh(s)]
 
+    def block_valid(self) -> np.ndarray:
+        """Blocks that enter the graph (flat, row-major): at least
+        :data:`MIN_VALID_BLOCK_FRACTION` of their pixels are used (not masked, saturated,
+        black or invalid). The others are labelled from their nearest valid block."""
+        pol = self.get("polarisation")
+        window = self._p().window
+        if not pol.invalid.any():
+            grid = harmonics.block_grid(pol.intensity.shape, window)
+            return np.ones(grid[0] * grid[1], dtype=bool)
+        used = harmonics._blockify((~pol.invalid).astype(np.float64), window).mean(axis=-1)
+        return (used >= MIN_VALID_BLOCK_FRACTION).ravel()
+
     # -- stages -----------------------------------------------------------------------
     def _compute(self, stage: str) -> Any:
         p = self._p()
@@ -319,26 +335,43 @@ class Pipeline:
                     f"window size {p.window} leaves fewer than 2 blocks in a "
                     f"{self.stack.shape[1]} x {self.stack.shape[2]} image"
                 )
-            return feat.pca_features(feat.harmonic_features(coef, p.features), p.variance)
+            vectors = feat.harmonic_features(coef, p.features)
+            valid = self.block_valid()
+            if valid.all():
+                return feat.pca_features(vectors, p.variance)
+            if valid.sum() < 2:
+                raise PolarsegError("the mask leaves fewer than 2 usable blocks to segment")
+            # masked-out blocks take no part in the PCA; they hold the mean feature only
+            # to keep the block grid (they are no nodes of the graph, see "affinity")
+            pca = feat.pca_features(vectors[valid], p.variance)
+            full = np.broadcast_to(pca.features.mean(axis=0), (valid.size, pca.n_components))
+            full = full.copy()
+            full[valid] = pca.features
+            return replace(pca, features=full)
         if stage == "affinity":
             pca = self.get("pca")
-            n = pca.features.shape[0]
+            valid = self.block_valid()
+            features = pca.features[valid]  # graph nodes: the blocks the mask leaves
+            n = features.shape[0]
             kind = affinity_graph_kind(n, p)
             grid = self.get("harmonics").shape[:2]
             if kind == "knn":
-                return feat.knn_affinity(pca.features, p.scale, p.scale_mode)
+                return feat.knn_affinity(features, p.scale, p.scale_mode)
             if kind == "spatial":
-                return feat.spatial_affinity(
+                W = feat.spatial_affinity(
                     pca.features, grid, p.spatial_radius, p.spatial_sigma, p.scale, p.scale_mode
                 )
+                return W if valid.all() else W.tocsr()[valid][:, valid]
             if n > MAX_DENSE_BLOCKS:
                 raise PolarsegError(
                     f"{n} blocks is too many for a dense affinity (limit {MAX_DENSE_BLOCKS}); "
                     "use a larger window or affinity_graph 'sparse'"
                 )
-            W = feat.affinity_matrix(pca.features, p.scale, p.scale_mode)
+            W = feat.affinity_matrix(features, p.scale, p.scale_mode)
             if p.spatial_radius > 0:
-                W *= feat.spatial_kernel(grid, p.spatial_radius, p.spatial_sigma)
+                W *= feat.spatial_kernel(grid, p.spatial_radius, p.spatial_sigma)[
+                    np.ix_(valid, valid)
+                ]
             return W
         if stage == "cut":
             W = self.get("affinity")
@@ -354,7 +387,13 @@ class Pipeline:
         if stage == "labels":
             tree = self.get("cut")
             coef = self.get("harmonics")
-            block = tree.labels(p.n_segments).reshape(coef.shape[:2])
+            valid = self.block_valid().reshape(coef.shape[:2])
+            block = np.zeros(coef.shape[:2], dtype=np.int32)
+            block[valid] = tree.labels(p.n_segments)
+            if not valid.all():
+                # masked-out blocks take the label of the nearest block that was segmented
+                _, (ri, ci) = ndimage.distance_transform_edt(~valid, return_indices=True)
+                block = block[ri, ci]
             shape = self.stack.shape[1:]
             return block, harmonics.upsample_block_labels(block, shape, p.window), tree.ncut_values
         if stage == "reconstruction":
