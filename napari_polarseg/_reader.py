@@ -7,7 +7,13 @@ Handles (the reading itself is :func:`napari_polarseg.io.read_stack`):
   :func:`napari_polarseg.io.write_stack_tiff` writes it);
 - an ``.npz`` with arrays ``stack`` (N, H, W) and ``angles`` (degrees);
 - a folder of at least three frames whose file names carry the angle (the last number in
-  the name: ``leaf_030.png`` is 30 degrees).
+  the name: ``leaf_030.png`` is 30 degrees);
+- a raw polarisation-camera frame (one 2-D grey PNG or TIFF) whose file name names a Sony
+  polarisation sensor (``IMX250MZR``, ``IMX253MZR``, ``IMX264MZR``, as in
+  ``fruits_IMX250MZR.png``): decoded as a 2 × 2 mosaic with the sensors' layout
+  90/45 over 135/0 at half resolution (:func:`napari_polarseg.io.read_stack` with
+  ``mosaic=DEFAULT_MOSAIC``). Other single images are left to napari's own readers, since
+  an ordinary photo cannot be told from a raw mosaic by its pixels.
 
 The layer's ``metadata["angles_deg"]`` holds the angles in degrees, one per frame, which
 the plugin's widgets read. Anything else (single images, TIFFs without angles, ``.npz``
@@ -19,6 +25,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -27,7 +34,10 @@ import numpy as np
 import tifffile
 
 from .engine.polarimage import distinct_angle_count
-from .io import FRAME_SUFFIXES, angle_from_name, read_stack
+from .io import DEFAULT_MOSAIC, FRAME_SUFFIXES, angle_from_name, read_stack
+
+#: Sony polarisation sensors (2 × 2 super-pixels 90/45 over 135/0) named in raw files.
+MOSAIC_SENSOR_NAMES = re.compile(r"IMX2(50|53|64)M[ZY]R", re.IGNORECASE)
 
 LayerData = tuple[Any, dict[str, Any], str]
 ReaderFunction = Callable[[str | list[str]], list[LayerData]]
@@ -110,6 +120,8 @@ def get_reader(path: str | list[str]) -> ReaderFunction | None:
     if p.is_dir():
         return read_angle_stack if _folder_angles(p) is not None else None
     suffix = p.suffix.lower()
+    if suffix in (".png", ".tif", ".tiff") and MOSAIC_SENSOR_NAMES.search(p.stem):
+        return read_mosaic_frame
     if suffix == ".npz":
         return read_angle_stack if _npz_has_stack(p) else None
     if suffix in (".tif", ".tiff"):
@@ -138,6 +150,15 @@ def read_angle_stack(path: str | list[str]) -> list[LayerData]:
     if p is None:
         raise ValueError("napari-polarseg reads one angle stack (file or folder) at a time")
     return [stack_layer_data(read_stack(p))]
+
+
+def read_mosaic_frame(path: str | list[str]) -> list[LayerData]:
+    """Read a raw polarisation-camera frame (sensor named in the file name) as one
+    4-angle image layer (super-pixel demosaicing, IMX250MZR layout 90/45 over 135/0)."""
+    p = _single_path(path)
+    if p is None:
+        raise ValueError("napari-polarseg reads one raw frame at a time")
+    return [stack_layer_data(read_stack(p, mosaic=DEFAULT_MOSAIC))]
 
 
 def _plain(obj: Any) -> Any:

@@ -1069,3 +1069,17 @@ def test_partial_nan_is_masked_counted_and_segmented(tmp_path, capsys):
     assert "left out 16 of 960 pixels (16 not finite; see mask.tif)" in stdout
     assert json.loads((out / "summary.json").read_text())["mask"]["nonfinite_pixels"] == 16
     assert not tifffile.imread(out / "mask.tif")[:4, :4].any()
+
+
+@needs_real_data
+@pytest.mark.parametrize("name", REAL_FRAMES)
+def test_real_frames_open_through_the_plugin_reader(name):
+    """napari's File > Open on a raw frame: the plugin reader gives a 4-angle stack."""
+    from napari_polarseg._reader import get_reader
+
+    path = real_frame(name)
+    reader = get_reader(str(path))
+    assert reader is not None
+    ((data, meta, kind),) = reader(str(path))
+    assert kind == "image" and data.shape == (4, 1024, 1224)
+    assert sorted(meta["metadata"]["angles_deg"]) == [0.0, 45.0, 90.0, 135.0]

@@ -159,3 +159,30 @@ def test_segments_layer_saves_through_the_plugin_writer(make_napari_viewer, qtbo
     saved = segments.save(str(out), plugin="napari-polarseg")
     assert saved == [str(out)]
     np.testing.assert_array_equal(tifffile.imread(out), segments.data)
+
+
+def test_raw_polarisation_camera_frames_open_as_four_angle_stacks(tmp_path):
+    """A PNG/TIFF named after a Sony polarisation sensor is read as a 2 x 2 mosaic."""
+    import tifffile
+    from skimage import io as skio
+
+    from napari_polarseg._reader import get_reader
+
+    rng = np.random.default_rng(0)
+    raw = rng.integers(0, 255, (8, 10), dtype=np.uint8)
+    named = tmp_path / "scene_IMX250MZR.png"
+    skio.imsave(named, raw, check_contrast=False)
+    reader = get_reader(str(named))
+    assert reader is not None
+    ((data, meta, kind),) = reader(str(named))
+    assert kind == "image" and data.shape == (4, 4, 5)
+    assert sorted(meta["metadata"]["angles_deg"]) == [0.0, 45.0, 90.0, 135.0]
+    # the 0-degree image is the bottom-right pixel of every super-pixel (90/45 over 135/0)
+    zero = list(meta["metadata"]["angles_deg"]).index(0.0)
+    np.testing.assert_array_equal(data[zero], raw[1::2, 1::2])
+    # an ordinary image is left to napari's own readers
+    plain = tmp_path / "holiday.png"
+    skio.imsave(plain, raw, check_contrast=False)
+    assert get_reader(str(plain)) is None
+    tifffile.imwrite(tmp_path / "frame_imx253mzr.tif", raw)
+    assert get_reader(str(tmp_path / "frame_imx253mzr.tif")) is not None
