@@ -52,6 +52,11 @@ ROLES: dict[str, LayerStyle] = {
     "zenith": LayerStyle("θ zenith", colormap="magma"),
     "segments": LayerStyle("segments", layer_type="labels", extra={"opacity": 0.6}),
     "error": LayerStyle("reconstruction error", colormap="inferno", extra={"visible": False}),
+    # 1 where a pixel was left out of the fit and the features (mask, saturated, black, …)
+    "masked": LayerStyle(
+        "masked pixels", layer_type="labels", extra={"visible": False, "opacity": 0.7}
+    ),
+    "residual": LayerStyle("fit residual", colormap="magma", extra={"visible": False}),
 }
 
 

@@ -14,7 +14,7 @@ viewer, and guarantees:
 
 :class:`PipelineStore` keeps one :class:`~napari_polarseg.engine.Pipeline` per
 angle-stack layer so that a rerun only recomputes the stages a parameter change made
-stale.
+stale; a different mask (another region, an edited one, or none) builds a new one.
 """
 
 from __future__ import annotations
@@ -33,7 +33,7 @@ from napari.qt.threading import GeneratorWorker, create_worker
 from napari.utils.notifications import show_error
 from qtpy.QtCore import QCoreApplication
 
-from ..engine import Pipeline, PolarsegError, SegmentParams
+from ..engine import Pipeline, PolarsegError, SegmentParams, validity_mask
 
 Stage = tuple[str, int, int]
 Job = Callable[..., Generator[Stage, None, Any]]
@@ -137,15 +137,27 @@ def format_angles(angles_deg: Any) -> str:
 class _Entry:
     data: Any
     angles: tuple[float, ...]
+    mask_key: str | None
+    region: np.ndarray | None
     pipeline: Pipeline
+
+    def matches(
+        self, data: Any, angles: tuple[float, ...], mask_key: str | None, region: Any
+    ) -> bool:
+        if self.data is not data or self.angles != angles or self.mask_key != mask_key:
+            return False
+        if self.region is None or region is None:
+            return self.region is None and region is None
+        return self.region.shape == region.shape and bool(np.array_equal(self.region, region))
 
 
 class PipelineStore:
     """One cached :class:`Pipeline` per angle-stack layer (keyed by the layer's id).
 
-    The pipeline is rebuilt when the layer's data object or the angles change; otherwise
-    the same object is reused so cached stages survive parameter changes. Safe to call
-    from a worker thread (the slot runs one worker at a time; a lock guards the dict).
+    The pipeline is rebuilt when the layer's data object, the angles or the mask (its
+    ``mask_key`` or the content of its ``region``) change; otherwise the same object is
+    reused so cached stages survive parameter changes. Safe to call from a worker thread
+    (the slot runs one worker at a time; a lock guards the dict).
     """
 
     def __init__(self) -> None:
@@ -159,14 +171,32 @@ class PipelineStore:
         return None if entry is None else entry.pipeline
 
     def obtain(
-        self, key: str, data: Any, angles_rad: np.ndarray, params: SegmentParams
+        self,
+        key: str,
+        data: Any,
+        angles_rad: np.ndarray,
+        params: SegmentParams,
+        region: np.ndarray | None = None,
+        mask_key: str | None = None,
     ) -> Pipeline:
-        """The pipeline for ``key`` set to ``params``, built if missing or out of date."""
+        """The pipeline for ``key`` set to ``params``, built if missing or out of date.
+
+        ``region`` (H, W) bool (True = use the pixel) or None restricts the segmentation;
+        a new pipeline gets the mask :func:`~napari_polarseg.engine.validity_mask` builds
+        from the stack (saturated samples at the integer dtype's maximum and black ones at
+        or below 0 are left out and counted) and the region. ``mask_key`` names where the
+        region came from (e.g. the Labels layer's id); a change of either rebuilds.
+        """
         angles = tuple(float(a) for a in np.asarray(angles_rad, dtype=float).ravel())
+        if region is not None:
+            region = np.asarray(region, dtype=bool)
         with self._lock:
             entry = self._entries.get(key)
-        if entry is None or entry.data is not data or entry.angles != angles:
-            entry = _Entry(data, angles, Pipeline(np.asarray(data), np.asarray(angles), params))
+        if entry is None or not entry.matches(data, angles, mask_key, region):
+            stack = np.asarray(data)
+            mask = validity_mask(stack, saturation="auto", dark_level=0, region=region)
+            pipeline = Pipeline(stack, np.asarray(angles), params, mask=mask)
+            entry = _Entry(data, angles, mask_key, region, pipeline)
             with self._lock:
                 self._entries[key] = entry
         entry.pipeline.params = params

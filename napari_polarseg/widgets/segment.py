@@ -2,18 +2,21 @@
 
 from __future__ import annotations
 
+import hashlib
 import time
 from collections.abc import Generator
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from magicgui.widgets import CheckBox, ComboBox, FloatSpinBox, SpinBox
+from napari.layers import Labels
 from qtpy.QtCore import QTimer
 
 from ..engine import STAGES, Pipeline, PolarsegError, SegmentParams
 from ..engine.params import (
     COEFFICIENT_METHODS,
     FEATURE_KINDS,
+    FIT_METHODS,
     MAX_DEGREE,
     MODELS,
     RECOMMENDED,
@@ -21,7 +24,7 @@ from ..engine.params import (
     SPECULAR_BRANCHES,
 )
 from ._base import StackWidget
-from ._layers import show_output, source_key
+from ._layers import find_output, layer_tag, show_output, source_key
 from ._runner import PipelineStore
 
 if TYPE_CHECKING:
@@ -34,11 +37,26 @@ LIVE_DELAY_MS = 150
 #: Starting points offered by the "preset" menu.
 PRESETS: dict[str, SegmentParams] = {"thesis": SegmentParams(), "recommended": RECOMMENDED}
 
+#: Text shown for each sinusoid-fit method of the "fit" menu.
+FIT_NAMES = {"lsq": "least squares", "robust": "robust"}
+
+#: Text of the "mask" menu entry that segments every pixel.
+NO_MASK = "none"
+
+#: Words of the status line for the masked-pixel counts of ``result.mask_counts``.
+MASK_REASONS = (
+    ("saturated_pixels", "saturated"),
+    ("dark_pixels", "black"),
+    ("nonfinite_pixels", "not finite"),
+    ("outside_region_pixels", "outside the mask"),
+)
+
 #: SegmentParams fields that have a control in the widget (the others come from the preset).
 CONTROLLED = (
     "window",
     "degree",
     "refractive_index",
+    "fit",
     "model",
     "specular_branch",
     "coefficients",
@@ -52,16 +70,38 @@ CONTROLLED = (
 
 
 def segment_job(
-    store: PipelineStore, key: str, data: Any, angles_rad: np.ndarray, params: SegmentParams
+    store: PipelineStore,
+    key: str,
+    data: Any,
+    angles_rad: np.ndarray,
+    params: SegmentParams,
+    region: np.ndarray | None = None,
+    mask_key: str | None = None,
 ) -> Generator[tuple[str, int, int], None, Any]:
     """Worker job: run the stale stages of the layer's cached pipeline, then assemble.
 
-    Yields ``(stage, index, total)`` after every stage; stopping the worker between two
-    yields cancels the run and leaves the stages computed so far cached.
+    ``region`` (H, W bool, True = use) restricts the segmentation; saturated and black
+    samples are left out in any case (:meth:`PipelineStore.obtain`). Yields ``(stage,
+    index, total)`` after every stage; stopping the worker between two yields cancels the
+    run and leaves the stages computed so far cached.
     """
-    pipe = store.obtain(key, data, angles_rad, params)
+    pipe = store.obtain(key, data, angles_rad, params, region=region, mask_key=mask_key)
     yield from pipe.run_iter(reconstruction=True)
     return pipe.result(reconstruction=True, params=params)
+
+
+def mask_text(counts: dict[str, Any]) -> str:
+    """``"masked: 120 saturated, 3 black"`` from ``result.mask_counts`` ("" if none)."""
+    parts = [f"{int(counts[k])} {word}" for k, word in MASK_REASONS if counts.get(k)]
+    return f"masked: {', '.join(parts)}" if parts else ""
+
+
+def region_digest(region: np.ndarray | None) -> str | None:
+    """A short fingerprint of a region's content (None for no region)."""
+    if region is None:
+        return None
+    bits = np.packbits(np.asarray(region, dtype=bool))
+    return f"{region.shape}:{hashlib.blake2b(bits.tobytes(), digest_size=16).hexdigest()}"
 
 
 class SegmentWidget(StackWidget):
@@ -70,19 +110,27 @@ class SegmentWidget(StackWidget):
     Controls: a preset (thesis values or the recommended ones), window size w, harmonic
     degree L, refractive index n, Fresnel model (and specular branch), coefficient
     estimator, block features, PCA variance share, affinity scale s and its mode, minimum
-    segment size, number of segments; Run and Cancel; a live-update toggle that reruns
-    after every change.
+    segment size, number of segments, the sinusoid fit (least squares or robust) and a
+    mask (none, or a Labels layer of the stack's height x width: non-zero = segment the
+    pixel); Run and Cancel; a live-update toggle that reruns after every change.
+    Saturated samples (at the integer dtype's maximum) and black ones (at or below 0)
+    are always left out of the fit and counted in the status line.
 
     One :class:`~napari_polarseg.engine.Pipeline` is kept per stack layer, so a rerun
     computes only the stages a change made stale (changing the number of segments
-    recomputes only the labels). At most one worker runs at a time; a change during a
-    run stops it at the next stage boundary and starts the newest request.
+    recomputes only the labels). The mask is read at every run: choosing another one,
+    or painting the chosen Labels layer, builds a new pipeline at the next run. At most
+    one worker runs at a time; a change during a run stops it at the next stage boundary
+    and starts the newest request.
 
     Output layers (replaced in place on a rerun): ``segments`` (Labels, one label per
     segment over every pixel; segment k of the engine is label k + 1 because napari
     draws label 0 as transparent background) and ``reconstruction error`` (Image,
     per-pixel |Î rebuilt from the block harmonics − Î|, added hidden below the segments;
-    its mean is in the status line).
+    its mean is in the status line). Once a run leaves pixels out (mask, saturated, black)
+    or uses the robust fit, also ``masked pixels`` (Labels, 1 where a pixel was left out
+    of the fit and the features) and ``fit residual`` (Image, RMS residual of the
+    per-pixel sinusoid fit), both added hidden and updated on every later run.
 
     Parameters
     ----------
@@ -126,6 +174,13 @@ class SegmentWidget(StackWidget):
             max=3.0,
             step=0.01,
             tooltip="Assumed refractive index n for zenith from ρ (thesis: 1.45)",
+        )
+        self.fit = ComboBox(
+            label="fit",
+            choices=[(FIT_NAMES.get(m, m), m) for m in FIT_METHODS],
+            value=d.fit,
+            tooltip="Per-pixel sinusoid fit: least squares, or robust (Tukey-weighted; "
+            "resists one outlying frame, needs at least 5 distinct angles)",
         )
         self.model = ComboBox(
             label="model",
@@ -195,13 +250,24 @@ class SegmentWidget(StackWidget):
             value=False,
             tooltip="Rerun (only the stale stages) whenever a value changes",
         )
+        self.mask_layer = ComboBox(
+            label="mask",
+            choices=self._mask_choices,
+            nullable=True,
+            tooltip="Segment only where this Labels layer is non-zero (same height x width "
+            "as the stack); saturated and black samples are left out in any case",
+        )
+        self.mask_layer.null_string = NO_MASK
+        self.mask_layer.reset_choices()
+        self.mask_layer.value = None
         self.parameter_widgets = [getattr(self, name) for name in CONTROLLED]
-        self._add_parameters([self.preset, *self.parameter_widgets, self.live])
+        self._add_parameters([self.preset, *self.parameter_widgets, self.mask_layer, self.live])
         self._timer = QTimer(self.native)  # deleted with the widget: never fires after it
         self._timer.setSingleShot(True)
         self._timer.setInterval(LIVE_DELAY_MS)
         self._timer.timeout.connect(self.run)
-        for w in [*self.parameter_widgets, self.stack_layer, self.angles]:
+        self.stack_layer.changed.connect(self.mask_layer.reset_choices)
+        for w in [*self.parameter_widgets, self.stack_layer, self.angles, self.mask_layer]:
             w.changed.connect(self._on_value_changed)
         self.live.changed.connect(self._on_value_changed)
         self.model.changed.connect(self._on_model_changed)
@@ -215,6 +281,7 @@ class SegmentWidget(StackWidget):
         ``ncut_threshold``) come from the chosen preset or the last :meth:`set_params`.
         """
         values = {name: getattr(self, name).value for name in CONTROLLED}
+        values["fit"] = str(values["fit"])
         for name in ("window", "degree", "min_segment_blocks", "n_segments"):
             values[name] = int(values[name])
         for name in ("refractive_index", "variance", "scale"):
@@ -235,14 +302,49 @@ class SegmentWidget(StackWidget):
     def _on_preset_changed(self, name: str) -> None:
         self.set_params(PRESETS[name])
 
+    # -- mask -------------------------------------------------------------------------
+    def _mask_choices(self, _widget: Any = None) -> list[tuple[str, Layer]]:
+        """The user's 2-D Labels layers with the chosen stack's height x width."""
+        stack = getattr(self, "stack_layer", None)
+        stack = None if stack is None else stack.value
+        if stack is None:
+            return []
+        size = tuple(stack.data.shape[-2:])
+        return [
+            (layer.name, layer)
+            for layer in self._viewer.layers
+            if isinstance(layer, Labels)
+            and layer_tag(layer) is None
+            and not layer.multiscale
+            and layer.ndim == 2
+            and tuple(layer.data.shape) == size
+        ]
+
+    def _refresh_stacks(self) -> None:
+        super()._refresh_stacks()
+        mask = getattr(self, "mask_layer", None)  # None while the base class initialises
+        if mask is not None:
+            mask.reset_choices()
+
+    def current_mask(self) -> tuple[str | None, np.ndarray | None]:
+        """Key and (H, W) bool region (a copy; True = use) of the chosen mask, or Nones."""
+        layer = self.mask_layer.value
+        if layer is None:
+            return None, None
+        if layer not in self._viewer.layers:
+            raise PolarsegError(f"the mask layer {layer.name!r} is no longer in the viewer")
+        return source_key(layer), np.asarray(layer.data) != 0
+
     def snapshot(self) -> tuple[Any, ...] | None:
         """Everything a result depends on, or None if the values are invalid."""
         layer = self.stack_layer.value
         try:
             params = self.params()
+            mask_key, region = self.current_mask()
         except PolarsegError:
             return None
-        return (None if layer is None else source_key(layer), self.angles.value, params)
+        key = None if layer is None else source_key(layer)
+        return (key, self.angles.value, params, mask_key, region_digest(region))
 
     @property
     def pipeline(self) -> Pipeline | None:
@@ -276,12 +378,15 @@ class SegmentWidget(StackWidget):
         try:
             layer, angles_deg = self.current_stack()
             params = self.params()
+            mask_key, region = self.current_mask()
         except PolarsegError as exc:
             self._fail(exc)
             return
-        snap = (source_key(layer), self.angles.value, params)
+        key = source_key(layer)
+        snap = (key, self.angles.value, params, mask_key, region_digest(region))
         t0 = time.perf_counter()
-        args = (self.store, source_key(layer), layer.data, np.deg2rad(angles_deg), params)
+        angles_rad = np.deg2rad(angles_deg)
+        args = (self.store, key, layer.data, angles_rad, params, region, mask_key)
 
         def on_result(run_id: int, result: Any) -> None:
             if snap != self.snapshot() or layer not in self._viewer.layers:
@@ -300,9 +405,31 @@ class SegmentWidget(StackWidget):
         labels = np.asarray(result.labels, dtype=np.int32) + 1  # a copy: painting is safe
         # the error map (added hidden) goes below the segments, which overlay the stack
         show_output(self._viewer, "error", np.array(result.reconstruction_error), layer, meta)
+        masked = np.zeros(labels.shape, dtype=np.uint8)
+        if result.valid is not None:
+            masked = (~np.asarray(result.valid, dtype=bool)).astype(np.uint8)
+        if self._shows_diagnostics(layer, result, masked):
+            show_output(self._viewer, "residual", np.array(result.residual), layer, meta)
+            show_output(self._viewer, "masked", masked, layer, meta)
         show_output(self._viewer, "segments", labels, layer, meta)
-        self._done(
-            f"{summary['n_segments']} segments · {summary['n_components']} PCA components "
-            f"({summary['explained_variance']:.0%} variance) · mean reconstruction error "
-            f"{summary['mean_reconstruction_error']:.3g} · {seconds:.2f} s"
-        )
+        parts = [
+            f"{summary['n_segments']} segments",
+            f"{summary['n_components']} PCA components "
+            f"({summary['explained_variance']:.0%} variance)",
+            f"mean reconstruction error {summary['mean_reconstruction_error']:.3g}",
+        ]
+        masked_text = mask_text(result.mask_counts)
+        if masked_text:
+            parts.append(masked_text)
+        parts.append(f"{seconds:.2f} s")
+        self._done(" · ".join(parts))
+
+    def _shows_diagnostics(self, layer: Layer, result: Any, masked: np.ndarray) -> bool:
+        """Whether to add/update ``masked pixels`` and ``fit residual`` for this result.
+
+        From the first run that leaves a pixel out or fits robustly on; once they exist
+        they are updated on every run (so they never show a stale mask).
+        """
+        if result.params.fit != "lsq" or bool(masked.any()):
+            return True
+        return any(find_output(self._viewer, r, layer) is not None for r in ("masked", "residual"))
