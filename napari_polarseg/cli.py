@@ -7,7 +7,8 @@
                          [--dark-frame FILE] [--offset V] [--saturation LEVEL]
                          [--dark-level LEVEL] [--mask FILE] [--register] [--fit robust]
                          [--window W] [--degree L] [--refractive-index N]
-                         [--segments K] [--params FILE.json] [--max-memory GIB] [...]
+                         [--segments K] [--params FILE.json] [--max-memory GIB]
+                         [--scribbles FILE] [--ground-truth FILE] [...]
     polarseg demo [--out DIR] [--scene leaves]
 
 Angles are **degrees** on the command line and in every file (comma-separated, one per
@@ -34,6 +35,15 @@ frame, in frame order); the engine gets radians. ``segment`` writes into DIR:
                             pixels, the pixel counts per exclusion reason under
                             ``mask``) and the seconds spent reading, registering and
                             writing
+``segments.csv``            one row per segment: pixels, area fraction, mean Î, ρ,
+                            θ (degrees), circular mean of φ (degrees) and the means of
+                            the first 3 PCA features
+``probabilities.tif``       with ``--scribbles``: probability of each scribbled class
+                            per pixel (float32, K × H × W; class k = the k-th smallest
+                            scribble value, as in ``labels.tif``)
+``evaluation.json``         with ``--ground-truth``: adjusted Rand index, IoU per true
+                            segment and its mean, block accuracy (worst, optimistic);
+                            the figures are also added to ``summary.json``
 =========================== ==========================================================
 
 All images are H × W of the angle stack the engine sees: the input's size, except with
@@ -61,6 +71,7 @@ could not be written, 130 interrupted.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import sys
 import time
@@ -75,6 +86,7 @@ import numpy as np
 from . import __version__
 from . import io as pio
 from .engine.errors import PolarsegError
+from .engine.evaluation import STATISTICS_COLUMNS, evaluate, segment_statistics
 from .engine.limits import check_pipeline_memory, memory_limit
 from .engine.mosaic import DEMOSAIC_METHODS
 from .engine.params import (
@@ -392,6 +404,20 @@ def build_parser() -> argparse.ArgumentParser:
         help="align the frames to the first by sub-pixel phase correlation first (shifts "
         "are reported and written to params.json)",
     )
+    seg.add_argument(
+        "--scribbles",
+        metavar="FILE",
+        help="strokes (labels image: TIFF, PNG, .npy/.npz; the outputs' height x width; 0 = "
+        "unlabelled, 1, 2, ... = materials, at least two): the labels come from a classifier "
+        "of the block features trained on the scribbled blocks instead of the normalized "
+        "cut; also writes probabilities.tif",
+    )
+    seg.add_argument(
+        "--ground-truth",
+        metavar="FILE",
+        help="true materials (labels image, the outputs' size): writes evaluation.json "
+        "(adjusted Rand index, IoU per segment, block accuracy) and adds it to summary.json",
+    )
     _add_param_options(seg)
     seg.set_defaults(func=_cmd_segment)
 
@@ -560,6 +586,7 @@ class Run:
     shifts: np.ndarray | None
     seconds: dict[str, float] = field(default_factory=dict)
     mask: PixelMask | None = None
+    pipeline: Pipeline | None = None
 
 
 def _progress(verbose: bool):
@@ -618,7 +645,7 @@ def _segment(
     pipe = Pipeline(stack, data.angles_rad, params, mask=mask)
     result = pipe.run(progress=_progress(verbose))
     seconds["segment"] = time.perf_counter() - t0
-    return Run(data, params, stack, result, shifts, seconds, mask)
+    return Run(data, params, stack, result, shifts, seconds, mask, pipe)
 
 
 MASK_META = {
@@ -683,8 +710,40 @@ def _run_info(run: Run, command: str, args: argparse.Namespace) -> dict[str, Any
     }
 
 
+def _csv_value(value: Any) -> str:
+    if isinstance(value, float):
+        return "" if not np.isfinite(value) else f"{value:.6g}"
+    return str(value)
+
+
+def write_segments_csv(path: Path, rows: list[dict[str, Any]]) -> None:
+    """Write per-segment statistics (:data:`STATISTICS_COLUMNS`) as CSV, atomically.
+
+    NaN (a segment with no used pixel or block, fewer than 3 PCA features) is empty.
+    """
+    lines = [",".join(STATISTICS_COLUMNS)]
+    lines += [",".join(_csv_value(row[c]) for c in STATISTICS_COLUMNS) for row in rows]
+    with pio.atomic_output(path) as tmp:
+        tmp.write_text("\n".join(lines) + "\n", encoding="utf-8")
+
+
+PROBABILITY_META = {
+    "quantity": "class probability from the scribble classifier",
+    "unit": "1",
+    "axes": "class, row, column (class k = the k-th smallest scribble value)",
+}
+
+
 def _write_outputs(
-    out: Path, run: Run, info: dict[str, Any], summary: dict[str, Any], overview: np.ndarray | None
+    out: Path,
+    run: Run,
+    info: dict[str, Any],
+    summary: dict[str, Any],
+    overview: np.ndarray | None,
+    *,
+    segments: list[dict[str, Any]] | None = None,
+    probabilities: np.ndarray | None = None,
+    evaluation: dict[str, Any] | None = None,
 ) -> list[str]:
     """Write every output file atomically; returns their names. Raises OutputError."""
     t0 = time.perf_counter()
@@ -706,6 +765,20 @@ def _write_outputs(
         name = str(out / "mask.tif")
         pio.write_tiff(out / "mask.tif", _used_pixels(run.result), MASK_META)
         written.append("mask.tif")
+        if segments is not None:
+            name = str(out / "segments.csv")
+            write_segments_csv(out / "segments.csv", segments)
+            written.append("segments.csv")
+        if probabilities is not None:
+            name = str(out / "probabilities.tif")
+            pio.write_tiff(
+                out / "probabilities.tif", probabilities.astype(np.float32), PROBABILITY_META
+            )
+            written.append("probabilities.tif")
+        if evaluation is not None:
+            name = str(out / "evaluation.json")
+            pio.write_json(out / "evaluation.json", evaluation)
+            written.append("evaluation.json")
         if overview is not None:
             name = str(out / "overview.png")
             pio.write_png(out / "overview.png", overview)
@@ -773,6 +846,105 @@ def _report(out: Path, run: Run, written: list[str]) -> None:
     print(f"{PROG}: wrote {', '.join(written)} to {out}")
 
 
+def read_labels_image(path: str, shape: Sequence[int], what: str) -> np.ndarray:
+    """Read a labels image (scribbles, ground truth) of the outputs' size as int64.
+
+    ``.tif``/``.tiff``/``.png`` (single channel, e.g. a napari Labels layer saved as an
+    image), ``.npy`` or ``.npz`` (the array ``labels``, ``scribbles`` or ``mask``, or its
+    only array). Raises :class:`PolarsegError` naming the file and the problem.
+    """
+    p = Path(path)
+    suffix = p.suffix.lower()
+    if suffix not in pio.MASK_SUFFIXES:
+        kinds = ", ".join(pio.MASK_SUFFIXES)
+        raise PolarsegError(f"{path}: unsupported {what} file type {suffix!r} ({kinds})")
+    if not p.is_file():
+        raise PolarsegError(f"{path}: no such file")
+    colour = False
+    if suffix in (".npy", ".npz"):
+        try:
+            loaded = np.load(p, allow_pickle=False)
+            if isinstance(loaded, np.ndarray):
+                data = loaded
+            else:
+                with loaded:
+                    names = loaded.files
+                    pick = [n for n in ("labels", "scribbles", "mask") if n in names]
+                    pick = pick or (names if len(names) == 1 else [])
+                    if not pick:
+                        raise PolarsegError(
+                            f"{path}: no array named 'labels' or 'scribbles' "
+                            f"(found: {', '.join(names)})"
+                        )
+                    data = loaded[pick[0]]
+        except PolarsegError:
+            raise
+        except Exception as exc:
+            first = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
+            raise PolarsegError(f"{path}: cannot read the {what} ({first})") from None
+    else:
+        data, colour, _ = pio._load_frame(p, memory_limit())
+    data = np.asarray(data)
+    if colour:
+        raise PolarsegError(f"{path}: the {what} must be a single-channel labels image")
+    while data.ndim > 2 and data.shape[0] == 1:
+        data = data[0]
+    if data.ndim != 2:
+        raise PolarsegError(f"{path}: the {what} must be one 2-D image, got shape {data.shape}")
+    if data.dtype == np.bool_:
+        data = data.astype(np.uint8)
+    if data.dtype.kind == "f":
+        if not np.all(np.isfinite(data)) or np.any(data != np.round(data)):
+            raise PolarsegError(f"{path}: the {what} must hold integer labels")
+    elif data.dtype.kind not in "iu":
+        raise PolarsegError(f"{path}: the {what} must hold integer labels, got {data.dtype}")
+    h, w = (int(v) for v in shape)
+    if data.shape != (h, w):
+        raise PolarsegError(
+            f"{path}: the {what} image is {data.shape[0]} x {data.shape[1]} pixels but the "
+            f"outputs are {h} x {w}"
+        )
+    return data.astype(np.int64)
+
+
+def _scribble_run(run: Run, scribbles: np.ndarray, path: str) -> tuple[Run, np.ndarray, list]:
+    """Replace the cut's labels by the scribble classifier's (labels, probabilities)."""
+    from .engine.scribbles import training_blocks
+
+    pipe = run.pipeline
+    assert pipe is not None
+    t0 = time.perf_counter()
+    try:
+        labels, proba = pipe.scribble_result(scribbles)
+    except PolarsegError as exc:
+        raise PolarsegError(f"{path}: {exc}") from None
+    window = run.params.window
+    grid = run.result.block_labels.shape
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        classes = training_blocks(scribbles, grid, window)[2].tolist()
+    block = labels[: grid[0] * window : window, : grid[1] * window : window]
+    result = dataclasses.replace(run.result, labels=labels, block_labels=block, ncut_values=[])
+    seconds = {**run.seconds, "scribbles": time.perf_counter() - t0}
+    return dataclasses.replace(run, result=result, seconds=seconds), proba, classes
+
+
+def _segment_rows(run: Run) -> list[dict[str, Any]]:
+    result = run.result
+    block_valid = run.pipeline.block_valid() if run.pipeline is not None else None
+    return segment_statistics(
+        result.labels,
+        result.intensity,
+        result.dop,
+        result.zenith,
+        result.phase,
+        valid=result.valid,
+        block_labels=result.block_labels,
+        features=result.features,
+        block_valid=block_valid,
+    )
+
+
 def _job(
     args: argparse.Namespace,
     command: str,
@@ -784,14 +956,66 @@ def _job(
 ) -> tuple[Run, dict[str, Any]]:
     """Segment, render and write: everything is computed before the first file is written."""
     mask = _pixel_mask(data, args)
+    shape = data.stack.shape[1:]
+    scribble_file = getattr(args, "scribbles", None)
+    truth_file = getattr(args, "ground_truth", None)
+    scribbles = read_labels_image(scribble_file, shape, "scribbles") if scribble_file else None
+    truth = read_labels_image(truth_file, shape, "ground truth") if truth_file else None
     run = _segment(data, params, register, args.verbose, mask, _max_bytes(args))
-    summary = {**_summary(run, read_seconds), **(extra or {})}
+    probabilities = None
+    scribble_info: dict[str, Any] = {}
+    if scribbles is not None:
+        run, probabilities, classes = _scribble_run(run, scribbles, scribble_file)
+        scribble_info = {"labels_from": "scribbles", "scribble_classes": classes}
+    summary = {**_summary(run, read_seconds), **(extra or {}), **scribble_info}
+    if "scribbles" in run.seconds:
+        summary["scribble_seconds"] = round(run.seconds["scribbles"], 6)
     if data.ground_truth is not None:
         summary["adjusted_rand_index"] = adjusted_rand_index(data.ground_truth, run.result.labels)
+    evaluation = None
+    if truth is not None:
+        evaluation = {
+            "ground_truth": str(Path(truth_file).resolve()),
+            **evaluate(truth, run.result.labels, run.params.window),
+        }
+        summary["adjusted_rand_index"] = evaluation["adjusted_rand_index"]
+        summary["evaluation"] = {
+            k: evaluation[k]
+            for k in (
+                "adjusted_rand_index",
+                "mean_iou",
+                "iou_per_segment",
+                "block_accuracy_worst",
+                "block_accuracy_optimistic",
+                "window",
+            )
+        }
+    segments = _segment_rows(run)
     overview = render_overview(run.stack[0], run.result) if args.overview else None
     out = Path(args.out)
-    written = _write_outputs(out, run, _run_info(run, command, args), summary, overview)
+    info = _run_info(run, command, args)
+    if scribble_file:
+        info["scribbles_file"] = str(Path(scribble_file).resolve())
+    if truth_file:
+        info["ground_truth_file"] = str(Path(truth_file).resolve())
+    written = _write_outputs(
+        out,
+        run,
+        info,
+        summary,
+        overview,
+        segments=segments,
+        probabilities=probabilities,
+        evaluation=evaluation,
+    )
     _report(out, run, written)
+    if evaluation is not None:
+        print(
+            f"{PROG}: against the ground truth: adjusted Rand index "
+            f"{evaluation['adjusted_rand_index']:.3f}, mean IoU {evaluation['mean_iou']:.3f}, "
+            f"block accuracy {evaluation['block_accuracy_worst']:.3f} (worst) .. "
+            f"{evaluation['block_accuracy_optimistic']:.3f} (optimistic)"
+        )
     return run, summary
 
 

@@ -33,6 +33,7 @@ CONTRACT = {
     "reconstruction_error.tif",
     "residual.tif",
     "mask.tif",
+    "segments.csv",
     "params.json",
     "summary.json",
 }
@@ -521,3 +522,152 @@ def test_unwritable_output_is_exit_code_1(tmp_path, capsys, scene_tif):
     assert code == 1
     assert len(err.splitlines()) == 1 and err.startswith(f"polarseg: error: cannot write {blocker}")
     assert blocker.read_text() == "not a folder"
+
+
+# -- scribbles, ground truth and per-segment statistics ------------------------------------
+
+
+def _strokes(h=H, w=W):
+    """Two short horizontal strokes per material of the two-material scene (x < 30 | x >= 30)."""
+    strokes = np.zeros((h, w), dtype=np.uint16)
+    for row in (8, 44):
+        strokes[row, 4:24] = 1
+        strokes[row, 36:58] = 2
+    return strokes
+
+
+def test_segment_with_scribbles_and_ground_truth(tmp_path, capsys, scene_tif):
+    path, truth, _ = scene_tif
+    scribbles = tmp_path / "strokes.tif"
+    tifffile.imwrite(scribbles, _strokes())
+    gt = tmp_path / "truth.png"
+    skio.imsave(gt, truth.astype(np.uint8), check_contrast=False)
+    out = tmp_path / "out"
+    code, stdout, err = run(
+        capsys, "segment", path, "--out", out, *FAST, "--scribbles", scribbles, "--ground-truth", gt
+    )
+    assert code == 0, err
+    assert set(os.listdir(out)) == CONTRACT | {"probabilities.tif", "evaluation.json"}
+    labels = read_tif(out / "labels.tif")
+    assert labels.shape == (H, W) and set(np.unique(labels)) == {0, 1}
+    assert adjusted_rand_score(truth.ravel(), labels.ravel()) > 0.9
+    assert np.array_equal(labels[:, :30] == 0, np.ones((H, 30), bool))  # class 0 = value 1
+    proba = read_tif(out / "probabilities.tif")
+    assert proba.shape == (2, H, W) and proba.dtype == np.float32
+    np.testing.assert_allclose(proba.sum(axis=0), 1.0, atol=1e-5)
+    assert np.array_equal(np.argmax(proba, axis=0), labels)
+
+    evaluation = json.loads((out / "evaluation.json").read_text())
+    ari = adjusted_rand_score(truth.ravel(), labels.ravel())
+    assert evaluation["adjusted_rand_index"] == pytest.approx(ari)
+    assert set(evaluation["iou_per_segment"]) == {"0", "1"}
+    assert 0.9 < evaluation["mean_iou"] <= 1.0
+    assert evaluation["block_accuracy_worst"] <= evaluation["block_accuracy_optimistic"]
+    assert evaluation["window"] == 10
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["labels_from"] == "scribbles" and summary["scribble_classes"] == [1, 2]
+    assert summary["evaluation"]["mean_iou"] == pytest.approx(evaluation["mean_iou"])
+    assert summary["adjusted_rand_index"] == pytest.approx(ari)
+    assert "adjusted Rand index" in stdout and "block accuracy" in stdout
+    params = json.loads((out / "params.json").read_text())
+    assert params["scribbles_file"] == str(scribbles.resolve())
+
+
+def test_segment_ground_truth_only_and_segments_csv(tmp_path, capsys, scene_tif):
+    path, truth, _ = scene_tif
+    gt = tmp_path / "truth.npy"
+    np.save(gt, truth + 5)  # label ids do not matter
+    out = tmp_path / "out"
+    code, _, err = run(capsys, "segment", path, "--out", out, *FAST, "--ground-truth", gt)
+    assert code == 0, err
+    assert set(os.listdir(out)) == CONTRACT | {"evaluation.json"}
+    labels = read_tif(out / "labels.tif")
+    evaluation = json.loads((out / "evaluation.json").read_text())
+    assert evaluation["adjusted_rand_index"] == pytest.approx(
+        adjusted_rand_score(truth.ravel(), labels.ravel())
+    )
+    assert set(evaluation["iou_per_segment"]) == {"5", "6"}
+    assert "labels_from" not in json.loads((out / "summary.json").read_text())
+
+    lines = (out / "segments.csv").read_text().splitlines()
+    header = lines[0].split(",")
+    assert header[:3] == ["segment", "pixels", "area_fraction"]
+    assert header[-3:] == ["mean_pca_1", "mean_pca_2", "mean_pca_3"]
+    rows = [dict(zip(header, line.split(","), strict=True)) for line in lines[1:]]
+    assert [int(r["segment"]) for r in rows] == [0, 1]
+    assert sum(int(r["pixels"]) for r in rows) == H * W
+    assert sum(float(r["area_fraction"]) for r in rows) == pytest.approx(1.0, abs=1e-5)
+    intensity = read_tif(out / "intensity.tif")
+    for r in rows:
+        seg = labels == int(r["segment"])
+        assert float(r["mean_intensity"]) == pytest.approx(intensity[seg].mean(), rel=1e-4)
+        assert 0 <= float(r["circular_mean_phase_deg"]) < 180
+        assert 0 <= float(r["mean_zenith_deg"]) <= 90
+        assert float(r["mean_pca_1"]) == float(r["mean_pca_1"])  # a number, not empty
+
+
+def _one_class(t):
+    strokes = np.zeros((H, W), np.uint8)
+    strokes[8, 4:24] = 3
+    np.save(t / "one.npy", strokes)
+    return t / "one.npy"
+
+
+BAD_EVALUATION_INPUTS = {
+    "scribbles of the wrong size": (
+        lambda t: ["--scribbles", _saved(t, "s.npy", _strokes(H - 1, W))],
+        f"the scribbles image is {H - 1} x {W} pixels but the outputs are {H} x {W}",
+    ),
+    "only one class scribbled": (
+        lambda t: ["--scribbles", _one_class(t)],
+        "scribbles must mark at least 2 materials (non-zero labels), found only label 3",
+    ),
+    "no scribble at all": (
+        lambda t: ["--scribbles", _saved(t, "z.npy", np.zeros((H, W), np.uint8))],
+        "the scribbles label no pixel",
+    ),
+    "fractional scribbles": (
+        lambda t: ["--scribbles", _saved(t, "f.npy", _strokes() + 0.5)],
+        "must hold integer labels",
+    ),
+    "missing scribbles file": (
+        lambda t: ["--scribbles", t / "none.tif"],
+        "none.tif: no such file",
+    ),
+    "ground truth of the wrong size": (
+        lambda t: ["--ground-truth", _saved(t, "g.npy", np.zeros((H, W + 2), np.uint8))],
+        f"the ground truth image is {H} x {W + 2} pixels but the outputs are {H} x {W}",
+    ),
+    "ground truth of an unknown type": (
+        lambda t: ["--ground-truth", _saved(t, "g.txt", None)],
+        "unsupported ground truth file type '.txt'",
+    ),
+}
+
+
+def _saved(folder, name, array):
+    path = folder / name
+    if array is None:
+        path.write_text("0 1")
+    else:
+        np.save(path, array)
+    return path
+
+
+@pytest.mark.parametrize("case", list(BAD_EVALUATION_INPUTS))
+def test_bad_scribbles_or_ground_truth_one_line_error(tmp_path, capsys, case, scene_tif):
+    path, _, _ = scene_tif
+    build, words = BAD_EVALUATION_INPUTS[case]
+    extra = build(tmp_path)
+    out = tmp_path / "out"
+    out.mkdir()
+    good = b"a good labels.tif from an earlier run"
+    (out / "labels.tif").write_bytes(good)
+    code, stdout, err = run(capsys, "segment", path, "--out", out, *FAST, *extra)
+    assert code == 2, err
+    lines = err.splitlines()
+    assert len(lines) == 1, err
+    assert lines[0].startswith("polarseg: error: ")
+    assert words in lines[0]
+    assert "Traceback" not in err + stdout
+    assert os.listdir(out) == ["labels.tif"] and (out / "labels.tif").read_bytes() == good

@@ -510,6 +510,44 @@ class Pipeline:
             duplicate_angle_frames=polarimage.duplicate_angle_frames(self.angles),
         )
 
+    def scribble_result(self, scribbles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Labels from a classifier trained on user strokes instead of the normalized cut.
+
+        The block features of the ``pca`` stage (thesis section 4.3.3) of the blocks the
+        strokes cover train :func:`~napari_polarseg.engine.scribbles.classify_blocks`,
+        which labels every block; affinity and cut are not needed.
+
+        Parameters
+        ----------
+        scribbles : array (H, W) of int
+            Strokes over the stack's frames: 0 = unlabelled, 1, 2, … = materials (at
+            least two).
+
+        Returns
+        -------
+        labels : ndarray (H, W) of int
+            Class of every pixel (remainder strips take their nearest block's), as an
+            index 0..K-1 into the scribble values in ascending order.
+        probabilities : ndarray (K, H, W) float
+            Probability of each class per pixel (its block's); sums to 1 over K.
+        """
+        from .scribbles import classify_blocks
+
+        scribbles = np.asarray(scribbles)
+        shape = self.stack.shape[1:]
+        if scribbles.shape != shape:
+            raise PolarsegError(
+                f"the scribbles are {' x '.join(map(str, scribbles.shape))} pixels but the "
+                f"frames are {shape[0]} x {shape[1]}"
+            )
+        window = self._p().window
+        grid = self.get("harmonics").shape[:2]
+        block, proba, _ = classify_blocks(self.get("pca").features, grid, scribbles, window)
+        rows, cols = harmonics.pixel_block_index(shape, window)
+        labels = harmonics.upsample_block_labels(block, shape, window)
+        maps = proba.T.reshape(-1, *grid)[:, rows[:, None], cols[None, :]]
+        return labels, maps
+
 
 def segment(
     stack: np.ndarray, angles: np.ndarray, params: SegmentParams | None = None, **changes: Any
