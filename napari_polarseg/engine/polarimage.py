@@ -438,15 +438,20 @@ def polarisation_image(
     y = fit_y.reshape(g, -1)
     base = fit_w.reshape(g, -1)
     design = sinusoid_design(fit_angles)
-    full = np.all(base == 1.0, axis=0)  # pixels with every sample at weight 1
+    # Pixels whose every sample is usable share one weight per state (the number of shots
+    # averaged into it): one weighted 3 x G pseudo-inverse solves them all at once.
+    ref = base.max(axis=1)
+    full = np.all(base == ref[:, None], axis=0) if np.all(ref > 0) else np.zeros(y.shape[1], bool)
     uniform = bool(full.all())
+    sw = np.sqrt(np.where(ref > 0, ref, 1.0))[:, None]
+    solve = np.linalg.pinv(design * sw) * sw.T  # (3, G): weighted least squares
     if uniform:
-        coef = np.linalg.pinv(design) @ y  # (3, P): the exact least-squares solve
+        coef = solve @ y  # (3, P): the exact least-squares solve
         ok = np.ones(y.shape[1], dtype=bool)
     else:
         coef = np.zeros((3, y.shape[1]))
         ok = full.copy()
-        coef[:, full] = np.linalg.pinv(design) @ y[:, full]
+        coef[:, full] = solve @ y[:, full]
         part = ~full
         coef[:, part], ok[part] = _weighted_fit(design, y[:, part], base[:, part])
     final_w = base
