@@ -41,6 +41,7 @@ def test_manifest_is_valid_and_complete():
         "Segment by material",
         "Batch over a folder",
         "Time series change map",
+        "Polarisation plots",
     }
     assert {s.key for s in contributions.sample_data} == {
         "leaves",

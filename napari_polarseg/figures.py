@@ -1,0 +1,267 @@
+"""Matplotlib figures of the analyst's plots, and :func:`save_plots` writing them as PNGs.
+
+Every ``*_figure`` function draws the data of :mod:`napari_polarseg.engine.plots` into a
+:class:`matplotlib.figure.Figure` (a new one, or ``fig`` cleared first, e.g. the figure
+of a Qt canvas) with the object-oriented API only: no pyplot, so no global state.
+matplotlib is imported lazily, when a figure is drawn.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from .engine import plots
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
+    from .engine.pipeline import SegmentationResult
+
+#: Colours of the light default theme: figure background, text/axes, accent.
+LIGHT = {"background": "#ffffff", "foreground": "#000000", "accent": "#1f77b4"}
+#: A dark theme like napari's default one.
+DARK = {"background": "#262930", "foreground": "#f0f1f2", "accent": "#50a0ff"}
+
+#: Files :func:`save_plots` writes.
+PLOT_FILES = (
+    "scatter.png",
+    "explained_variance.png",
+    "coefficients.png",
+    "components.png",
+    "histograms.png",
+    "error_table.png",
+)
+
+
+def _figure(fig: Figure | None, size: tuple[float, float], theme: dict[str, str]) -> Figure:
+    if fig is None:
+        from matplotlib.figure import Figure
+
+        fig = Figure(figsize=size, layout="constrained")
+    else:
+        fig.clear()
+    fig.set_facecolor(theme["background"])
+    return fig
+
+
+def _style(ax: Any, theme: dict[str, str]) -> None:
+    fg = theme["foreground"]
+    ax.set_facecolor(theme["background"])
+    ax.tick_params(colors=fg, which="both")
+    for spine in ax.spines.values():
+        spine.set_color(fg)
+    ax.xaxis.label.set_color(fg)
+    ax.yaxis.label.set_color(fg)
+    ax.title.set_color(fg)
+
+
+def _legend(ax: Any, theme: dict[str, str], **kwargs: Any) -> None:
+    leg = ax.legend(fontsize="small", **kwargs)
+    leg.get_frame().set_facecolor(theme["background"])
+    leg.get_frame().set_edgecolor(theme["foreground"])
+    for text in leg.get_texts():
+        text.set_color(theme["foreground"])
+
+
+def scatter_figure(
+    data: plots.ScatterData,
+    against: str = "dop",
+    fig: Figure | None = None,
+    theme: dict[str, str] = LIGHT,
+) -> Figure:
+    """Î against ρ (``against="dop"``), φ (``"phase"``, degrees) or both (``"both"``),
+    coloured by segment (thesis figure 4.1). One point collection per axes."""
+    from matplotlib import colormaps
+
+    kinds = ["dop", "phase"] if against == "both" else [against]
+    if any(k not in ("dop", "phase") for k in kinds):
+        raise ValueError(f"against must be 'dop', 'phase' or 'both', got {against!r}")
+    fig = _figure(fig, (5.0 * len(kinds), 4.0), theme)
+    labels = np.asarray(data.labels)
+    values = np.unique(labels)
+    cmap = colormaps["tab10" if values.size <= 10 else "tab20"]
+    index = np.searchsorted(values, labels)
+    colours = cmap(index % cmap.N)
+    for i, kind in enumerate(kinds):
+        ax = fig.add_subplot(1, len(kinds), i + 1)
+        x = data.dop if kind == "dop" else np.rad2deg(data.phase)
+        ax.scatter(x, data.intensity, c=colours, s=2, linewidths=0, rasterized=True)
+        for j, v in enumerate(values):  # legend entries only (no points)
+            ax.scatter([], [], color=cmap(j % cmap.N), s=12, label=f"segment {v}")
+        ax.set_xlabel("ρ degree of polarisation" if kind == "dop" else "φ phase (degrees)")
+        ax.set_ylabel("Î intensity")
+        ax.set_title(f"Î against {'ρ' if kind == 'dop' else 'φ'} ({len(data)} pixels)")
+        _style(ax, theme)
+        if values.size <= 12:
+            _legend(ax, theme, markerscale=1.5)
+    return fig
+
+
+def explained_variance_figure(
+    data: plots.ExplainedVariance, fig: Figure | None = None, theme: dict[str, str] = LIGHT
+) -> Figure:
+    """Bars of each principal component's share and a line of the cumulative share."""
+    fig = _figure(fig, (5.0, 3.5), theme)
+    ax = fig.add_subplot(1, 1, 1)
+    k = np.arange(1, data.ratio.size + 1)
+    ax.bar(k, data.ratio, color=theme["accent"], label="component")
+    ax.plot(k, data.cumulative, "o-", color=theme["foreground"], ms=3, label="cumulative")
+    ax.set_xlabel("principal component")
+    ax.set_ylabel("share of the variance")
+    ax.set_ylim(0, 1.02)
+    ax.set_xticks(k if k.size <= 20 else k[:: int(np.ceil(k.size / 20))])
+    ax.set_title("explained variance")
+    _style(ax, theme)
+    _legend(ax, theme, loc="center right")
+    return fig
+
+
+def _map_grid(
+    maps: np.ndarray,
+    titles: Sequence[str],
+    fig: Figure | None,
+    theme: dict[str, str],
+    cmap: str,
+) -> Figure:
+    n = maps.shape[0]
+    ncols = min(3, n)
+    nrows = int(np.ceil(n / ncols))
+    fig = _figure(fig, (3.2 * ncols, 2.8 * nrows), theme)
+    for i in range(n):
+        ax = fig.add_subplot(nrows, ncols, i + 1)
+        im = ax.imshow(maps[i], cmap=cmap, interpolation="nearest")
+        ax.set_title(titles[i])
+        ax.set_xticks([])
+        ax.set_yticks([])
+        _style(ax, theme)
+        bar = fig.colorbar(im, ax=ax, shrink=0.8)
+        bar.ax.tick_params(colors=theme["foreground"], labelsize="small")
+    return fig
+
+
+def coefficients_figure(
+    data: plots.CoefficientMaps, fig: Figure | None = None, theme: dict[str, str] = LIGHT
+) -> Figure:
+    """Block-grid maps of the chosen a_lm (thesis figures 5.2/5.11)."""
+    titles = [f"a(l={l}, m={m})" for l, m in data.pairs]  # noqa: E741
+    return _map_grid(data.maps, titles, fig, theme, "viridis")
+
+
+def components_figure(
+    data: plots.ComponentMaps, fig: Figure | None = None, theme: dict[str, str] = LIGHT
+) -> Figure:
+    """Block-grid maps of the first principal components (thesis figures 5.4/5.13)."""
+    titles = [f"component {i + 1} ({r:.0%})" for i, r in enumerate(data.explained)]
+    return _map_grid(data.blocks, titles, fig, theme, "RdBu_r")
+
+
+def histograms_figure(
+    data: plots.ReconstructionHistograms, fig: Figure | None = None, theme: dict[str, str] = LIGHT
+) -> Figure:
+    """Histogram of Î and of its reconstructions on shared bins (thesis figure 5.17)."""
+    from matplotlib import colormaps
+
+    fig = _figure(fig, (5.5, 3.8), theme)
+    ax = fig.add_subplot(1, 1, 1)
+    ax.stairs(data.original, data.edges, color=theme["foreground"], lw=1.6, label="original Î")
+    cmap = colormaps["plasma"]
+    n = max(1, len(data.reconstructed))
+    for i, (d, counts) in enumerate(data.reconstructed.items()):
+        colour = cmap(0.15 + 0.7 * i / max(1, n - 1))
+        ax.stairs(counts, data.edges, color=colour, lw=1.0, label=f"L = {d}")
+    ax.set_xlabel("Î intensity")
+    ax.set_ylabel("pixels")
+    ax.set_title(f"original and reconstructed Î (w = {data.window})")
+    _style(ax, theme)
+    _legend(ax, theme)
+    return fig
+
+
+def error_table_figure(
+    data: plots.ErrorTable, fig: Figure | None = None, theme: dict[str, str] = LIGHT
+) -> Figure:
+    """Mean reconstruction error per window and degree as a table (thesis table 5.1)."""
+    fig = _figure(fig, (1.5 + 0.9 * len(data.degrees), 0.8 + 0.35 * len(data.windows)), theme)
+    ax = fig.add_subplot(1, 1, 1)
+    ax.axis("off")
+    cells = [[f"{v:.4g}" for v in row] for row in data.errors]
+    table = ax.table(
+        cellText=cells,
+        rowLabels=[f"w = {w}" for w in data.windows],
+        colLabels=[f"L = {d}" for d in data.degrees],
+        bbox=[0.15, 0.0, 0.85, 0.9],  # axes fraction: row labels stay inside the figure
+    )
+    for cell in table.get_celld().values():
+        cell.set_facecolor(theme["background"])
+        cell.set_edgecolor(theme["foreground"])
+        cell.get_text().set_color(theme["foreground"])
+    ax.set_title("mean |reconstruction error|", color=theme["foreground"])
+    return fig
+
+
+def _save(fig: Figure, path: Path, dpi: int) -> Path:
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    FigureCanvasAgg(fig)
+    tmp = path.with_name(path.name + ".tmp")
+    fig.savefig(tmp, format="png", dpi=dpi, facecolor=fig.get_facecolor())
+    tmp.replace(path)
+    return path
+
+
+def save_plots(
+    result: SegmentationResult,
+    out_dir: str | Path,
+    *,
+    degrees: Sequence[int] = (4, 12, 20),
+    windows: Sequence[int] | None = None,
+    table_degrees: Sequence[int] | None = None,
+    pairs: Sequence[tuple[int, int]] | None = None,
+    n_components: int = 3,
+    max_points: int = 20000,
+    seed: int = 0,
+    dpi: int = 100,
+    theme: dict[str, str] = LIGHT,
+) -> dict[str, Path]:
+    """Write the six plots of ``result`` as PNGs into ``out_dir`` (created if missing).
+
+    ``windows`` and ``table_degrees`` of the error table default to the result's window
+    and (4, 8, 12, 16, 20); ``pairs`` (l, m) of the coefficient maps to
+    :data:`~napari_polarseg.engine.plots.DEFAULT_PAIRS` up to the result's degree.
+    Returns the path of each file by its name (:data:`PLOT_FILES`).
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    degree = result.params.degree
+    if pairs is None:
+        pairs = [(l, m) for l, m in plots.DEFAULT_PAIRS if l <= degree]  # noqa: E741
+    figures = {
+        "scatter.png": lambda: scatter_figure(
+            plots.scatter_data(result, max_points, seed), "both", theme=theme
+        ),
+        "explained_variance.png": lambda: explained_variance_figure(
+            plots.explained_variance(result), theme=theme
+        ),
+        "coefficients.png": lambda: coefficients_figure(
+            plots.coefficient_maps(result, pairs), theme=theme
+        ),
+        "components.png": lambda: components_figure(
+            plots.component_maps(result, n_components), theme=theme
+        ),
+        "histograms.png": lambda: histograms_figure(
+            plots.result_histograms(result, degrees), theme=theme
+        ),
+        "error_table.png": lambda: error_table_figure(
+            plots.result_error_table(
+                result,
+                windows or [result.params.window],
+                table_degrees or (4, 8, 12, 16, 20),
+            ),
+            theme=theme,
+        ),
+    }
+    return {name: _save(make(), out / name, dpi) for name, make in figures.items()}

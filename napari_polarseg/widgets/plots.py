@@ -1,0 +1,244 @@
+"""The "Polarisation plots" widget: the analyst's plots of a stack's last segmentation.
+
+Thin: the data come from :mod:`napari_polarseg.engine.plots`, the drawing from
+:mod:`napari_polarseg.figures`; this module only finds the segmentation, runs the engine
+in a worker when needed and shows a matplotlib canvas themed like napari.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Generator
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from magicgui.widgets import ComboBox, PushButton
+
+from .. import figures
+from ..engine import Pipeline, PolarsegError, SegmentParams, plots, validity_mask
+from ._base import StackWidget
+from ._layers import TAG, find_output, fitted_limits, source_key
+
+if TYPE_CHECKING:
+    import napari
+    from napari.layers import Layer
+
+    from ..engine.pipeline import SegmentationResult
+
+#: Plot menu: text shown → key.
+PLOTS = (
+    ("scatter Î–ρ", "scatter_dop"),
+    ("scatter Î–φ", "scatter_phase"),
+    ("explained variance", "variance"),
+    ("histograms", "histograms"),
+)
+#: Degrees of the reconstruction histograms (thesis figure 5.17).
+HISTOGRAM_DEGREES = (4, 12, 20)
+#: Pixels drawn at most in a scatter plot.
+MAX_POINTS = 20000
+#: Principal components "Add component maps" adds.
+N_COMPONENTS = 3
+
+
+def component_role(i: int) -> str:
+    """Tag role of the layer of principal component ``i`` (0-based)."""
+    return f"component_{i + 1}"
+
+
+def segment_job(
+    data: Any, angles_rad: np.ndarray, params: SegmentParams
+) -> Generator[tuple[str, int, int], None, Any]:
+    """Worker job: the segmentation of a stack with ``params`` (as the Segment widget)."""
+    stack = np.asarray(data)
+    mask = validity_mask(stack, saturation="auto", dark_level=0)
+    pipe = Pipeline(stack, np.asarray(angles_rad, dtype=float), params, mask=mask)
+    yield from pipe.run_iter(reconstruction=True)
+    return pipe.result(reconstruction=True, params=params)
+
+
+def histogram_job(
+    result: SegmentationResult, degrees: tuple[int, ...]
+) -> Generator[tuple[str, int, int], None, Any]:
+    """Worker job: the reconstruction histograms of ``result``."""
+    hist = plots.result_histograms(result, degrees)
+    yield "histograms", 1, 1
+    return hist
+
+
+def napari_theme(viewer: napari.viewer.Viewer) -> dict[str, str]:
+    """Figure colours from the viewer's napari theme (a dark grey if unavailable)."""
+    try:
+        from napari.utils.theme import get_theme
+
+        theme = get_theme(viewer.theme)
+        return {
+            "background": theme.background.as_hex(),
+            "foreground": theme.text.as_hex(),
+            "accent": theme.highlight.as_hex() if theme.highlight else figures.DARK["accent"],
+        }
+    except Exception:  # noqa: BLE001 - any theme problem: fall back to dark grey
+        return dict(figures.DARK)
+
+
+class PlotsWidget(StackWidget):
+    """Plots of the last segmentation of an angle stack (thesis figures 4.1, 5.17).
+
+    *Load segmentation* reads the result the docked *Segment by material* widget keeps
+    for the stack (when its cached pipeline is up to date), or recomputes it in a worker
+    from the parameters stored on the stack's ``segments`` layer. The plot menu shows Î
+    against ρ or φ coloured by segment, the PCA's explained variance, or histograms of Î
+    and of its reconstructions at L = 4, 12, 20. *Add component maps* adds the first
+    principal components at pixel resolution as image layers (replaced in place).
+    """
+
+    run_text = "Load segmentation"
+    progress_desc = "Polarisation plots"
+
+    def __init__(self, viewer: napari.viewer.Viewer) -> None:
+        from matplotlib.backends.backend_qtagg import FigureCanvasQTAgg
+        from matplotlib.figure import Figure
+
+        super().__init__(viewer)
+        self.result: SegmentationResult | None = None
+        self.histograms: plots.ReconstructionHistograms | None = None
+        self._source: Layer | None = None
+        self.plot = ComboBox(
+            label="plot", choices=list(PLOTS), value="scatter_dop", tooltip="What to plot"
+        )
+        self.components_button = PushButton(text="Add component maps")
+        self._add_parameters([self.plot, self.components_button])
+        self.theme = napari_theme(viewer)
+        self.figure = Figure(figsize=(4.0, 3.2), layout="constrained")
+        self.canvas = FigureCanvasQTAgg(self.figure)
+        self.canvas.setMinimumHeight(280)
+        self.native.layout().addWidget(self.canvas)
+        self.plot.changed.connect(self.draw)
+        self.components_button.changed.connect(self.add_component_maps)
+        self.draw()
+
+    # -- finding the segmentation ------------------------------------------------------
+    def segmentation_params(self, layer: Layer) -> SegmentParams:
+        """Parameters of the stack's last segmentation (raises PolarsegError)."""
+        segments = find_output(self._viewer, "segments", layer)
+        meta = None if segments is None else segments.metadata.get("polarseg_params")
+        if not isinstance(meta, dict):
+            raise PolarsegError(
+                f"no segmentation of {layer.name!r} yet: run 'Segment by material' first"
+            )
+        return SegmentParams.from_dict({k: v for k, v in meta.items() if k != "angles_deg"})
+
+    def cached_result(self, layer: Layer, params: SegmentParams) -> SegmentationResult | None:
+        """The docked Segment widget's result for ``layer``, if its pipeline is current."""
+        from .segment import SegmentWidget
+
+        for widget in self._viewer.window.dock_widgets.values():
+            if isinstance(widget, SegmentWidget):
+                pipe = widget.pipeline_for(layer)
+                if pipe is not None and pipe.params == params and not pipe.stale_stages():
+                    return pipe.result(reconstruction=True)
+        return None
+
+    def run(self, *_: Any) -> None:
+        """Load the chosen stack's last segmentation (cached, or in a worker)."""
+        try:
+            layer, angles_deg = self.current_stack()
+            params = self.segmentation_params(layer)
+        except PolarsegError as exc:
+            self._fail(exc)
+            return
+        result = self.cached_result(layer, params)
+        if result is not None:
+            self.set_result(layer, result)
+            return
+
+        def on_result(run_id: int, value: Any) -> None:
+            if layer in self._viewer.layers and self.stack_layer.value is layer:
+                self.set_result(layer, value)
+
+        args = (layer.data, np.deg2rad(angles_deg), params)
+        self._submit(segment_job, args, 8, on_result)
+
+    def set_result(self, layer: Layer, result: SegmentationResult) -> None:
+        """Plot ``result`` (a segmentation of ``layer``)."""
+        self.result, self._source, self.histograms = result, layer, None
+        self._done(f"{result.n_segments} segments · {result.features.shape[1]} components")
+        self.draw()
+
+    def _on_stack_changed(self, layer: Layer | None) -> None:
+        super()._on_stack_changed(layer)
+        if getattr(self, "result", None) is not None and layer is not self._source:
+            self.result, self._source, self.histograms = None, None, None
+            self.draw()
+
+    # -- drawing -----------------------------------------------------------------------
+    def draw(self, *_: Any) -> None:
+        """Draw the chosen plot into the canvas (a hint when there is nothing to plot)."""
+        kind = self.plot.value
+        result = self.result
+        fig, theme = self.figure, self.theme
+        if result is None:
+            self._message("press 'Load segmentation' to plot the stack's last segmentation")
+        elif kind in ("scatter_dop", "scatter_phase"):
+            data = plots.scatter_data(result, MAX_POINTS)
+            figures.scatter_figure(data, kind.split("_")[1], fig=fig, theme=theme)
+        elif kind == "variance":
+            figures.explained_variance_figure(plots.explained_variance(result), fig, theme)
+        elif self.histograms is not None:
+            figures.histograms_figure(self.histograms, fig, theme)
+        else:
+            self._message("computing the reconstructions…")
+            res = result
+
+            def on_result(run_id: int, value: Any) -> None:
+                if self.result is res:
+                    self.histograms = value
+                    self._done(
+                        f"histograms of Î and L = {', '.join(map(str, value.reconstructed))}"
+                    )
+                    self.draw()
+
+            self._submit(histogram_job, (result, HISTOGRAM_DEGREES), 1, on_result)
+        self.canvas.draw_idle()
+
+    def _message(self, text: str) -> None:
+        self.figure.clear()
+        self.figure.set_facecolor(self.theme["background"])
+        self.figure.text(
+            0.5, 0.5, text, ha="center", va="center", wrap=True, color=self.theme["foreground"]
+        )
+
+    # -- component layers --------------------------------------------------------------
+    def add_component_maps(self, *_: Any) -> list[Layer]:
+        """Add (or replace in place) the first principal components as image layers."""
+        if self.result is None or self._source is None or self._source not in self._viewer.layers:
+            self._fail(PolarsegError("load a segmentation first"))
+            return []
+        source, comp = self._source, plots.component_maps(self.result, N_COMPONENTS)
+        out = []
+        for i, data in enumerate(comp.pixels):
+            role = component_role(i)
+            meta = {TAG: {"role": role, "source": source_key(source)}}
+            hi = max(abs(v) for v in fitted_limits(data, (1.0, 99.0)))
+            limits = (-hi, hi)
+            layer = find_output(self._viewer, role, source)
+            if layer is not None:
+                layer.data = data
+                layer.contrast_limits_range = (
+                    min(-hi, float(data.min())),
+                    max(hi, float(data.max())),
+                )
+                layer.contrast_limits = limits
+                layer.metadata = {**layer.metadata, **meta}
+            else:
+                layer = self._viewer.add_image(
+                    data,
+                    name=f"principal component {i + 1}",
+                    metadata=meta,
+                    colormap="PiYG",
+                    contrast_limits=limits,
+                    scale=tuple(source.scale[-2:]),
+                    translate=tuple(source.translate[-2:]),
+                    visible=i == 0,
+                )
+            out.append(layer)
+        self._done(f"added {len(out)} component maps")
+        return out

@@ -1,0 +1,126 @@
+"""Plot data of the analyst's bench (engine/plots.py) and the PNGs of figures.save_plots."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from napari_polarseg.engine import Pipeline, PolarsegError, SegmentParams, plots
+from napari_polarseg.engine.harmonics import coefficient_index, degree_order
+from napari_polarseg.engine.synthetic import make_scene
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return make_scene("leaves", shape=(60, 70), seed=0)
+
+
+@pytest.fixture(scope="module")
+def result(scene):
+    params = SegmentParams(window=10, degree=5, n_segments=3)
+    return Pipeline(scene.stack, np.deg2rad(scene.angles_deg), params).run()
+
+
+def test_scatter_colours_are_the_labels_at_the_sampled_pixels(result):
+    data = plots.scatter_data(result, max_points=500, seed=3)
+    assert len(data) == 500
+    np.testing.assert_array_equal(data.labels, result.labels[data.rows, data.cols])
+    np.testing.assert_array_equal(data.intensity, result.intensity[data.rows, data.cols])
+    np.testing.assert_array_equal(data.dop, result.dop[data.rows, data.cols])
+    np.testing.assert_array_equal(data.phase, result.phase[data.rows, data.cols])
+    flat = np.ravel_multi_index((data.rows, data.cols), result.labels.shape)
+    assert np.unique(flat).size == 500  # without replacement
+    again = plots.scatter_data(result, max_points=500, seed=3)
+    np.testing.assert_array_equal(again.rows, data.rows)  # seeded
+
+
+def test_scatter_takes_every_pixel_when_few_and_any_labels(result, scene):
+    h, w = result.labels.shape
+    data = plots.scatter_data(result, max_points=10**6)
+    assert len(data) == h * w == data.n_pixels
+    truth = np.asarray(scene.labels)
+    other = plots.scatter_data(result, max_points=200, labels=truth)
+    np.testing.assert_array_equal(other.labels, truth[other.rows, other.cols])
+    with pytest.raises(PolarsegError):
+        plots.scatter_data(result, labels=truth[:-1])
+
+
+def test_explained_variance_matches_the_pca(result):
+    ev = plots.explained_variance(result)
+    np.testing.assert_allclose(ev.ratio, result.explained_variance_ratio)
+    np.testing.assert_allclose(ev.cumulative, np.cumsum(result.explained_variance_ratio))
+    assert ev.cumulative[-1] == pytest.approx(float(np.sum(result.explained_variance_ratio)))
+    assert ev.cumulative[-1] <= 1 + 1e-12
+    assert ev.cumulative[-1] >= result.params.variance - 1e-12
+
+
+def test_coefficient_maps_are_the_coefficients(result):
+    maps = plots.coefficient_maps(result)
+    assert maps.maps.shape == (6, *result.block_labels.shape)
+    ls, ms = degree_order(result.params.degree)
+    for k, (l, m) in enumerate(maps.pairs):  # noqa: E741
+        idx = l * l + l + m
+        assert idx == coefficient_index(l, m) and (ls[idx], ms[idx]) == (l, m)
+        np.testing.assert_array_equal(maps.maps[k], result.coefficients[..., idx])
+    with pytest.raises(PolarsegError):
+        plots.coefficient_maps(result, [(result.params.degree + 1, 0)])
+
+
+def test_component_maps_on_blocks_and_pixels(result):
+    comp = plots.component_maps(result, n=3)
+    grid = result.block_labels.shape
+    assert comp.blocks.shape == (3, *grid)
+    assert comp.pixels.shape == (3, *result.labels.shape)
+    for i in range(3):
+        np.testing.assert_array_equal(comp.blocks[i].ravel(), result.features[:, i])
+    w = result.params.window
+    np.testing.assert_array_equal(comp.pixels[1, 3 * w + 2, 4 * w + 7], comp.blocks[1, 3, 4])
+    # remainder pixels take the nearest block
+    assert comp.pixels[0, -1, -1] == comp.blocks[0, -1, -1]
+    many = plots.component_maps(result, n=500)
+    assert many.blocks.shape[0] == result.features.shape[1]
+
+
+def test_histograms_share_bins_and_higher_degree_fits_closer(result):
+    hist = plots.result_histograms(result, degrees=(4, 12, 20))
+    n = result.intensity.size
+    assert hist.original.sum() == n
+    for d in (4, 12, 20):
+        assert hist.reconstructed[d].sum() == n
+        assert hist.reconstructed[d].shape == hist.original.shape
+    assert hist.edges.size == hist.original.size + 1
+    assert hist.l1_distance(20) < hist.l1_distance(4)
+    assert hist.mean_error[20] < hist.mean_error[4]
+
+
+def test_error_table_decreases_with_degree(result):
+    degrees = [0, 2, 4, 8, 12]
+    table = plots.result_error_table(result, windows=[8, 10], degrees=degrees)
+    assert table.errors.shape == (2, 5)
+    assert np.all(np.diff(table.errors[0]) < 0)
+    # the cell of the result's own (w, L) is the result's mean reconstruction error
+    own = plots.result_error_table(result, [result.params.window], [result.params.degree])
+    assert own.errors[0, 0] == pytest.approx(result.mean_reconstruction_error)
+
+
+def test_save_plots_writes_non_empty_pngs(result, tmp_path):
+    from napari_polarseg.figures import PLOT_FILES, save_plots
+
+    paths = save_plots(result, tmp_path / "plots", degrees=(2, 6), windows=[10], dpi=50)
+    assert set(paths) == set(PLOT_FILES)
+    for path in paths.values():
+        data = path.read_bytes()
+        assert len(data) > 1000 and data[:8] == b"\x89PNG\r\n\x1a\n"
+    assert sorted(p.name for p in (tmp_path / "plots").iterdir()) == sorted(PLOT_FILES)
+
+
+def test_figures_hold_the_data(result):
+    from napari_polarseg import figures
+
+    data = plots.scatter_data(result, max_points=300)
+    fig = figures.scatter_figure(data, "both")
+    assert len(fig.axes) == 2
+    assert all(len(ax.collections[0].get_offsets()) == 300 for ax in fig.axes)
+    ev = plots.explained_variance(result)
+    fig = figures.explained_variance_figure(ev, theme=figures.DARK)
+    assert len(fig.axes[0].patches) == ev.ratio.size
