@@ -86,7 +86,12 @@ import numpy as np
 from . import __version__
 from . import io as pio
 from .engine.errors import PolarsegError
-from .engine.evaluation import STATISTICS_COLUMNS, evaluate, segment_statistics
+from .engine.evaluation import (
+    STATISTICS_COLUMNS,
+    adjusted_rand_index,
+    evaluate,
+    segment_statistics,
+)
 from .engine.limits import check_pipeline_memory, memory_limit
 from .engine.mosaic import DEMOSAIC_METHODS
 from .engine.params import (
@@ -1070,16 +1075,6 @@ def _cmd_demo(args: argparse.Namespace) -> int:
         ari = summary["adjusted_rand_index"]
         print(f"{PROG}: adjusted Rand index against the ground truth: {ari:.3f}")
     return 0
-
-
-def adjusted_rand_index(truth: np.ndarray, labels: np.ndarray) -> float:
-    """Adjusted Rand index of two labellings of the same pixels (1 = identical partition)."""
-    from sklearn.metrics import adjusted_rand_score
-
-    truth, labels = np.asarray(truth), np.asarray(labels)
-    if truth.shape != labels.shape:
-        raise PolarsegError(f"ground truth is {truth.shape} but the labels are {labels.shape}")
-    return float(adjusted_rand_score(truth.ravel(), labels.ravel()))
 
 
 # -- overview figure ------------------------------------------------------------------------
