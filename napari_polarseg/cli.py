@@ -315,6 +315,22 @@ def _add_param_options(parser: argparse.ArgumentParser, preset: str = "thesis") 
     )
 
 
+def _add_input_options(parser: argparse.ArgumentParser, unit: str) -> None:
+    """Reading options shared by ``batch`` and ``timeseries`` (one INPUT per ``unit``)."""
+    parser.add_argument(
+        "--angles", type=_angles_arg, metavar="A,B,...", help=f"polariser angles of every {unit}"
+    )
+    parser.add_argument(
+        "--mosaic", type=_angles_arg, metavar="A,B,C,D", help="every INPUT is a raw mosaic frame"
+    )
+    parser.add_argument("--demosaic", choices=DEMOSAIC_METHODS, default="superpixel")
+    parser.add_argument("--channel", type=int, metavar="C", help="colour channel to use")
+    parser.add_argument("--register", action="store_true", help=f"align the frames of each {unit}")
+    parser.add_argument(
+        "--max-memory", type=_gib_arg, metavar="GIB", help=f"memory limit of one {unit}, GiB"
+    )
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``polarseg`` (errors raise :class:`UsageError`)."""
     parser = _Parser(
@@ -483,18 +499,7 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_false",
         help="redo every scene, also those already complete",
     )
-    bat.add_argument(
-        "--angles", type=_angles_arg, metavar="A,B,...", help="polariser angles of every scene"
-    )
-    bat.add_argument(
-        "--mosaic", type=_angles_arg, metavar="A,B,C,D", help="every INPUT is a raw mosaic frame"
-    )
-    bat.add_argument("--demosaic", choices=DEMOSAIC_METHODS, default="superpixel")
-    bat.add_argument("--channel", type=int, metavar="C", help="colour channel to use")
-    bat.add_argument("--register", action="store_true", help="align the frames of each scene")
-    bat.add_argument(
-        "--max-memory", type=_gib_arg, metavar="GIB", help="memory limit of one scene, GiB"
-    )
+    _add_input_options(bat, "scene")
     _add_param_options(bat)
     bat.set_defaults(func=_cmd_batch)
 
@@ -520,18 +525,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="cut day 1 and give later blocks the nearest segment, or one cut over all "
         "days' blocks [reference]",
     )
-    ts.add_argument(
-        "--angles", type=_angles_arg, metavar="A,B,...", help="polariser angles of every day"
-    )
-    ts.add_argument(
-        "--mosaic", type=_angles_arg, metavar="A,B,C,D", help="every INPUT is a raw mosaic frame"
-    )
-    ts.add_argument("--demosaic", choices=DEMOSAIC_METHODS, default="superpixel")
-    ts.add_argument("--channel", type=int, metavar="C", help="colour channel to use")
-    ts.add_argument("--register", action="store_true", help="align the frames of each day")
-    ts.add_argument(
-        "--max-memory", type=_gib_arg, metavar="GIB", help="memory limit of one day, GiB"
-    )
+    _add_input_options(ts, "day")
     _add_param_options(ts, preset="recommended")
     ts.set_defaults(func=_cmd_timeseries)
     return parser
