@@ -19,7 +19,8 @@ MODELS = ("diffuse", "specular")
 SPECULAR_BRANCHES = ("below-brewster", "above-brewster")
 COEFFICIENT_METHODS = ("thesis", "ridge")
 SCALE_MODES = ("absolute", "median")
-FEATURE_KINDS = ("thesis", "zonal", "energy")
+FEATURE_KINDS = ("thesis", "zonal", "energy", "polstats", "zonal+polstats")
+CLUSTERING_METHODS = ("recursive", "kway")
 FIT_METHODS = ("lsq", "robust")
 AFFINITY_GRAPHS = ("auto", "dense", "sparse")
 MAX_DEGREE = 60
@@ -48,9 +49,12 @@ class SegmentParams:
         ridge least-squares fit.
     ridge : float
         Ridge penalty, relative to the mean diagonal of the block Gram matrix.
-    features : {"thesis", "zonal", "energy"}
+    features : {"thesis", "zonal", "energy", "polstats", "zonal+polstats"}
         Block features fed to the PCA: every coefficient (thesis), the azimuth-invariant
-        m = 0 coefficients, or the rotation-invariant energy per degree.
+        m = 0 coefficients, the rotation-invariant energy per degree, direct
+        polarisation statistics of the block (distributions of ρ, θ and Î and their
+        relation; :mod:`~napari_polarseg.engine.polstats`), or the zonal coefficients
+        and the statistics together.
     variance : float
         Share of variance the PCA keeps, in (0, 1] (thesis: 0.95).
     scale : float
@@ -70,6 +74,11 @@ class SegmentParams:
         Stop splitting earlier when the best cut's Ncut value exceeds this.
     min_segment_blocks : int
         Smallest segment, in blocks, a cut may produce.
+    clustering : {"recursive", "kway"}
+        ``"recursive"``: greedy recursive two-way normalized cuts (thesis section 4.4.1).
+        ``"kway"``: k-way spectral clustering — the first k generalized eigenvectors of
+        the same affinity, rows normalised, k-means (Ng, Jordan & Weiss 2002)
+        (:mod:`~napari_polarseg.engine.spectral`).
     fit : {"lsq", "robust"}
         Fit of the polarisation image: exact linear least squares (optimal for Gaussian
         noise), or a robust IRLS fit (Tukey's biweight from a trimmed start) that
@@ -99,6 +108,7 @@ class SegmentParams:
     n_segments: int = 3
     ncut_threshold: float | None = None
     min_segment_blocks: int = 1
+    clustering: str = "recursive"
     fit: str = "lsq"
     affinity_graph: str = "auto"
 
@@ -122,6 +132,7 @@ class SegmentParams:
         _check_choice("scale_mode", self.scale_mode, SCALE_MODES)
         _check_choice("features", self.features, FEATURE_KINDS)
         _check_choice("fit", self.fit, FIT_METHODS)
+        _check_choice("clustering", self.clustering, CLUSTERING_METHODS)
         _check_choice("affinity_graph", self.affinity_graph, AFFINITY_GRAPHS)
         if not _is_number(self.ridge) or self.ridge <= 0:
             raise PolarsegError(f"ridge must be a positive number, got {self.ridge!r}")
