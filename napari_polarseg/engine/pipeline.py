@@ -27,7 +27,7 @@ import numpy as np
 from scipy import ndimage
 
 from . import features as feat
-from . import fresnel, harmonics, ncut, polarimage
+from . import fresnel, harmonics, ncut, polarimage, polstats, spectral
 from .errors import Cancelled, PolarsegError
 from .params import SegmentParams
 
@@ -100,6 +100,8 @@ def _own_key(stage: str, p: SegmentParams) -> tuple:
         spatial = (p.spatial_radius, p.spatial_sigma) if p.spatial_radius > 0 else None
         return (p.scale, p.scale_mode, spatial, p.affinity_graph)
     if stage == "cut":
+        if p.clustering == "kway":
+            return (p.min_segment_blocks, "kway")
         return (p.min_segment_blocks, p.ncut_threshold)
     if stage == "labels":
         return (p.n_segments,)
@@ -335,7 +337,7 @@ class Pipeline:
                     f"window size {p.window} leaves fewer than 2 blocks in a "
                     f"{self.stack.shape[1]} x {self.stack.shape[2]} image"
                 )
-            vectors = feat.harmonic_features(coef, p.features)
+            vectors = self._block_vectors(coef, p)
             valid = self.block_valid()
             if valid.all():
                 return feat.pca_features(vectors, p.variance)
@@ -375,11 +377,15 @@ class Pipeline:
             return W
         if stage == "cut":
             W = self.get("affinity")
+            if p.clustering == "kway":
+                # k-way spectral clustering of the same graph (spectral.py); the number of
+                # segments only reruns k-means on the cached eigenvectors
+                return spectral.SpectralClustering(W, min_size=p.min_segment_blocks)
             # warm start: eigenvectors of the previous tree on the same blocks (e.g. when
             # only the affinity scale changed) start the solves of identical segments
             old = self._cache.get("cut")
             warm = None
-            if old is not None and old[1].W.shape == W.shape:
+            if old is not None and isinstance(old[1], ncut.CutTree) and old[1].W.shape == W.shape:
                 warm = old[1].fiedler_vectors()
             return ncut.CutTree(
                 W, min_size=p.min_segment_blocks, threshold=p.ncut_threshold, warm=warm
@@ -409,6 +415,26 @@ class Pipeline:
             )
             return Reconstruction(rec, np.abs(rec - pol.intensity))
         raise KeyError(stage)
+
+    def _block_vectors(self, coef: np.ndarray, p: SegmentParams) -> np.ndarray:
+        """Feature vector of every block (rows·cols, F) for ``p.features``.
+
+        Harmonic kinds come from the coefficients (:func:`~.features.harmonic_features`);
+        ``"polstats"`` from the polarisation image directly (:mod:`.polstats`), z-scored
+        because its columns have different units; ``"zonal+polstats"`` puts the z-scored
+        zonal coefficients and statistics side by side.
+        """
+        if p.features not in ("polstats", "zonal+polstats"):
+            return feat.harmonic_features(coef, p.features)
+        pol, nrm = self.get("polarisation"), self.get("normals")
+        stats = polstats.block_polarisation_statistics(
+            pol.intensity, pol.dop, pol.phase, nrm.zenith, p.window, valid=~pol.invalid
+        ).reshape(-1, len(polstats.STAT_NAMES))
+        stats = polstats.standardise(stats)
+        if p.features == "polstats":
+            return stats
+        zonal = polstats.standardise(feat.harmonic_features(coef, "zonal"))
+        return np.concatenate([zonal, stats], axis=1)
 
     def get(self, stage: str) -> Any:
         """Value of a stage for the current parameters, computing it if stale.
