@@ -6,45 +6,20 @@ import warnings
 
 import numpy as np
 import pytest
-from scipy import ndimage
 
 from napari_polarseg.engine import Pipeline
 from napari_polarseg.engine.errors import PolarsegError
 from napari_polarseg.engine.evaluation import adjusted_rand_index
 from napari_polarseg.engine.params import RECOMMENDED
 from napari_polarseg.engine.scribbles import classify_blocks, training_blocks
-from napari_polarseg.engine.synthetic import make_scene
+from napari_polarseg.engine.synthetic import make_scene, scribble_strokes
 
 #: Block side of the scribble mode on the 120 x 130 scenes: more, smaller blocks give
 #: the classifier more training examples from the same strokes (w = 12: ARI ~0.2).
 SCRIBBLE_WINDOW = 8
 
 
-def stroke_lines(truth: np.ndarray, seed: int, per_material: int = 6, length: int = 16):
-    """Short straight strokes (1 px wide) inside each material, seeded.
-
-    Each stroke lies at least 2 px inside its material; label = material index + 1.
-    """
-    rng = np.random.default_rng(seed)
-    strokes = np.zeros(truth.shape, dtype=np.int32)
-    for i, material in enumerate(np.unique(truth)):
-        inner = ndimage.binary_erosion(truth == material, iterations=2)
-        points = np.argwhere(inner)
-        drawn = 0
-        for _ in range(1000):
-            if drawn == per_material:
-                break
-            p = points[rng.integers(len(points))]
-            angle = rng.uniform(0, np.pi)
-            t = np.arange(length) - length / 2
-            rr = np.round(p[0] + t * np.sin(angle)).astype(int)
-            cc = np.round(p[1] + t * np.cos(angle)).astype(int)
-            inside = (rr >= 0) & (rr < truth.shape[0]) & (cc >= 0) & (cc < truth.shape[1])
-            if not inside.all() or not inner[rr, cc].all():
-                continue
-            strokes[rr, cc] = i + 1
-            drawn += 1
-    return strokes
+stroke_lines = scribble_strokes  # strokes from the ground truth, seeded
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
