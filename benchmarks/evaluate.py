@@ -1,20 +1,30 @@
 """Segmentation quality on the synthetic scenes: pixel adjusted Rand index (ARI).
 
 For every scene (the bundled sample, seed 0, and freshly rendered held-out seeds), prints
-the ARI against ground truth of
+the ARI against ground truth of every option the README's "Segmentation quality" table
+lists (:data:`OPTIONS`):
 
 - ``intensity only``: the intensity baseline (block mean and std of Î, the same
   Mahalanobis affinity and recursive normalized cuts, no polarisation);
 - ``thesis defaults``: the pipeline with ``SegmentParams()`` (w 10, L 12, n 1.45, 95 %
   variance, s = 1);
-- ``recommended``: the pipeline with ``RECOMMENDED`` (napari_polarseg.engine.params);
+- the other columns start from ``RECOMMENDED`` (w 12, L 8, zonal features, s = 2 ×
+  median distance, min 4 blocks) and change one thing: the feature kind (thesis,
+  energy, ridge coefficients, polarisation statistics, zonal + statistics), the spatial
+  term, k-way spectral clustering;
+- ``scribbles``: the scribble mode (a classifier on the block features, w 8) trained on
+  a fixed small set of strokes (``synthetic.scribble_strokes``: 6 strokes of 16 px per
+  material, 1-2 % of the pixels);
 - with ``--sweep``: the best cell of a parameter grid per scene (chosen on the same
   scene, so an optimistic upper bound, not a fair score), and the cells with the best
-  worst case over all scenes and seeds (how ``RECOMMENDED`` was chosen).
+  worst case over all scenes and seeds (how ``RECOMMENDED`` was chosen);
+- with ``--limits``: what limits every option, measured (README "Why not 0.8").
 
 Usage::
 
     .venv/bin/python benchmarks/evaluate.py            # table, ~1 minute
+    .venv/bin/python benchmarks/evaluate.py --readme   # and rewrite README's table
+    .venv/bin/python benchmarks/evaluate.py --limits   # the limits analysis, ~1 minute
     .venv/bin/python benchmarks/evaluate.py --sweep    # plus the grid search, ~5 minutes
 """
 
@@ -30,7 +40,28 @@ from sklearn.metrics import adjusted_rand_score
 
 from napari_polarseg.engine import Pipeline, SegmentParams, intensity_baseline
 from napari_polarseg.engine.params import RECOMMENDED
-from napari_polarseg.engine.synthetic import SCENES, make_scene
+from napari_polarseg.engine.synthetic import SCENES, make_scene, scribble_strokes
+
+README = Path(__file__).resolve().parents[1] / "README.md"
+BEGIN, END = "<!-- evaluate.py table: begin -->", "<!-- evaluate.py table: end -->"
+
+#: Column name -> parameters (None: a special column computed in ``evaluate``).
+OPTIONS: dict[str, SegmentParams | None] = {
+    "intensity only": None,
+    "thesis defaults": SegmentParams(),
+    "thesis features": RECOMMENDED.replace(features="thesis"),
+    "zonal (recommended)": RECOMMENDED,
+    "energy": RECOMMENDED.replace(features="energy"),
+    "ridge coefficients": RECOMMENDED.replace(coefficients="ridge"),
+    "polarisation stats": RECOMMENDED.replace(features="polstats"),
+    "zonal + stats": RECOMMENDED.replace(features="zonal+polstats"),
+    "spatial term": RECOMMENDED.replace(spatial_radius=1.5),
+    "k-way": RECOMMENDED.replace(clustering="kway"),
+    "k-way, stats": RECOMMENDED.replace(features="polstats", clustering="kway"),
+    "scribbles": None,
+}
+#: Block side of the scribble mode (more, smaller blocks: more training examples).
+SCRIBBLE_WINDOW = 8
 
 SAMPLES = Path(__file__).resolve().parents[1] / "napari_polarseg" / "sample_data"
 
@@ -65,9 +96,13 @@ def evaluate(name: str, seed: int, sweep: bool) -> dict:
     intensity = stack.astype(float).mean(axis=0)
     row["intensity only"] = ari(truth, intensity_baseline(intensity, 10, k))
     pipe = Pipeline(stack, angles, SegmentParams(n_segments=k))
-    row["thesis defaults"] = ari(truth, pipe.run(reconstruction=False).labels)
-    pipe.params = RECOMMENDED.replace(n_segments=k)
-    row["recommended"] = ari(truth, pipe.run(reconstruction=False).labels)
+    for column, params in OPTIONS.items():
+        if params is not None:
+            pipe.params = params.replace(n_segments=k)
+            row[column] = ari(truth, pipe.run(reconstruction=False).labels)
+    pipe.params = RECOMMENDED.replace(window=SCRIBBLE_WINDOW)
+    labels, _ = pipe.scribble_result(scribble_strokes(truth, seed=0))
+    row["scribbles"] = ari(truth, labels)
     if sweep:
         row["grid"] = {}
         for values in itertools.product(*GRID.values()):
@@ -80,31 +115,60 @@ def evaluate(name: str, seed: int, sweep: bool) -> dict:
     return row
 
 
+def markdown_table(rows: list[dict], cols: list[str]) -> str:
+    """The README table: one row per scene and seed, then the mean per scene."""
+    lines = [
+        "| scene | seed | " + " | ".join(cols) + " |",
+        "|---|---|" + "---:|" * len(cols),
+    ]
+    for r in rows:
+        lines.append(
+            f"| {r['scene']} | {r['seed']} | " + " | ".join(f"{r[c]:.3f}" for c in cols) + " |"
+        )
+    for name in SCENES:
+        mine = [r for r in rows if r["scene"] == name]
+        means = " | ".join(f"**{np.mean([r[c] for r in mine]):.3f}**" for c in cols)
+        lines.append(f"| {name} | mean | {means} |")
+    return "\n".join(lines)
+
+
+def write_readme(table: str, command: str) -> None:
+    text = README.read_text(encoding="utf-8")
+    if BEGIN not in text or END not in text:
+        raise SystemExit(f"README.md has no {BEGIN} ... {END} block to replace")
+    head, rest = text.split(BEGIN, 1)
+    _, tail = rest.split(END, 1)
+    block = f"{BEGIN}\n<!-- generated by `{command}`; do not edit by hand -->\n\n{table}\n\n{END}"
+    README.write_text(head + block + tail, encoding="utf-8")
+
+
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--sweep", action="store_true", help="also search the grid")
     parser.add_argument("--seeds", default="0,1,2", help="scene seeds (0 = bundled sample)")
+    parser.add_argument(
+        "--readme", action="store_true", help="rewrite the table in README.md with the result"
+    )
+    parser.add_argument(
+        "--limits", action="store_true", help="only the limits analysis (limits.py), no table"
+    )
     args = parser.parse_args(argv)
+    if args.limits:
+        from limits import main as limits_main
+
+        limits_main()
+        return
     seeds = [int(s) for s in args.seeds.split(",")]
-    cols = ["intensity only", "thesis defaults", "recommended"]
+    cols = list(OPTIONS)
     if args.sweep:
         cols.append("best of grid")
     t0 = time.perf_counter()
     rows = [evaluate(name, seed, args.sweep) for name in SCENES for seed in seeds]
     print(f"recommended = {RECOMMENDED.to_dict()}\n")
-    header = f"| {'scene':<11}| seed | k | " + " | ".join(f"{c:>15}" for c in cols) + " |"
-    print(header)
-    print("|" + "|".join("-" * (len(p)) for p in header.split("|")[1:-1]) + "|")
-    for r in rows:
-        cells = " | ".join(f"{r[c]:>15.3f}" for c in cols)
-        print(f"| {r['scene']:<11}| {r['seed']:>4} | {r['k']} | {cells} |")
+    table = markdown_table(rows, cols)
+    print(table)
     print()
-    for name in SCENES:
-        mine = [r for r in rows if r["scene"] == name]
-        means = "  ".join(f"{c}: {np.mean([r[c] for r in mine]):.3f}" for c in cols)
-        print(f"mean over seeds, {name}: {means}")
     if args.sweep:
-        print()
         for r in rows:
             print(f"best cell {r['scene']} seed {r['seed']}: {r['best params']}")
         cells = rows[0]["grid"].keys()
@@ -118,6 +182,12 @@ def main(argv: list[str] | None = None) -> None:
             cell = dict(zip(GRID, c, strict=True))
             print(f"  worst {worst[c]:.3f}  mean per scene {per_scene}  {cell}")
     print(f"\n{time.perf_counter() - t0:.1f} s")
+    if args.readme:
+        cmd = "python benchmarks/evaluate.py --readme"
+        if args.seeds != "0,1,2":
+            cmd += f" --seeds {args.seeds}"
+        write_readme(markdown_table(rows, list(OPTIONS)), cmd)
+        print(f"README.md table rewritten ({README})")
 
 
 if __name__ == "__main__":
