@@ -1,5 +1,9 @@
 """Matplotlib figures of the analyst's plots, and :func:`save_plots` writing them as PNGs.
 
+:func:`render_plots` gives the same PNGs as bytes in memory (for writers that compute
+everything first); :func:`sweep_heatmap_figure` draws a parameter sweep
+(:mod:`napari_polarseg.engine.sweep`) as heatmaps.
+
 Every ``*_figure`` function draws the data of :mod:`napari_polarseg.engine.plots` into a
 :class:`matplotlib.figure.Figure` (a new one, or ``fig`` cleared first, e.g. the figure
 of a Qt canvas) with the object-oriented API only: no pyplot, so no global state.
@@ -8,6 +12,7 @@ matplotlib is imported lazily, when a figure is drawn.
 
 from __future__ import annotations
 
+import io
 from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -15,11 +20,13 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .engine import plots
+from .engine.errors import PolarsegError
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
     from .engine.pipeline import SegmentationResult
+    from .engine.sweep import SweepResult
 
 #: Colours of the light default theme: figure background, text/axes, accent.
 LIGHT = {"background": "#ffffff", "foreground": "#000000", "accent": "#1f77b4"}
@@ -213,33 +220,23 @@ def _save(fig: Figure, path: Path, dpi: int) -> Path:
     return path
 
 
-def save_plots(
+def _plot_makers(
     result: SegmentationResult,
-    out_dir: str | Path,
     *,
-    degrees: Sequence[int] = (4, 12, 20),
-    windows: Sequence[int] | None = None,
-    table_degrees: Sequence[int] | None = None,
-    pairs: Sequence[tuple[int, int]] | None = None,
-    n_components: int = 3,
-    max_points: int = 20000,
-    seed: int = 0,
-    dpi: int = 100,
-    theme: dict[str, str] = LIGHT,
-) -> dict[str, Path]:
-    """Write the six plots of ``result`` as PNGs into ``out_dir`` (created if missing).
-
-    ``windows`` and ``table_degrees`` of the error table default to the result's window
-    and (4, 8, 12, 16, 20); ``pairs`` (l, m) of the coefficient maps to
-    :data:`~napari_polarseg.engine.plots.DEFAULT_PAIRS` up to the result's degree.
-    Returns the path of each file by its name (:data:`PLOT_FILES`).
-    """
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    degrees: Sequence[int],
+    windows: Sequence[int] | None,
+    table_degrees: Sequence[int] | None,
+    pairs: Sequence[tuple[int, int]] | None,
+    n_components: int,
+    max_points: int,
+    seed: int,
+    theme: dict[str, str],
+) -> dict[str, Any]:
+    """File name → function drawing that plot of ``result`` (:data:`PLOT_FILES`)."""
     degree = result.params.degree
     if pairs is None:
         pairs = [(l, m) for l, m in plots.DEFAULT_PAIRS if l <= degree]  # noqa: E741
-    figures = {
+    return {
         "scatter.png": lambda: scatter_figure(
             plots.scatter_data(result, max_points, seed), "both", theme=theme
         ),
@@ -264,4 +261,199 @@ def save_plots(
             theme=theme,
         ),
     }
+
+
+def save_plots(
+    result: SegmentationResult,
+    out_dir: str | Path,
+    *,
+    degrees: Sequence[int] = (4, 12, 20),
+    windows: Sequence[int] | None = None,
+    table_degrees: Sequence[int] | None = None,
+    pairs: Sequence[tuple[int, int]] | None = None,
+    n_components: int = 3,
+    max_points: int = 20000,
+    seed: int = 0,
+    dpi: int = 100,
+    theme: dict[str, str] = LIGHT,
+) -> dict[str, Path]:
+    """Write the six plots of ``result`` as PNGs into ``out_dir`` (created if missing).
+
+    ``windows`` and ``table_degrees`` of the error table default to the result's window
+    and (4, 8, 12, 16, 20); ``pairs`` (l, m) of the coefficient maps to
+    :data:`~napari_polarseg.engine.plots.DEFAULT_PAIRS` up to the result's degree.
+    Returns the path of each file by its name (:data:`PLOT_FILES`).
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    figures = _plot_makers(
+        result,
+        degrees=degrees,
+        windows=windows,
+        table_degrees=table_degrees,
+        pairs=pairs,
+        n_components=n_components,
+        max_points=max_points,
+        seed=seed,
+        theme=theme,
+    )
     return {name: _save(make(), out / name, dpi) for name, make in figures.items()}
+
+
+def png_bytes(fig: Figure, dpi: int = 100) -> bytes:
+    """The figure as PNG file content (drawn on an Agg canvas; nothing is written)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    FigureCanvasAgg(fig)
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=dpi, facecolor=fig.get_facecolor())
+    return buf.getvalue()
+
+
+def render_plots(
+    result: SegmentationResult,
+    *,
+    degrees: Sequence[int] = (4, 12, 20),
+    windows: Sequence[int] | None = None,
+    table_degrees: Sequence[int] | None = None,
+    pairs: Sequence[tuple[int, int]] | None = None,
+    n_components: int = 3,
+    max_points: int = 20000,
+    seed: int = 0,
+    dpi: int = 100,
+    theme: dict[str, str] = LIGHT,
+) -> dict[str, bytes]:
+    """The PNGs :func:`save_plots` writes, as file contents by name, in memory.
+
+    For callers that compute everything before writing anything (``polarseg segment
+    --plots``); the arguments are those of :func:`save_plots`.
+    """
+    makers = _plot_makers(
+        result,
+        degrees=degrees,
+        windows=windows,
+        table_degrees=table_degrees,
+        pairs=pairs,
+        n_components=n_components,
+        max_points=max_points,
+        seed=seed,
+        theme=theme,
+    )
+    return {name: png_bytes(make(), dpi) for name, make in makers.items()}
+
+
+# -- parameter sweep ------------------------------------------------------------------------
+
+#: Columns of a sweep drawn by :func:`sweep_heatmap_figure` by default (``ari`` only with
+#: a ground truth), and their titles.
+SWEEP_METRICS = {
+    "stability": "stability",
+    "score": "combined score",
+    "silhouette": "silhouette",
+    "mean_ncut": "mean Ncut (lower is better)",
+    "ari": "ARI (ground truth)",
+    "seconds": "seconds",
+}
+
+
+def sweep_heatmap_figure(
+    result: SweepResult,
+    metrics: str | Sequence[str] | None = None,
+    fig: Figure | None = None,
+    theme: dict[str, str] = LIGHT,
+    annotate: bool = True,
+) -> Figure:
+    """Heatmaps of a parameter sweep: one row per metric, one column per refractive index.
+
+    Each panel is the w × L grid (rows: window size w, columns: degree L) of one metric
+    for one n (:meth:`~napari_polarseg.engine.sweep.SweepResult.grid`), on one colour
+    scale per metric, brighter = better (reversed for the mean Ncut), with the values
+    written in the cells; failed cells are blank and marked ×. The best cell by the
+    sweep's criterion (``result.score``) is outlined in every row.
+
+    Parameters
+    ----------
+    result : SweepResult
+    metrics : str or sequence of str, optional
+        Columns of the sweep to draw (default: :data:`SWEEP_METRICS` without
+        ``seconds``, and without ``ari`` when there is no ground truth).
+    fig, theme
+        As the other figures of this module.
+    annotate : bool
+        Write each cell's value into it.
+    """
+    from matplotlib import colormaps
+    from matplotlib.patches import Rectangle
+
+    if metrics is None:
+        metrics = [
+            m for m in SWEEP_METRICS if m != "seconds" and (m != "ari" or result.has_ground_truth)
+        ]
+    elif isinstance(metrics, str):
+        metrics = [metrics]
+    metrics = list(metrics)
+    n_rows, n_cols = len(metrics), len(result.refractive_indices)
+    nw, nl = len(result.windows), len(result.degrees)
+    panel = (1.2 + 0.55 * nl, 0.9 + 0.42 * nw)
+    fig = _figure(fig, (panel[0] * n_cols + 0.8, panel[1] * n_rows + 0.4), theme)
+    try:
+        best = result.best_cell()
+    except PolarsegError:
+        best = None
+    fg = theme["foreground"]
+    for r, metric in enumerate(metrics):
+        values = result.grid(metric)
+        finite = values[np.isfinite(values)]
+        lo, hi = (float(finite.min()), float(finite.max())) if finite.size else (0.0, 1.0)
+        if not hi > lo:
+            lo, hi = lo - 0.5, hi + 0.5
+        cmap = colormaps["viridis_r" if metric in ("mean_ncut", "seconds") else "viridis"]
+        cmap = cmap.with_extremes(bad=theme["background"])
+        axes = []
+        for k, n in enumerate(result.refractive_indices):
+            ax = fig.add_subplot(n_rows, n_cols, r * n_cols + k + 1)
+            axes.append(ax)
+            grid = np.ma.masked_invalid(values[k])
+            im = ax.imshow(grid, cmap=cmap, vmin=lo, vmax=hi, aspect="auto")
+            ax.set_xticks(range(nl), [str(d) for d in result.degrees])
+            ax.set_yticks(range(nw), [str(w) for w in result.windows])
+            ax.set_xlabel("degree L")
+            ax.set_ylabel("window w")
+            title = SWEEP_METRICS.get(metric, metric)
+            ax.set_title(f"{title}\nn = {n:g}" if n_cols > 1 else title, fontsize="medium")
+            _style(ax, theme)
+            for i in range(nw):
+                for j in range(nl):
+                    v = values[k, i, j]
+                    if not np.isfinite(v):
+                        ax.text(j, i, "×", ha="center", va="center", color=fg)
+                    elif annotate:
+                        shade = (v - lo) / (hi - lo)
+                        if metric in ("mean_ncut", "seconds"):
+                            shade = 1.0 - shade
+                        colour = "black" if shade > 0.55 else "white"
+                        ax.text(
+                            j,
+                            i,
+                            f"{v:.2f}",
+                            ha="center",
+                            va="center",
+                            color=colour,
+                            fontsize="small",
+                        )
+            if best is not None and best.index[0] == k:
+                _, i, j = best.index
+                ax.add_patch(
+                    Rectangle(
+                        (j - 0.5, i - 0.5), 1, 1, fill=False, edgecolor="#ff3b30", linewidth=2.5
+                    )
+                )
+        bar = fig.colorbar(im, ax=axes, shrink=0.9)
+        bar.ax.tick_params(colors=fg, labelsize="small")
+    if best is not None:
+        fig.suptitle(
+            f"best by {result.score}: w = {best.window}, L = {best.degree}, "
+            f"n = {best.refractive_index:g}",
+            color=fg,
+        )
+    return fig

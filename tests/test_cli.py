@@ -165,7 +165,7 @@ def test_segment_all_parameter_flags_reach_params_json(tmp_path, capsys, scene_t
         *("--features", "zonal"),
         *("--scale-mode", "median", "--spatial-radius", "1.5", "--spatial-sigma", "3"),
         *("--ncut-threshold", "0.8", "--min-segment-blocks", "2", "--fit", "robust"),
-        *("--affinity-graph", "sparse"),
+        *("--affinity-graph", "sparse", "--clustering", "kway"),
     ]
     code, _, err = run(capsys, "segment", path, "--out", out, *flags)
     assert code == 0, err
@@ -186,6 +186,7 @@ def test_segment_all_parameter_flags_reach_params_json(tmp_path, capsys, scene_t
         "n_segments": 3,
         "ncut_threshold": 0.8,
         "min_segment_blocks": 2,
+        "clustering": "kway",
         "fit": "robust",
         "affinity_graph": "sparse",
     }

@@ -48,6 +48,7 @@ from .polarimage import (
     validity_mask,
 )
 from .registration import register_stack
+from .sweep import SweepCell, SweepResult  # the function: engine.sweep.sweep
 
 __all__ = [
     "STAGES",
@@ -60,6 +61,8 @@ __all__ = [
     "PolarsegError",
     "SegmentParams",
     "SegmentationResult",
+    "SweepCell",
+    "SweepResult",
     "ZenithEstimate",
     "affinity_matrix",
     "average_duplicate_angles",

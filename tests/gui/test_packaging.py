@@ -42,6 +42,7 @@ def test_manifest_is_valid_and_complete():
         "Batch over a folder",
         "Time series change map",
         "Polarisation plots",
+        "Parameter sweep",
     }
     assert {s.key for s in contributions.sample_data} == {
         "leaves",

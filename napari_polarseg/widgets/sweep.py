@@ -1,0 +1,425 @@
+"""The "Parameter sweep" widget: score a grid of w, L and n on the chosen angle stack.
+
+Thin: the sweep is :func:`napari_polarseg.engine.sweep.iter_sweep` run in a napari
+worker (progress bar per cell, *Cancel* stops after the running cell), the heatmaps are
+:func:`napari_polarseg.figures.sweep_heatmap_figure` on a matplotlib canvas themed like
+napari, the table is the sweep's rows. *Use best* hands the best cell's parameters to the
+*Segment by material* widget (docking it if needed) and runs it; *Save best…* writes them
+as a SegmentParams JSON file (the format of ``polarseg segment --params``).
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Generator
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from magicgui.widgets import ComboBox, Container, LineEdit, PushButton, SpinBox, Table
+from napari.layers import Labels
+
+from .. import figures
+from .. import io as pio
+from ..engine import PolarsegError, SegmentParams, validity_mask
+from ..engine.sweep import DEFAULT_SCORE, SCORES, SweepResult, check_grid, iter_sweep
+from ._base import StackWidget
+from ._layers import layer_tag
+from .batch import params_from
+from .plots import napari_theme
+
+if TYPE_CHECKING:
+    import napari
+    from napari.layers import Layer
+
+    from .segment import SegmentWidget
+
+#: Where the sweep's other parameters come from (the first is the default).
+PARAM_SOURCES = ("recommended", "thesis", "Segment by material widget")
+#: Heatmap menu: text shown → column of the sweep.
+HEATMAPS = (
+    ("stability", "stability"),
+    ("combined score", "score"),
+    ("silhouette", "silhouette"),
+    ("mean Ncut", "mean_ncut"),
+    ("ARI (ground truth)", "ari"),
+    ("seconds", "seconds"),
+)
+#: Table columns: header → sweep column.
+TABLE_COLUMNS = (
+    ("best", None),
+    ("n", "refractive_index"),
+    ("w", "window"),
+    ("L", "degree"),
+    ("segments", "n_segments"),
+    ("stability", "stability"),
+    ("silhouette", "silhouette"),
+    ("mean Ncut", "mean_ncut"),
+    ("score", "score"),
+    ("ARI", "ari"),
+    ("seconds", "seconds"),
+    ("error", "error"),
+)
+#: Display name of the Segment widget in the manifest.
+SEGMENT_WIDGET = "Segment by material"
+
+
+def parse_numbers(text: str, kind: type, what: str) -> list:
+    """Numbers from ``"8, 10, 12"`` (commas, semicolons or spaces); raises PolarsegError."""
+    parts = [p for p in re.split(r"[,;\s]+", str(text).strip()) if p]
+    if not parts:
+        raise PolarsegError(f"give the {what}, e.g. {'8,10,12' if kind is int else '1.45,1.6'}")
+    out = []
+    for p in parts:
+        try:
+            out.append(kind(p))
+        except ValueError:
+            raise PolarsegError(
+                f"{what} must be {'whole ' if kind is int else ''}numbers, got {p!r}"
+            ) from None
+    return out
+
+
+def sweep_table(result: SweepResult | None) -> dict[str, list[Any]]:
+    """Table data (header → values) of a sweep's cells; the best cell is marked ★."""
+    if result is None:
+        return {head: [] for head, _ in TABLE_COLUMNS}
+    try:
+        best = result.best_cell()
+    except PolarsegError:
+        best = None
+
+    def cell(value: Any) -> Any:
+        if value is None:
+            return ""
+        if isinstance(value, float):
+            return "" if not math.isfinite(value) else round(value, 3)
+        return value
+
+    out: dict[str, list[Any]] = {}
+    for head, column in TABLE_COLUMNS:
+        if column is None:
+            out[head] = ["★" if c is best else "" for c in result.cells]
+        elif column == "refractive_index":
+            out[head] = [f"{c.refractive_index:g}" for c in result.cells]
+        else:
+            out[head] = [cell(getattr(c, column)) for c in result.cells]
+    return out
+
+
+def sweep_job(
+    data: Any,
+    angles_rad: np.ndarray,
+    base: SegmentParams,
+    windows: list[int],
+    degrees: list[int],
+    refractive_indices: list[float] | None,
+    truth: np.ndarray | None,
+    score: str,
+) -> Generator[tuple[str, int, int], None, SweepResult]:
+    """Worker job: the sweep, yielding ``("w=… L=… n=…", done, total)`` after each cell.
+
+    Saturated and black samples are left out as in the Segment widget. Stopping the
+    worker between two yields stops the sweep.
+    """
+    stack = np.asarray(data)
+    mask = validity_mask(stack, saturation="auto", dark_level=0)
+    gen = iter_sweep(
+        stack, angles_rad, base, windows, degrees, refractive_indices, truth, score, mask=mask
+    )
+    try:
+        while True:
+            try:
+                done, total, cell = next(gen)
+            except StopIteration as stop:
+                return stop.value
+            text = f"w={cell.window} L={cell.degree} n={cell.refractive_index:g}"
+            yield text, done, total
+    finally:
+        gen.close()
+
+
+class SweepWidget(StackWidget):
+    """Sweep window size w, harmonic degree L and refractive index n on an angle stack.
+
+    The other parameters come from a preset (recommended, thesis) or from the docked
+    *Segment by material* widget; *segments* (0: from those parameters) sets the number
+    of segments. The grid is typed as lists (``8,10,12``). With a *ground truth* Labels
+    layer (any label ids; the stack's height × width) every cell also gets its adjusted
+    Rand index. *best by* chooses the criterion of the best cell (the default, stability,
+    is the label-free one that tracked the ground truth best on the synthetic scenes;
+    README "Parameter sweep"). *Run sweep* runs in a worker with a progress bar;
+    *Cancel* stops after the running cell. The canvas shows one metric as heatmaps (rows
+    w, columns L, one per n; the best cell outlined) and the table every cell.
+
+    Parameters
+    ----------
+    viewer : napari.viewer.Viewer
+        The viewer whose layers the widget reads.
+    """
+
+    run_text = "Run sweep"
+    progress_desc = "Parameter sweep"
+
+    def __init__(self, viewer: napari.viewer.Viewer) -> None:
+        from matplotlib.backends.backend_qtagg import FigureCanvasQTAgg
+        from matplotlib.figure import Figure
+
+        super().__init__(viewer)
+        self.result: SweepResult | None = None
+        self._source: Layer | None = None
+        self.source = ComboBox(
+            label="parameters",
+            choices=list(PARAM_SOURCES),
+            value=PARAM_SOURCES[0],
+            tooltip="The parameters of every cell apart from w, L and n",
+        )
+        self.windows = LineEdit(
+            label="windows w", value="8,10,12", tooltip="Window sizes in pixels, comma-separated"
+        )
+        self.degrees = LineEdit(
+            label="degrees L", value="4,8,12", tooltip="Harmonic degrees, comma-separated"
+        )
+        self.refractive_indices = LineEdit(
+            label="refractive indices n",
+            value="",
+            tooltip="Refractive indices, comma-separated; empty: the parameters' n",
+        )
+        self.n_segments = SpinBox(
+            label="segments", value=0, min=0, max=256, tooltip="0: from the parameters"
+        )
+        self.ground_truth = ComboBox(
+            label="ground truth",
+            choices=self._truth_choices,
+            nullable=True,
+            tooltip="A Labels layer of the true materials (the stack's height x width): adds "
+            "the adjusted Rand index of every cell",
+        )
+        self.ground_truth.null_string = "none"
+        self.ground_truth.reset_choices()
+        self.ground_truth.value = None
+        self.score = ComboBox(
+            label="best by",
+            choices=list(SCORES),
+            value=DEFAULT_SCORE,
+            tooltip="What picks the best cell: stability (mean ARI with the neighbouring "
+            "cells), the combined label-free score, silhouette, the smallest mean Ncut, or "
+            "the ARI against the ground truth",
+        )
+        self.metric = ComboBox(
+            label="heatmap", choices=list(HEATMAPS), value="stability", tooltip="Metric shown"
+        )
+        self.use_button = PushButton(text="Use best", enabled=False)
+        self.save_button = PushButton(text="Save best…", enabled=False)
+        self._add_parameters(
+            [
+                self.source,
+                self.windows,
+                self.degrees,
+                self.refractive_indices,
+                self.n_segments,
+                self.ground_truth,
+                self.score,
+            ]
+        )
+        self.theme = napari_theme(viewer)
+        self.figure = Figure(figsize=(4.0, 3.0), layout="constrained")
+        self.canvas = FigureCanvasQTAgg(self.figure)
+        self.canvas.setMinimumHeight(260)
+        self.table = Table(value=sweep_table(None))
+        self.table.native.setMinimumHeight(160)
+        buttons = Container(layout="horizontal", widgets=[self.use_button, self.save_button])
+        buttons.margins = (0, 0, 0, 0)
+        self.append(self.metric)
+        # below the labelled controls: heatmaps, the two buttons, the table
+        layout = self.native.layout()
+        layout.addWidget(self.canvas)
+        layout.addWidget(buttons.native)
+        layout.addWidget(self.table.native)
+        self._buttons = buttons
+        self.metric.changed.connect(self.draw)
+        self.use_button.changed.connect(self.use_best)
+        self.save_button.changed.connect(self._save_clicked)
+        self.stack_layer.changed.connect(self.ground_truth.reset_choices)
+        self.draw()
+
+    # -- inputs -----------------------------------------------------------------------
+    def _truth_choices(self, _widget: Any = None) -> list[tuple[str, Layer]]:
+        """The user's 2-D Labels layers with the chosen stack's height × width."""
+        stack = getattr(self, "stack_layer", None)
+        stack = None if stack is None else stack.value
+        if stack is None:
+            return []
+        size = tuple(stack.data.shape[-2:])
+        return [
+            (layer.name, layer)
+            for layer in self._viewer.layers
+            if isinstance(layer, Labels)
+            and layer_tag(layer) is None
+            and layer.ndim == 2
+            and not layer.multiscale
+            and tuple(layer.data.shape) == size
+        ]
+
+    def _refresh_stacks(self) -> None:
+        super()._refresh_stacks()
+        truth = getattr(self, "ground_truth", None)  # None while the base class initialises
+        if truth is not None:
+            truth.reset_choices()
+
+    def base_params(self) -> SegmentParams:
+        """The parameters of every cell apart from w, L, n (raises PolarsegError)."""
+        params = params_from(self._viewer, self.source.value)
+        if int(self.n_segments.value) > 0:
+            params = params.replace(n_segments=int(self.n_segments.value))
+        return params
+
+    def grid(self) -> tuple[list[int], list[int], list[float] | None]:
+        """The windows, degrees and refractive indices typed (raises PolarsegError)."""
+        windows = parse_numbers(self.windows.value, int, "window sizes")
+        degrees = parse_numbers(self.degrees.value, int, "harmonic degrees")
+        text = self.refractive_indices.value.strip()
+        ns = parse_numbers(text, float, "refractive indices") if text else None
+        return windows, degrees, ns
+
+    # -- running ----------------------------------------------------------------------
+    def run(self, *_: Any) -> None:
+        """Start the sweep in a worker; returns at once."""
+        try:
+            layer, angles_deg = self.current_stack()
+            base = self.base_params()
+            windows, degrees, ns = self.grid()
+            ws, ls, nn = check_grid(base, windows, degrees, ns)
+            truth_layer = self.ground_truth.value
+            truth = None if truth_layer is None else np.asarray(truth_layer.data)
+            score = self.score.value
+            if score == "ari" and truth is None:
+                raise PolarsegError("'best by ari' needs a ground-truth Labels layer")
+        except PolarsegError as exc:
+            self._fail(exc)
+            return
+        total = len(ws) * len(ls) * len(nn)
+
+        def on_result(run_id: int, result: SweepResult) -> None:
+            if layer in self._viewer.layers:
+                self.set_result(layer, result)
+
+        args = (layer.data, np.deg2rad(angles_deg), base, windows, degrees, ns, truth, score)
+        self._set_status(f"running {total} cells…")
+        self._submit(sweep_job, args, total, on_result)
+
+    def set_result(self, layer: Layer, result: SweepResult) -> None:
+        """Show ``result`` (a sweep of ``layer``): heatmap, table, status."""
+        self.result, self._source = result, layer
+        self.table.value = sweep_table(result)
+        self.table.native.resizeColumnsToContents()
+        failed = sum(not c.ok for c in result.cells)
+        try:
+            best = result.best_cell()
+            text = (
+                f"best by {result.score}: w = {best.window}, L = {best.degree}, "
+                f"n = {best.refractive_index:g}"
+            )
+            self.use_button.enabled = self.save_button.enabled = True
+        except PolarsegError as exc:
+            text = str(exc)
+            self.use_button.enabled = self.save_button.enabled = False
+        self._done(
+            f"{text} · {len(result.cells)} cells ({failed} failed) in {result.total_seconds:.2f} s"
+        )
+        self.draw()
+
+    # -- drawing ----------------------------------------------------------------------
+    def draw(self, *_: Any) -> None:
+        """Draw the chosen metric's heatmaps (a hint before the first sweep)."""
+        result, theme = self.result, self.theme
+        if result is None:
+            self.figure.clear()
+            self.figure.set_facecolor(theme["background"])
+            self.figure.text(
+                0.5,
+                0.5,
+                "press 'Run sweep' to score the grid",
+                ha="center",
+                va="center",
+                wrap=True,
+                color=theme["foreground"],
+            )
+        else:
+            metric = self.metric.value
+            if metric == "ari" and not result.has_ground_truth:
+                metric = "stability"
+            figures.sweep_heatmap_figure(result, metric, fig=self.figure, theme=theme)
+        self.canvas.draw_idle()
+
+    # -- the best cell ----------------------------------------------------------------
+    def best_params(self) -> SegmentParams:
+        """The best cell's parameters (raises PolarsegError before a sweep)."""
+        if self.result is None:
+            raise PolarsegError("run a sweep first")
+        return self.result.best()
+
+    def segment_widget(self) -> SegmentWidget:
+        """The docked *Segment by material* widget, docked now if it is not."""
+        from .segment import SegmentWidget
+
+        for widget in self._viewer.window.dock_widgets.values():
+            if isinstance(widget, SegmentWidget):
+                return widget
+        _, widget = self._viewer.window.add_plugin_dock_widget("napari-polarseg", SEGMENT_WIDGET)
+        return widget
+
+    def use_best(self, *_: Any) -> SegmentWidget | None:
+        """Set the Segment widget to the best cell's parameters on this stack and run it."""
+        try:
+            params = self.best_params()
+            source = self._source
+            if source is None or source not in self._viewer.layers:
+                raise PolarsegError("the swept stack layer is no longer in the viewer")
+        except PolarsegError as exc:
+            self._fail(exc)
+            return None
+        widget = self.segment_widget()
+        widget.stack_layer.value = source
+        if not widget.angles.value:
+            widget.angles.value = self.angles.value
+        widget.set_params(params)
+        widget.run()
+        self._done(
+            f"'{SEGMENT_WIDGET}' runs w = {params.window}, L = {params.degree}, "
+            f"n = {params.refractive_index:g}"
+        )
+        return widget
+
+    def save_best(self, path: str | Path | None = None) -> Path | None:
+        """Write the best parameters as SegmentParams JSON (asks for a file if no ``path``).
+
+        The file is what ``polarseg segment --params`` and the batch widget read.
+        """
+        try:
+            params = self.best_params()
+        except PolarsegError as exc:
+            self._fail(exc)
+            return None
+        if path is None:
+            from qtpy.QtWidgets import QFileDialog
+
+            name, _ = QFileDialog.getSaveFileName(
+                self.native, "Save the best parameters", "best_params.json", "JSON (*.json)"
+            )
+            if not name:
+                return None
+            path = name
+        path = Path(path)
+        try:
+            with pio.atomic_output(path) as tmp:
+                tmp.write_text(params.to_json() + "\n", encoding="utf-8")
+        except OSError as exc:
+            self._fail(PolarsegError(f"cannot write {path}: {exc.strerror or exc}"))
+            return None
+        self._done(f"saved the best parameters to {path}")
+        return path
+
+    def _save_clicked(self, *_: Any) -> None:
+        self.save_best()
