@@ -57,6 +57,10 @@ ROLES: dict[str, LayerStyle] = {
         "masked pixels", layer_type="labels", extra={"visible": False, "opacity": 0.7}
     ),
     "residual": LayerStyle("fit residual", colormap="magma", extra={"visible": False}),
+    # scribble mode: probability of the class the classifier chose (1/K .. 1)
+    "probability": LayerStyle(
+        "class probability", colormap="cividis", limits=(0.0, 1.0), extra={"visible": False}
+    ),
 }
 
 
@@ -143,6 +147,15 @@ def show_output(
     return viewer.add_image(
         data, name=style.name, metadata=meta, **placement, **_image_style(role, data)
     )
+
+
+def remove_output(viewer: napari.Viewer, role: str, source: Layer) -> bool:
+    """Remove the plugin's ``role`` layer of ``source`` (True if there was one)."""
+    layer = find_output(viewer, role, source)
+    if layer is None:
+        return False
+    viewer.layers.remove(layer)
+    return True
 
 
 def own_layers(viewer: napari.Viewer, source: Layer | None = None) -> list[Layer]:

@@ -15,17 +15,24 @@ viewer, and guarantees:
 :class:`PipelineStore` keeps one :class:`~napari_polarseg.engine.Pipeline` per
 angle-stack layer so that a rerun only recomputes the stages a parameter change made
 stale; a different mask (another region, an edited one, or none) builds a new one.
+
+:func:`scribble_stages` is the scribble mode's job body: the pipeline's stages up to the
+block features, then the classifier trained on the user's strokes
+(:meth:`~napari_polarseg.engine.Pipeline.scribble_result`) instead of affinity and cut,
+assembled into a :class:`~napari_polarseg.engine.SegmentationResult` like the cut's.
 """
 
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import os
 import re
 import threading
 import time
+import warnings
 from collections.abc import Callable, Generator, Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -33,7 +40,8 @@ from napari.qt.threading import GeneratorWorker, create_worker
 from napari.utils.notifications import show_error
 from qtpy.QtCore import QCoreApplication
 
-from ..engine import Pipeline, PolarsegError, SegmentParams, validity_mask
+from ..engine import Pipeline, PolarsegError, SegmentationResult, SegmentParams, validity_mask
+from ..engine.polarimage import duplicate_angle_frames
 
 Stage = tuple[str, int, int]
 Job = Callable[..., Generator[Stage, None, Any]]
@@ -131,6 +139,133 @@ def parse_angles(text: str) -> np.ndarray:
 def format_angles(angles_deg: Any) -> str:
     """``[0.0, 45.0]`` -> ``"0, 45"``."""
     return ", ".join(f"{float(a):g}" for a in np.asarray(angles_deg, dtype=float).ravel())
+
+
+def content_digest(array: Any) -> str | None:
+    """A short fingerprint of an array's shape, dtype and values (None for None).
+
+    Used to tell whether a mask or scribbles layer was edited since a run.
+    """
+    if array is None:
+        return None
+    a = np.ascontiguousarray(array)
+    if a.dtype == bool:
+        a = np.packbits(a)
+    digest = hashlib.blake2b(a.tobytes(), digest_size=16).hexdigest()
+    return f"{np.shape(array)}:{np.asarray(array).dtype}:{digest}"
+
+
+# -- scribble mode ----------------------------------------------------------------------
+
+#: Pipeline stages the scribble mode runs; the classifier replaces affinity, cut, labels.
+SCRIBBLE_STAGES = ("polarisation", "normals", "harmonics", "pca", "reconstruction")
+
+
+def scribble_problem(scribbles: np.ndarray) -> str | None:
+    """Why ``scribbles`` cannot train the classifier yet (None when they can).
+
+    Checked in the GUI thread before a run: at least two distinct non-zero labels.
+    """
+    values = np.unique(np.asarray(scribbles))
+    if values.size and values[0] < 0:
+        return "scribble labels must be >= 0 (0 = unlabelled)"
+    marked = values[values > 0]
+    if marked.size >= 2:
+        return None
+    found = "none yet" if marked.size == 0 else f"only label {int(marked[0])}"
+    return f"paint at least 2 materials (label 1 on one material, 2 on another, …); found {found}"
+
+
+@dataclass
+class ScribbleOutput:
+    """What a scribble-mode job returns.
+
+    ``result.labels`` and ``result.block_labels`` hold the class index 0..K-1;
+    ``classes[k]`` is the scribble value (label) of class k; ``probabilities`` is
+    (K, H, W) and sums to 1 over K. When the strokes cannot train the classifier
+    (e.g. one material holds the majority of no block) ``problem`` says why and the
+    other fields are None.
+    """
+
+    result: SegmentationResult | None
+    probabilities: np.ndarray | None
+    classes: np.ndarray | None
+    training_blocks: int = 0
+    notes: list[str] = field(default_factory=list)
+    problem: str | None = None
+
+
+def scribble_stages(
+    pipe: Pipeline,
+    scribbles: np.ndarray,
+    params: SegmentParams,
+    reconstruction: bool = True,
+) -> Generator[Stage, None, ScribbleOutput]:
+    """Run the stages the classifier needs (yielding after each), then classify.
+
+    ``len(SCRIBBLE_STAGES)`` yields (one fewer without the reconstruction); the
+    classifier (milliseconds) runs after the last one. The pipeline's cache is used and
+    kept as for a normalized-cut run: the cut's own stages (affinity, cut, labels) are
+    neither computed nor invalidated.
+    """
+    from ..engine.scribbles import training_blocks
+
+    names = SCRIBBLE_STAGES if reconstruction else SCRIBBLE_STAGES[:-1]
+    total = len(names)
+    timings: dict[str, float] = {}
+    recomputed: list[str] = []
+    for i, name in enumerate(names):
+        before = pipe.calls[name]
+        t0 = time.perf_counter()
+        pipe.get(name)
+        if pipe.calls[name] != before:
+            timings[name] = time.perf_counter() - t0
+            recomputed.append(name)
+        yield name, i + 1, total
+    if params != pipe.params:
+        raise PolarsegError("parameters changed while the pipeline was running")
+    t0 = time.perf_counter()
+    window = params.window
+    coef = pipe.get("harmonics")
+    grid = coef.shape[:2]
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            labels, proba = pipe.scribble_result(scribbles)
+            blocks, _, classes = training_blocks(scribbles, grid, window)
+    except PolarsegError as exc:
+        return ScribbleOutput(None, None, None, problem=str(exc))
+    notes = sorted({str(w.message) for w in caught})
+    timings["scribbles"] = time.perf_counter() - t0
+    recomputed.append("scribbles")
+    pol, nrm, pca = pipe.get("polarisation"), pipe.get("normals"), pipe.get("pca")
+    rec = pipe.get("reconstruction") if reconstruction else None
+    labels = np.asarray(labels, dtype=np.int32)
+    block = labels[: grid[0] * window : window, : grid[1] * window : window].copy()
+    result = SegmentationResult(
+        params=params,
+        intensity=pol.intensity,
+        dop=pol.dop,
+        phase=pol.phase,
+        residual=pol.residual,
+        zenith=nrm.zenith,
+        azimuth=nrm.azimuth,
+        clamped=nrm.clamped,
+        coefficients=coef,
+        features=pca.features,
+        explained_variance_ratio=pca.explained_variance_ratio,
+        block_labels=block,
+        labels=labels,
+        ncut_values=[],
+        timings={name: timings.get(name, 0.0) for name in (*names, "scribbles")},
+        recomputed=recomputed,
+        reconstruction=None if rec is None else rec.intensity,
+        reconstruction_error=None if rec is None else rec.error,
+        valid=~pol.invalid,
+        mask_counts=pipe.mask.counts(),
+        duplicate_angle_frames=duplicate_angle_frames(pipe.angles),
+    )
+    return ScribbleOutput(result, np.asarray(proba), np.asarray(classes), int(blocks.size), notes)
 
 
 @dataclass

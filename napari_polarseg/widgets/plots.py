@@ -14,9 +14,10 @@ import numpy as np
 from magicgui.widgets import ComboBox, PushButton
 
 from .. import figures
-from ..engine import Pipeline, PolarsegError, SegmentParams, plots, validity_mask
+from ..engine import STAGES, Pipeline, PolarsegError, SegmentParams, plots, validity_mask
 from ._base import StackWidget
 from ._layers import TAG, find_output, fitted_limits, source_key
+from ._runner import SCRIBBLE_STAGES, content_digest, scribble_stages
 
 if TYPE_CHECKING:
     import napari
@@ -45,12 +46,25 @@ def component_role(i: int) -> str:
 
 
 def segment_job(
-    data: Any, angles_rad: np.ndarray, params: SegmentParams
+    data: Any,
+    angles_rad: np.ndarray,
+    params: SegmentParams,
+    region: np.ndarray | None = None,
+    scribbles: np.ndarray | None = None,
 ) -> Generator[tuple[str, int, int], None, Any]:
-    """Worker job: the segmentation of a stack with ``params`` (as the Segment widget)."""
+    """Worker job: the segmentation of a stack with ``params`` (as the Segment widget).
+
+    ``region`` (H, W bool, True = use) is the user's mask; with ``scribbles`` (H, W
+    labels) the scribble classifier replaces the normalized cut.
+    """
     stack = np.asarray(data)
-    mask = validity_mask(stack, saturation="auto", dark_level=0)
+    mask = validity_mask(stack, saturation="auto", dark_level=0, region=region)
     pipe = Pipeline(stack, np.asarray(angles_rad, dtype=float), params, mask=mask)
+    if scribbles is not None:
+        out = yield from scribble_stages(pipe, scribbles, params, reconstruction=True)
+        if out.problem is not None:
+            raise PolarsegError(f"scribbles: {out.problem}")
+        return out.result
     yield from pipe.run_iter(reconstruction=True)
     return pipe.result(reconstruction=True, params=params)
 
@@ -83,8 +97,9 @@ class PlotsWidget(StackWidget):
     """Plots of the last segmentation of an angle stack (thesis figures 4.1, 5.17).
 
     *Load segmentation* reads the result the docked *Segment by material* widget keeps
-    for the stack (when its cached pipeline is up to date), or recomputes it in a worker
-    from the parameters stored on the stack's ``segments`` layer. The plot menu shows Î
+    for the stack's ``segments`` layer, or recomputes it in a worker from what that layer
+    records: the parameters, and the mask and scribbles layers used (read again from the
+    viewer; the status line says so when they were edited since). The plot menu shows Î
     against ρ or φ coloured by segment, the PCA's explained variance, or histograms of Î
     and of its reconstructions at L = 4, 12, 20. *Add component maps* adds the first
     principal components at pixel resolution as image layers (replaced in place).
@@ -126,15 +141,52 @@ class PlotsWidget(StackWidget):
             )
         return SegmentParams.from_dict({k: v for k, v in meta.items() if k != "angles_deg"})
 
+    def segmentation_inputs(
+        self, layer: Layer
+    ) -> tuple[np.ndarray | None, np.ndarray | None, list[str]]:
+        """The mask region and scribbles of the stack's last segmentation, and notes.
+
+        Read from the layers the ``segments`` layer's metadata names (raises
+        PolarsegError if one was removed); a note says when one was edited since.
+        """
+        segments = find_output(self._viewer, "segments", layer)
+        inputs = None if segments is None else segments.metadata.get("polarseg_inputs")
+        inputs = inputs if isinstance(inputs, dict) else {}
+        notes: list[str] = []
+        found: dict[str, np.ndarray | None] = {"mask": None, "scribbles": None}
+        for role in found:
+            info = inputs.get(role)
+            if not isinstance(info, dict):
+                continue
+            source = self._layer_by_key(info.get("layer_id"))
+            if source is None:
+                raise PolarsegError(
+                    f"the {role} layer {info.get('name')!r} of the segmentation of "
+                    f"{layer.name!r} is no longer in the viewer"
+                )
+            data = np.array(source.data, copy=True)
+            if role == "mask":
+                data = data != 0
+            if content_digest(data) != info.get("digest"):
+                notes.append(f"{role} {source.name!r} edited since the segmentation")
+            found[role] = data
+        return found["mask"], found["scribbles"], notes
+
+    def _layer_by_key(self, key: Any) -> Layer | None:
+        for candidate in self._viewer.layers:
+            if source_key(candidate) == key:
+                return candidate
+        return None
+
     def cached_result(self, layer: Layer, params: SegmentParams) -> SegmentationResult | None:
-        """The docked Segment widget's result for ``layer``, if its pipeline is current."""
+        """The docked Segment widget's result behind ``layer``'s ``segments`` layer."""
         from .segment import SegmentWidget
 
         for widget in self._viewer.window.dock_widgets.values():
             if isinstance(widget, SegmentWidget):
-                pipe = widget.pipeline_for(layer)
-                if pipe is not None and pipe.params == params and not pipe.stale_stages():
-                    return pipe.result(reconstruction=True)
+                result = widget.shown_result(layer)
+                if result is not None and result.params == params:
+                    return result
         return None
 
     def run(self, *_: Any) -> None:
@@ -149,18 +201,27 @@ class PlotsWidget(StackWidget):
         if result is not None:
             self.set_result(layer, result)
             return
+        try:
+            region, scribbles, notes = self.segmentation_inputs(layer)
+        except PolarsegError as exc:
+            self._fail(exc)
+            return
 
         def on_result(run_id: int, value: Any) -> None:
             if layer in self._viewer.layers and self.stack_layer.value is layer:
-                self.set_result(layer, value)
+                self.set_result(layer, value, notes)
 
-        args = (layer.data, np.deg2rad(angles_deg), params)
-        self._submit(segment_job, args, 8, on_result)
+        args = (layer.data, np.deg2rad(angles_deg), params, region, scribbles)
+        total = len(STAGES) if scribbles is None else len(SCRIBBLE_STAGES)
+        self._submit(segment_job, args, total, on_result)
 
-    def set_result(self, layer: Layer, result: SegmentationResult) -> None:
+    def set_result(
+        self, layer: Layer, result: SegmentationResult, notes: list[str] | None = None
+    ) -> None:
         """Plot ``result`` (a segmentation of ``layer``)."""
         self.result, self._source, self.histograms = result, layer, None
-        self._done(f"{result.n_segments} segments · {result.features.shape[1]} components")
+        parts = [f"{result.n_segments} segments", f"{result.features.shape[1]} components"]
+        self._done(" · ".join([*parts, *(notes or [])]))
         self.draw()
 
     def _on_stack_changed(self, layer: Layer | None) -> None:

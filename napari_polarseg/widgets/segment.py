@@ -2,18 +2,21 @@
 
 from __future__ import annotations
 
-import hashlib
+import contextlib
+import json
 import time
 from collections.abc import Generator
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from magicgui.widgets import CheckBox, ComboBox, FloatSpinBox, SpinBox
+from magicgui.widgets import CheckBox, ComboBox, Container, FloatSpinBox, PushButton, SpinBox
 from napari.layers import Labels
 from qtpy.QtCore import QTimer
 
-from ..engine import STAGES, Pipeline, PolarsegError, SegmentParams
+from ..engine import STAGES, Pipeline, PolarsegError, SegmentationResult, SegmentParams
 from ..engine.params import (
+    CLUSTERING_METHODS,
     COEFFICIENT_METHODS,
     FEATURE_KINDS,
     FIT_METHODS,
@@ -24,8 +27,15 @@ from ..engine.params import (
     SPECULAR_BRANCHES,
 )
 from ._base import StackWidget
-from ._layers import find_output, layer_tag, show_output, source_key
-from ._runner import PipelineStore
+from ._layers import find_output, layer_tag, remove_output, show_output, source_key
+from ._runner import (
+    SCRIBBLE_STAGES,
+    PipelineStore,
+    ScribbleOutput,
+    content_digest,
+    scribble_problem,
+    scribble_stages,
+)
 
 if TYPE_CHECKING:
     import napari
@@ -40,8 +50,18 @@ PRESETS: dict[str, SegmentParams] = {"thesis": SegmentParams(), "recommended": R
 #: Text shown for each sinusoid-fit method of the "fit" menu.
 FIT_NAMES = {"lsq": "least squares", "robust": "robust"}
 
+#: Text shown for each clustering method of the "clustering" menu.
+CLUSTERING_NAMES = {"recursive": "recursive two-way", "kway": "k-way spectral"}
+
 #: Text of the "mask" menu entry that segments every pixel.
 NO_MASK = "none"
+
+#: Text of the "scribbles" menu entry that segments without supervision (normalized cut).
+NO_SCRIBBLES = "none (unsupervised)"
+
+#: Layer events that mean the user edited a Labels layer: a brush, fill or eraser stroke
+#: (``paint``), new data (``data``), undo/redo and other refreshes (``set_data``).
+EDIT_EVENTS = ("paint", "data", "set_data")
 
 #: Words of the status line for the masked-pixel counts of ``result.mask_counts``.
 MASK_REASONS = (
@@ -64,9 +84,17 @@ CONTROLLED = (
     "variance",
     "scale",
     "scale_mode",
+    "clustering",
     "min_segment_blocks",
     "n_segments",
 )
+
+#: Controls of the normalized cut only: disabled while scribbles replace the cut.
+CUT_ONLY = ("scale", "scale_mode", "clustering", "min_segment_blocks", "n_segments")
+
+#: Decimals the float controls show. A value with more (e.g. loaded from a file) is kept
+#: exactly as long as the control shows it rounded (see ``SegmentWidget.params``).
+FLOAT_DECIMALS = {"refractive_index": 3, "variance": 3, "scale": 3}
 
 
 def segment_job(
@@ -90,6 +118,63 @@ def segment_job(
     return pipe.result(reconstruction=True, params=params)
 
 
+def float_box(decimals: int, **kwargs: Any) -> FloatSpinBox:
+    """A FloatSpinBox showing ``decimals`` decimals (Qt's default, 2, would round the
+    range and the values, e.g. a minimum of 0.001 to 0)."""
+    box = FloatSpinBox(**kwargs)
+    box.native.setDecimals(decimals)
+    for name in ("min", "max", "value"):
+        if name in kwargs:
+            setattr(box, name, kwargs[name])
+    return box
+
+
+def scribble_job(
+    store: PipelineStore,
+    key: str,
+    data: Any,
+    angles_rad: np.ndarray,
+    params: SegmentParams,
+    scribbles: np.ndarray,
+    region: np.ndarray | None = None,
+    mask_key: str | None = None,
+) -> Generator[tuple[str, int, int], None, ScribbleOutput]:
+    """Worker job of the scribble mode: the cached pipeline's stages up to the block
+    features (and the reconstruction), then the classifier trained on ``scribbles``
+    (:func:`~napari_polarseg.widgets._runner.scribble_stages`)."""
+    pipe = store.obtain(key, data, angles_rad, params, region=region, mask_key=mask_key)
+    return (yield from scribble_stages(pipe, scribbles, params, reconstruction=True))
+
+
+def read_params_file(path: str | Path) -> SegmentParams:
+    """SegmentParams from a JSON file, as ``polarseg segment --params`` reads it.
+
+    Either a SegmentParams object (``SegmentParams.to_json``, what *Save parameters…*
+    writes) or a ``params.json`` written by ``polarseg`` (its ``"params"`` entry).
+    Missing fields take the thesis defaults; an unknown field, a value out of range,
+    invalid JSON or an unreadable file raise :class:`PolarsegError` naming the file.
+    """
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        reason = getattr(exc, "strerror", None) or str(exc)
+        raise PolarsegError(f"{path}: cannot read the parameters file ({reason})") from None
+    try:
+        data = json.loads(text)
+    except ValueError as exc:
+        raise PolarsegError(f"{path}: parameters file is not valid JSON ({exc})") from None
+    if isinstance(data, dict) and isinstance(data.get("params"), dict):
+        data = data["params"]  # a params.json written by polarseg
+    if not isinstance(data, dict):
+        raise PolarsegError(f"{path}: parameters file must hold a JSON object")
+    try:
+        return SegmentParams.from_dict(data)
+    except PolarsegError as exc:
+        raise PolarsegError(f"{path}: {exc}") from None
+    except (TypeError, ValueError) as exc:
+        raise PolarsegError(f"{path}: a parameter has the wrong type ({exc})") from None
+
+
 def mask_text(counts: dict[str, Any]) -> str:
     """``"masked: 120 saturated, 3 black"`` from ``result.mask_counts`` ("" if none)."""
     parts = [f"{int(counts[k])} {word}" for k, word in MASK_REASONS if counts.get(k)]
@@ -98,39 +183,46 @@ def mask_text(counts: dict[str, Any]) -> str:
 
 def region_digest(region: np.ndarray | None) -> str | None:
     """A short fingerprint of a region's content (None for no region)."""
-    if region is None:
-        return None
-    bits = np.packbits(np.asarray(region, dtype=bool))
-    return f"{region.shape}:{hashlib.blake2b(bits.tobytes(), digest_size=16).hexdigest()}"
+    return None if region is None else content_digest(np.asarray(region, dtype=bool))
 
 
 class SegmentWidget(StackWidget):
     """Segment an angle stack by material (thesis section 4.5) with live parameters.
 
-    Controls: a preset (thesis values or the recommended ones), window size w, harmonic
-    degree L, refractive index n, Fresnel model (and specular branch), coefficient
-    estimator, block features, PCA variance share, affinity scale s and its mode, minimum
-    segment size, number of segments, the sinusoid fit (least squares or robust) and a
-    mask (none, or a Labels layer of the stack's height x width: non-zero = segment the
-    pixel); Run and Cancel; a live-update toggle that reruns after every change.
+    Controls: a preset (thesis values or the recommended ones), *Load parameters…* and
+    *Save parameters…* (the JSON of ``polarseg segment --params``), window size w,
+    harmonic degree L, refractive index n, Fresnel model (and specular branch),
+    coefficient estimator, block features, PCA variance share, affinity scale s and its
+    mode, clustering (recursive two-way cuts or k-way spectral), minimum segment size,
+    number of segments, the sinusoid fit (least squares or robust), a mask (none, or a
+    Labels layer of the stack's height x width: non-zero = segment the pixel) and
+    scribbles (none = unsupervised, or a Labels layer of strokes, 1, 2, … = materials);
+    *New scribbles layer*; Run and Cancel; a live-update toggle that reruns after every
+    change, including every stroke painted into the chosen mask or scribbles layer.
     Saturated samples (at the integer dtype's maximum) and black ones (at or below 0)
     are always left out of the fit and counted in the status line.
 
     One :class:`~napari_polarseg.engine.Pipeline` is kept per stack layer, so a rerun
     computes only the stages a change made stale (changing the number of segments
-    recomputes only the labels). The mask is read at every run: choosing another one,
-    or painting the chosen Labels layer, builds a new pipeline at the next run. At most
-    one worker runs at a time; a change during a run stops it at the next stage boundary
-    and starts the newest request.
+    recomputes only the labels; repainting scribbles only retrains the classifier). The
+    mask is read at every run: choosing another one, or painting the chosen Labels
+    layer, builds a new pipeline at the next run. At most one worker runs at a time; a
+    change during a run stops it at the next stage boundary and starts the newest
+    request.
 
     Output layers (replaced in place on a rerun): ``segments`` (Labels, one label per
     segment over every pixel; segment k of the engine is label k + 1 because napari
-    draws label 0 as transparent background) and ``reconstruction error`` (Image,
-    per-pixel |Î rebuilt from the block harmonics − Î|, added hidden below the segments;
-    its mean is in the status line). Once a run leaves pixels out (mask, saturated, black)
-    or uses the robust fit, also ``masked pixels`` (Labels, 1 where a pixel was left out
-    of the fit and the features) and ``fit residual`` (Image, RMS residual of the
-    per-pixel sinusoid fit), both added hidden and updated on every later run.
+    draws label 0 as transparent background; with scribbles, each pixel gets the label
+    of the scribbled material the classifier chose, so segments and strokes share their
+    colours) and ``reconstruction error`` (Image, per-pixel |Î rebuilt from the block
+    harmonics − Î|, added hidden below the segments; its mean is in the status line).
+    Once a run leaves pixels out (mask, saturated, black) or uses the robust fit, also
+    ``masked pixels`` (Labels, 1 where a pixel was left out of the fit and the features)
+    and ``fit residual`` (Image, RMS residual of the per-pixel sinusoid fit), both added
+    hidden and updated on every later run. With scribbles, also ``class probability``
+    (Image, hidden: the classifier's probability of the chosen class, 1/K … 1, low where
+    it hesitates between materials); the probabilities of every class are
+    :attr:`probabilities` (K, H, W) with their labels in :attr:`classes`.
 
     Parameters
     ----------
@@ -146,6 +238,16 @@ class SegmentWidget(StackWidget):
         d = PRESETS["thesis"]
         self._base = d  # values of the fields without a control
         self.store = PipelineStore()
+        #: Per stack key: (result, inputs) behind the stack's ``segments`` layer.
+        self._shown: dict[str, tuple[SegmentationResult, dict[str, Any]]] = {}
+        #: Class probabilities (K, H, W) of the last scribble run shown, and the
+        #: scribble label of each class (None after an unsupervised run).
+        self.probabilities: np.ndarray | None = None
+        self.classes: np.ndarray | None = None
+        self._requested: tuple[Any, ...] | None = None  # snapshot of the last request
+        self._force = False  # a control changed: the next live run is not skipped
+        self._watched: dict[str, Any] = {"mask": None, "scribbles": None}
+        self._params_dir = Path.home()
         self.preset = ComboBox(
             label="preset",
             choices=list(PRESETS),
@@ -153,6 +255,22 @@ class SegmentWidget(StackWidget):
             tooltip="Start from the thesis values or from the values that score best on "
             "the bundled synthetic scenes (README, 'Segmentation quality')",
         )
+        self.load_button = PushButton(
+            text="Load parameters…",
+            tooltip="Set every control from a parameters JSON file (as written by 'Save "
+            "parameters…', or a params.json from polarseg segment)",
+        )
+        self.save_button = PushButton(
+            text="Save parameters…",
+            tooltip="Write the parameters as JSON, the format of polarseg segment --params",
+        )
+        self.params_file = Container(
+            layout="horizontal",
+            widgets=[self.load_button, self.save_button],
+            labels=False,
+            label="",
+        )
+        self.params_file.margins = (0, 0, 0, 0)
         self.window = SpinBox(
             label="window size",
             value=d.window,
@@ -167,7 +285,8 @@ class SegmentWidget(StackWidget):
             max=MAX_DEGREE,
             tooltip="Highest spherical-harmonic degree L: (L+1)² coefficients (thesis: 12)",
         )
-        self.refractive_index = FloatSpinBox(
+        self.refractive_index = float_box(
+            FLOAT_DECIMALS["refractive_index"],
             label="refractive index",
             value=d.refractive_index,
             min=1.01,
@@ -206,9 +325,13 @@ class SegmentWidget(StackWidget):
             choices=list(FEATURE_KINDS),
             value=d.features,
             tooltip="Block features for the PCA: every coefficient (thesis), the "
-            "azimuth-invariant m = 0 coefficients (zonal), or the energy per degree",
+            "azimuth-invariant m = 0 coefficients (zonal), the energy per degree (energy), "
+            "polarisation statistics of the block: the distributions of ρ, θ and Î and "
+            "their relation (polstats), or the zonal coefficients and the statistics "
+            "together (zonal+polstats)",
         )
-        self.variance = FloatSpinBox(
+        self.variance = float_box(
+            FLOAT_DECIMALS["variance"],
             label="PCA variance",
             value=d.variance,
             min=0.05,
@@ -216,7 +339,8 @@ class SegmentWidget(StackWidget):
             step=0.01,
             tooltip="Share of the variance the PCA keeps (thesis: 0.95)",
         )
-        self.scale = FloatSpinBox(
+        self.scale = float_box(
+            FLOAT_DECIMALS["scale"],
             label="affinity scale",
             value=d.scale,
             min=0.001,
@@ -231,6 +355,14 @@ class SegmentWidget(StackWidget):
             tooltip="absolute: s as given (thesis); median: s relative to the median "
             "squared Mahalanobis distance between blocks",
         )
+        self.clustering = ComboBox(
+            label="clustering",
+            choices=[(CLUSTERING_NAMES.get(m, m), m) for m in CLUSTERING_METHODS],
+            value=d.clustering,
+            tooltip="How the affinity graph is split into segments: recursive two-way "
+            "normalized cuts (thesis) or k-way spectral clustering (the first k "
+            "eigenvectors at once, then k-means)",
+        )
         self.min_segment_blocks = SpinBox(
             label="min segment (blocks)",
             value=d.min_segment_blocks,
@@ -243,16 +375,17 @@ class SegmentWidget(StackWidget):
             value=d.n_segments,
             min=1,
             max=256,
-            tooltip="Number of segments the recursive normalized cut stops at",
+            tooltip="Number of segments the normalized cut stops at (k of the k-way clustering)",
         )
         self.live = CheckBox(
             text="live update",
             value=False,
-            tooltip="Rerun (only the stale stages) whenever a value changes",
+            tooltip="Rerun (only the stale stages) whenever a value changes or a stroke is "
+            "painted into the chosen mask or scribbles layer",
         )
         self.mask_layer = ComboBox(
             label="mask",
-            choices=self._mask_choices,
+            choices=self._labels_choices,
             nullable=True,
             tooltip="Segment only where this Labels layer is non-zero (same height x width "
             "as the stack); saturated and black samples are left out in any case",
@@ -260,50 +393,184 @@ class SegmentWidget(StackWidget):
         self.mask_layer.null_string = NO_MASK
         self.mask_layer.reset_choices()
         self.mask_layer.value = None
+        self.scribbles_layer = ComboBox(
+            label="scribbles",
+            choices=self._labels_choices,
+            nullable=True,
+            tooltip="Strokes per material in a Labels layer of the stack's height x width "
+            "(0 = unlabelled, 1, 2, … = materials, at least two): a classifier of the "
+            "block features trained on the scribbled blocks replaces the normalized cut",
+        )
+        self.scribbles_layer.null_string = NO_SCRIBBLES
+        self.scribbles_layer.reset_choices()
+        self.scribbles_layer.value = None
+        self.new_scribbles_button = PushButton(
+            text="New scribbles layer",
+            tooltip="Add an empty Labels layer of the stack's size, choose it as the "
+            "scribbles and start the paint brush: paint label 1 on one material, 2 on "
+            "another, …",
+        )
         self.parameter_widgets = [getattr(self, name) for name in CONTROLLED]
-        self._add_parameters([self.preset, *self.parameter_widgets, self.mask_layer, self.live])
+        self._add_parameters(
+            [
+                self.preset,
+                self.params_file,
+                *self.parameter_widgets,
+                self.mask_layer,
+                self.scribbles_layer,
+                self.new_scribbles_button,
+                self.live,
+            ]
+        )
         self._timer = QTimer(self.native)  # deleted with the widget: never fires after it
         self._timer.setSingleShot(True)
         self._timer.setInterval(LIVE_DELAY_MS)
-        self._timer.timeout.connect(self.run)
+        self._timer.timeout.connect(self._on_timer)
         self.stack_layer.changed.connect(self.mask_layer.reset_choices)
-        for w in [*self.parameter_widgets, self.stack_layer, self.angles, self.mask_layer]:
+        self.stack_layer.changed.connect(self.scribbles_layer.reset_choices)
+        watched = [self.stack_layer, self.angles, self.mask_layer, self.scribbles_layer]
+        for w in [*self.parameter_widgets, *watched]:
             w.changed.connect(self._on_value_changed)
         self.live.changed.connect(self._on_value_changed)
         self.model.changed.connect(self._on_model_changed)
         self.preset.changed.connect(self._on_preset_changed)
+        self.mask_layer.changed.connect(self._sync_watches)
+        self.scribbles_layer.changed.connect(self._sync_watches)
+        self.scribbles_layer.changed.connect(self._on_scribbles_changed)
+        self.new_scribbles_button.changed.connect(self.new_scribbles_layer)
+        self.load_button.changed.connect(self._on_load_clicked)
+        self.save_button.changed.connect(self._on_save_clicked)
+        watches, on_edit = self._watched, self._on_layer_edited
+
+        def _unwatch(*_: Any) -> None:
+            for layer in watches.values():
+                _disconnect_edits(layer, on_edit)
+            watches.clear()
+
+        self.native.destroyed.connect(_unwatch)
 
     # -- parameters -------------------------------------------------------------------
     def params(self) -> SegmentParams:
         """The engine parameters the widget's values describe (raises PolarsegError).
 
         Fields without a control (``ridge``, ``spatial_radius``, ``spatial_sigma``,
-        ``ncut_threshold``) come from the chosen preset or the last :meth:`set_params`.
+        ``ncut_threshold``, ``affinity_graph``) come from the chosen preset or the last
+        :meth:`set_params`. A float set with more decimals than its control shows (e.g.
+        ``refractive_index`` 1.4537 from a file, shown as 1.454) is kept exactly until the
+        control is changed.
         """
         values = {name: getattr(self, name).value for name in CONTROLLED}
         values["fit"] = str(values["fit"])
+        values["clustering"] = str(values["clustering"])
         for name in ("window", "degree", "min_segment_blocks", "n_segments"):
             values[name] = int(values[name])
         for name in ("refractive_index", "variance", "scale"):
-            values[name] = float(values[name])
+            shown = float(values[name])
+            exact = float(getattr(self._base, name))
+            tolerance = 0.5 * 10.0 ** -FLOAT_DECIMALS[name] + 1e-12
+            values[name] = exact if abs(exact - shown) <= tolerance else shown
         return self._base.replace(**values)
 
     def set_params(self, params: SegmentParams | None = None, **changes: Any) -> None:
         """Set the controls from ``params`` and/or keyword changes (SegmentParams names).
 
-        Validated first (raises PolarsegError); with live update on, the burst of
-        changes triggers one run.
+        Validated first, also against the controls' ranges (raises PolarsegError and
+        changes nothing); with live update on, the burst of changes triggers one run.
         """
         values = (params or self.params()).replace(**changes)
+        self._check_controls(values)
         self._base = values
         for name in CONTROLLED:
             getattr(self, name).value = getattr(values, name)
 
+    def _check_controls(self, values: SegmentParams) -> None:
+        """Raise PolarsegError if a value does not fit its control (range, menu)."""
+        for name in CONTROLLED:
+            control, value = getattr(self, name), getattr(values, name)
+            if isinstance(control, ComboBox):
+                if value not in control.choices:
+                    raise PolarsegError(f"{name} {value!r} is not offered by the widget")
+            elif not control.min <= value <= control.max:
+                raise PolarsegError(
+                    f"{name} {value} is outside the widget's range {control.min:g}..{control.max:g}"
+                )
+
     def _on_preset_changed(self, name: str) -> None:
         self.set_params(PRESETS[name])
 
-    # -- mask -------------------------------------------------------------------------
-    def _mask_choices(self, _widget: Any = None) -> list[tuple[str, Layer]]:
+    # -- parameter files --------------------------------------------------------------
+    def save_params(self, path: str | Path) -> bool:
+        """Write the current parameters to ``path`` as JSON (``SegmentParams.to_json``).
+
+        The format of ``polarseg segment --params`` (and of *Load parameters…*, the
+        batch widget's JSON file). Problems go to the status line and a notification;
+        returns whether the file was written.
+        """
+        from ..io import atomic_output
+
+        path = Path(path)
+        try:
+            text = self.params().to_json() + "\n"
+            with atomic_output(path) as tmp:
+                tmp.write_text(text, encoding="utf-8")
+        except PolarsegError as exc:
+            self._fail(exc)
+            return False
+        except OSError as exc:
+            reason = exc.strerror or str(exc)
+            self._fail(PolarsegError(f"{path}: cannot write the parameters file ({reason})"))
+            return False
+        self._params_dir = path.parent
+        self._set_status(f"saved the parameters to {path}")
+        return True
+
+    def load_params(self, path: str | Path) -> bool:
+        """Set every control from a parameters JSON file (see :func:`read_params_file`).
+
+        Missing fields take the thesis defaults, as with ``polarseg segment --params``.
+        Invalid JSON, an unknown field or a value out of range leave every control as it
+        was and are reported in the status line (and a notification); returns whether
+        the parameters were loaded. With live update on, loading triggers one run.
+        """
+        path = Path(path)
+        try:
+            params = read_params_file(path)
+            try:
+                self.set_params(params)
+            except PolarsegError as exc:
+                raise PolarsegError(f"{path}: {exc}") from None
+        except PolarsegError as exc:
+            self._fail(exc)
+            return False
+        self._params_dir = path.parent
+        self._set_status(f"loaded the parameters from {path}")
+        return True
+
+    def _ask_path(self, save: bool) -> str | None:
+        """A file chosen in a Qt dialog (None when cancelled)."""
+        from qtpy.QtWidgets import QFileDialog
+
+        filters = "JSON (*.json);;All files (*)"
+        if save:
+            start = str(self._params_dir / "params.json")
+            path, _ = QFileDialog.getSaveFileName(self.native, "Save parameters", start, filters)
+        else:
+            start = str(self._params_dir)
+            path, _ = QFileDialog.getOpenFileName(self.native, "Load parameters", start, filters)
+        return path or None
+
+    def _on_save_clicked(self, *_: Any) -> None:
+        path = self._ask_path(save=True)
+        if path:
+            self.save_params(path if Path(path).suffix else f"{path}.json")
+
+    def _on_load_clicked(self, *_: Any) -> None:
+        path = self._ask_path(save=False)
+        if path:
+            self.load_params(path)
+
+    # -- mask and scribbles -----------------------------------------------------------
+    def _labels_choices(self, _widget: Any = None) -> list[tuple[str, Layer]]:
         """The user's 2-D Labels layers with the chosen stack's height x width."""
         stack = getattr(self, "stack_layer", None)
         stack = None if stack is None else stack.value
@@ -320,11 +587,17 @@ class SegmentWidget(StackWidget):
             and tuple(layer.data.shape) == size
         ]
 
+    _mask_choices = _labels_choices
+
     def _refresh_stacks(self) -> None:
         super()._refresh_stacks()
-        mask = getattr(self, "mask_layer", None)  # None while the base class initialises
-        if mask is not None:
-            mask.reset_choices()
+        for name in ("mask_layer", "scribbles_layer"):
+            chooser = getattr(self, name, None)  # None while the base class initialises
+            if chooser is not None:
+                chooser.reset_choices()
+        if getattr(self, "scribbles_layer", None) is not None:
+            self._sync_watches()
+            self._on_scribbles_changed(self.scribbles_layer.value)
 
     def current_mask(self) -> tuple[str | None, np.ndarray | None]:
         """Key and (H, W) bool region (a copy; True = use) of the chosen mask, or Nones."""
@@ -335,16 +608,100 @@ class SegmentWidget(StackWidget):
             raise PolarsegError(f"the mask layer {layer.name!r} is no longer in the viewer")
         return source_key(layer), np.asarray(layer.data) != 0
 
+    def current_scribbles(self) -> tuple[str | None, np.ndarray | None]:
+        """Key and (H, W) labels (a copy) of the chosen scribbles layer, or Nones."""
+        layer = self.scribbles_layer.value
+        if layer is None:
+            return None, None
+        if layer not in self._viewer.layers:
+            raise PolarsegError(f"the scribbles layer {layer.name!r} is no longer in the viewer")
+        return source_key(layer), np.array(layer.data, copy=True)
+
+    def new_scribbles_layer(self, *_: Any) -> Labels | None:
+        """Add an empty Labels layer for strokes, choose it and start the paint brush.
+
+        Named ``"<stack> scribbles"``, of the stack's height x width (and placement),
+        selected in the layer list with the paint tool on label 1.
+        """
+        stack = self.stack_layer.value
+        if stack is None:
+            self._fail(PolarsegError("choose an angle-stack image layer first"))
+            return None
+        h, w = stack.data.shape[-2:]
+        layer = self._viewer.add_labels(
+            np.zeros((h, w), dtype=np.int32),
+            name=f"{stack.name} scribbles",
+            scale=tuple(stack.scale[-2:]),
+            translate=tuple(stack.translate[-2:]),
+        )
+        self.scribbles_layer.reset_choices()
+        self.scribbles_layer.value = layer
+        layer.selected_label = 1
+        self._viewer.layers.selection.active = layer
+        layer.mode = "paint"
+        self._set_status(
+            f"paint strokes into {layer.name!r}: label 1 on one material, 2 on another, … "
+            "(at least 2), then Run (or tick live update)"
+        )
+        return layer
+
+    def _on_scribbles_changed(self, layer: Layer | None = None) -> None:
+        for name in CUT_ONLY:  # the classifier replaces the cut: its controls do nothing
+            getattr(self, name).enabled = layer is None
+
+    def _sync_watches(self, *_: Any) -> None:
+        """Listen to edits of the chosen mask and scribbles layers (and no others)."""
+        for role, chooser in (("mask", self.mask_layer), ("scribbles", self.scribbles_layer)):
+            old, new = self._watched.get(role), chooser.value
+            if old is new:
+                continue
+            if old is not None and old not in self._watched_except(role):
+                _disconnect_edits(old, self._on_layer_edited)
+            if new is not None and new not in self._watched_except(role):
+                for name in EDIT_EVENTS:
+                    getattr(new.events, name).connect(self._on_layer_edited)
+            self._watched[role] = new
+
+    def _watched_except(self, role: str) -> list[Any]:
+        return [layer for r, layer in self._watched.items() if r != role and layer is not None]
+
+    def _on_layer_edited(self, *_: Any) -> None:
+        """A stroke (or undo, new data) in the chosen mask or scribbles layer."""
+        try:
+            if self.live.value:
+                self._timer.start()  # the same debounce as a changed value
+        except RuntimeError:  # the widget was deleted
+            pass
+
     def snapshot(self) -> tuple[Any, ...] | None:
         """Everything a result depends on, or None if the values are invalid."""
-        layer = self.stack_layer.value
         try:
             params = self.params()
             mask_key, region = self.current_mask()
+            scribble_key, scribbles = self.current_scribbles()
         except PolarsegError:
             return None
+        return self._snapshot_of(params, mask_key, region, scribble_key, scribbles)
+
+    def _snapshot_of(
+        self,
+        params: SegmentParams,
+        mask_key: str | None,
+        region: np.ndarray | None,
+        scribble_key: str | None,
+        scribbles: np.ndarray | None,
+    ) -> tuple[Any, ...]:
+        layer = self.stack_layer.value
         key = None if layer is None else source_key(layer)
-        return (key, self.angles.value, params, mask_key, region_digest(region))
+        return (
+            key,
+            self.angles.value,
+            params,
+            mask_key,
+            region_digest(region),
+            scribble_key,
+            content_digest(scribbles),
+        )
 
     @property
     def pipeline(self) -> Pipeline | None:
@@ -356,53 +713,125 @@ class SegmentWidget(StackWidget):
         """The cached pipeline of ``layer`` (None before its first run)."""
         return self.store.get(source_key(layer))
 
+    def shown_result(self, layer: Layer) -> SegmentationResult | None:
+        """The result behind ``layer``'s ``segments`` layer, if this widget made it."""
+        entry = self._shown.get(source_key(layer))
+        segments = find_output(self._viewer, "segments", layer)
+        if entry is None or segments is None:
+            return None
+        result, inputs = entry
+        if segments.metadata.get("polarseg_inputs") != inputs:
+            return None  # another widget has written the layer since
+        return result
+
     def _forget(self, keep: set[str]) -> None:
         store = getattr(self, "store", None)  # None while the base class initialises
         if store is not None:
             store.discard(keep)
+        shown = getattr(self, "_shown", None)
+        if shown is not None:
+            for key in set(shown) - keep:
+                del shown[key]
 
     def _on_model_changed(self, model: str) -> None:
         self.specular_branch.visible = model == "specular"
 
     def _on_value_changed(self, *_: Any) -> None:
         if self.live.value:
+            self._force = True
             self._timer.start()  # restarts the delay: a burst of changes runs once
+
+    def _on_timer(self) -> None:
+        force, self._force = self._force, False
+        if not force and self.snapshot() == self._requested:
+            return  # a layer event that changed nothing (e.g. a redraw)
+        self.run()
 
     def _waiting(self) -> bool:
         return self._timer.isActive()
 
     # -- running ----------------------------------------------------------------------
     def run(self, *_: Any) -> None:
-        """Start (or queue) a run with the current values in a worker; returns at once."""
+        """Start (or queue) a run with the current values in a worker; returns at once.
+
+        With a scribbles layer chosen, the classifier replaces the normalized cut; strokes
+        of fewer than two materials are reported in the status line and nothing runs.
+        """
         self._timer.stop()
+        self._force = False
         try:
             layer, angles_deg = self.current_stack()
             params = self.params()
             mask_key, region = self.current_mask()
+            scribble_key, scribbles = self.current_scribbles()
         except PolarsegError as exc:
+            self._requested = self.snapshot()
             self._fail(exc)
             return
+        snap = self._snapshot_of(params, mask_key, region, scribble_key, scribbles)
+        self._requested = snap
+        if scribbles is not None:
+            problem = scribble_problem(scribbles)
+            if problem is not None:
+                self._set_status(f"scribbles: {problem}")
+                return
+        inputs = {
+            "mask": _input_info(self.mask_layer.value, mask_key, snap[4]),
+            "scribbles": _input_info(self.scribbles_layer.value, scribble_key, snap[6]),
+        }
         key = source_key(layer)
-        snap = (key, self.angles.value, params, mask_key, region_digest(region))
         t0 = time.perf_counter()
         angles_rad = np.deg2rad(angles_deg)
-        args = (self.store, key, layer.data, angles_rad, params, region, mask_key)
 
         def on_result(run_id: int, result: Any) -> None:
             if snap != self.snapshot() or layer not in self._viewer.layers:
                 self._set_status("result dropped: the parameters changed while it was computed")
                 return
-            self._show(layer, angles_deg, result, time.perf_counter() - t0)
+            if isinstance(result, ScribbleOutput) and result.problem is not None:
+                self._set_status(f"scribbles: {result.problem}")
+                return
+            self._show(layer, angles_deg, result, time.perf_counter() - t0, inputs)
 
-        self._submit(segment_job, args, len(STAGES), on_result)
+        if scribbles is None:
+            args = (self.store, key, layer.data, angles_rad, params, region, mask_key)
+            self._submit(segment_job, args, len(STAGES), on_result)
+        else:
+            args = (self.store, key, layer.data, angles_rad, params, scribbles, region, mask_key)
+            self._submit(scribble_job, args, len(SCRIBBLE_STAGES), on_result)
 
-    def _show(self, layer: Layer, angles_deg: np.ndarray, result: Any, seconds: float) -> None:
+    def _show(
+        self,
+        layer: Layer,
+        angles_deg: np.ndarray,
+        result: SegmentationResult | ScribbleOutput,
+        seconds: float,
+        inputs: dict[str, Any] | None = None,
+    ) -> None:
+        inputs = inputs or {"mask": None, "scribbles": None}
+        out = result if isinstance(result, ScribbleOutput) else None
+        if out is not None:
+            assert out.result is not None and out.probabilities is not None
+            assert out.classes is not None
+            result = out.result
+        assert isinstance(result, SegmentationResult)
         summary = result.summary()
+        confidence = None
+        if out is not None:
+            confidence = out.probabilities.max(axis=0).astype(np.float32)
+            summary["scribbles"] = {
+                "classes": [int(c) for c in out.classes],
+                "training_blocks": out.training_blocks,
+                "mean_class_probability": float(confidence.mean()),
+            }
         meta = {
             "polarseg_params": {**result.params.to_dict(), "angles_deg": angles_deg.tolist()},
             "polarseg_summary": summary,
+            "polarseg_inputs": inputs,
         }
-        labels = np.asarray(result.labels, dtype=np.int32) + 1  # a copy: painting is safe
+        if out is not None:  # the scribble value of the chosen class: strokes' colours
+            labels = np.asarray(out.classes, dtype=np.int32)[result.labels]
+        else:
+            labels = np.asarray(result.labels, dtype=np.int32) + 1  # a copy: painting is safe
         # the error map (added hidden) goes below the segments, which overlay the stack
         show_output(self._viewer, "error", np.array(result.reconstruction_error), layer, meta)
         masked = np.zeros(labels.shape, dtype=np.uint8)
@@ -411,9 +840,26 @@ class SegmentWidget(StackWidget):
         if self._shows_diagnostics(layer, result, masked):
             show_output(self._viewer, "residual", np.array(result.residual), layer, meta)
             show_output(self._viewer, "masked", masked, layer, meta)
+        if out is not None:
+            assert confidence is not None
+            self._show_probability(layer, confidence, meta)
+            self.probabilities, self.classes = out.probabilities, out.classes
+        else:
+            remove_output(self._viewer, "probability", layer)  # it would be stale
+            self.probabilities, self.classes = None, None
         show_output(self._viewer, "segments", labels, layer, meta)
-        parts = [
-            f"{summary['n_segments']} segments",
+        self._shown[source_key(layer)] = (result, inputs)
+        if out is not None:
+            assert out.classes is not None and confidence is not None
+            names = ", ".join(str(int(c)) for c in out.classes)
+            parts = [
+                f"{out.classes.size} materials from scribbles (labels {names})",
+                f"{out.training_blocks} training blocks",
+                f"mean class probability {float(confidence.mean()):.2f}",
+            ]
+        else:
+            parts = [f"{summary['n_segments']} segments"]
+        parts += [
             f"{summary['n_components']} PCA components "
             f"({summary['explained_variance']:.0%} variance)",
             f"mean reconstruction error {summary['mean_reconstruction_error']:.3g}",
@@ -421,8 +867,19 @@ class SegmentWidget(StackWidget):
         masked_text = mask_text(result.mask_counts)
         if masked_text:
             parts.append(masked_text)
+        if out is not None:
+            parts += out.notes
         parts.append(f"{seconds:.2f} s")
         self._done(" · ".join(parts))
+
+    def _show_probability(self, layer: Layer, confidence: np.ndarray, meta: dict) -> None:
+        """Add/update ``class probability``; a new one goes just below the segments."""
+        new = find_output(self._viewer, "probability", layer) is None
+        prob = show_output(self._viewer, "probability", confidence, layer, meta)
+        segments = find_output(self._viewer, "segments", layer)
+        if new and segments is not None:
+            layers = self._viewer.layers
+            layers.move(layers.index(prob), layers.index(segments))
 
     def _shows_diagnostics(self, layer: Layer, result: Any, masked: np.ndarray) -> bool:
         """Whether to add/update ``masked pixels`` and ``fit residual`` for this result.
@@ -433,3 +890,18 @@ class SegmentWidget(StackWidget):
         if result.params.fit != "lsq" or bool(masked.any()):
             return True
         return any(find_output(self._viewer, r, layer) is not None for r in ("masked", "residual"))
+
+
+def _input_info(layer: Layer | None, key: str | None, digest: str | None) -> dict | None:
+    """What the segments' metadata records about a mask or scribbles layer."""
+    if layer is None or key is None:
+        return None
+    return {"name": layer.name, "layer_id": key, "digest": digest}
+
+
+def _disconnect_edits(layer: Any, callback: Any) -> None:
+    if layer is None:
+        return
+    for name in EDIT_EVENTS:
+        with contextlib.suppress(Exception):
+            getattr(layer.events, name).disconnect(callback)

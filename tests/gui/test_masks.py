@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from _gui_helpers import error_messages, run_and_wait
+from _gui_helpers import error_messages, run_and_wait, wait_idle
 from napari.layers import Image, Labels
 
 from napari_polarseg.engine import Pipeline, SegmentParams, validity_mask
@@ -196,3 +196,36 @@ def test_removed_mask_layer_falls_back_to_none(viewer, open_sample, add_widget, 
     np.testing.assert_array_equal(
         widget.output("segments").data, reference(stack, SegmentParams(**FAST)).labels + 1
     )
+
+
+def test_painting_the_mask_with_live_update_reruns(viewer, open_sample, add_widget, qtbot):
+    stack = open_sample("leaves")
+    h, w = stack.data.shape[1:]
+    user_mask = viewer.add_labels(top_half((h, w)), name="my region")
+    widget = add_widget("Segment by material")
+    widget.set_params(**FAST)
+    widget.mask_layer.value = user_mask
+    widget.live.value = True
+    wait_idle(qtbot, widget)
+    masked = widget.output("masked")
+    np.testing.assert_array_equal(masked.data, (top_half((h, w)) == 0).astype(np.uint8))
+    first = widget._slot.run_id
+
+    # erase a patch with the brush (label 0), as a user would: the widget reruns itself
+    user_mask.brush_size = 20
+    user_mask.paint((20, 30), 0)
+    assert widget._waiting()
+    wait_idle(qtbot, widget)
+    assert error_messages() == []
+    assert widget._slot.run_id == first + 1
+    edited = np.asarray(user_mask.data) != 0
+    assert edited.sum() < np.count_nonzero(top_half((h, w)))
+    np.testing.assert_array_equal(masked.data, (~edited).astype(np.uint8))
+    ref = reference(stack, SegmentParams(**FAST), mask=validity_mask(stack.data, region=edited))
+    np.testing.assert_array_equal(widget.output("segments").data, ref.labels + 1)
+
+    # with live update off, painting waits for Run
+    widget.live.value = False
+    user_mask.paint((20, 80), 0)
+    qtbot.wait(400)
+    assert not widget._waiting() and widget._slot.run_id == first + 1

@@ -6,7 +6,7 @@ import numpy as np
 from _gui_helpers import click, engine_result, error_messages, run_and_wait, wait_idle
 from napari.layers import Image
 
-from napari_polarseg.engine import SegmentParams
+from napari_polarseg.engine import Pipeline, SegmentParams, validity_mask
 from napari_polarseg.widgets._layers import TAG
 from napari_polarseg.widgets.plots import N_COMPONENTS, PlotsWidget
 
@@ -57,9 +57,11 @@ def test_plots_widget_draws_the_segmentation_and_adds_component_maps(
     assert widget.histograms.original.sum() == h * w
 
     # recomputed in a worker from the segments layer's parameters when nothing is cached
-    seg.store.discard(set())
+    seg._forget(set())
     widget.result = None
-    run_and_wait(qtbot, widget)
+    click(qtbot, widget.run_button)
+    assert widget.busy
+    wait_idle(qtbot, widget)
     assert error_messages() == []
     np.testing.assert_array_equal(widget.result.labels, ref.labels)
 
@@ -77,3 +79,81 @@ def test_plots_widget_draws_the_segmentation_and_adds_component_maps(
     click(qtbot, widget.components_button)  # replaced in place
     assert len(viewer.layers) == n_before + N_COMPONENTS
     assert viewer.layers[first.name] is first
+
+
+def _reference(stack, params, region=None, scribbles=None):
+    angles = np.deg2rad(stack.metadata["angles_deg"])
+    mask = None if region is None else validity_mask(np.asarray(stack.data), region=region)
+    pipe = Pipeline(np.asarray(stack.data), angles, params, mask=mask)
+    if scribbles is not None:
+        return pipe.scribble_result(scribbles)[0]
+    return pipe.run().labels
+
+
+def _recompute(qtbot, seg, widget):
+    """Load the segmentation in a worker (nothing cached in the Segment widget)."""
+    seg._forget(set())
+    widget.result = None
+    click(qtbot, widget.run_button)
+    assert widget.busy
+    wait_idle(qtbot, widget)
+
+
+def test_plots_recompute_with_the_mask_and_scribbles_of_the_segmentation(
+    viewer, open_sample, add_widget, qtbot
+):
+    stack = open_sample("leaves")
+    h, w = stack.data.shape[1:]
+    region = np.zeros((h, w), dtype=np.int32)
+    region[:, : w // 2] = 1
+    mask = viewer.add_labels(region.copy(), name="left half")
+    seg = add_widget("Segment by material")
+    seg.set_params(**FAST)
+    seg.mask_layer.value = mask
+    run_and_wait(qtbot, seg)
+    widget = add_widget("Polarisation plots")
+    params = SegmentParams(**FAST)
+    masked_ref = _reference(stack, params, region=region != 0)
+    assert not np.array_equal(masked_ref, _reference(stack, params))  # the mask matters
+
+    click(qtbot, widget.run_button)  # the Segment widget's result
+    np.testing.assert_array_equal(widget.result.labels, masked_ref)
+    _recompute(qtbot, seg, widget)  # the mask layer the segments record, read again
+    assert error_messages() == []
+    np.testing.assert_array_equal(widget.result.labels, masked_ref)
+    assert "edited" not in widget.status.value
+
+    # an edited mask is used as it is now, and the status line says so
+    mask.data[: h // 2] = 0
+    mask.refresh()
+    _recompute(qtbot, seg, widget)
+    edited_ref = _reference(stack, params, region=np.asarray(mask.data) != 0)
+    np.testing.assert_array_equal(widget.result.labels, edited_ref)
+    assert "mask 'left half' edited since the segmentation" in widget.status.value
+
+    # scribbles: the classifier's labels, cached or recomputed
+    seg.mask_layer.value = None
+    scribbles = seg.new_scribbles_layer()
+    strokes = np.zeros((h, w), dtype=np.int32)
+    truth = np.asarray(viewer.layers["leaves ground truth"].data)
+    for value in (1, 2, 3):
+        rows, cols = np.nonzero(truth == value)
+        strokes[rows[::40], cols[::40]] = value
+    scribbles.data = strokes
+    run_and_wait(qtbot, seg)
+    scribble_ref = _reference(stack, params, scribbles=strokes)
+    click(qtbot, widget.run_button)
+    np.testing.assert_array_equal(widget.result.labels, scribble_ref)
+    np.testing.assert_array_equal(seg.output("segments").data, scribble_ref + 1)
+    _recompute(qtbot, seg, widget)
+    np.testing.assert_array_equal(widget.result.labels, scribble_ref)
+    assert error_messages() == []
+
+    # a removed scribbles layer cannot be read again: an error, not a wrong plot
+    seg._forget(set())
+    viewer.layers.remove(scribbles)
+    widget.result = None
+    click(qtbot, widget.run_button)
+    assert widget.result is None
+    assert "scribbles layer 'leaves scribbles'" in widget.status.value
+    assert "no longer in the viewer" in error_messages()[-1]
