@@ -77,6 +77,29 @@ def test_classify_blocks_separates_two_clusters():
     assert proba.shape == (24, 2) and np.allclose(proba.sum(axis=1), 1)
 
 
+def test_masked_blocks_do_not_train_and_take_the_nearest_valid_class():
+    rng = np.random.default_rng(1)
+    grid = (4, 6)
+    truth = np.zeros(grid, int)
+    truth[:, 3:] = 1
+    features = rng.normal(0, 0.1, (24, 3)) + truth.reshape(-1, 1) * np.array([2.0, -1.0, 0.5])
+    # masked blocks hold a placeholder feature (the pipeline puts the mean there)
+    valid = np.ones(grid, bool)
+    valid[0, 0] = valid[0, 5] = False
+    features[~valid.ravel()] = features.mean(axis=0)
+    scribbles = np.zeros((20, 30), dtype=np.uint8)
+    scribbles[2, 0:10] = 1  # over blocks (0, 0) (masked) and (0, 1): truth 0
+    scribbles[2, 20:30] = 2  # over blocks (0, 4) and (0, 5) (masked): truth 1
+    labels, proba, classes = classify_blocks(features, grid, scribbles, 5, valid=valid.ravel())
+    assert classes.tolist() == [1, 2]
+    assert np.array_equal(labels, truth)
+    # the masked blocks copy a nearest valid block's probabilities
+    assert any(np.allclose(proba[0], proba[i]) for i in (1, 6))
+    assert any(np.allclose(proba[5], proba[i]) for i in (4, 11))
+    with pytest.raises(PolarsegError, match="no block"):
+        classify_blocks(features, grid, scribbles, 5, valid=np.zeros(24, bool))
+
+
 def test_bad_scribbles_raise_polarseg_error():
     features = np.random.default_rng(0).normal(size=(4, 2))
     one = np.zeros((4, 4), int)

@@ -568,7 +568,9 @@ class Pipeline:
             )
         window = self._p().window
         grid = self.get("harmonics").shape[:2]
-        block, proba, _ = classify_blocks(self.get("pca").features, grid, scribbles, window)
+        block, proba, _ = classify_blocks(
+            self.get("pca").features, grid, scribbles, window, valid=self.block_valid()
+        )
         rows, cols = harmonics.pixel_block_index(shape, window)
         labels = harmonics.upsample_block_labels(block, shape, window)
         maps = proba.T.reshape(-1, *grid)[:, rows[:, None], cols[None, :]]

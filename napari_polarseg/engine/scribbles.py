@@ -105,6 +105,7 @@ def classify_blocks(
     grid: tuple[int, int],
     scribbles: np.ndarray,
     window: int,
+    valid: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Label every block with a classifier trained on the scribbled blocks.
 
@@ -128,6 +129,11 @@ def classify_blocks(
         User strokes: 0 = unlabelled, 1, 2, … = classes; H // w == R and W // w == C.
     window : int
         Block side w, pixels.
+    valid : array (n_blocks,) of bool, optional
+        Blocks that may be used (default: all). Masked-out blocks are no training
+        examples, even when strokes cover them, and take the class and probabilities of
+        the nearest valid block — as the normalized cut gives them the nearest segmented
+        block's label.
 
     Returns
     -------
@@ -155,7 +161,16 @@ def classify_blocks(
         raise PolarsegError(f"features are {x.shape} but the block grid has {r * c} blocks")
     if not np.all(np.isfinite(x)):
         raise PolarsegError("block features contain NaN or infinite values")
+    use = np.ones(r * c, bool) if valid is None else np.asarray(valid, bool).ravel()
+    if use.size != r * c:
+        raise PolarsegError(f"valid has {use.size} entries but the grid has {r * c} blocks")
+    if not use.any():
+        raise PolarsegError("the mask leaves no block to classify")
     blocks, targets, classes = training_blocks(scribbles, (r, c), window)
+    keep = use[blocks]
+    blocks, targets = blocks[keep], targets[keep]
+    present = np.unique(targets)
+    classes, targets = classes[present], np.searchsorted(present, targets)
     if classes.size < 2:
         found = "none" if classes.size == 0 else f"only label {int(classes[0])}"
         raise PolarsegError(
@@ -167,5 +182,12 @@ def classify_blocks(
     model.fit(x[blocks], targets)
     proba = np.asarray(model.predict_proba(x), dtype=np.float64)
     proba /= proba.sum(axis=1, keepdims=True)
+    if not use.all():
+        from scipy import ndimage
+
+        _, (ri, ci) = ndimage.distance_transform_edt(
+            ~use.reshape(r, c), return_indices=True
+        )
+        proba = proba[(ri * c + ci).ravel()]
     labels = np.argmax(proba, axis=1).reshape(r, c)
     return labels, proba, classes
