@@ -9,7 +9,10 @@
                          [--window W] [--degree L] [--refractive-index N]
                          [--segments K] [--params FILE.json] [--max-memory GIB]
                          [--scribbles FILE] [--ground-truth FILE] [...]
-    polarseg demo [--out DIR] [--scene leaves]
+    polarseg demo [--out DIR] [--scene leaves] [--plots]
+    polarseg sweep INPUT --out DIR [--windows 8,10,12] [--degrees 4,8,12]
+                         [--refractive-indices 1.45,1.6] [--ground-truth FILE]
+                         [--score stability|combined|silhouette|ncut|ari] [--apply-best]
 
 Angles are **degrees** on the command line and in every file (comma-separated, one per
 frame, in frame order); the engine gets radians. ``segment`` writes into DIR:
@@ -49,7 +52,15 @@ frame, in frame order); the engine gets radians. ``segment`` writes into DIR:
 All images are H × W of the angle stack the engine sees: the input's size, except with
 ``--mosaic``, where a raw H × W camera frame becomes a stack of H/2 × W/2 frames and so do
 the outputs (full size with ``--demosaic interpolated``). ``demo`` (and ``segment
---overview``) also writes ``overview.png``.
+--overview``) also writes ``overview.png``; ``--plots`` the analyst's plots as PNGs into
+``DIR/plots/`` (:func:`napari_polarseg.figures.save_plots`).
+
+``sweep`` segments one stack for every w, L (and n) of a grid with one cached pipeline
+(:mod:`napari_polarseg.engine.sweep`) and writes ``sweep.csv`` (one row per cell: the
+setting, segments reached, stability, silhouette, mean Ncut, combined score, ARI with a
+ground truth, seconds, error), ``sweep.json`` (the same, the best cell and its parameters,
+the total seconds), ``sweep_heatmap.png`` and ``best_params.json`` (SegmentParams JSON for
+``segment --params``); ``--apply-best`` also runs ``segment`` with them into ``DIR/best/``.
 
 Real captures: saturated samples (at or above ``--saturation``, default the integer
 type's maximum) and black ones (at or below ``--dark-level``, default 0) are left out of
@@ -95,6 +106,7 @@ from .engine.evaluation import (
 from .engine.limits import check_pipeline_memory, memory_limit
 from .engine.mosaic import DEMOSAIC_METHODS
 from .engine.params import (
+    CLUSTERING_METHODS,
     COEFFICIENT_METHODS,
     FEATURE_KINDS,
     FIT_METHODS,
@@ -251,6 +263,13 @@ PARAM_OPTIONS: dict[str, tuple[str, dict[str, Any]]] = {
         "--min-segment-blocks",
         {"type": int, "metavar": "B", "help": "smallest segment, in blocks"},
     ),
+    "clustering": (
+        "--clustering",
+        {
+            "choices": CLUSTERING_METHODS,
+            "help": "recursive two-way normalized cuts (thesis) or k-way spectral clustering",
+        },
+    ),
     "fit": (
         "--fit",
         {
@@ -328,6 +347,16 @@ def _add_input_options(parser: argparse.ArgumentParser, unit: str) -> None:
     parser.add_argument("--register", action="store_true", help=f"align the frames of each {unit}")
     parser.add_argument(
         "--max-memory", type=_gib_arg, metavar="GIB", help=f"memory limit of one {unit}, GiB"
+    )
+
+
+def _add_plots_option(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--plots",
+        action="store_true",
+        help="also write the analyst's plots as PNGs into OUT/plots/ (I-rho/phi scatter, "
+        "explained variance, coefficient and component maps, reconstruction histograms, "
+        "error table)",
     )
 
 
@@ -439,6 +468,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="true materials (labels image, the outputs' size): writes evaluation.json "
         "(adjusted Rand index, IoU per segment, block accuracy) and adds it to summary.json",
     )
+    _add_plots_option(seg)
     _add_param_options(seg)
     seg.set_defaults(func=_cmd_segment)
 
@@ -456,8 +486,10 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument(
         "--sample", metavar="FILE.npz", help="use this .npz (stack, angles, labels) instead"
     )
+    _add_plots_option(demo)
     _add_param_options(demo, preset="recommended")
     demo.set_defaults(func=_cmd_demo, overview=True)
+    _add_sweep_parser(sub)
 
     bat = sub.add_parser(
         "batch",
@@ -507,12 +539,13 @@ def build_parser() -> argparse.ArgumentParser:
         "timeseries",
         help="segment scenes of one view over time in a shared basis, with change maps",
         description="Segment INPUT1 INPUT2 ... (the same view on consecutive days, in time "
-        "order) with block features in one shared PCA basis, so that a segment means the "
-        "same material every day, and map the blocks that changed segment between "
-        "consecutive days. Writes labels_01.tif, labels_02.tif, ... (one per day), "
-        "change_01.tif (day 1 -> 2), ... (uint8, 1 = changed), distance_01.tif, ... "
-        "(feature distance of each block between the two days), params.json and "
-        "summary.json into --out.",
+        "order) so that a segment means the same material every day, test every block for a "
+        "change of its polarisation between consecutive days (the geometry of a static view "
+        "cancels), and map the blocks that changed segment. Writes labels_01.tif, "
+        "labels_02.tif, ... (one per day), change_01.tif (day 1 -> 2), ... (uint8, 1 = "
+        "changed segment), score_01.tif, ... (float32 change score: the normal deviate of "
+        "the block's p-value, 3.09 = p 0.001), distance_01.tif, ... (feature distance of "
+        "each block between the two days), params.json and summary.json into --out.",
     )
     ts.add_argument(
         "input", metavar="INPUT", nargs="+", help="one angle stack per day, in time order"
@@ -520,10 +553,34 @@ def build_parser() -> argparse.ArgumentParser:
     ts.add_argument("-o", "--out", required=True, metavar="DIR", help="output folder")
     ts.add_argument(
         "--method",
-        choices=("reference", "joint"),
-        default="reference",
-        help="cut day 1 and give later blocks the nearest segment, or one cut over all "
-        "days' blocks [reference]",
+        choices=("tracked", "reference", "joint"),
+        default="tracked",
+        help="tracked: cut day 1 and move only the blocks whose polarisation changed "
+        "significantly, to the segment of what they changed into; reference: give every "
+        "day's blocks the nearest day-1 segment; joint: one cut over all days' blocks "
+        "[tracked]",
+    )
+    ts.add_argument(
+        "--false-alarm",
+        type=float,
+        default=0.001,
+        metavar="P",
+        help="probability that a block without change is flagged, per block and pair of "
+        "days [0.001]",
+    )
+    ts.add_argument(
+        "--change-window",
+        type=int,
+        default=None,
+        metavar="PX",
+        help="side of the change-test blocks in pixels [half the window, at least 6]",
+    )
+    ts.add_argument(
+        "--change-from",
+        choices=("all", "polarisation", "intensity"),
+        default="all",
+        help="what the change test compares: intensity and polarisation, or only one "
+        "(polarisation: when the lighting changes between days) [all]",
     )
     _add_input_options(ts, "day")
     _add_param_options(ts, preset="recommended")
@@ -743,6 +800,7 @@ def _write_outputs(
     segments: list[dict[str, Any]] | None = None,
     probabilities: np.ndarray | None = None,
     evaluation: dict[str, Any] | None = None,
+    plots: dict[str, bytes] | None = None,
 ) -> list[str]:
     """Write every output file atomically; returns their names. Raises OutputError."""
     t0 = time.perf_counter()
@@ -782,6 +840,10 @@ def _write_outputs(
             name = str(out / "overview.png")
             pio.write_png(out / "overview.png", overview)
             written.append("overview.png")
+        if plots is not None:
+            name = str(out / "plots")
+            _write_plots(out / "plots", plots)
+            written.append(f"plots/ ({len(plots)} PNGs)")
         name = str(out / "params.json")
         pio.write_json(out / "params.json", info)
         written.append("params.json")
@@ -991,6 +1053,7 @@ def _job(
         }
     segments = _segment_rows(run)
     overview = render_overview(run.stack[0], run.result) if args.overview else None
+    plot_pngs = _render_plots(run.result) if getattr(args, "plots", False) else None
     out = Path(args.out)
     info = _run_info(run, command, args)
     if scribble_file:
@@ -1006,6 +1069,7 @@ def _job(
         segments=segments,
         probabilities=probabilities,
         evaluation=evaluation,
+        plots=plot_pngs,
     )
     _report(out, run, written)
     if evaluation is not None:
@@ -1129,6 +1193,247 @@ def render_overview(first_frame: np.ndarray, result: SegmentationResult) -> np.n
     fig.tight_layout()
     canvas.draw()
     return np.asarray(canvas.buffer_rgba()).copy()
+
+
+# -- plots and parameter sweep --------------------------------------------------------------
+
+
+def _render_plots(result: SegmentationResult) -> dict[str, bytes]:
+    """The PNGs of :func:`napari_polarseg.figures.save_plots`, in memory (``--plots``)."""
+    from . import figures
+
+    return figures.render_plots(result)
+
+
+def _write_plots(folder: Path, pngs: dict[str, bytes]) -> None:
+    """Write ``--plots`` PNGs into ``folder`` (created), each atomically."""
+    folder.mkdir(parents=True, exist_ok=True)
+    for fname, content in pngs.items():
+        with pio.atomic_output(folder / fname) as tmp:
+            tmp.write_bytes(content)
+
+
+def _number_list_arg(kind: type, what: str):
+    def parse(text: str) -> tuple:
+        parts = [p.strip() for p in text.split(",") if p.strip()]
+        try:
+            values = [kind(p) for p in parts]
+        except ValueError:
+            values = []
+        if not values or not all(np.isfinite(v) for v in values):
+            example = "8,10,12" if kind is int else "1.4,1.6"
+            raise argparse.ArgumentTypeError(
+                f"expected comma-separated {what} (e.g. {example}), got {text!r}"
+            )
+        return tuple(values)
+
+    return parse
+
+
+def _add_sweep_parser(sub: Any) -> None:
+    from .engine.sweep import DEFAULT_SCORE, SCORES
+
+    sw = sub.add_parser(
+        "sweep",
+        help="segment one stack over a grid of window sizes, degrees and refractive indices",
+        description="Run the segmentation for every window size w, harmonic degree L and "
+        "refractive index n of a grid (one cached pipeline), score every cell without "
+        "ground truth (stability: mean adjusted Rand index with the neighbouring w and L "
+        "cells; silhouette of the blocks in the whitened PCA space; mean Ncut value of the "
+        "cuts; a combined score) and, with a ground truth, by its adjusted Rand index. "
+        "Writes sweep.csv, sweep.json, sweep_heatmap.png and best_params.json (give it to "
+        "'polarseg segment --params') into --out; --apply-best also segments with the best "
+        "parameters into OUT/best/.",
+    )
+    sw.add_argument(
+        "input",
+        metavar="INPUT",
+        nargs="+",
+        help="TIFF, .npz/.npy, folder, raw frame, or several frame files (one per angle)",
+    )
+    sw.add_argument("-o", "--out", required=True, metavar="DIR", help="output folder")
+    sw.add_argument(
+        "--windows",
+        type=_number_list_arg(int, "window sizes in pixels"),
+        default=(8, 10, 12),
+        metavar="W,W,...",
+        help="window sizes w in pixels [8,10,12]",
+    )
+    sw.add_argument(
+        "--degrees",
+        type=_number_list_arg(int, "harmonic degrees"),
+        default=(4, 8, 12),
+        metavar="L,L,...",
+        help="harmonic degrees L [4,8,12]",
+    )
+    sw.add_argument(
+        "--refractive-indices",
+        type=_number_list_arg(float, "refractive indices"),
+        metavar="N,N,...",
+        help="refractive indices n [the parameters' n]",
+    )
+    sw.add_argument(
+        "--ground-truth",
+        metavar="FILE",
+        help="true materials (labels image, the outputs' size): adds the adjusted Rand "
+        "index of every cell [the input's own labels, e.g. a bundled sample's]",
+    )
+    sw.add_argument(
+        "--score",
+        choices=SCORES,
+        default=DEFAULT_SCORE,
+        help="what picks the best cell: stability, the combined label-free score, "
+        "silhouette, the smallest mean Ncut, or the adjusted Rand index against the ground "
+        f"truth [{DEFAULT_SCORE}]",
+    )
+    sw.add_argument(
+        "--apply-best",
+        action="store_true",
+        help="also segment with the best parameters into OUT/best/ (as 'polarseg segment')",
+    )
+    _add_input_options(sw, "stack")
+    _add_plots_option(sw)
+    _add_param_options(sw, preset="recommended")
+    sw.set_defaults(func=_cmd_sweep)
+
+
+def _fmt(value: Any, digits: int = 3) -> str:
+    if value is None or (isinstance(value, float) and not np.isfinite(value)):
+        return "-"
+    return f"{value:.{digits}f}" if isinstance(value, float) else str(value)
+
+
+def sweep_table(result: Any, best: Any = None) -> list[str]:
+    """Lines of the short table ``polarseg sweep`` prints (best cell marked ``*``)."""
+    cols = ["n", "w", "L", "segs", "stability", "silhouette", "ncut", "score"]
+    if result.has_ground_truth:
+        cols.append("ARI")
+    cols.append("s")
+    lines = ["  " + " ".join(f"{c:>10}" for c in cols)]
+    for c in result.cells:
+        mark = "*" if c is best else " "
+        if not c.ok:
+            head = [f"{c.refractive_index:g}", str(c.window), str(c.degree)]
+            lines.append(f"{mark} " + " ".join(f"{v:>10}" for v in head) + f"  error: {c.error}")
+            continue
+        values = [
+            f"{c.refractive_index:g}",
+            str(c.window),
+            str(c.degree),
+            str(c.n_segments),
+            _fmt(c.stability),
+            _fmt(c.silhouette),
+            _fmt(c.mean_ncut),
+            _fmt(c.score),
+        ]
+        if result.has_ground_truth:
+            values.append(_fmt(c.ari))
+        values.append(_fmt(c.seconds, 2))
+        lines.append(f"{mark} " + " ".join(f"{v:>10}" for v in values))
+    return lines
+
+
+def _cmd_sweep(args: argparse.Namespace) -> int:
+    from . import figures
+    from .engine.sweep import sweep
+
+    params = _params_from_args(args)
+    for flag, value in (("--plots", args.plots), ("--overview", args.overview)):
+        if value and not args.apply_best:
+            raise PolarsegError(f"{flag} draws the best cell's segmentation: give --apply-best")
+    t0 = time.perf_counter()
+    data = pio.read_stack(
+        args.input[0] if len(args.input) == 1 else args.input,
+        angles_deg=args.angles,
+        mosaic=args.mosaic,
+        channel=args.channel,
+        demosaic=args.demosaic,
+        max_bytes=_max_bytes(args),
+    )
+    read_seconds = time.perf_counter() - t0
+    shape = data.stack.shape[1:]
+    truth, truth_from = None, None
+    if args.ground_truth:
+        truth = read_labels_image(args.ground_truth, shape, "ground truth")
+        truth_from = str(Path(args.ground_truth).resolve())
+    elif data.ground_truth is not None:
+        truth, truth_from = np.asarray(data.ground_truth), "input"
+    if args.score == "ari" and truth is None:
+        raise PolarsegError("--score ari needs --ground-truth (or an input with its labels)")
+    mask = _pixel_mask(data, args)
+    stack, shifts = data.stack, None
+    if args.register:
+        stack, shifts = register_stack(stack)
+        mask = mask.shifted(shifts)
+
+    def progress(done: int, total: int) -> None:
+        print(f"{PROG}: sweep cell {done}/{total}", file=sys.stderr, flush=True)
+
+    result = sweep(
+        stack,
+        data.angles_rad,
+        params,
+        args.windows,
+        args.degrees,
+        args.refractive_indices,
+        ground_truth=truth,
+        score=args.score,
+        progress=progress if args.verbose else None,
+        mask=mask,
+        max_bytes=_max_bytes(args),
+        keep_labels=False,
+    )
+    failed = [c for c in result.cells if not c.ok]
+    if len(failed) == len(result.cells):
+        raise PolarsegError(f"no cell of the sweep could run: {failed[0].error}")
+    best_cell = result.best_cell()  # raises if no cell reached two segments
+    best = best_cell.params(result.base)
+    heatmap = figures.png_bytes(figures.sweep_heatmap_figure(result))
+    summary = {
+        "polarseg_version": __version__,
+        "command": "sweep",
+        "input": str(Path(data.source).resolve()),
+        "stack_shape": list(stack.shape),
+        "angles_deg": data.angles_deg.tolist(),
+        "registration_shifts_px": None if shifts is None else shifts.tolist(),
+        "ground_truth": truth_from,
+        "read_seconds": round(read_seconds, 6),
+        **result.to_dict(),
+    }
+    out = Path(args.out)
+    name = str(out)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        name = str(out / "sweep.csv")
+        with pio.atomic_output(out / "sweep.csv") as tmp:
+            tmp.write_text(result.to_csv(), encoding="utf-8")
+        name = str(out / "sweep_heatmap.png")
+        with pio.atomic_output(out / "sweep_heatmap.png") as tmp:
+            tmp.write_bytes(heatmap)
+        name = str(out / "best_params.json")
+        with pio.atomic_output(out / "best_params.json") as tmp:
+            tmp.write_text(best.to_json() + "\n", encoding="utf-8")
+        name = str(out / "sweep.json")
+        pio.write_json(out / "sweep.json", summary)
+    except OSError as exc:
+        raise OutputError(f"cannot write {name}: {exc.strerror or exc}") from exc
+    for line in sweep_table(result, best_cell):
+        print(line)
+    extra = "" if not result.has_ground_truth else f", ARI {best_cell.ari:.3f}"
+    print(
+        f"{PROG}: best by {result.score}: w = {best.window}, L = {best.degree}, "
+        f"n = {best.refractive_index:g} ({best_cell.n_segments} segments{extra})"
+    )
+    print(
+        f"{PROG}: {len(result.cells)} cells ({len(failed)} failed) in "
+        f"{result.total_seconds:.2f} s; wrote sweep.csv, sweep.json, sweep_heatmap.png, "
+        f"best_params.json to {out}"
+    )
+    print(f"{PROG}: to use it: {PROG} segment INPUT --params {out / 'best_params.json'} --out DIR")
+    if args.apply_best:
+        best_args = argparse.Namespace(**{**vars(args), "out": str(out / "best")})
+        _job(best_args, "segment", data, read_seconds, best, args.register)
+    return 0
 
 
 # -- entry point ----------------------------------------------------------------------------
@@ -1288,6 +1593,9 @@ def _cmd_timeseries(args: argparse.Namespace) -> int:
         [d.angles_rad for d in days],
         params,
         method=args.method,
+        change_window=args.change_window,
+        false_alarm=args.false_alarm,
+        change_from=args.change_from,
         masks=masks,
         progress=_progress(args.verbose),
     )
@@ -1310,9 +1618,15 @@ def _cmd_timeseries(args: argparse.Namespace) -> int:
             "labels": "labels_DD.tif: segment of every pixel on day DD (0 = first segment, "
             "the same numbering every day)",
             "change": "change_DD.tif: 1 where the block changed segment from day DD to DD+1",
+            "score": "score_DD.tif: change score of the pixel's change block between day DD "
+            "and DD+1 (normal deviate of the p-value that its polarisation image did not "
+            f"change; significant above {summary['score_threshold']:.2f})",
             "distance": "distance_DD.tif: Mahalanobis distance of the block's features "
             "between day DD and DD+1 (shared basis)",
         },
+        "change_window": result.change_window,
+        "false_alarm": result.false_alarm,
+        "change_from": result.change_from,
         "params": params.to_dict(),
     }
     out = Path(args.out)
@@ -1325,11 +1639,15 @@ def _cmd_timeseries(args: argparse.Namespace) -> int:
             meta = {"quantity": "segment labels", "first_label": 0, "day": t + 1}
             pio.write_tiff(name, _labels_image(labels), meta)
             written.append(Path(name).name)
-        pairs = zip(result.changes, result.feature_distance, strict=True)
-        for t, (change, dist) in enumerate(pairs):
+        pairs = zip(result.changes, result.change_score, result.feature_distance, strict=True)
+        for t, (change, score, dist) in enumerate(pairs):
             name = str(out / f"change_{t + 1:02d}.tif")
             meta = {"quantity": "segment changed", "from_day": t + 1, "to_day": t + 2}
             pio.write_tiff(name, change.astype(np.uint8), meta)
+            written.append(Path(name).name)
+            name = str(out / f"score_{t + 1:02d}.tif")
+            meta = {"quantity": "change score (normal deviate)", "from_day": t + 1}
+            pio.write_tiff(name, score.astype(np.float32), {**meta, "to_day": t + 2})
             written.append(Path(name).name)
             name = str(out / f"distance_{t + 1:02d}.tif")
             meta = {"quantity": "feature distance (Mahalanobis)", "from_day": t + 1}
@@ -1348,7 +1666,13 @@ def _cmd_timeseries(args: argparse.Namespace) -> int:
         f"({args.method}, {summary['n_components']} shared PCA components)"
     )
     for t, frac in enumerate(result.changed_fraction()):
-        print(f"{PROG}: day {t + 1} -> {t + 2}: {frac:.1%} of the blocks changed segment")
+        st = result.change_statistics[t]
+        print(
+            f"{PROG}: day {t + 1} -> {t + 2}: {frac:.1%} of the pixels changed segment; "
+            f"{int(st.significant.sum())} of {st.significant.size} change blocks changed "
+            f"significantly (false-alarm rate {result.false_alarm:g}, noise inflation "
+            f"{st.inflation:.2f}, intensity gain {st.gain:.3f})"
+        )
     for t, ari in enumerate(aris):
         if ari is not None:
             print(f"{PROG}: day {t + 1}: adjusted Rand index against the ground truth {ari:.3f}")

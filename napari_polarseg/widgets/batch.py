@@ -8,7 +8,8 @@
 - :class:`TimeSeriesWidget` ("Time series change map"): segments several angle-stack
   layers (days, in the chosen order) in one shared basis
   (:func:`napari_polarseg.engine.timeseries.segment_timeseries`) and adds the per-day
-  segments and the change maps as Labels layers (:func:`add_timeseries_layers`).
+  segments and the change maps as Labels layers and the graded change score as an Image
+  layer (:func:`add_timeseries_layers`).
 
 Both are thin: the work is done by the engine; nothing here is needed by the CLI.
 """
@@ -38,7 +39,12 @@ from napari.utils.notifications import show_error
 from .. import batch as batch_engine
 from ..engine import PolarsegError, SegmentParams
 from ..engine.params import RECOMMENDED
-from ..engine.timeseries import METHODS, TimeSeriesResult, segment_timeseries
+from ..engine.timeseries import (
+    DEFAULT_FALSE_ALARM,
+    METHODS,
+    TimeSeriesResult,
+    segment_timeseries,
+)
 from ._base import is_angle_stack
 from ._layers import ANGLES_KEY
 from ._runner import WorkerSlot, parse_angles
@@ -49,6 +55,8 @@ if TYPE_CHECKING:
 
 #: Where the batch parameters come from.
 PARAM_SOURCES = ("Segment by material widget", "recommended", "thesis", "JSON file")
+#: False-alarm rates (per change block and pair of days) the time-series widget offers.
+FALSE_ALARM_CHOICES = (1e-2, 1e-3, 1e-4, 1e-6)
 #: Columns of the summary table in the widget.
 TABLE_COLUMNS = (
     "scene",
@@ -299,9 +307,10 @@ class BatchWidget(Container):
 
 
 def read_timeseries_folder(folder: str | Path) -> dict[str, np.ndarray]:
-    """Labels, change and distance maps of a ``polarseg timeseries`` output folder.
+    """Labels, change, change-score and distance maps of a ``polarseg timeseries`` folder.
 
-    Returns ``{"labels": (T, H, W), "changes": (T − 1, H, W), "distance": (T − 1, H, W)}``.
+    Returns ``{"labels": (T, H, W), "changes": (T − 1, H, W), "score": (T − 1, H, W),
+    "distance": (T − 1, H, W)}`` (the last three when their files are there).
     """
     import tifffile
 
@@ -310,7 +319,12 @@ def read_timeseries_folder(folder: str | Path) -> dict[str, np.ndarray]:
     if not labels:
         raise PolarsegError(f"{root}: no labels_XX.tif (not a polarseg timeseries folder)")
     out = {"labels": np.stack([tifffile.imread(p) for p in labels]).astype(np.int32)}
-    for key, pattern in (("changes", "change_*.tif"), ("distance", "distance_*.tif")):
+    patterns = (
+        ("changes", "change_*.tif"),
+        ("score", "score_*.tif"),
+        ("distance", "distance_*.tif"),
+    )
+    for key, pattern in patterns:
         files = sorted(root.glob(pattern))
         if files:
             out[key] = np.stack([tifffile.imread(p) for p in files])
@@ -327,8 +341,10 @@ def add_timeseries_layers(
 
     Layers: ``<name> segments`` (Labels, days × H × W; segment k is label k + 1, the
     same on every day), ``<name> change`` (Labels, (days − 1) × H × W; 1 where the block
-    changed segment from one day to the next, slider position t = day t + 1 → t + 2) and
-    ``<name> feature distance`` (Image, hidden).
+    changed segment from one day to the next, slider position t = day t + 1 → t + 2),
+    ``<name> change score`` (Image, hidden; the graded change test, significant above
+    ~3.1 at the default false-alarm rate) and ``<name> feature distance`` (Image,
+    hidden). A folder without score maps (an older run) gets no score layer.
 
     Parameters
     ----------
@@ -341,11 +357,12 @@ def add_timeseries_layers(
     """
     if isinstance(result, TimeSeriesResult):
         labels, changes = result.labels, result.changes
+        score: np.ndarray | None = result.change_score
         distance: np.ndarray | None = result.feature_distance
     else:
         data = read_timeseries_folder(result)
         labels, changes = data["labels"], data.get("changes")
-        distance = data.get("distance")
+        score, distance = data.get("score"), data.get("distance")
         if changes is None:
             changes = labels[1:] != labels[:-1]
     place: dict[str, Any] = {}
@@ -357,6 +374,18 @@ def add_timeseries_layers(
         ),
         viewer.add_labels(np.asarray(changes, np.uint8), name=f"{name} change", **place),
     ]
+    if score is not None:
+        score = np.asarray(score, np.float32)
+        layers.append(
+            viewer.add_image(
+                score,
+                name=f"{name} change score",
+                colormap="inferno",
+                contrast_limits=(0.0, max(float(score.max(initial=0.0)), 4.0)),
+                visible=False,
+                **place,
+            )
+        )
     if distance is not None:
         layers.append(
             viewer.add_image(
@@ -371,12 +400,21 @@ def add_timeseries_layers(
 
 
 def timeseries_job(
-    stacks: list[np.ndarray], angles: list[np.ndarray], params: SegmentParams, method: str
+    stacks: list[np.ndarray],
+    angles: list[np.ndarray],
+    params: SegmentParams,
+    method: str,
+    false_alarm: float = DEFAULT_FALSE_ALARM,
 ) -> Generator[tuple[str, int, int], None, TimeSeriesResult]:
     """Worker job: the time-series engine, yielding after each step."""
     steps: list[tuple[str, int, int]] = []
     result = segment_timeseries(
-        stacks, angles, params, method=method, progress=lambda *s: steps.append(s)
+        stacks,
+        angles,
+        params,
+        method=method,
+        false_alarm=false_alarm,
+        progress=lambda *s: steps.append(s),
     )
     yield from steps
     return result
@@ -385,22 +423,29 @@ def timeseries_job(
 class TimeSeriesWidget(Container):
     """Segment several angle-stack layers (days of one view) and map what changed.
 
-    Select the day layers in time order (the list order), choose the method and the
-    parameters (as in :class:`BatchWidget`), press *Run*: adds the layers of
-    :func:`add_timeseries_layers`.
+    Select the day layers in time order (the list order), choose the method, the
+    false-alarm rate of the change test and the parameters (as in :class:`BatchWidget`),
+    press *Run*: adds the layers of :func:`add_timeseries_layers`.
     """
 
     def __init__(self, viewer: napari.viewer.Viewer) -> None:
         super().__init__(labels=True)
         self._viewer = viewer
         self.days = Select(label="days (in order)", choices=self._stack_choices)
-        self.method = ComboBox(label="method", choices=list(METHODS), value="reference")
+        self.method = ComboBox(label="method", choices=list(METHODS), value=METHODS[0])
+        self.false_alarm = ComboBox(
+            label="false-alarm rate",
+            choices=[(f"{p:g} per block", p) for p in FALSE_ALARM_CHOICES],
+            value=DEFAULT_FALSE_ALARM,
+        )
         self.source = ComboBox(label="parameters", choices=list(PARAM_SOURCES[:3]))
         self.run_button = PushButton(text="Run")
         self.status = Label(value="")
         self.status.native.setWordWrap(True)
         self.result: TimeSeriesResult | None = None
-        self.extend([self.days, self.method, self.source, self.run_button, self.status])
+        self.extend(
+            [self.days, self.method, self.false_alarm, self.source, self.run_button, self.status]
+        )
         self._slot = WorkerSlot("Time series", on_status=self._set_status)
         self.run_button.changed.connect(self.run)
         events = viewer.layers.events
@@ -450,12 +495,15 @@ class TimeSeriesWidget(Container):
             self.result = result
             add_timeseries_layers(self._viewer, result, source=layers[0])
             changed = ", ".join(f"{f:.0%}" for f in result.changed_fraction())
+            significant = ", ".join(str(int(s.sum())) for s in result.change_significant)
             self._set_status(
-                f"{result.n_days} days, {result.n_segments} segments; blocks changed: {changed}"
+                f"{result.n_days} days, {result.n_segments} segments "
+                f"({len(result.changed_segments)} changed materials); pixels changed "
+                f"segment: {changed}; significant change blocks: {significant}"
             )
 
-        args = (stacks, angles, params, self.method.value)
-        self._slot.submit(timeseries_job, args, len(layers) + 4, on_result)
+        args = (stacks, angles, params, self.method.value, self.false_alarm.value)
+        self._slot.submit(timeseries_job, args, len(layers) + 5, on_result)
 
     def _set_status(self, text: str) -> None:
         try:

@@ -5,10 +5,11 @@ from __future__ import annotations
 import numpy as np
 import tifffile
 from _gui_helpers import click
+from scipy import ndimage
 
 from napari_polarseg import batch, cli
 from napari_polarseg.engine.params import RECOMMENDED
-from napari_polarseg.engine.synthetic import make_scene
+from napari_polarseg.engine.synthetic import DEFAULT_NOISE_SIGMA, make_scene, render_stack
 from napari_polarseg.engine.timeseries import segment_timeseries
 from napari_polarseg.widgets.batch import (
     BatchWidget,
@@ -81,47 +82,76 @@ def test_batch_widget_cancel_and_bad_input(viewer, add_widget, qtbot, tmp_path):
 
 
 def fruit_days():
+    """Day 1: the fruit scene; day 2: the same view with new noise and a patch 3 % darker
+    and 30 % less polarised (a material change), rendered from day 1's noise-free images."""
     day1 = make_scene("fruit", shape=SHAPE, seed=0)
-    day2 = make_scene("fruit", shape=SHAPE, seed=0, noise_sigma=0.004)
-    return day1, day2
+    patch = np.zeros(SHAPE, bool)
+    patch[12:36, 24:48] = True
+    stack = render_stack(
+        np.where(patch, 0.97, 1.0) * day1.intensity,
+        np.where(patch, 0.7, 1.0) * day1.dop,
+        day1.phase,
+        day1.angles,
+        noise_sigma=DEFAULT_NOISE_SIGMA,
+        bit_depth=12,
+        rng=1,
+    )
+    return day1, stack, patch
 
 
-def test_timeseries_widget_adds_segments_and_change_layers(viewer, add_widget, qtbot):
-    day1, day2 = fruit_days()
+def test_timeseries_widget_adds_segments_change_and_score_layers(viewer, add_widget, qtbot):
+    day1, stack2, patch = fruit_days()
     layers = [
-        viewer.add_image(d.stack, name=f"day {i}", metadata={"angles_deg": d.angles_deg})
-        for i, d in enumerate((day1, day2), start=1)
+        viewer.add_image(s, name=f"day {i}", metadata={"angles_deg": day1.angles_deg})
+        for i, s in enumerate((day1.stack, stack2), start=1)
     ]
     widget = add_widget("Time series change map")
     assert isinstance(widget, TimeSeriesWidget)
+    assert widget.method.value == "tracked" and widget.false_alarm.value == 1e-3
     widget.source.value = "recommended"
+    widget.false_alarm.value = 1e-4
     widget.days.value = layers
     click(qtbot, widget.run_button)
     assert widget.wait(120)
     expected = segment_timeseries(
-        [day1.stack, day2.stack], day1.angles, RECOMMENDED, method=widget.method.value
+        [day1.stack, stack2], day1.angles, RECOMMENDED, method="tracked", false_alarm=1e-4
     )
     seg = viewer.layers["time series segments"]
     change = viewer.layers["time series change"]
+    score = viewer.layers["time series change score"]
     assert seg.data.shape == (2, *SHAPE) and change.data.shape == (1, *SHAPE)
     np.testing.assert_array_equal(seg.data, expected.labels + 1)
     np.testing.assert_array_equal(change.data[0], expected.changes[0])
-    assert "2 days" in widget.status.value
+    np.testing.assert_array_equal(score.data, expected.change_score)
+    # the darkened patch is what changed segment, and nothing far from it
+    assert change.data[0][patch].mean() > 0.7
+    far = ~ndimage.binary_dilation(patch, iterations=6)
+    assert change.data[0][far].mean() < 0.02
+    assert score.data[0][patch].mean() > 3.7
+    assert "2 days" in widget.status.value and "significant change blocks" in widget.status.value
 
 
 def test_add_timeseries_layers_from_a_cli_folder(viewer, tmp_path):
+    day1, stack2, _ = fruit_days()
     paths = []
-    for i, day in enumerate(fruit_days(), start=1):
+    for i, stack in enumerate((day1.stack, stack2), start=1):
         paths.append(tmp_path / f"day{i}.npz")
-        np.savez(paths[-1], stack=day.stack, angles=day.angles_deg)
+        np.savez(paths[-1], stack=stack, angles=day1.angles_deg)
     out = tmp_path / "series"
     assert cli.main(["timeseries", *map(str, paths), "--out", str(out), "--window", "8"]) == 0
     layers = add_timeseries_layers(viewer, out, name="cli")
     assert [layer.name for layer in layers] == [
         "cli segments",
         "cli change",
+        "cli change score",
         "cli feature distance",
     ]
     labels = tifffile.imread(out / "labels_02.tif")
     np.testing.assert_array_equal(layers[0].data[1], labels + 1)
     np.testing.assert_array_equal(layers[1].data[0], tifffile.imread(out / "change_01.tif"))
+    np.testing.assert_array_equal(layers[2].data[0], tifffile.imread(out / "score_01.tif"))
+    assert layers[1].data.any()
+    # an older folder without score maps still loads (no score layer)
+    (out / "score_01.tif").unlink()
+    names = [layer.name for layer in add_timeseries_layers(viewer, out, name="old")]
+    assert names == ["old segments", "old change", "old feature distance"]
