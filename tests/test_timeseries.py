@@ -367,3 +367,22 @@ def test_cli_timeseries_needs_two_inputs(tmp_path, capsys) -> None:
     assert cli.main(["timeseries", str(path), "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "at least 2 inputs" in err[0]
+
+
+def test_polarisation_statistics_share_one_standardisation_over_the_days():
+    # two days of the same scene, the second uniformly brighter: per-day z-scores would
+    # erase that difference; the shared basis must keep it
+    from napari_polarseg.engine import Pipeline, polstats
+
+    sc = syn.make_scene("leaves", shape=(64, 72), seed=3)
+    params = RECOMMENDED.replace(window=8, features="polstats", n_segments=2)
+    day2 = (sc.stack.astype(float) * 1.5).astype(sc.stack.dtype)
+    raw = [
+        Pipeline(s, sc.angles, params).block_vectors(standardise=False) for s in (sc.stack, day2)
+    ]
+    col = polstats.STAT_NAMES.index("log_intensity")
+    np.testing.assert_allclose(raw[1][:, col] - raw[0][:, col], np.log(1.5), atol=1e-3)
+    per_day = Pipeline(sc.stack, sc.angles, params).block_vectors()
+    np.testing.assert_allclose(per_day, polstats.standardise(raw[0]))
+    result = segment_timeseries([sc.stack, day2], [sc.angles, sc.angles], params)
+    assert result.labels.shape == (2, 64, 72)

@@ -58,6 +58,9 @@ UPSTREAM = {
 #: Largest number of blocks for a dense affinity even when asked for (n² float64 entries).
 MAX_DENSE_BLOCKS = 12_000
 
+#: Feature kinds computed from the polarisation statistics (engine.polstats), which are
+#: z-scored per column before the PCA.
+POLSTATS_KINDS = ("polstats", "zonal+polstats")
 #: Share of a block's pixels that must be usable for the block to be segmented.
 MIN_VALID_BLOCK_FRACTION = 0.25
 #: Above this many blocks ``affinity_graph="auto"`` switches to the sparse k-nearest-
@@ -68,6 +71,18 @@ MIN_VALID_BLOCK_FRACTION = 0.25
 #: blocks) stays dense; a polarisation-camera frame at w = 8 (19,584 blocks: 3 GB dense)
 #: goes sparse.
 DENSE_MAX_BLOCKS = 6_000
+
+
+def valid_blocks(valid: np.ndarray, window: int) -> np.ndarray:
+    """Blocks (flat, row-major over the w × w block grid) of which at least
+    :data:`MIN_VALID_BLOCK_FRACTION` of the pixels are ``valid`` (H, W bool, e.g.
+    :attr:`SegmentationResult.valid`): the blocks that enter the graph."""
+    valid = np.asarray(valid, dtype=bool)
+    if valid.all():
+        grid = harmonics.block_grid(valid.shape, window)
+        return np.ones(grid[0] * grid[1], dtype=bool)
+    used = harmonics._blockify(valid.astype(np.float64), window).mean(axis=-1)
+    return (used >= MIN_VALID_BLOCK_FRACTION).ravel()
 
 
 def affinity_graph_kind(n_blocks: int, p: SegmentParams) -> str:
@@ -289,13 +304,7 @@ class Pipeline:
         """Blocks that enter the graph (flat, row-major): at least
         :data:`MIN_VALID_BLOCK_FRACTION` of their pixels are used (not masked, saturated,
         black or invalid). The others are labelled from their nearest valid block."""
-        pol = self.get("polarisation")
-        window = self._p().window
-        if not pol.invalid.any():
-            grid = harmonics.block_grid(pol.intensity.shape, window)
-            return np.ones(grid[0] * grid[1], dtype=bool)
-        used = harmonics._blockify((~pol.invalid).astype(np.float64), window).mean(axis=-1)
-        return (used >= MIN_VALID_BLOCK_FRACTION).ravel()
+        return valid_blocks(~self.get("polarisation").invalid, self._p().window)
 
     # -- stages -----------------------------------------------------------------------
     def _compute(self, stage: str) -> Any:
@@ -416,7 +425,19 @@ class Pipeline:
             return Reconstruction(rec, np.abs(rec - pol.intensity))
         raise KeyError(stage)
 
-    def _block_vectors(self, coef: np.ndarray, p: SegmentParams) -> np.ndarray:
+    def block_vectors(self, standardise: bool = True) -> np.ndarray:
+        """Feature vector of every block (rows·cols, F) for the current ``features`` kind.
+
+        What the ``pca`` stage reduces. With ``standardise=False`` the polarisation
+        statistics are returned in their own units, so that a caller pooling several
+        images (the time series' shared basis) can standardise them over all of them.
+        """
+        p = self._p()
+        return self._block_vectors(self.get("harmonics"), p, standardise)
+
+    def _block_vectors(
+        self, coef: np.ndarray, p: SegmentParams, standardise: bool = True
+    ) -> np.ndarray:
         """Feature vector of every block (rows·cols, F) for ``p.features``.
 
         Harmonic kinds come from the coefficients (:func:`~.features.harmonic_features`);
@@ -424,17 +445,15 @@ class Pipeline:
         because its columns have different units; ``"zonal+polstats"`` puts the z-scored
         zonal coefficients and statistics side by side.
         """
-        if p.features not in ("polstats", "zonal+polstats"):
+        if p.features not in POLSTATS_KINDS:
             return feat.harmonic_features(coef, p.features)
         pol, nrm = self.get("polarisation"), self.get("normals")
         stats = polstats.block_polarisation_statistics(
             pol.intensity, pol.dop, pol.phase, nrm.zenith, p.window, valid=~pol.invalid
         ).reshape(-1, len(polstats.STAT_NAMES))
-        stats = polstats.standardise(stats)
-        if p.features == "polstats":
-            return stats
-        zonal = polstats.standardise(feat.harmonic_features(coef, "zonal"))
-        return np.concatenate([zonal, stats], axis=1)
+        if p.features == "zonal+polstats":
+            stats = np.concatenate([feat.harmonic_features(coef, "zonal"), stats], axis=1)
+        return polstats.standardise(stats) if standardise else stats
 
     def get(self, stage: str) -> Any:
         """Value of a stage for the current parameters, computing it if stale.

@@ -100,10 +100,10 @@ import numpy as np
 from scipy import stats
 
 from . import features as feat
-from . import harmonics, ncut
+from . import harmonics, ncut, polstats
 from .errors import Cancelled, PolarsegError
 from .params import SegmentParams
-from .pipeline import MAX_DENSE_BLOCKS, Pipeline
+from .pipeline import MAX_DENSE_BLOCKS, POLSTATS_KINDS, Pipeline
 
 #: Ways to segment the days (see the module docstring); the first is the default.
 METHODS = ("tracked", "reference", "joint")
@@ -773,7 +773,8 @@ def segment_timeseries(
         try:
             pipe = Pipeline(np.asarray(stacks[t]), angle_list[t], params, mask=mask_list[t])
             coef = pipe.get("harmonics")
-            vectors.append(_block_vectors(pipe, coef, params))
+            # polarisation statistics are standardised over all days below, not per day
+            vectors.append(pipe.block_vectors(standardise=False))
         except PolarsegError as exc:
             raise PolarsegError(f"day {t + 1}: {exc}") from None
         day_shape = tuple(pipe.stack.shape[1:])
@@ -796,7 +797,10 @@ def segment_timeseries(
 
     # 2. one PCA over the blocks of all days
     t0 = time.perf_counter()
-    pca = feat.pca_features(np.concatenate(vectors, axis=0), params.variance)
+    pooled = np.concatenate(vectors, axis=0)
+    if params.features in POLSTATS_KINDS:
+        pooled = polstats.standardise(pooled)  # one z-score over every day's blocks
+    pca = feat.pca_features(pooled, params.variance)
     scores = pca.features
     done("shared pca", t0)
 
@@ -914,14 +918,6 @@ def segment_timeseries(
         pipelines=pipelines,
         timings=timings,
     )
-
-
-def _block_vectors(pipe: Pipeline, coef: np.ndarray, params: SegmentParams) -> np.ndarray:
-    """The pipeline's block feature vectors for ``params.features`` (any kind it knows)."""
-    own = getattr(pipe, "_block_vectors", None)
-    if own is not None:
-        return own(coef, params)
-    return feat.harmonic_features(coef, params.features)
 
 
 def _block_any(mask: np.ndarray, window: int) -> np.ndarray:
