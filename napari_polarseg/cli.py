@@ -53,7 +53,8 @@ All images are H × W of the angle stack the engine sees: the input's size, exce
 ``--mosaic``, where a raw H × W camera frame becomes a stack of H/2 × W/2 frames and so do
 the outputs (full size with ``--demosaic interpolated``). ``demo`` (and ``segment
 --overview``) also writes ``overview.png``; ``--plots`` the analyst's plots as PNGs into
-``DIR/plots/`` (:func:`napari_polarseg.figures.save_plots`).
+``DIR/plots/`` (:func:`napari_polarseg.figures.save_plots`). The folder is written by
+:func:`napari_polarseg.export.write_result_folder`, as the plugin's *Export results…* does.
 
 ``sweep`` segments one stack for every w, L (and n) of a grid with one cached pipeline
 (:mod:`napari_polarseg.engine.sweep`) and writes ``sweep.csv`` (one row per cell: the
@@ -97,12 +98,7 @@ import numpy as np
 from . import __version__
 from . import io as pio
 from .engine.errors import PolarsegError
-from .engine.evaluation import (
-    STATISTICS_COLUMNS,
-    adjusted_rand_index,
-    evaluate,
-    segment_statistics,
-)
+from .engine.evaluation import adjusted_rand_index, evaluate
 from .engine.limits import check_pipeline_memory, memory_limit
 from .engine.mosaic import DEMOSAIC_METHODS
 from .engine.params import (
@@ -117,8 +113,11 @@ from .engine.params import (
     SegmentParams,
 )
 from .engine.pipeline import Pipeline, SegmentationResult
-from .engine.polarimage import PixelMask, duplicate_angle_frames, validity_mask
+from .engine.polarimage import PixelMask, validity_mask
 from .engine.registration import register_stack
+from .export import FLOAT_OUTPUTS as FLOAT_OUTPUTS  # the output contract (batch.py reads it)
+from .export import OutputError, write_result_folder
+from .export import labels_image as _labels_image
 
 PROG = "polarseg"
 #: Folder of the bundled sample scenes (``<scene>.npz``).
@@ -126,29 +125,9 @@ SAMPLE_DIR = Path(__file__).resolve().parent / "sample_data"
 DEFAULT_SCENE = "leaves"
 DEFAULT_DEMO_OUT = "polarseg-demo"
 
-#: Output images: file name -> (result attribute, TIFF metadata).
-FLOAT_OUTPUTS = {
-    "intensity.tif": ("intensity", {"quantity": "mean intensity", "unit": "input units"}),
-    "dop.tif": ("dop", {"quantity": "degree of polarisation", "unit": "1"}),
-    "phase.tif": ("phase", {"quantity": "phase", "unit": "radians", "range": "[0, pi)"}),
-    "zenith.tif": ("zenith", {"quantity": "zenith angle", "unit": "radians"}),
-    "reconstruction_error.tif": (
-        "reconstruction_error",
-        {"quantity": "absolute reconstruction error of the mean intensity", "unit": "input units"},
-    ),
-    "residual.tif": (
-        "residual",
-        {"quantity": "RMS residual of the sinusoid fit", "unit": "input units"},
-    ),
-}
-
 
 class UsageError(PolarsegError):
     """A command-line syntax error (reported like any bad input)."""
-
-
-class OutputError(Exception):
-    """The outputs could not be written (exit code 1)."""
 
 
 class _Parser(argparse.ArgumentParser):
@@ -704,168 +683,37 @@ def _segment(
     return Run(data, params, stack, result, shifts, seconds, mask, pipe)
 
 
-MASK_META = {
-    "quantity": "pixels used by the fit and the features",
-    "values": "1 used, 0 excluded (saturated, black, not finite, outside the mask, or no "
-    "positive intensity)",
-}
-
-
-def _used_pixels(result: SegmentationResult) -> np.ndarray:
-    valid = result.valid
-    if valid is None:
-        return np.ones(result.labels.shape, np.uint8)
-    return np.asarray(valid, dtype=np.uint8)
-
-
-def _labels_image(labels: np.ndarray) -> np.ndarray:
-    dtype = np.uint16 if labels.max(initial=0) < 2**16 else np.uint32
-    return labels.astype(dtype)
-
-
 def _resolved(name: str | None) -> str | None:
     return None if name in (None, "array") else str(Path(name).resolve())
 
 
-def _run_info(run: Run, command: str, args: argparse.Namespace) -> dict[str, Any]:
-    data = run.data
+def _input_info(data: pio.StackData, args: argparse.Namespace) -> dict[str, Any]:
+    """What ``params.json`` records of the reading, beyond :func:`export.run_info`."""
+    meta = data.metadata
     return {
-        "polarseg_version": __version__,
-        "command": command,
-        "input": str(Path(data.source).resolve()),
-        "input_format": data.metadata.get("format"),
-        "input_files": data.metadata.get("files"),
-        "stack_shape": list(run.stack.shape),
-        "output_shape": list(run.result.labels.shape),
-        "angles_deg": data.angles_deg.tolist(),
-        "angles_from": data.metadata.get("angles_from"),
-        "mosaic_layout_deg": data.metadata.get("mosaic_layout_deg"),
-        "raw_shape": data.metadata.get("raw_shape"),
+        "input_format": meta.get("format"),
+        "input_files": meta.get("files"),
+        "angles_from": meta.get("angles_from"),
+        "mosaic_layout_deg": meta.get("mosaic_layout_deg"),
+        "raw_shape": meta.get("raw_shape"),
         "channel": getattr(args, "channel", None),
-        "demosaic": data.metadata.get("demosaic"),
-        "dark_frame": _resolved(data.metadata.get("dark_frame")),
-        "offset": data.metadata.get("offset"),
-        "saturation_level": None if run.mask is None else run.mask.saturation_level,
-        "bits_per_sample": data.metadata.get("bits_per_sample"),
-        "dark_level": None if run.mask is None else run.mask.dark_level,
+        "demosaic": meta.get("demosaic"),
+        "dark_frame": _resolved(meta.get("dark_frame")),
+        "offset": meta.get("offset"),
+        "bits_per_sample": meta.get("bits_per_sample"),
         "mask_file": _resolved(getattr(args, "mask", None)),
-        "duplicate_angles": [
-            {
-                "angle_deg": float(data.angles_deg[frames[0]]),
-                "frames": frames,
-                "handling": "averaged before the fit",
-            }
-            for frames in duplicate_angle_frames(data.angles_rad)
-        ],
-        "registration": {
-            "ran": run.shifts is not None,
-            "reference_frame": 0 if run.shifts is not None else None,
-            "shifts_px": None if run.shifts is None else run.shifts.tolist(),
-        },
-        "params": run.params.to_dict(),
     }
-
-
-def _csv_value(value: Any) -> str:
-    if isinstance(value, float):
-        return "" if not np.isfinite(value) else f"{value:.6g}"
-    return str(value)
-
-
-def write_segments_csv(path: Path, rows: list[dict[str, Any]]) -> None:
-    """Write per-segment statistics (:data:`STATISTICS_COLUMNS`) as CSV, atomically.
-
-    NaN (a segment with no used pixel or block, fewer than 3 PCA features) is empty.
-    """
-    lines = [",".join(STATISTICS_COLUMNS)]
-    lines += [",".join(_csv_value(row[c]) for c in STATISTICS_COLUMNS) for row in rows]
-    with pio.atomic_output(path) as tmp:
-        tmp.write_text("\n".join(lines) + "\n", encoding="utf-8")
-
-
-PROBABILITY_META = {
-    "quantity": "class probability from the scribble classifier",
-    "unit": "1",
-    "axes": "class, row, column (class k = the k-th smallest scribble value)",
-}
-
-
-def _write_outputs(
-    out: Path,
-    run: Run,
-    info: dict[str, Any],
-    summary: dict[str, Any],
-    overview: np.ndarray | None,
-    *,
-    segments: list[dict[str, Any]] | None = None,
-    probabilities: np.ndarray | None = None,
-    evaluation: dict[str, Any] | None = None,
-    plots: dict[str, bytes] | None = None,
-) -> list[str]:
-    """Write every output file atomically; returns their names. Raises OutputError."""
-    t0 = time.perf_counter()
-    written: list[str] = []
-    name = str(out)
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-        name = str(out / "labels.tif")
-        pio.write_tiff(
-            out / "labels.tif",
-            _labels_image(run.result.labels),
-            {"quantity": "segment labels", "first_label": 0},
-        )
-        written.append("labels.tif")
-        for fname, (attr, meta) in FLOAT_OUTPUTS.items():
-            name = str(out / fname)
-            pio.write_tiff(out / fname, np.asarray(getattr(run.result, attr), np.float32), meta)
-            written.append(fname)
-        name = str(out / "mask.tif")
-        pio.write_tiff(out / "mask.tif", _used_pixels(run.result), MASK_META)
-        written.append("mask.tif")
-        if segments is not None:
-            name = str(out / "segments.csv")
-            write_segments_csv(out / "segments.csv", segments)
-            written.append("segments.csv")
-        if probabilities is not None:
-            name = str(out / "probabilities.tif")
-            pio.write_tiff(
-                out / "probabilities.tif", probabilities.astype(np.float32), PROBABILITY_META
-            )
-            written.append("probabilities.tif")
-        if evaluation is not None:
-            name = str(out / "evaluation.json")
-            pio.write_json(out / "evaluation.json", evaluation)
-            written.append("evaluation.json")
-        if overview is not None:
-            name = str(out / "overview.png")
-            pio.write_png(out / "overview.png", overview)
-            written.append("overview.png")
-        if plots is not None:
-            name = str(out / "plots")
-            _write_plots(out / "plots", plots)
-            written.append(f"plots/ ({len(plots)} PNGs)")
-        name = str(out / "params.json")
-        pio.write_json(out / "params.json", info)
-        written.append("params.json")
-        summary["io_seconds"]["write"] = round(time.perf_counter() - t0, 6)
-        name = str(out / "summary.json")
-        pio.write_json(out / "summary.json", summary)
-        written.append("summary.json")
-    except OSError as exc:
-        reason = exc.strerror or str(exc)
-        raise OutputError(f"cannot write {name}: {reason}") from exc
-    return written
 
 
 def _summary(run: Run, read_seconds: float) -> dict[str, Any]:
-    summary = run.result.summary()
-    summary["io_seconds"] = {
-        "read": round(read_seconds, 6),
-        "register": round(run.seconds.get("register", 0.0), 6),
+    """The CLI's items of ``summary.json`` (beyond ``result.summary()``): seconds."""
+    return {
+        "io_seconds": {
+            "read": round(read_seconds, 6),
+            "register": round(run.seconds.get("register", 0.0), 6),
+        },
+        "segment_seconds": round(run.seconds["segment"], 6),
     }
-    summary["segment_seconds"] = round(run.seconds["segment"], 6)
-    summary["output_shape"] = list(run.result.labels.shape)
-    return summary
 
 
 def _report(out: Path, run: Run, written: list[str]) -> None:
@@ -904,7 +752,11 @@ def _report(out: Path, run: Run, written: list[str]) -> None:
             f"{PROG}: frames {', '.join(map(str, frames))} share a polariser angle "
             f"(modulo 180 degrees) and were averaged before the fit"
         )
-    print(f"{PROG}: wrote {', '.join(written)} to {out}")
+    plots = [name for name in written if name.startswith("plots/")]
+    listed = [name for name in written if name not in plots]
+    if plots:
+        listed.insert(-2, f"plots/ ({len(plots)} PNGs)")  # before params.json, summary.json
+    print(f"{PROG}: wrote {', '.join(listed)} to {out}")
 
 
 def read_labels_image(path: str, shape: Sequence[int], what: str) -> np.ndarray:
@@ -990,22 +842,6 @@ def _scribble_run(run: Run, scribbles: np.ndarray, path: str) -> tuple[Run, np.n
     return dataclasses.replace(run, result=result, seconds=seconds), proba, classes
 
 
-def _segment_rows(run: Run) -> list[dict[str, Any]]:
-    result = run.result
-    block_valid = run.pipeline.block_valid() if run.pipeline is not None else None
-    return segment_statistics(
-        result.labels,
-        result.intensity,
-        result.dop,
-        result.zenith,
-        result.phase,
-        valid=result.valid,
-        block_labels=result.block_labels,
-        features=result.features,
-        block_valid=block_valid,
-    )
-
-
 def _job(
     args: argparse.Namespace,
     command: str,
@@ -1039,37 +875,27 @@ def _job(
             "ground_truth": str(Path(truth_file).resolve()),
             **evaluate(truth, run.result.labels, run.params.window),
         }
-        summary["adjusted_rand_index"] = evaluation["adjusted_rand_index"]
-        summary["evaluation"] = {
-            k: evaluation[k]
-            for k in (
-                "adjusted_rand_index",
-                "mean_iou",
-                "iou_per_segment",
-                "block_accuracy_worst",
-                "block_accuracy_optimistic",
-                "window",
-            )
-        }
-    segments = _segment_rows(run)
-    overview = render_overview(run.stack[0], run.result) if args.overview else None
-    plot_pngs = _render_plots(run.result) if getattr(args, "plots", False) else None
     out = Path(args.out)
-    info = _run_info(run, command, args)
+    info = _input_info(data, args)
     if scribble_file:
         info["scribbles_file"] = str(Path(scribble_file).resolve())
     if truth_file:
         info["ground_truth_file"] = str(Path(truth_file).resolve())
-    written = _write_outputs(
+    written = write_result_folder(
         out,
-        run,
-        info,
-        summary,
-        overview,
-        segments=segments,
+        stack=run.stack,
+        angles_deg=data.angles_deg,
+        result=run.result,
+        mask=run.mask,
+        source=str(Path(data.source).resolve()),
+        command=command,
+        overview=bool(args.overview),
+        plots=bool(getattr(args, "plots", False)),
         probabilities=probabilities,
         evaluation=evaluation,
-        plots=plot_pngs,
+        shifts=run.shifts,
+        info=info,
+        summary=summary,
     )
     _report(out, run, written)
     if evaluation is not None:
@@ -1135,82 +961,7 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     return 0
 
 
-# -- overview figure ------------------------------------------------------------------------
-
-
-def render_overview(first_frame: np.ndarray, result: SegmentationResult) -> np.ndarray:
-    """Draw input, Î, ρ, φ, segments and reconstruction error side by side.
-
-    Uses matplotlib's object-oriented API on an Agg canvas (no pyplot, so no global
-    backend is switched and no window opens).
-
-    Parameters
-    ----------
-    first_frame : array (H, W)
-        First frame of the angle stack.
-    result : SegmentationResult
-        The pipeline's result.
-
-    Returns
-    -------
-    ndarray (rows, columns, 4) uint8
-        The RGBA figure, ready for :func:`napari_polarseg.io.write_png`.
-    """
-    from matplotlib import colormaps
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.colors import ListedColormap
-    from matplotlib.figure import Figure
-
-    k = max(result.n_segments, 1)
-    base = "tab10" if k <= 10 else "tab20"
-    seg_cmap = ListedColormap(colormaps[base](np.arange(k) % colormaps[base].N))
-    error = result.reconstruction_error
-    error = np.zeros_like(result.intensity) if error is None else error
-    finite_err = error[np.isfinite(error)]
-    err_max = float(np.percentile(finite_err, 99)) if finite_err.size else 1.0
-    panels = [
-        ("input (first frame)", first_frame, "gray", None, None),
-        ("Î mean intensity", result.intensity, "gray", None, None),
-        ("ρ degree of polarisation", result.dop, "viridis", 0.0, None),
-        ("φ phase (rad)", result.phase, "twilight", 0.0, np.pi),
-        (f"segments ({result.n_segments})", result.labels, seg_cmap, -0.5, k - 0.5),
-        ("reconstruction error", error, "magma", 0.0, err_max or None),
-    ]
-    h, w = result.labels.shape
-    panel_w = 3.2
-    fig = Figure(figsize=(panel_w * len(panels), panel_w * h / w + 0.8), dpi=100)
-    canvas = FigureCanvasAgg(fig)
-    axes = fig.subplots(1, len(panels))
-    for ax, (title, image, cmap, vmin, vmax) in zip(axes, panels, strict=True):
-        shown = ax.imshow(
-            np.asarray(image, dtype=float), cmap=cmap, vmin=vmin, vmax=vmax, interpolation="nearest"
-        )
-        ax.set_title(title, fontsize=10)
-        ax.set_axis_off()
-        bar = fig.colorbar(shown, ax=ax, fraction=0.046, pad=0.02)
-        if cmap is seg_cmap:
-            bar.set_ticks(np.arange(k) if k <= 12 else np.linspace(0, k - 1, 5).round())
-    fig.tight_layout()
-    canvas.draw()
-    return np.asarray(canvas.buffer_rgba()).copy()
-
-
-# -- plots and parameter sweep --------------------------------------------------------------
-
-
-def _render_plots(result: SegmentationResult) -> dict[str, bytes]:
-    """The PNGs of :func:`napari_polarseg.figures.save_plots`, in memory (``--plots``)."""
-    from . import figures
-
-    return figures.render_plots(result)
-
-
-def _write_plots(folder: Path, pngs: dict[str, bytes]) -> None:
-    """Write ``--plots`` PNGs into ``folder`` (created), each atomically."""
-    folder.mkdir(parents=True, exist_ok=True)
-    for fname, content in pngs.items():
-        with pio.atomic_output(folder / fname) as tmp:
-            tmp.write_bytes(content)
+# -- parameter sweep ------------------------------------------------------------------------
 
 
 def _number_list_arg(kind: type, what: str):

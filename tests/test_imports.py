@@ -9,7 +9,13 @@ GUI_ROOTS = ["napari", "magicgui", "qtpy", "PyQt5", "PyQt6", "PySide2", "PySide6
 
 
 @pytest.mark.parametrize(
-    "module", ["napari_polarseg", "napari_polarseg.engine", "napari_polarseg.engine.pipeline"]
+    "module",
+    [
+        "napari_polarseg",
+        "napari_polarseg.engine",
+        "napari_polarseg.engine.pipeline",
+        "napari_polarseg.export",
+    ],
 )
 def test_import_loads_no_gui_module(module):
     code = (

@@ -6,6 +6,7 @@ import contextlib
 import json
 import time
 from collections.abc import Generator
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -32,6 +33,7 @@ from ._runner import (
     SCRIBBLE_STAGES,
     PipelineStore,
     ScribbleOutput,
+    WorkerSlot,
     content_digest,
     scribble_problem,
     scribble_stages,
@@ -146,6 +148,51 @@ def scribble_job(
     return (yield from scribble_stages(pipe, scribbles, params, reconstruction=True))
 
 
+@dataclass
+class ExportRecord:
+    """What *Export results…* writes for a stack layer: its last result and inputs.
+
+    The keyword arguments of :func:`napari_polarseg.export.write_result_folder` but the
+    folder (and ``overview``/``plots``), captured when the result was shown.
+    """
+
+    stack: Any
+    angles_deg: np.ndarray
+    result: SegmentationResult
+    mask: Any = None
+    source: str | None = None
+    probabilities: np.ndarray | None = None
+    info: dict[str, Any] = field(default_factory=dict)
+    summary: dict[str, Any] = field(default_factory=dict)
+
+    def kwargs(self) -> dict[str, Any]:
+        return {
+            "stack": self.stack,
+            "angles_deg": self.angles_deg,
+            "result": self.result,
+            "mask": self.mask,
+            "source": self.source,
+            "command": "napari",
+            "probabilities": self.probabilities,
+            "info": self.info,
+            "summary": self.summary,
+        }
+
+
+def export_job(
+    folder: Path, kwargs: dict[str, Any]
+) -> Generator[tuple[str, int, int], None, list[str]]:
+    """Worker job of *Export results…*: :func:`~napari_polarseg.export.write_result_folder`
+    (a file that cannot be written is reported as a :class:`PolarsegError`)."""
+    from ..export import OutputError, write_result_folder
+
+    yield "writing", 1, 1
+    try:
+        return write_result_folder(folder, **kwargs)
+    except OutputError as exc:
+        raise PolarsegError(str(exc)) from None
+
+
 def read_params_file(path: str | Path) -> SegmentParams:
     """SegmentParams from a JSON file, as ``polarseg segment --params`` reads it.
 
@@ -198,7 +245,9 @@ class SegmentWidget(StackWidget):
     Labels layer of the stack's height x width: non-zero = segment the pixel) and
     scribbles (none = unsupervised, or a Labels layer of strokes, 1, 2, … = materials);
     *New scribbles layer*; Run and Cancel; a live-update toggle that reruns after every
-    change, including every stroke painted into the chosen mask or scribbles layer.
+    change, including every stroke painted into the chosen mask or scribbles layer;
+    *Export results…* (:meth:`export_results`: the chosen stack's last result as the
+    folder ``polarseg segment --out`` writes).
     Saturated samples (at the integer dtype's maximum) and black ones (at or below 0)
     are always left out of the fit and counted in the status line.
 
@@ -248,6 +297,10 @@ class SegmentWidget(StackWidget):
         self._force = False  # a control changed: the next live run is not skipped
         self._watched: dict[str, Any] = {"mask": None, "scribbles": None}
         self._params_dir = Path.home()
+        #: Per stack key: what *Export results…* writes (the last result shown).
+        self._exports: dict[str, ExportRecord] = {}
+        self._export_dir = Path.home()
+        self._export_slot = WorkerSlot("Export results", on_status=self._set_status)
         self.preset = ComboBox(
             label="preset",
             choices=list(PRESETS),
@@ -410,6 +463,14 @@ class SegmentWidget(StackWidget):
             "scribbles and start the paint brush: paint label 1 on one material, 2 on "
             "another, …",
         )
+        self.export_button = PushButton(
+            text="Export results…",
+            enabled=False,
+            tooltip="Write the last result of the chosen stack into a folder: labels, maps, "
+            "mask, per-segment statistics (segments.csv), params.json (loadable with 'Load "
+            "parameters…' and polarseg segment --params), summary.json and overview.png, "
+            "as polarseg segment --out writes them",
+        )
         self.parameter_widgets = [getattr(self, name) for name in CONTROLLED]
         self._add_parameters(
             [
@@ -422,6 +483,7 @@ class SegmentWidget(StackWidget):
                 self.live,
             ]
         )
+        self.insert(self.index(self.status), self.export_button)  # after Run and Cancel
         self._timer = QTimer(self.native)  # deleted with the widget: never fires after it
         self._timer.setSingleShot(True)
         self._timer.setInterval(LIVE_DELAY_MS)
@@ -440,6 +502,8 @@ class SegmentWidget(StackWidget):
         self.new_scribbles_button.changed.connect(self.new_scribbles_layer)
         self.load_button.changed.connect(self._on_load_clicked)
         self.save_button.changed.connect(self._on_save_clicked)
+        self.export_button.changed.connect(self._on_export_clicked)
+        self.stack_layer.changed.connect(self._update_export_button)
         watches, on_edit = self._watched, self._on_layer_edited
 
         def _unwatch(*_: Any) -> None:
@@ -568,6 +632,97 @@ class SegmentWidget(StackWidget):
         path = self._ask_path(save=False)
         if path:
             self.load_params(path)
+
+    # -- exporting --------------------------------------------------------------------
+    def export_results(
+        self, folder: str | Path, *, overview: bool = True, plots: bool = False
+    ) -> bool:
+        """Write the chosen stack's last result into ``folder``, in a worker thread.
+
+        The files of ``polarseg segment --out`` (:func:`napari_polarseg.export.
+        write_result_folder`): ``labels.tif`` (0 = first segment; after a scribble run the
+        class index, 0 = smallest scribble value), the float maps, ``mask.tif``,
+        ``segments.csv``, ``params.json`` (reloads with :meth:`load_params` and ``polarseg
+        segment --params``), ``summary.json``, ``overview.png`` (unless ``overview`` is
+        False), the analyst's plots in ``plots/`` with ``plots``, and after a scribble run
+        ``probabilities.tif``. The result is the one the stack's ``segments`` layer was
+        made from, with the stack, angles, parameters and mask of that run. Returns
+        whether the export started; the status line then says how many files were
+        written, or why they could not be (also as a notification). :meth:`wait` waits for
+        it.
+        """
+        layer = self.stack_layer.value
+        record = None if layer is None else self._exports.get(source_key(layer))
+        if record is None:
+            self._fail(PolarsegError("nothing to export: run a segmentation of this stack first"))
+            return False
+        folder = Path(folder)
+        kwargs = {**record.kwargs(), "overview": overview, "plots": plots}
+
+        def on_result(run_id: int, written: list[str]) -> None:
+            self._export_dir = folder
+            self._set_status(f"exported {len(written)} files to {folder}")
+
+        self._set_status(f"exporting to {folder}…")
+        self._export_slot.submit(export_job, (folder, kwargs), 1, on_result)
+        return True
+
+    def _on_export_clicked(self, *_: Any) -> None:
+        from qtpy.QtWidgets import QFileDialog
+
+        folder = QFileDialog.getExistingDirectory(
+            self.native, "Export results into a folder", str(self._export_dir)
+        )
+        if folder:
+            self.export_results(folder)
+
+    def _update_export_button(self, *_: Any) -> None:
+        button = getattr(self, "export_button", None)  # None while the widget is built
+        if button is None:
+            return
+        layer = self.stack_layer.value
+        try:
+            button.enabled = layer is not None and source_key(layer) in self._exports
+        except RuntimeError:  # the widget was deleted
+            pass
+
+    def _record_export(
+        self,
+        layer: Layer,
+        angles_deg: np.ndarray,
+        result: SegmentationResult,
+        out: ScribbleOutput | None,
+        inputs: dict[str, Any],
+    ) -> None:
+        """Keep what *Export results…* needs of the result just shown for ``layer``."""
+        key = source_key(layer)
+        pipe = self.store.get(key)  # the pipeline that made the result (its pixel mask)
+        source = getattr(getattr(layer, "source", None), "path", None)
+        summary: dict[str, Any] = {}
+        if out is not None:
+            assert out.classes is not None
+            summary = {
+                "labels_from": "scribbles",
+                "scribble_classes": [int(c) for c in out.classes],
+                "scribble_training_blocks": out.training_blocks,
+            }
+        self._exports[key] = ExportRecord(
+            stack=layer.data,
+            angles_deg=np.asarray(angles_deg, dtype=float),
+            result=result,
+            mask=None if pipe is None else pipe.mask,
+            source=None if source is None else str(source),
+            probabilities=None if out is None else out.probabilities,
+            info={
+                "napari": {
+                    "stack_layer": layer.name,
+                    "mask_layer": inputs.get("mask"),
+                    "scribbles_layer": inputs.get("scribbles"),
+                }
+            },
+            summary=summary,
+        )
+        self._update_export_button()
 
     # -- mask and scribbles -----------------------------------------------------------
     def _labels_choices(self, _widget: Any = None) -> list[tuple[str, Layer]]:
@@ -732,6 +887,11 @@ class SegmentWidget(StackWidget):
         if shown is not None:
             for key in set(shown) - keep:
                 del shown[key]
+        exports = getattr(self, "_exports", None)
+        if exports is not None:
+            for key in set(exports) - keep:
+                del exports[key]
+            self._update_export_button()
 
     def _on_model_changed(self, model: str) -> None:
         self.specular_branch.visible = model == "specular"
@@ -748,7 +908,7 @@ class SegmentWidget(StackWidget):
         self.run()
 
     def _waiting(self) -> bool:
-        return self._timer.isActive()
+        return self._timer.isActive() or self._export_slot.busy
 
     # -- running ----------------------------------------------------------------------
     def run(self, *_: Any) -> None:
@@ -849,6 +1009,7 @@ class SegmentWidget(StackWidget):
             self.probabilities, self.classes = None, None
         show_output(self._viewer, "segments", labels, layer, meta)
         self._shown[source_key(layer)] = (result, inputs)
+        self._record_export(layer, angles_deg, result, out, inputs)
         if out is not None:
             assert out.classes is not None and confidence is not None
             names = ", ".join(str(int(c)) for c in out.classes)

@@ -1,0 +1,447 @@
+"""A segmentation's results as a folder: what ``polarseg segment --out DIR`` writes.
+
+:func:`write_result_folder` writes, from a :class:`~napari_polarseg.engine.SegmentationResult`
+and the angle stack it came from, the files of the ``segment`` contract (the table in
+:mod:`napari_polarseg.cli`): ``labels.tif``, the float maps of :data:`FLOAT_OUTPUTS`,
+``mask.tif``, ``segments.csv``, ``params.json`` (its ``"params"`` entry is what ``polarseg
+segment --params`` and the plugin's *Load parameters…* read), ``summary.json``, and on
+request ``overview.png``, ``plots/*.png``, ``probabilities.tif`` (scribble classifier) and
+``evaluation.json`` (ground truth). The command line and the *Segment by material*
+widget's *Export results…* both write through it.
+
+Everything (statistics, figures, JSON) is computed before the first file is written, and
+every file is written to a temporary name and renamed (:func:`napari_polarseg.io.atomic_output`),
+so a failure never leaves a partial file where a good one was; a file that cannot be
+written raises :class:`OutputError` naming it. No napari, no Qt: usable from scripts.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from . import __version__
+from . import io as pio
+from .engine.errors import PolarsegError
+from .engine.evaluation import STATISTICS_COLUMNS, segment_statistics
+from .engine.pipeline import SegmentationResult, valid_blocks
+from .engine.polarimage import PixelMask, duplicate_angle_frames
+
+#: Output images: file name -> (result attribute, TIFF metadata).
+FLOAT_OUTPUTS = {
+    "intensity.tif": ("intensity", {"quantity": "mean intensity", "unit": "input units"}),
+    "dop.tif": ("dop", {"quantity": "degree of polarisation", "unit": "1"}),
+    "phase.tif": ("phase", {"quantity": "phase", "unit": "radians", "range": "[0, pi)"}),
+    "zenith.tif": ("zenith", {"quantity": "zenith angle", "unit": "radians"}),
+    "reconstruction_error.tif": (
+        "reconstruction_error",
+        {"quantity": "absolute reconstruction error of the mean intensity", "unit": "input units"},
+    ),
+    "residual.tif": (
+        "residual",
+        {"quantity": "RMS residual of the sinusoid fit", "unit": "input units"},
+    ),
+}
+
+MASK_META = {
+    "quantity": "pixels used by the fit and the features",
+    "values": "1 used, 0 excluded (saturated, black, not finite, outside the mask, or no "
+    "positive intensity)",
+}
+
+PROBABILITY_META = {
+    "quantity": "class probability from the scribble classifier",
+    "unit": "1",
+    "axes": "class, row, column (class k = the k-th smallest scribble value)",
+}
+
+#: Figures of an ``evaluation.json`` that ``summary.json`` repeats under ``"evaluation"``.
+EVALUATION_SUMMARY_KEYS = (
+    "adjusted_rand_index",
+    "mean_iou",
+    "iou_per_segment",
+    "block_accuracy_worst",
+    "block_accuracy_optimistic",
+    "window",
+)
+
+
+class OutputError(Exception):
+    """The outputs could not be written (``polarseg`` exit code 1)."""
+
+
+# -- the pieces -----------------------------------------------------------------------------
+
+
+def labels_image(labels: np.ndarray) -> np.ndarray:
+    """Labels as the smallest unsigned type that holds them (uint16, else uint32)."""
+    dtype = np.uint16 if labels.max(initial=0) < 2**16 else np.uint32
+    return labels.astype(dtype)
+
+
+def used_pixels(result: SegmentationResult) -> np.ndarray:
+    """``mask.tif``: 1 where the fit and the features used the pixel (uint8)."""
+    valid = result.valid
+    if valid is None:
+        return np.ones(result.labels.shape, np.uint8)
+    return np.asarray(valid, dtype=np.uint8)
+
+
+def segment_rows(result: SegmentationResult) -> list[dict[str, Any]]:
+    """Per-segment statistics of ``result`` (the rows of ``segments.csv``).
+
+    Means over the used pixels (``result.valid``) and, for the PCA features, over the
+    blocks that entered the graph (:func:`~napari_polarseg.engine.pipeline.valid_blocks`).
+    """
+    valid = result.valid
+    block_valid = None if valid is None else valid_blocks(valid, result.params.window)
+    return segment_statistics(
+        result.labels,
+        result.intensity,
+        result.dop,
+        result.zenith,
+        result.phase,
+        valid=valid,
+        block_labels=result.block_labels,
+        features=result.features,
+        block_valid=block_valid,
+    )
+
+
+def _csv_value(value: Any) -> str:
+    if isinstance(value, float):
+        return "" if not np.isfinite(value) else f"{value:.6g}"
+    return str(value)
+
+
+def write_segments_csv(path: str | os.PathLike[str], rows: list[dict[str, Any]]) -> None:
+    """Write per-segment statistics (:data:`STATISTICS_COLUMNS`) as CSV, atomically.
+
+    NaN (a segment with no used pixel or block, fewer than 3 PCA features) is empty.
+    """
+    lines = [",".join(STATISTICS_COLUMNS)]
+    lines += [",".join(_csv_value(row[c]) for c in STATISTICS_COLUMNS) for row in rows]
+    with pio.atomic_output(path) as tmp:
+        tmp.write_text("\n".join(lines) + "\n", encoding="utf-8")
+
+
+def render_overview(first_frame: np.ndarray, result: SegmentationResult) -> np.ndarray:
+    """Draw input, Î, ρ, φ, segments and reconstruction error side by side.
+
+    Uses matplotlib's object-oriented API on an Agg canvas (no pyplot, so no global
+    backend is switched and no window opens; safe in a worker thread).
+
+    Parameters
+    ----------
+    first_frame : array (H, W)
+        First frame of the angle stack.
+    result : SegmentationResult
+        The pipeline's result.
+
+    Returns
+    -------
+    ndarray (rows, columns, 4) uint8
+        The RGBA figure, ready for :func:`napari_polarseg.io.write_png`.
+    """
+    from matplotlib import colormaps
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.colors import ListedColormap
+    from matplotlib.figure import Figure
+
+    k = max(result.n_segments, 1)
+    base = "tab10" if k <= 10 else "tab20"
+    seg_cmap = ListedColormap(colormaps[base](np.arange(k) % colormaps[base].N))
+    error = result.reconstruction_error
+    error = np.zeros_like(result.intensity) if error is None else error
+    finite_err = error[np.isfinite(error)]
+    err_max = float(np.percentile(finite_err, 99)) if finite_err.size else 1.0
+    panels = [
+        ("input (first frame)", first_frame, "gray", None, None),
+        ("Î mean intensity", result.intensity, "gray", None, None),
+        ("ρ degree of polarisation", result.dop, "viridis", 0.0, None),
+        ("φ phase (rad)", result.phase, "twilight", 0.0, np.pi),
+        (f"segments ({result.n_segments})", result.labels, seg_cmap, -0.5, k - 0.5),
+        ("reconstruction error", error, "magma", 0.0, err_max or None),
+    ]
+    h, w = result.labels.shape
+    panel_w = 3.2
+    fig = Figure(figsize=(panel_w * len(panels), panel_w * h / w + 0.8), dpi=100)
+    canvas = FigureCanvasAgg(fig)
+    axes = fig.subplots(1, len(panels))
+    for ax, (title, image, cmap, vmin, vmax) in zip(axes, panels, strict=True):
+        shown = ax.imshow(
+            np.asarray(image, dtype=float), cmap=cmap, vmin=vmin, vmax=vmax, interpolation="nearest"
+        )
+        ax.set_title(title, fontsize=10)
+        ax.set_axis_off()
+        bar = fig.colorbar(shown, ax=ax, fraction=0.046, pad=0.02)
+        if cmap is seg_cmap:
+            bar.set_ticks(np.arange(k) if k <= 12 else np.linspace(0, k - 1, 5).round())
+    fig.tight_layout()
+    canvas.draw()
+    return np.asarray(canvas.buffer_rgba()).copy()
+
+
+def run_info(
+    result: SegmentationResult,
+    *,
+    command: str,
+    stack_shape: Sequence[int],
+    angles_deg: Sequence[float],
+    source: str | None = None,
+    mask: PixelMask | None = None,
+    shifts: np.ndarray | None = None,
+    **extra: Any,
+) -> dict[str, Any]:
+    """The content of ``params.json``: the run's parameters, input and settings.
+
+    Every key ``polarseg segment`` writes is present (None where it does not apply, e.g.
+    the reader's settings for a stack that came from a napari layer); ``extra`` items
+    fill or add keys. ``"params"`` is ``result.params`` as a SegmentParams dict.
+    """
+    angles = np.asarray(angles_deg, dtype=float).ravel()
+    info: dict[str, Any] = {
+        "polarseg_version": __version__,
+        "command": command,
+        "input": source,
+        "input_format": None,
+        "input_files": None,
+        "stack_shape": [int(n) for n in stack_shape],
+        "output_shape": list(result.labels.shape),
+        "angles_deg": angles.tolist(),
+        "angles_from": None,
+        "mosaic_layout_deg": None,
+        "raw_shape": None,
+        "channel": None,
+        "demosaic": None,
+        "dark_frame": None,
+        "offset": None,
+        "saturation_level": None if mask is None else mask.saturation_level,
+        "bits_per_sample": None,
+        "dark_level": None if mask is None else mask.dark_level,
+        "mask_file": None,
+        "duplicate_angles": [
+            {
+                "angle_deg": float(angles[frames[0]]),
+                "frames": frames,
+                "handling": "averaged before the fit",
+            }
+            for frames in duplicate_angle_frames(np.deg2rad(angles))
+        ],
+        "registration": {
+            "ran": shifts is not None,
+            "reference_frame": 0 if shifts is not None else None,
+            "shifts_px": None if shifts is None else np.asarray(shifts).tolist(),
+        },
+        "params": result.params.to_dict(),
+    }
+    info.update(extra)
+    return info
+
+
+def evaluation_summary(evaluation: dict[str, Any]) -> dict[str, Any]:
+    """What ``summary.json`` repeats of an ``evaluation.json``."""
+    return {
+        "adjusted_rand_index": evaluation["adjusted_rand_index"],
+        "evaluation": {k: evaluation[k] for k in EVALUATION_SUMMARY_KEYS},
+    }
+
+
+# -- writing --------------------------------------------------------------------------------
+
+
+def write_outputs(
+    out: str | os.PathLike[str],
+    result: SegmentationResult,
+    info: dict[str, Any],
+    summary: dict[str, Any],
+    overview: np.ndarray | None = None,
+    *,
+    segments: list[dict[str, Any]] | None = None,
+    probabilities: np.ndarray | None = None,
+    evaluation: dict[str, Any] | None = None,
+    plots: dict[str, bytes] | None = None,
+) -> list[str]:
+    """Write already computed outputs into ``out`` (created), each file atomically.
+
+    Returns the files written, relative to ``out`` (``plots/<name>.png`` for plots), in
+    the order written. Records the writing time in ``summary["io_seconds"]["write"]``.
+    Raises :class:`OutputError` naming the file that could not be written.
+    """
+    out = Path(out)
+    t0 = time.perf_counter()
+    written: list[str] = []
+    name = str(out)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        name = str(out / "labels.tif")
+        pio.write_tiff(
+            out / "labels.tif",
+            labels_image(result.labels),
+            {"quantity": "segment labels", "first_label": 0},
+        )
+        written.append("labels.tif")
+        for fname, (attr, meta) in FLOAT_OUTPUTS.items():
+            name = str(out / fname)
+            pio.write_tiff(out / fname, np.asarray(getattr(result, attr), np.float32), meta)
+            written.append(fname)
+        name = str(out / "mask.tif")
+        pio.write_tiff(out / "mask.tif", used_pixels(result), MASK_META)
+        written.append("mask.tif")
+        if segments is not None:
+            name = str(out / "segments.csv")
+            write_segments_csv(out / "segments.csv", segments)
+            written.append("segments.csv")
+        if probabilities is not None:
+            name = str(out / "probabilities.tif")
+            pio.write_tiff(
+                out / "probabilities.tif", probabilities.astype(np.float32), PROBABILITY_META
+            )
+            written.append("probabilities.tif")
+        if evaluation is not None:
+            name = str(out / "evaluation.json")
+            pio.write_json(out / "evaluation.json", evaluation)
+            written.append("evaluation.json")
+        if overview is not None:
+            name = str(out / "overview.png")
+            pio.write_png(out / "overview.png", overview)
+            written.append("overview.png")
+        if plots is not None:
+            name = str(out / "plots")
+            (out / "plots").mkdir(parents=True, exist_ok=True)
+            for fname, content in plots.items():
+                name = str(out / "plots" / fname)
+                with pio.atomic_output(out / "plots" / fname) as tmp:
+                    tmp.write_bytes(content)
+                written.append(f"plots/{fname}")
+        name = str(out / "params.json")
+        pio.write_json(out / "params.json", info)
+        written.append("params.json")
+        summary["io_seconds"]["write"] = round(time.perf_counter() - t0, 6)
+        name = str(out / "summary.json")
+        pio.write_json(out / "summary.json", summary)
+        written.append("summary.json")
+    except OSError as exc:
+        reason = exc.strerror or str(exc)
+        raise OutputError(f"cannot write {name}: {reason}") from exc
+    return written
+
+
+def write_result_folder(
+    out: str | os.PathLike[str],
+    *,
+    stack: np.ndarray,
+    angles_deg: Sequence[float],
+    result: SegmentationResult,
+    mask: PixelMask | None = None,
+    source: str | None = None,
+    command: str = "export",
+    overview: bool = True,
+    plots: bool = False,
+    probabilities: np.ndarray | None = None,
+    evaluation: dict[str, Any] | None = None,
+    shifts: np.ndarray | None = None,
+    info: dict[str, Any] | None = None,
+    summary: dict[str, Any] | None = None,
+) -> list[str]:
+    """Write a segmentation's results into the folder ``out``, as ``polarseg segment``.
+
+    Parameters
+    ----------
+    out : path
+        The folder (created if missing; files of the same names are replaced).
+    stack : array (N, H, W)
+        The angle stack the result was computed from (after any registration); its first
+        frame is drawn in ``overview.png``.
+    angles_deg : sequence of N floats
+        Polariser angle of each frame, degrees.
+    result : SegmentationResult
+        What to write; ``params.json`` records ``result.params``.
+    mask : PixelMask, optional
+        The pixel mask the pipeline used (its saturation and dark levels go to
+        ``params.json``; ``mask.tif`` is ``result.valid`` in any case).
+    source : str, optional
+        Where the stack came from (``params.json``'s ``"input"``).
+    command : str
+        ``params.json``'s ``"command"`` (``"segment"``, ``"demo"``, ``"napari"``, …).
+    overview, plots : bool
+        Also write ``overview.png`` (:func:`render_overview`), and the analyst's plots
+        into ``plots/`` (:func:`napari_polarseg.figures.render_plots`).
+    probabilities : array (K, H, W), optional
+        Class probabilities of a scribble-guided run: ``probabilities.tif``.
+    evaluation : dict, optional
+        :func:`~napari_polarseg.engine.evaluation.evaluate` figures (plus e.g. the ground
+        truth's file): ``evaluation.json``, repeated in ``summary.json``.
+    shifts : array (N, 2), optional
+        Registration shifts (rows, columns) in pixels, if the frames were registered.
+    info, summary : dict, optional
+        Items added to (or replacing those of) ``params.json`` (:func:`run_info`) and
+        ``summary.json`` (``result.summary()``, ``io_seconds``, ``output_shape``).
+
+    Returns
+    -------
+    list of str
+        The files written, relative to ``out``, in the order written.
+
+    Raises
+    ------
+    PolarsegError
+        The stack, angles, result and probabilities do not fit together (before any file
+        is written).
+    OutputError
+        A file could not be written (the files written before it stay).
+    """
+    stack = np.asarray(stack)
+    angles = np.asarray(angles_deg, dtype=float).ravel()
+    shape = tuple(result.labels.shape)
+    if stack.ndim != 3 or tuple(stack.shape[1:]) != shape:
+        raise PolarsegError(
+            f"the stack {stack.shape} does not match the result's {shape[0]} x {shape[1]} pixels"
+        )
+    if angles.size != stack.shape[0]:
+        raise PolarsegError(f"{stack.shape[0]} frames but {angles.size} angles")
+    if probabilities is not None:
+        probabilities = np.asarray(probabilities)
+        if probabilities.ndim != 3 or tuple(probabilities.shape[1:]) != shape:
+            raise PolarsegError(
+                f"the probabilities {probabilities.shape} do not match the result's "
+                f"{shape[0]} x {shape[1]} pixels"
+            )
+    params_json = run_info(
+        result,
+        command=command,
+        stack_shape=stack.shape,
+        angles_deg=angles,
+        source=source,
+        mask=mask,
+        shifts=shifts,
+        **(info or {}),
+    )
+    summary_json = {**result.summary(), "io_seconds": {}, "output_shape": list(shape)}
+    summary_json.update(summary or {})
+    summary_json["io_seconds"] = dict(summary_json["io_seconds"])  # leave the caller's dict
+    if evaluation is not None:
+        summary_json.update(evaluation_summary(evaluation))
+    rows = segment_rows(result)
+    picture = render_overview(stack[0], result) if overview else None
+    pngs = None
+    if plots:
+        from . import figures
+
+        pngs = figures.render_plots(result)
+    return write_outputs(
+        out,
+        result,
+        params_json,
+        summary_json,
+        picture,
+        segments=rows,
+        probabilities=probabilities,
+        evaluation=evaluation,
+        plots=pngs,
+    )
