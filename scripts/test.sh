@@ -9,5 +9,7 @@ bash scripts/setup.sh
 export MPLBACKEND=Agg
 # software OpenGL from Mesa for napari's vispy canvas under Xvfb
 export LIBGL_ALWAYS_SOFTWARE=1
+# Qt 6 bindings (napari deprecates PyQt5); an older .venv may still hold PyQt5 too
+export QT_API=pyqt6
 .venv/bin/ruff check .
 exec xvfb-run -a -s "-screen 0 1600x1000x24" .venv/bin/python -m pytest "$@"
