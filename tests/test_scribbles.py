@@ -128,3 +128,17 @@ def test_pipeline_scribble_result_checks_the_size():
     pipe = Pipeline(scene.stack, scene.angles, RECOMMENDED)
     with pytest.raises(PolarsegError, match="frames are 48 x 48"):
         pipe.scribble_result(np.zeros((40, 48), int))
+
+
+def test_scribble_segmentation_returns_the_whole_result():
+    scene = make_scene("leaves", shape=(64, 72), seed=2)
+    pipe = Pipeline(scene.stack, scene.angles, RECOMMENDED.replace(window=SCRIBBLE_WINDOW))
+    strokes = stroke_lines(scene.labels, seed=0)
+    seg = pipe.scribble_segmentation(strokes, reconstruction=False)
+    labels, maps = pipe.scribble_result(strokes)
+    assert np.array_equal(seg.result.labels, labels)
+    np.testing.assert_allclose(seg.probabilities, maps)
+    assert seg.classes.tolist() == sorted(np.unique(strokes[strokes > 0]).tolist())
+    assert seg.training_blocks > 0 and seg.result.ncut_values == []
+    assert seg.result.reconstruction is None and "scribbles" in seg.result.timings
+    assert pipe.calls["affinity"] == 0 and pipe.calls["cut"] == 0  # the cut is not needed

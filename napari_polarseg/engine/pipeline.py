@@ -18,10 +18,11 @@ changing ``n_segments`` re-reads the cached cut tree and never recomputes harmon
 from __future__ import annotations
 
 import time
+import warnings
 from collections import Counter
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from scipy import ndimage
@@ -123,6 +124,15 @@ def _own_key(stage: str, p: SegmentParams) -> tuple:
     if stage == "reconstruction":
         return (p.window, p.degree, p.ridge)
     return ()
+
+
+class ScribbleSegmentation(NamedTuple):
+    """What :meth:`Pipeline.scribble_segmentation` returns."""
+
+    result: SegmentationResult
+    probabilities: np.ndarray
+    classes: np.ndarray
+    training_blocks: int
 
 
 @dataclass
@@ -524,13 +534,30 @@ class Pipeline:
         """Assemble the result from the cache (runs stale stages if needed)."""
         if params is not None and params != self.params:
             raise PolarsegError("parameters changed while the pipeline was running")
-        pol = self.get("polarisation")
-        nrm = self.get("normals")
-        coef = self.get("harmonics")
-        pca = self.get("pca")
         block, labels, ncut_values = self.get("labels")
-        rec = self.get("reconstruction") if reconstruction else None
         names = STAGES if reconstruction else STAGES[:-1]
+        return self._assemble(
+            block,
+            labels,
+            ncut_values,
+            reconstruction,
+            timings={s: self._seconds.get(s, 0.0) for s in names},
+            recomputed=[s for s in names if s in self._recomputed],
+        )
+
+    def _assemble(
+        self,
+        block: np.ndarray,
+        labels: np.ndarray,
+        ncut_values: list[float],
+        reconstruction: bool,
+        timings: dict[str, float],
+        recomputed: list[str],
+    ) -> SegmentationResult:
+        """A :class:`SegmentationResult` of the cached stages and the given labels."""
+        pol, nrm = self.get("polarisation"), self.get("normals")
+        coef, pca = self.get("harmonics"), self.get("pca")
+        rec = self.get("reconstruction") if reconstruction else None
         return SegmentationResult(
             params=self.params,
             intensity=pol.intensity,
@@ -546,14 +573,35 @@ class Pipeline:
             block_labels=block,
             labels=labels,
             ncut_values=ncut_values,
-            timings={s: self._seconds.get(s, 0.0) for s in names},
-            recomputed=[s for s in names if s in self._recomputed],
+            timings=timings,
+            recomputed=recomputed,
             reconstruction=None if rec is None else rec.intensity,
             reconstruction_error=None if rec is None else rec.error,
             valid=~pol.invalid,
             mask_counts=self.mask.counts(),
             duplicate_angle_frames=polarimage.duplicate_angle_frames(self.angles),
         )
+
+    def scribble_segmentation(
+        self, scribbles: np.ndarray, reconstruction: bool = True
+    ) -> ScribbleSegmentation:
+        """The whole result of a scribble-guided run (:meth:`scribble_result`).
+
+        Returns the :class:`SegmentationResult` (labels = class index 0..K−1, no Ncut
+        values; affinity and cut are neither computed nor invalidated), the class
+        probabilities (K, H, W), the scribble value of every class and the number of
+        training blocks.
+        """
+        t0 = time.perf_counter()
+        block, labels, maps, classes, n_train = self._classify(scribbles)
+        seconds = time.perf_counter() - t0
+        names = ["polarisation", "normals", "harmonics", "pca"]
+        names += ["reconstruction"] if reconstruction else []
+        timings = {s: self._seconds.get(s, 0.0) for s in names}
+        timings["scribbles"] = seconds
+        recomputed = [s for s in names if s in self._recomputed] + ["scribbles"]
+        result = self._assemble(block, labels, [], reconstruction, timings, recomputed)
+        return ScribbleSegmentation(result, maps, classes, n_train)
 
     def scribble_result(self, scribbles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Labels from a classifier trained on user strokes instead of the normalized cut.
@@ -576,7 +624,14 @@ class Pipeline:
         probabilities : ndarray (K, H, W) float
             Probability of each class per pixel (its block's); sums to 1 over K.
         """
-        from .scribbles import classify_blocks
+        _, labels, maps, _, _ = self._classify(scribbles)
+        return labels, maps
+
+    def _classify(
+        self, scribbles: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]:
+        """(block labels, pixel labels, probability maps, classes, training blocks)."""
+        from .scribbles import classify_blocks, training_blocks
 
         scribbles = np.asarray(scribbles)
         shape = self.stack.shape[1:]
@@ -587,13 +642,17 @@ class Pipeline:
             )
         window = self._p().window
         grid = self.get("harmonics").shape[:2]
-        block, proba, _ = classify_blocks(
-            self.get("pca").features, grid, scribbles, window, valid=self.block_valid()
+        valid = self.block_valid()
+        block, proba, classes = classify_blocks(
+            self.get("pca").features, grid, scribbles, window, valid=valid
         )
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # classify_blocks has warned already
+            blocks, _, _ = training_blocks(scribbles, grid, window)
         rows, cols = harmonics.pixel_block_index(shape, window)
         labels = harmonics.upsample_block_labels(block, shape, window)
         maps = proba.T.reshape(-1, *grid)[:, rows[:, None], cols[None, :]]
-        return labels, maps
+        return block, labels, maps, classes, int(valid[blocks].sum())
 
 
 def segment(

@@ -32,7 +32,7 @@ import threading
 import time
 import warnings
 from collections.abc import Callable, Generator, Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -41,7 +41,6 @@ from napari.utils.notifications import show_error
 from qtpy.QtCore import QCoreApplication
 
 from ..engine import Pipeline, PolarsegError, SegmentationResult, SegmentParams, validity_mask
-from ..engine.polarimage import duplicate_angle_frames
 
 Stage = tuple[str, int, int]
 Job = Callable[..., Generator[Stage, None, Any]]
@@ -208,8 +207,6 @@ def scribble_stages(
     kept as for a normalized-cut run: the cut's own stages (affinity, cut, labels) are
     neither computed nor invalidated.
     """
-    from ..engine.scribbles import training_blocks
-
     names = SCRIBBLE_STAGES if reconstruction else SCRIBBLE_STAGES[:-1]
     total = len(names)
     timings: dict[str, float] = {}
@@ -224,48 +221,22 @@ def scribble_stages(
         yield name, i + 1, total
     if params != pipe.params:
         raise PolarsegError("parameters changed while the pipeline was running")
-    t0 = time.perf_counter()
-    window = params.window
-    coef = pipe.get("harmonics")
-    grid = coef.shape[:2]
     try:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
-            labels, proba = pipe.scribble_result(scribbles)
-            blocks, _, classes = training_blocks(scribbles, grid, window)
+            seg = pipe.scribble_segmentation(scribbles, reconstruction)
     except PolarsegError as exc:
         return ScribbleOutput(None, None, None, problem=str(exc))
     notes = sorted({str(w.message) for w in caught})
-    timings["scribbles"] = time.perf_counter() - t0
+    timings["scribbles"] = seg.result.timings["scribbles"]
     recomputed.append("scribbles")
-    pol, nrm, pca = pipe.get("polarisation"), pipe.get("normals"), pipe.get("pca")
-    rec = pipe.get("reconstruction") if reconstruction else None
-    labels = np.asarray(labels, dtype=np.int32)
-    block = labels[: grid[0] * window : window, : grid[1] * window : window].copy()
-    result = SegmentationResult(
+    result = replace(
+        seg.result,
         params=params,
-        intensity=pol.intensity,
-        dop=pol.dop,
-        phase=pol.phase,
-        residual=pol.residual,
-        zenith=nrm.zenith,
-        azimuth=nrm.azimuth,
-        clamped=nrm.clamped,
-        coefficients=coef,
-        features=pca.features,
-        explained_variance_ratio=pca.explained_variance_ratio,
-        block_labels=block,
-        labels=labels,
-        ncut_values=[],
         timings={name: timings.get(name, 0.0) for name in (*names, "scribbles")},
         recomputed=recomputed,
-        reconstruction=None if rec is None else rec.intensity,
-        reconstruction_error=None if rec is None else rec.error,
-        valid=~pol.invalid,
-        mask_counts=pipe.mask.counts(),
-        duplicate_angle_frames=duplicate_angle_frames(pipe.angles),
     )
-    return ScribbleOutput(result, np.asarray(proba), np.asarray(classes), int(blocks.size), notes)
+    return ScribbleOutput(result, seg.probabilities, seg.classes, seg.training_blocks, notes)
 
 
 @dataclass

@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 from _gui_helpers import click, error_messages, run_and_wait, wait_idle
 from napari.layers import Image, Labels
-from scipy import ndimage
 
 from napari_polarseg.engine import Pipeline
 from napari_polarseg.engine.evaluation import adjusted_rand_index
 from napari_polarseg.engine.params import RECOMMENDED
+from napari_polarseg.engine.synthetic import scribble_strokes
 from napari_polarseg.widgets._layers import TAG
 from napari_polarseg.widgets.segment import CUT_ONLY, NO_SCRIBBLES
 
@@ -22,28 +22,7 @@ FAST = {"window": 10, "degree": 4, "n_segments": 3}
 SCRIBBLE_WINDOW = 8
 
 
-def stroke_lines(truth: np.ndarray, seed: int = 0, per_material: int = 6, length: int = 16):
-    """Short straight 1-px strokes at least 2 px inside each material (label = index + 1)."""
-    rng = np.random.default_rng(seed)
-    strokes = np.zeros(truth.shape, dtype=np.int32)
-    for i, material in enumerate(np.unique(truth)):
-        inner = ndimage.binary_erosion(truth == material, iterations=2)
-        points = np.argwhere(inner)
-        drawn = 0
-        for _ in range(1000):
-            if drawn == per_material:
-                break
-            p = points[rng.integers(len(points))]
-            angle = rng.uniform(0, np.pi)
-            t = np.arange(length) - length / 2
-            rr = np.round(p[0] + t * np.sin(angle)).astype(int)
-            cc = np.round(p[1] + t * np.cos(angle)).astype(int)
-            inside = (rr >= 0) & (rr < truth.shape[0]) & (cc >= 0) & (cc < truth.shape[1])
-            if not inside.all() or not inner[rr, cc].all():
-                continue
-            strokes[rr, cc] = i + 1
-            drawn += 1
-    return strokes
+stroke_lines = scribble_strokes  # 6 short strokes per material, from the truth
 
 
 def material_blocks(truth: np.ndarray, window: int) -> dict[int, list[tuple[int, int]]]:
