@@ -167,3 +167,26 @@ def test_chunked_and_threaded_evaluation_equals_small_calls():
     np.testing.assert_allclose(big[:1, :2], part, rtol=1e-13, atol=1e-15)
     Y = real_sph_harm(6, theta, phi)
     np.testing.assert_allclose(Y[5, 7], real_sph_harm(6, theta[5, 7], phi[5, 7]), atol=1e-14)
+
+
+@pytest.mark.parametrize("shape", [(40, 30), (43, 37)])  # whole blocks only / with strips
+def test_reconstruction_shortcut_equals_ridge_expansion(shape):
+    """Î − λ'α (dual form, no weights) is Y a of the ridge coefficients, strips included."""
+    from napari_polarseg.engine.harmonics import pixel_block_index
+
+    theta, phi = random_normals(shape, seed=6)
+    rng = np.random.default_rng(7)
+    intensity = 1 + 0.3 * np.cos(theta) + 0.05 * rng.normal(size=shape)
+    window, L = 10, 12  # M = 100 < K = 169: the dual form
+    rec = reconstruct_intensity(intensity, theta, phi, window, L, ridge=1e-3)
+    coef = block_coefficients(intensity, theta, phi, window, L, method="ridge", ridge=1e-3)
+    rows, cols = pixel_block_index(shape, window)
+    per_pixel = coef[rows[:, None], cols[None, :]]  # (H, W, K): each pixel's block
+    Y = real_sph_harm(L, theta.ravel(), phi.ravel())
+    want = np.einsum("pk,pk->p", Y, per_pixel.reshape(-1, Y.shape[1])).reshape(shape)
+    np.testing.assert_allclose(rec, want, rtol=1e-9, atol=1e-9)
+    # with weights the general path runs; unit weights give the same numbers
+    rec_w = reconstruct_intensity(
+        intensity, theta, phi, window, L, ridge=1e-3, weights=np.ones(shape)
+    )
+    np.testing.assert_allclose(rec_w, rec, rtol=1e-9, atol=1e-9)

@@ -78,3 +78,120 @@ def test_cut_tree_is_cached_and_consistent():
         assert np.unique(two[three == lab]).size == 1
     assert len(tree.ncut_values) == 2
     assert adjusted_rand_score(truth, three) == 1.0
+
+
+def generalized_fiedler(W):
+    """Reference: second generalized eigenpair of (D − W) y = λ D y by dense eigh."""
+    D = np.diag(W.sum(1))
+    vals, vecs = scipy.linalg.eigh(D - W, D)
+    return vals[1], vecs[:, 1]
+
+
+def fallen_apart(n=700, seed=0):
+    """A thesis-like affinity (s = 1): unit self loops, tiny couplings, a few blocks
+    nearly isolated, and a group of 40 blocks bound to each other but weakly to the rest
+    whose eigenvalue lies *below* those of the isolated blocks (the case where a single
+    iterated vector can settle on the wrong eigenpair)."""
+    rng = np.random.default_rng(seed)
+    W = 1e-3 * rng.random((n, n)) ** 8
+    group = np.arange(100, 140)
+    W[np.ix_(group, group)] = 0.5 + 0.1 * rng.random((40, 40))
+    W[group[:, None], np.setdiff1d(np.arange(n), group)[None, :]] *= 0.01
+    for i, scale in zip((5, 300, 600), (0.5, 0.3, 0.2), strict=True):  # isolated blocks
+        W[i, :] *= scale
+    W = np.minimum(W, W.T)
+    np.fill_diagonal(W, 1.0)
+    return W, group
+
+
+def test_block_lobpcg_finds_the_smallest_eigenpair_on_a_clustered_spectrum():
+    from napari_polarseg.engine import ncut
+
+    W, group = fallen_apart()
+    assert W.shape[0] > ncut.DENSE_EIGH_MAX  # the iterative path
+    lam, ref = generalized_fiedler(W)
+    y = fiedler_vector(W)
+    D = np.diag(W.sum(1))
+    assert y @ (D - W) @ y / (y @ D @ y) == pytest.approx(lam, rel=1e-5)
+    cos = abs(y @ D @ ref) / np.sqrt((y @ D @ y) * (ref @ D @ ref))
+    assert cos > 1 - 1e-6
+
+
+def straightforward_tree(W, k):
+    """Greedy recursive Ncut with eigh per segment (the rule of CutTree)."""
+    segments = [np.arange(W.shape[0])]
+    while len(segments) < k:
+        best = (np.inf, None, None)
+        for pos, idx in enumerate(segments):
+            if idx.size < 2:
+                continue
+            sub = W[np.ix_(idx, idx)]
+            _, y = generalized_fiedler(sub)
+            mask, value = best_split(sub, y)
+            if mask is not None and value < best[0]:
+                best = (value, pos, mask)
+        _, pos, mask = best
+        idx = segments[pos]
+        segments[pos] = idx[mask]
+        segments.append(idx[~mask])
+    labels = np.empty(W.shape[0], dtype=int)
+    for lab, idx in enumerate(segments):
+        labels[idx] = lab
+    return labels
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_cut_tree_on_a_fallen_apart_graph_agrees_with_eigh(seed):
+    """Peeling cuts (children of ~all the parent's nodes: products through the whole
+    matrix, starts from the parent's vectors) give eigh's labels."""
+    W, _ = fallen_apart(seed=seed)
+    tree = CutTree(W)
+    for k in (2, 3, 4, 5):
+        assert adjusted_rand_score(straightforward_tree(W, k), tree.labels(k)) == 1.0
+
+
+def test_warm_started_tree_equals_cold_tree():
+    """Starting from an earlier tree's vectors (same segments or supersets) changes the
+    work, not the result."""
+    W, truth = planted((300, 250, 150, 100), p_in=0.6, p_out=0.1, noise=0.3, seed=6)
+    old = CutTree(W**3)
+    old.labels(4)
+    cold = CutTree(W).labels(4)
+    warm = CutTree(W, warm=old.fiedler_vectors()).labels(4)
+    np.testing.assert_array_equal(warm, cold)
+    assert adjusted_rand_score(truth, cold) == 1.0
+
+
+@pytest.mark.parametrize("order", ["C", "F"])
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_symmetric_product_takes_either_memory_order(order, dtype):
+    from napari_polarseg.engine.ncut import _symmetric_product
+
+    rng = np.random.default_rng(0)
+    A = rng.random((50, 50))
+    A = np.asarray(A + A.T, dtype=dtype, order=order)
+    X = rng.random((50, 3))
+    got = _symmetric_product(A)(np.asfortranarray(X, dtype=dtype))
+    np.testing.assert_allclose(got, A @ X, rtol=1e-5 if dtype == np.float32 else 1e-12)
+
+
+@pytest.mark.parametrize("kept", [2400, 1000])  # through the whole matrix / own copy
+def test_dense_segment_products_degrees_and_split_sums(kept):
+    from napari_polarseg.engine.ncut import _DenseGraph, _lower_prefix_sums
+
+    rng = np.random.default_rng(1)
+    n = 2500  # float32 products from FLOAT32_MIN_NODES
+    W = rng.random((n, n))
+    W = (W + W.T) / 2
+    idx = np.sort(rng.choice(n, kept, replace=False))
+    sub = W[np.ix_(idx, idx)]
+    seg = _DenseGraph(W).segment(idx)
+    np.testing.assert_allclose(seg.d, sub.sum(1), rtol=1e-12)
+    np.testing.assert_array_equal(seg.diag, np.diagonal(sub))
+    X = rng.random((kept, 2))
+    np.testing.assert_allclose(seg.product(X), sub @ X, rtol=1e-5)
+    order = rng.permutation(kept)
+    rank = np.empty(kept, dtype=int)
+    rank[order] = np.arange(kept)
+    want = np.where(rank[None, :] < rank[:, None], sub, 0.0).sum(1)[order]
+    np.testing.assert_allclose(_lower_prefix_sums(W, order, idx), want, rtol=1e-12)

@@ -107,3 +107,22 @@ def test_nan_only_stack_raises_and_nan_pixels_are_invalid():
     p = polarisation_image(stack, a)
     assert p.invalid[1, 1] and p.invalid.sum() == 1
     assert np.all(np.isfinite(p.dop)) and np.all(np.isfinite(p.phase))
+
+
+@pytest.mark.parametrize(
+    "angles_deg", [[0, 45, 90, 135], list(range(0, 181, 10)), [10, 10, 80, 150, 150]]
+)
+@pytest.mark.parametrize("robust", [False, True])
+def test_unweighted_fast_path_equals_weighted_fit(angles_deg, robust):
+    """Finite data without weights skips the weight arrays; unit weights take the
+    general path. Both are the same least-squares fit."""
+    rng = np.random.default_rng(11)
+    intensity, dop, phase = known_image((30, 40), seed=5)
+    a = np.deg2rad(angles_deg)
+    stack = render(intensity, dop, phase, a) + rng.normal(0, 0.01, (a.size, 30, 40))
+    fast = polarisation_image(stack, a, robust=robust)
+    slow = polarisation_image(stack, a, robust=robust, weights=np.ones(stack.shape))
+    for name in ("intensity", "dop", "phase", "residual"):
+        np.testing.assert_allclose(getattr(fast, name), getattr(slow, name), atol=1e-12)
+    np.testing.assert_array_equal(fast.invalid, slow.invalid)
+    assert np.array_equal(fast.angles, slow.angles)

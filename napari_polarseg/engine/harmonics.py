@@ -89,20 +89,26 @@ def degree_order(degree: int) -> tuple[np.ndarray, np.ndarray]:
 # -- evaluation ---------------------------------------------------------------------------
 
 
+_controller: list = []  # the threadpoolctl controller, found once (see below)
+
+
 @contextmanager
 def single_threaded_blas() -> Iterator[None]:
     """Limit BLAS/LAPACK to one thread (threadpoolctl, shipped with scikit-learn).
 
     Batched small matrix products and solves (100 × 169 per block) are 5–7 times *slower*
     with OpenBLAS's own two threads than with one; the engine parallelises over chunks of
-    blocks instead.
+    blocks instead. The libraries are looked up once: ``threadpool_limits`` scans every
+    loaded shared object on each call (about 1–2 ms, paid by every chunked stage).
     """
     try:
-        from threadpoolctl import threadpool_limits
+        from threadpoolctl import ThreadpoolController
     except ImportError:  # pragma: no cover - a dependency of scikit-learn
         yield
         return
-    with threadpool_limits(limits=1, user_api="blas"):
+    if not _controller:
+        _controller.append(ThreadpoolController())
+    with _controller[0].limit(limits=1, user_api="blas"):
         yield
 
 
@@ -403,22 +409,28 @@ def _ridge_blocks(
     ridge: float,
     weights: np.ndarray | None,
     reconstruct: bool = False,
-) -> tuple[np.ndarray, np.ndarray | None]:
+    coefficients: bool = True,
+) -> tuple[np.ndarray | None, np.ndarray | None]:
     """Per-block ridge fit: coefficients (n_blocks, K) and, optionally, Y a per pixel.
 
     argmin ‖Y a − Î‖² + λ' ‖a‖², λ' = ``ridge`` · M/(4π), solved per block in the dual
     (M × M) form α = (Y Yᵀ + λ'I)⁻¹ Î, a = Yᵀ α when M < K, else in the primal form
     a = (Yᵀ Y + λ'I)⁻¹ Yᵀ Î: one batched matrix product and one batched LAPACK solve per
     chunk of blocks, chunks spread over the cores with single-threaded BLAS.
+
+    In the dual form without weights the reconstruction needs no coefficients: with the
+    M × M Gram matrix G (Y Yᵀ above, rows = pixels), Y a = G α = (G + λ'I) α − λ'α =
+    Î − λ'α. ``coefficients=False`` then skips a and returns None for it.
     """
     k = n_coefficients(degree)
     m = window * window
     f, th, ph, wts = _block_inputs(intensity, zenith, azimuth, window, weights)
     nb = f.shape[0]
     lam = ridge * m / (4 * np.pi)
-    coef = np.empty((nb, k))
-    rec = np.empty((nb, m)) if reconstruct else None
     dual = m < k
+    shortcut = reconstruct and dual and wts is None  # Y a = Î − λ'α (docstring)
+    coef = np.empty((nb, k)) if coefficients or not shortcut else None
+    rec = np.empty((nb, m)) if reconstruct else None
     size = m if dual else k
     per = _points_per_chunk(k, m) // m
 
@@ -441,9 +453,13 @@ def _ridge_blocks(
             rhs = np.matmul(Yw, fb[..., None])
         gram.reshape(nbc, size * size)[:, :: size + 1] += lam
         sol = np.linalg.solve(gram, rhs)
+        if shortcut:
+            rec[sl] = fb - lam * sol[..., 0]
+            if coef is None:
+                return
         a = np.matmul(Yw, sol)[..., 0] if dual else sol[..., 0]
         coef[sl] = a
-        if rec is not None:
+        if rec is not None and not shortcut:
             rec[sl] = np.matmul(a[:, None, :], Y)[:, 0, :]
 
     run_chunks(_chunk_bounds(nb, per), work, nb * m)
@@ -510,11 +526,19 @@ def reconstruct_intensity(
     nearest block's coefficients. Returns an (H, W) array in the units of ``intensity``.
     """
     nby, nbx = block_grid(intensity.shape, window)
-    coef, rec = _ridge_blocks(
-        intensity, zenith, azimuth, window, degree, ridge, weights, reconstruct=True
-    )
     h, w = intensity.shape
     hb, wb = nby * window, nbx * window
+    coef, rec = _ridge_blocks(
+        intensity,
+        zenith,
+        azimuth,
+        window,
+        degree,
+        ridge,
+        weights,
+        reconstruct=True,
+        coefficients=hb < h or wb < w,  # only the remainder strips need them
+    )
     out = np.empty((h, w))
     out[:hb, :wb] = _unblockify(rec.reshape(nby, nbx, -1), window)
     if hb < h or wb < w:

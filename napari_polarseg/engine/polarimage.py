@@ -243,16 +243,47 @@ def check_stack(stack: np.ndarray, angles: np.ndarray) -> tuple[np.ndarray, np.n
     if not np.issubdtype(stack.dtype, np.number) or np.issubdtype(stack.dtype, np.complexfloating):
         raise PolarsegError(f"angle stack must hold real numbers, got dtype {stack.dtype}")
     data = stack.astype(np.float64, copy=False)
-    finite = np.isfinite(data)
-    if not np.any(finite):
-        raise PolarsegError("the angle stack has no finite values (all NaN or infinite)")
-    biggest = float(np.max(np.abs(data[finite]))) if not finite.all() else float(np.abs(data).max())
+    if _all_finite(data):
+        # the common case: the extremes, without an |data| copy or a finiteness mask
+        biggest = float(max(-data.min(), data.max()))
+    else:
+        finite = np.isfinite(data)
+        if not np.any(finite):
+            raise PolarsegError("the angle stack has no finite values (all NaN or infinite)")
+        biggest = float(np.max(np.abs(data[finite])))
     if biggest > MAX_ABS_VALUE:
         raise PolarsegError(
             f"intensities up to {biggest:.3g} are too large to process (limit {MAX_ABS_VALUE:g}); "
             "rescale the data"
         )
     return data, angles
+
+
+def _all_finite(data: np.ndarray) -> bool:
+    """True if no value is NaN or infinite (min and max are finite exactly then)."""
+    if data.size == 0:
+        return True
+    return bool(np.isfinite(data.min()) and np.isfinite(data.max()))
+
+
+def _state_means(
+    data: np.ndarray, angles: np.ndarray, groups: np.ndarray, n_groups: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per polariser state the mean of its frames, when every sample counts once.
+
+    Returns the means (G, P) over the P pixels, the angle of the first frame of each
+    state and the number of frames of each state. The same arithmetic as
+    :func:`average_duplicate_angles` with unit weights (sum by one matrix product, then
+    division by the count), without its weight arrays.
+    """
+    n = angles.size
+    flat = data.reshape(n, -1)
+    counts = np.bincount(groups, minlength=n_groups).astype(np.float64)
+    first = np.array([np.flatnonzero(groups == g)[0] for g in range(n_groups)])
+    if n_groups == n:  # one frame per state (groups are numbered by first appearance)
+        return flat, angles, counts
+    onehot = (groups[None, :] == np.arange(n_groups)[:, None]).astype(np.float64)
+    return (onehot @ flat) / counts[:, None], angles[first], counts
 
 
 def _weighted_fit(
@@ -423,6 +454,18 @@ def polarisation_image(
     if not isinstance(iterations, (int, np.integer)) or iterations < 1:
         raise PolarsegError(f"iterations must be a positive integer, got {iterations!r}")
     n, h, w = data.shape
+    groups = angle_groups(angles)
+    g = int(groups.max()) + 1
+    if weights is None and not (robust and g > 4) and _all_finite(data):
+        # every sample usable and weighted once: one pseudo-inverse fits every pixel
+        y, fit_angles, counts = _state_means(data, angles, groups, g)
+        design = sinusoid_design(fit_angles)
+        sw = np.sqrt(counts)[:, None]
+        coef = (np.linalg.pinv(design * sw) * sw.T) @ y  # (3, P): weighted least squares
+        fitted = y - design @ coef
+        residual = np.sqrt(np.einsum("ij,ij->j", fitted, fitted) / g)
+        ok = np.ones(y.shape[1], dtype=bool)
+        return _polarisation_result(coef, ok, ok, residual, None, fit_angles, (h, w))
     finite = np.isfinite(data)
     if weights is not None:
         weights = np.asarray(weights, dtype=np.float64)
@@ -460,10 +503,26 @@ def polarisation_image(
     usable = base > 0
     n_used = np.maximum(usable.sum(axis=0), 1)
     residual = np.sqrt(np.sum(np.where(usable, (y - design @ coef) ** 2, 0.0), axis=0) / n_used)
+    report_w = None
+    if not (uniform and final_w is base):
+        report_w = final_w.reshape(g, h, w).astype(np.float32)
+    return _polarisation_result(coef, ok, ~bad_pixel, residual, report_w, fit_angles, (h, w))
+
+
+def _polarisation_result(
+    coef: np.ndarray,
+    ok: np.ndarray,
+    good_pixel: np.ndarray,
+    residual: np.ndarray,
+    report_w: np.ndarray | None,
+    fit_angles: np.ndarray,
+    shape: tuple[int, int],
+) -> PolarisationImage:
+    """Î, ρ, φ from the fitted coefficients c = (Î, Îρ cos 2φ, Îρ sin 2φ) of eq. 3.14."""
     c0, c1, c2 = coef
     amp = np.hypot(c1, c2)
     no_value = (c0 <= 0) | ~ok
-    invalid = no_value | bad_pixel
+    invalid = no_value | ~good_pixel
     with np.errstate(divide="ignore", invalid="ignore"):
         dop = np.where(no_value, 0.0, amp / np.where(no_value, 1.0, c0))
     dop = np.clip(dop, 0.0, 1.0)
@@ -472,9 +531,7 @@ def polarisation_image(
     # mod can return π itself for tiny negative inputs in floating point
     phase[phase >= np.pi] = 0.0
     intensity = np.where(ok, c0, 0.0)
-    report_w = None
-    if not (uniform and final_w is base):
-        report_w = final_w.reshape(g, h, w).astype(np.float32)
+    h, w = shape
     return PolarisationImage(
         intensity=intensity.reshape(h, w),
         dop=dop.reshape(h, w),
