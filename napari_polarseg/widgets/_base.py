@@ -7,7 +7,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from magicgui.widgets import ComboBox, Container, Label, LineEdit, PushButton
-from napari.layers import Image
+from napari.layers import Image, Labels
 from napari.utils.notifications import show_error
 
 from ..engine import PolarsegError
@@ -90,6 +90,26 @@ class StackWidget(Container):
     # -- stack and angles -------------------------------------------------------------
     def _stack_choices(self, _widget: Any = None) -> list[tuple[str, Layer]]:
         return [(layer.name, layer) for layer in self._viewer.layers if is_angle_stack(layer)]
+
+    def _labels_choices(self, _widget: Any = None) -> list[tuple[str, Layer]]:
+        """The user's 2-D Labels layers with the chosen stack's height x width.
+
+        Choices of the widgets' mask, scribbles and ground-truth pickers.
+        """
+        stack = getattr(self, "stack_layer", None)
+        stack = None if stack is None else stack.value
+        if stack is None:
+            return []
+        size = tuple(stack.data.shape[-2:])
+        return [
+            (layer.name, layer)
+            for layer in self._viewer.layers
+            if isinstance(layer, Labels)
+            and layer_tag(layer) is None
+            and not layer.multiscale
+            and layer.ndim == 2
+            and tuple(layer.data.shape) == size
+        ]
 
     def _on_layers_changed(self, *_: Any) -> None:
         try:

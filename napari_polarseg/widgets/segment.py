@@ -28,7 +28,7 @@ from ..engine.params import (
     SPECULAR_BRANCHES,
 )
 from ._base import StackWidget
-from ._layers import find_output, layer_tag, remove_output, show_output, source_key
+from ._layers import find_output, remove_output, show_output, source_key
 from ._runner import (
     SCRIBBLE_STAGES,
     PipelineStore,
@@ -725,25 +725,6 @@ class SegmentWidget(StackWidget):
         self._update_export_button()
 
     # -- mask and scribbles -----------------------------------------------------------
-    def _labels_choices(self, _widget: Any = None) -> list[tuple[str, Layer]]:
-        """The user's 2-D Labels layers with the chosen stack's height x width."""
-        stack = getattr(self, "stack_layer", None)
-        stack = None if stack is None else stack.value
-        if stack is None:
-            return []
-        size = tuple(stack.data.shape[-2:])
-        return [
-            (layer.name, layer)
-            for layer in self._viewer.layers
-            if isinstance(layer, Labels)
-            and layer_tag(layer) is None
-            and not layer.multiscale
-            and layer.ndim == 2
-            and tuple(layer.data.shape) == size
-        ]
-
-    _mask_choices = _labels_choices
-
     def _refresh_stacks(self) -> None:
         super()._refresh_stacks()
         for name in ("mask_layer", "scribbles_layer"):

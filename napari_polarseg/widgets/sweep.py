@@ -18,14 +18,12 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from magicgui.widgets import ComboBox, Container, LineEdit, PushButton, SpinBox, Table
-from napari.layers import Labels
 
 from .. import figures
 from .. import io as pio
 from ..engine import PolarsegError, SegmentParams, validity_mask
 from ..engine.sweep import DEFAULT_SCORE, SCORES, SweepResult, check_grid, iter_sweep
 from ._base import StackWidget
-from ._layers import layer_tag
 from .batch import params_from
 from .plots import napari_theme
 
@@ -191,7 +189,7 @@ class SweepWidget(StackWidget):
         )
         self.ground_truth = ComboBox(
             label="ground truth",
-            choices=self._truth_choices,
+            choices=self._labels_choices,
             nullable=True,
             tooltip="A Labels layer of the true materials (the stack's height x width): adds "
             "the adjusted Rand index of every cell",
@@ -245,23 +243,6 @@ class SweepWidget(StackWidget):
         self.draw()
 
     # -- inputs -----------------------------------------------------------------------
-    def _truth_choices(self, _widget: Any = None) -> list[tuple[str, Layer]]:
-        """The user's 2-D Labels layers with the chosen stack's height × width."""
-        stack = getattr(self, "stack_layer", None)
-        stack = None if stack is None else stack.value
-        if stack is None:
-            return []
-        size = tuple(stack.data.shape[-2:])
-        return [
-            (layer.name, layer)
-            for layer in self._viewer.layers
-            if isinstance(layer, Labels)
-            and layer_tag(layer) is None
-            and layer.ndim == 2
-            and not layer.multiscale
-            and tuple(layer.data.shape) == size
-        ]
-
     def _refresh_stacks(self) -> None:
         super()._refresh_stacks()
         truth = getattr(self, "ground_truth", None)  # None while the base class initialises
