@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from . import io as pio
 from .engine import plots
 from .engine.errors import PolarsegError
 
@@ -210,16 +211,6 @@ def error_table_figure(
     return fig
 
 
-def _save(fig: Figure, path: Path, dpi: int) -> Path:
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-
-    FigureCanvasAgg(fig)
-    tmp = path.with_name(path.name + ".tmp")
-    fig.savefig(tmp, format="png", dpi=dpi, facecolor=fig.get_facecolor())
-    tmp.replace(path)
-    return path
-
-
 def _plot_makers(
     result: SegmentationResult,
     *,
@@ -297,7 +288,13 @@ def save_plots(
         seed=seed,
         theme=theme,
     )
-    return {name: _save(make(), out / name, dpi) for name, make in figures.items()}
+    paths = {}
+    for name, make in figures.items():  # one figure at a time: bounded memory
+        content = png_bytes(make(), dpi)
+        with pio.atomic_output(out / name) as tmp:
+            tmp.write_bytes(content)
+        paths[name] = out / name
+    return paths
 
 
 def png_bytes(fig: Figure, dpi: int = 100) -> bytes:
