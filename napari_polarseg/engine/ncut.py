@@ -120,8 +120,8 @@ def _subgraph(W, idx: np.ndarray):
 
 def _degrees(W) -> np.ndarray:
     d = np.asarray(W.sum(axis=1), dtype=float).ravel()
-    if np.any(d <= 0):
-        raise PolarsegError("affinity has an isolated node (zero degree)")
+    if np.any(~np.isfinite(d)) or np.any(d <= 0):
+        raise PolarsegError("affinity has an isolated node (zero degree) or a non-finite degree")
     return d
 
 

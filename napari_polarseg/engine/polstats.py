@@ -39,7 +39,7 @@ import warnings
 import numpy as np
 
 from .errors import PolarsegError
-from .harmonics import block_grid
+from .harmonics import _blockify, block_grid
 
 #: Names of the columns :func:`block_polarisation_statistics` returns, in order.
 STAT_NAMES: tuple[str, ...] = (
@@ -58,11 +58,10 @@ STAT_NAMES: tuple[str, ...] = (
 _FLOOR = 1e-5
 
 
-def _blocks(a: np.ndarray, window: int, grid: tuple[int, int]) -> np.ndarray:
-    """(rows·cols, w²) view of the whole blocks of a 2-D array (remainder strips dropped)."""
-    r, c = grid
-    a = np.asarray(a)[: r * window, : c * window]
-    return a.reshape(r, window, c, window).transpose(0, 2, 1, 3).reshape(r * c, window**2)
+def _blocks(a: np.ndarray, window: int) -> np.ndarray:
+    """(rows·cols, w²) pixels of the whole blocks of a 2-D array (remainder strips dropped)."""
+    b = _blockify(np.asarray(a), window)
+    return b.reshape(-1, b.shape[-1])
 
 
 def block_polarisation_statistics(
@@ -100,11 +99,11 @@ def block_polarisation_statistics(
     use = np.ones(shape, bool) if valid is None else np.asarray(valid, bool)
     if use.shape != shape:
         raise PolarsegError(f"valid mask shape {use.shape} does not match the image {shape}")
-    ok = _blocks(use, window, grid) & np.isfinite(_blocks(intensity, window, grid))
-    ok &= np.isfinite(_blocks(dop, window, grid)) & np.isfinite(_blocks(zenith, window, grid))
+    ok = _blocks(use, window) & np.isfinite(_blocks(intensity, window))
+    ok &= np.isfinite(_blocks(dop, window)) & np.isfinite(_blocks(zenith, window))
 
     def take(a: np.ndarray) -> np.ndarray:
-        return np.where(ok, _blocks(np.asarray(a, float), window, grid), np.nan)
+        return np.where(ok, _blocks(np.asarray(a, float), window), np.nan)
 
     i, r, p, t = take(intensity), take(dop), take(phase), take(zenith)
     count = ok.sum(axis=1)

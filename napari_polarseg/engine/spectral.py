@@ -29,6 +29,7 @@ import scipy.sparse as sps
 from scipy.sparse.linalg import ArpackNoConvergence, LinearOperator, eigsh
 
 from .errors import PolarsegError
+from .ncut import _degrees, _first_appearance_order
 
 #: Graphs up to this many nodes are decomposed densely.
 DENSE_MAX = 1_500
@@ -39,13 +40,6 @@ KMEANS_INIT = 10
 KMEANS_SEED = 0
 
 
-def _degrees(W) -> np.ndarray:
-    d = np.asarray(W.sum(axis=1)).ravel()
-    if np.any(~np.isfinite(d)) or np.any(d <= 0):
-        raise PolarsegError("affinity has a block without positive degree")
-    return d
-
-
 def normalized_eigenvectors(W, k: int) -> np.ndarray:
     """The k largest eigenvectors of D^−½ W D^−½ as columns (n, k), largest first.
 
@@ -54,7 +48,7 @@ def normalized_eigenvectors(W, k: int) -> np.ndarray:
     """
     n = W.shape[0]
     k = int(min(k, n))
-    d_is = 1.0 / np.sqrt(_degrees(W))
+    d_is = 1.0 / np.sqrt(_degrees(W))  # checks for isolated nodes
     if n > DENSE_MAX and k < n - 1:
         Wm = W.tocsr() if sps.issparse(W) else np.asarray(W, dtype=np.float64)
 
@@ -96,13 +90,6 @@ def kway_ncut(W, labels: np.ndarray) -> np.ndarray:
         return np.where(
             (assoc > 0) & (total - assoc > 0), cut / assoc + cut / (total - assoc), 0.0
         )
-
-
-def _first_appearance(labels: np.ndarray) -> np.ndarray:
-    _, first, inverse = np.unique(labels, return_index=True, return_inverse=True)
-    rank = np.empty(first.size, dtype=np.int32)
-    rank[np.argsort(first)] = np.arange(first.size, dtype=np.int32)
-    return rank[inverse.ravel()]
 
 
 @dataclass
@@ -157,7 +144,7 @@ class SpectralClustering:
                 x = self.embedding(k)
                 km = KMeans(k, n_init=KMEANS_INIT, random_state=KMEANS_SEED).fit(x)
                 lab = self._merge_small(km.labels_, x, km.cluster_centers_)
-            self._labels[k] = _first_appearance(lab)
+            self._labels[k] = _first_appearance_order(lab)
         lab = self._labels[k]
         self._ncut = [float(v) for v in kway_ncut(self.W, lab)] if lab.max() > 0 else []
         return lab.copy()
