@@ -91,8 +91,11 @@ def test_bad_inputs():
 
 def test_pipeline_kway_only_reruns_labels_when_k_changes():
     sc = make_scene("leaves", shape=(64, 72), seed=1)
-    pipe = Pipeline(sc.stack, sc.angles, SegmentParams(window=8, degree=6, clustering="kway",
-                                                        scale_mode="median", scale=2.0))
+    pipe = Pipeline(
+        sc.stack,
+        sc.angles,
+        SegmentParams(window=8, degree=6, clustering="kway", scale_mode="median", scale=2.0),
+    )
     res = pipe.run(reconstruction=False)
     assert res.labels.shape == sc.labels.shape and res.labels.max() == 2
     assert len(res.ncut_values) == 3 and all(0 <= v <= 2 for v in res.ncut_values)

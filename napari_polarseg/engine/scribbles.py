@@ -185,9 +185,7 @@ def classify_blocks(
     if not use.all():
         from scipy import ndimage
 
-        _, (ri, ci) = ndimage.distance_transform_edt(
-            ~use.reshape(r, c), return_indices=True
-        )
+        _, (ri, ci) = ndimage.distance_transform_edt(~use.reshape(r, c), return_indices=True)
         proba = proba[(ri * c + ci).ravel()]
     labels = np.argmax(proba, axis=1).reshape(r, c)
     return labels, proba, classes

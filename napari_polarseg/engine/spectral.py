@@ -87,9 +87,7 @@ def kway_ncut(W, labels: np.ndarray) -> np.ndarray:
     total = assoc.sum()
     cut = assoc - within
     with np.errstate(divide="ignore", invalid="ignore"):
-        return np.where(
-            (assoc > 0) & (total - assoc > 0), cut / assoc + cut / (total - assoc), 0.0
-        )
+        return np.where((assoc > 0) & (total - assoc > 0), cut / assoc + cut / (total - assoc), 0.0)
 
 
 @dataclass
