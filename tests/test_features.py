@@ -74,3 +74,32 @@ def test_spatial_kernel():
     assert k[0, 5] == pytest.approx(np.exp(-2 / 4))  # diagonal neighbour, within 1.5
     assert k[0, 2] == 0.0  # two blocks away: beyond the radius
     np.testing.assert_allclose(k, k.T)
+
+
+def test_affinity_from_kept_distances_and_float32():
+    """exp(−D/s) from distances computed once equals the affinity built from scratch, in
+    either mode; a float32 matrix holds the float64 values rounded."""
+    from napari_polarseg.engine.features import (
+        affinity_from_distances,
+        effective_scale,
+        median_offdiagonal,
+    )
+
+    rng = np.random.default_rng(2)
+    x = rng.normal(size=(50, 4))
+    d = mahalanobis_sq(x)
+    med = median_offdiagonal(d)
+    assert med == pytest.approx(np.median(d[~np.eye(50, dtype=bool)]), rel=1e-12)
+    for s, mode in ((1.0, "absolute"), (3.0, "absolute"), (2.0, "median")):
+        scale = effective_scale(s, mode, med)
+        np.testing.assert_allclose(
+            affinity_from_distances(d, scale), affinity_matrix(x, s, mode), rtol=1e-12
+        )
+    d32 = mahalanobis_sq(x, dtype=np.float32)
+    assert d32.dtype == np.float32
+    np.testing.assert_allclose(d32, d, rtol=1e-6, atol=1e-6)
+    w32 = affinity_matrix(x, 2.0, "median", dtype=np.float32)
+    assert w32.dtype == np.float32
+    np.testing.assert_allclose(w32, affinity_matrix(x, 2.0, "median"), rtol=1e-5)
+    with pytest.raises(PolarsegError, match="median"):
+        effective_scale(1.0, "median", None)

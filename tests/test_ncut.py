@@ -195,3 +195,76 @@ def test_dense_segment_products_degrees_and_split_sums(kept):
     rank[order] = np.arange(kept)
     want = np.where(rank[None, :] < rank[:, None], sub, 0.0).sum(1)[order]
     np.testing.assert_allclose(_lower_prefix_sums(W, order, idx), want, rtol=1e-12)
+
+
+@pytest.mark.parametrize("kept", [2400, 1000])  # the whole matrix minus outsiders / a copy
+def test_float32_affinity_is_used_as_is_with_float64_degrees(kept):
+    """A float32 W of FLOAT32_MIN_NODES nodes or more (the pipeline's affinity) is the
+    product matrix itself; degrees and prefix sums are accumulated in float64."""
+    from napari_polarseg.engine.ncut import FLOAT32_MIN_NODES, _DenseGraph, _lower_prefix_sums
+
+    rng = np.random.default_rng(2)
+    n = 2500
+    assert n >= FLOAT32_MIN_NODES
+    W64 = rng.random((n, n))
+    W64 = (W64 + W64.T) / 2
+    W = W64.astype(np.float32)
+    exact = W.astype(np.float64)  # the float32 values, summed exactly in float64
+    graph = _DenseGraph(W)
+    assert graph.W is W and graph.Wop is W  # no copy of the n² matrix
+    np.testing.assert_allclose(graph.d, exact.sum(1), rtol=1e-12)
+    idx = np.sort(rng.choice(n, kept, replace=False))
+    sub = exact[np.ix_(idx, idx)]
+    seg = graph.segment(idx)
+    np.testing.assert_allclose(seg.d, sub.sum(1), rtol=1e-9)
+    assert seg.d.dtype == np.float64
+    order = rng.permutation(kept)
+    rank = np.empty(kept, dtype=int)
+    rank[order] = np.arange(kept)
+    want = np.where(rank[None, :] < rank[:, None], sub, 0.0).sum(1)[order]
+    got = _lower_prefix_sums(W, order, idx)
+    assert got.dtype == np.float64
+    np.testing.assert_allclose(got, want, rtol=1e-9)
+
+
+def test_float32_tree_gives_the_float64_labels():
+    """The issue's condition for float32: the same labels. A 2,400-node graph with five
+    planted groups (and the thesis-like fallen-apart graph, tiled) cut from its float32
+    and float64 affinities."""
+    W, truth = planted((700, 600, 500, 400, 200), p_in=0.6, p_out=0.1, noise=0.3, seed=3)
+    for k in (2, 3, 5):
+        labels64 = CutTree(W).labels(k)
+        labels32 = CutTree(W.astype(np.float32)).labels(k)
+        np.testing.assert_array_equal(labels32, labels64)
+    assert adjusted_rand_score(truth, CutTree(W.astype(np.float32)).labels(5)) == 1.0
+    # 2,100 nodes: three different thesis-like graphs, weakly joined
+    big = scipy.linalg.block_diag(*(fallen_apart(n=700, seed=s)[0] for s in (0, 1, 2))) + 1e-9
+    for k in (2, 4):
+        np.testing.assert_array_equal(
+            CutTree(big.astype(np.float32)).labels(k), CutTree(big).labels(k)
+        )
+
+
+def test_prefetch_solves_what_the_next_split_needs():
+    from napari_polarseg.engine import ncut
+
+    W, _ = fallen_apart(seed=0)
+    tree = CutTree(W)
+    tree.labels(3)
+    solved = list(tree.prefetch())
+    assert solved and set(solved) <= {0, 1, 2}  # the segments not solved yet
+    assert list(tree.prefetch()) == []  # nothing left to solve
+    calls = []
+    original = ncut._segment_vectors
+
+    def counting(*args, **kwargs):
+        calls.append(1)
+        return original(*args, **kwargs)
+
+    ncut._segment_vectors = counting
+    try:
+        four = tree.labels(4)
+    finally:
+        ncut._segment_vectors = original
+    assert calls == []  # the 4th cut only compared the prefetched candidates
+    np.testing.assert_array_equal(four, CutTree(W).labels(4))

@@ -220,3 +220,65 @@ def test_masked_out_blocks_are_no_graph_nodes_and_take_their_neighbours_label():
     # and the two materials inside the region are still told apart
     assert adjusted_rand_score(truth[region], res.labels[region]) > 0.8
     assert res.summary()["mask"]  # counts reported
+
+
+def test_scale_change_reuses_the_distances_and_large_graphs_are_float32():
+    """The squared distances are kept with the block features: a change of the affinity
+    scale recomputes only the exponential. From ncut.FLOAT32_MIN_NODES blocks the
+    distances and the affinity are float32, and the labels equal those of the float64
+    affinity (the issue's condition for float32)."""
+    from napari_polarseg.engine import features as feat
+    from napari_polarseg.engine import ncut
+    from napari_polarseg.engine.synthetic import make_scene
+
+    scene = make_scene("camouflage", shape=(200, 208), angles_deg=np.arange(0, 180, 30))
+    p = SegmentParams(window=4, degree=4, n_segments=3, scale=2.0, scale_mode="median")
+    pipe = Pipeline(scene.stack, scene.angles, p)
+    pipe.run(reconstruction=False)
+    W = pipe.get("affinity")
+    n = W.shape[0]
+    assert n >= ncut.FLOAT32_MIN_NODES and W.dtype == np.float32
+    D = pipe._distances[1]
+    assert D.dtype == np.float32
+    features = pipe.get("pca").features.reshape(n, -1)
+    W64 = feat.affinity_matrix(features, 2.0, "median")
+    np.testing.assert_allclose(W, W64, rtol=2e-5, atol=1e-7)
+    want = ncut.CutTree(W64, min_size=p.min_segment_blocks).labels(3)
+    np.testing.assert_array_equal(pipe.get("labels")[0].ravel(), want)
+
+    pipe.update(scale=3.0)
+    pipe.run(reconstruction=False)
+    assert pipe._distances[1] is D  # kept: only exp(−D/s) was recomputed
+    np.testing.assert_allclose(
+        pipe.get("affinity"), feat.affinity_matrix(features, 3.0, "median"), rtol=2e-5, atol=1e-7
+    )
+    pipe.update(variance=0.9)  # other features: other distances
+    pipe.run(reconstruction=False)
+    assert pipe._distances[1] is not D
+
+
+def test_prefetch_makes_one_more_segment_free():
+    from napari_polarseg.engine import ncut
+
+    stack, _ = two_material_stack(shape=(96, 100))
+    pipe = Pipeline(stack, ANGLES, SegmentParams(window=4, degree=4, n_segments=2))
+    pipe.run()
+    assert list(pipe.prefetch())  # the two segments' candidate splits
+    tree = pipe.get("cut")
+    assert set(tree._candidates) == set(tree._ids)
+    pipe.update(n_segments=3)
+    pipe.run()
+    assert pipe.get("labels")[0].max() == 2
+    fresh = Pipeline(stack, ANGLES, pipe.params).run()
+    np.testing.assert_array_equal(pipe.get("labels")[0], fresh.block_labels)
+    # nothing to do: stale labels, a tree already deeper than k, or k-way clustering
+    pipe.update(scale=2.0)
+    assert list(pipe.prefetch()) == []
+    pipe.run()
+    pipe.update(n_segments=2)
+    pipe.run()
+    assert list(pipe.prefetch()) == []
+    pipe.update(clustering="kway")
+    pipe.run()
+    assert not isinstance(pipe.get("cut"), ncut.CutTree)
+    assert list(pipe.prefetch()) == []

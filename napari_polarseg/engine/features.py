@@ -142,20 +142,24 @@ def whiten(features: np.ndarray) -> np.ndarray:
     return centred @ (evecs * inv_sqrt)
 
 
-def _sq_distances(z: np.ndarray, scale: float | None = None) -> np.ndarray:
-    """‖z_i − z_j‖² for all pairs (n × n), optionally turned into exp(−D / s) in place.
+def _sq_distances(
+    z: np.ndarray, scale: float | None = None, dtype: np.dtype | type = np.float64
+) -> np.ndarray:
+    """‖z_i − z_j‖² for all pairs (n × n), optionally turned into exp(−D / s).
 
     One fused pass per chunk of rows (matrix product, then in-place additions, clipping
-    and exponential while the chunk is in cache), chunks spread over the cores.
+    and exponential while the chunk is in cache), chunks spread over the cores. Each
+    chunk is computed in float64 and stored as ``dtype``.
     """
     from .harmonics import run_chunks
 
     n = z.shape[0]
     sq = np.einsum("ij,ij->i", z, z)
-    out = np.empty((n, n))
+    out = np.empty((n, n), dtype=dtype)
+    direct = out.dtype == np.float64
 
     def work(a: int, b: int) -> None:
-        blk = out[a:b]
+        blk = out[a:b] if direct else np.empty((b - a, n))
         np.matmul(z[a:b], z.T, out=blk)
         blk *= -2.0
         blk += sq[a:b, None]
@@ -165,30 +169,36 @@ def _sq_distances(z: np.ndarray, scale: float | None = None) -> np.ndarray:
         if scale is not None:
             blk *= -1.0 / scale
             np.exp(blk, out=blk)
+        if not direct:
+            out[a:b] = blk
 
     step = max(1, 2**16 // max(n, 1))
     run_chunks([(a, min(n, a + step)) for a in range(0, n, step)], work, n * n // 8)
     return out
 
 
-def mahalanobis_sq(features: np.ndarray) -> np.ndarray:
+def mahalanobis_sq(features: np.ndarray, dtype: np.dtype | type = np.float64) -> np.ndarray:
     """Dense matrix of squared Mahalanobis distances D_k1k2 between blocks (eq. 4.27, Σ⁻¹).
 
     D = (A_k1 − A_k2)ᵀ Σ⁻¹ (A_k1 − A_k2), computed as ‖z_i‖² + ‖z_j‖² − 2 z_i·z_j on the
-    whitened features z (a matrix product instead of a pairwise loop). Dimensionless.
+    whitened features z (a matrix product instead of a pairwise loop), in float64 and
+    stored as ``dtype`` (float32 halves the memory of a large graph). Dimensionless.
     """
-    return _sq_distances(whiten(features))
+    return _sq_distances(whiten(features), dtype=dtype)
 
 
-def _median_offdiagonal(d: np.ndarray) -> float:
+def median_offdiagonal(d: np.ndarray) -> float:
     """Median of the off-diagonal entries of a symmetric matrix, from its upper triangle.
 
     Every off-diagonal value appears twice, so the median of the strict upper triangle is
-    the median of all off-diagonal entries; gathering it row by row avoids an n × n mask.
+    the median of all off-diagonal entries; it is gathered row by row (no n × n mask) into
+    one copy that the median then partitions in place.
     """
     n = d.shape[0]
+    if n < 2:
+        raise PolarsegError("the median distance needs at least 2 blocks")
     upper = np.concatenate([d[i, i + 1 :] for i in range(n - 1)])
-    return float(np.median(upper))
+    return float(np.median(upper, overwrite_input=True))
 
 
 SCALE_MODES = ("absolute", "median")
@@ -201,13 +211,53 @@ def _check_scale(scale: float, scale_mode: str) -> None:
         raise PolarsegError(f"scale mode must be one of {SCALE_MODES}, got {scale_mode!r}")
 
 
+def effective_scale(scale: float, scale_mode: str, median: float | None) -> float:
+    """The s of exp(−D / s): ``scale``, or ``scale`` times the median D in median mode."""
+    _check_scale(scale, scale_mode)
+    if scale_mode == "absolute":
+        return scale
+    if median is None:
+        raise PolarsegError("the median scale mode needs the median distance")
+    return scale * (median if median > 0 else 1.0)
+
+
+def affinity_from_distances(
+    d: np.ndarray, scale: float, out: np.ndarray | None = None
+) -> np.ndarray:
+    """exp(−D / s) for a dense D (:func:`mahalanobis_sq`), in D's dtype.
+
+    Thesis section 4.5 with the effective s (:func:`effective_scale`). Lets a caller
+    that keeps D (the pipeline does) change s with one pass over the matrix, in row
+    chunks on the cores. ``out`` (may be ``d`` itself) receives it, else a new array.
+    """
+    from .harmonics import run_chunks
+
+    if not scale > 0:
+        raise PolarsegError(f"affinity scale must be positive, got {scale!r}")
+    n = d.shape[0]
+    out = np.empty_like(d) if out is None else out
+    factor = np.asarray(-1.0 / scale, dtype=d.dtype)
+
+    def work(a: int, b: int) -> None:
+        np.multiply(d[a:b], factor, out=out[a:b])
+        np.exp(out[a:b], out=out[a:b])
+
+    step = max(1, 2**18 // max(n, 1))
+    run_chunks([(a, min(n, a + step)) for a in range(0, n, step)], work, n * n // 8)
+    return out
+
+
 def affinity_matrix(
-    features: np.ndarray, scale: float = 1.0, scale_mode: str = "absolute"
+    features: np.ndarray,
+    scale: float = 1.0,
+    scale_mode: str = "absolute",
+    dtype: np.dtype | type = np.float64,
 ) -> np.ndarray:
     """Block affinity S(k1, k2) = exp(−D_k1k2 / s) (thesis section 4.5; s = 1 there).
 
     D is the squared Mahalanobis distance of eq. 4.27 (a quadratic form, as printed).
-    Dense: n_blocks² float64 values (see :func:`knn_affinity` for large block counts).
+    Dense: n_blocks² values of ``dtype`` (see :func:`knn_affinity` for large block
+    counts).
 
     Parameters
     ----------
@@ -220,16 +270,16 @@ def affinity_matrix(
         like twice the number of kept components, so with 10–20 components an absolute
         s = 1 gives affinities of e^−30 and a graph that falls apart into single blocks;
         the median makes s dimensionless (s = 1: a typical pair has affinity 1/e).
+    dtype : float64 or float32
+        Precision of the stored matrix (every entry is computed in float64).
     """
     _check_scale(scale, scale_mode)
     z = whiten(features)
     if scale_mode == "absolute" or z.shape[0] < 2:
-        return _sq_distances(z, scale)
-    d = _sq_distances(z)
-    med = _median_offdiagonal(d)
-    scale = scale * (med if med > 0 else 1.0)
-    d *= -1.0 / scale
-    return np.exp(d, out=d)
+        return _sq_distances(z, scale, dtype)
+    d = _sq_distances(z, dtype=dtype)
+    s = effective_scale(scale, scale_mode, median_offdiagonal(d))
+    return affinity_from_distances(d, s, out=d)
 
 
 #: Neighbours per block of the sparse feature-space affinity (:func:`knn_affinity`).

@@ -62,7 +62,7 @@ more segments later costs nothing or only the extra splits.
 from __future__ import annotations
 
 import warnings
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -167,7 +167,9 @@ def _symmetric_product(M: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
 class _DenseGraph:
     """A dense affinity and its one copy for products (float32 from FLOAT32_MIN_NODES).
 
-    Shared by all segments of a :class:`CutTree`: no per-segment float64 copies.
+    Shared by all segments of a :class:`CutTree`: no per-segment float64 copies. A
+    float32 W of that size (the pipeline stores its affinity so) is used as it is, for
+    the products too; degrees are always summed in float64.
     """
 
     W: np.ndarray
@@ -178,24 +180,28 @@ class _DenseGraph:
     def __post_init__(self) -> None:
         from .harmonics import run_chunks
 
-        W = self.W = np.ascontiguousarray(self.W, dtype=float)
-        n = W.shape[0]
+        n = self.W.shape[0]
+        single = np.asarray(self.W).dtype == np.float32 and n >= FLOAT32_MIN_NODES
+        W = self.W = np.ascontiguousarray(self.W, dtype=np.float32 if single else float)
         if n < FLOAT32_MIN_NODES:
             self.Wop, self.d = W, _degrees(W)
         else:
-            # the float32 copy and the (float64) degrees in one pass over W, in row
-            # chunks on the cores
-            self.Wop = np.empty((n, n), dtype=np.float32)
+            # the float32 copy (unless W is float32) and the float64 degrees in one pass
+            # over W, in row chunks on the cores
+            self.Wop = W if single else np.empty((n, n), dtype=np.float32)
             self.d = np.empty(n)
 
             def work(a: int, b: int) -> None:
-                self.Wop[a:b] = W[a:b]
-                self.d[a:b] = W[a:b].sum(axis=1)
+                if not single:
+                    self.Wop[a:b] = W[a:b]
+                self.d[a:b] = W[a:b].sum(axis=1, dtype=np.float64)
 
             step = max(1, 2**20 // n)
             run_chunks([(a, min(n, a + step)) for a in range(0, n, step)], work, n * n // 8)
-            if np.any(self.d <= 0):
-                raise PolarsegError("affinity has an isolated node (zero degree)")
+            if not np.all(np.isfinite(self.d)) or np.any(self.d <= 0):
+                raise PolarsegError(
+                    "affinity has an isolated node (zero degree) or a non-finite degree"
+                )
         self.diag = _diagonal(W)
 
     @property
@@ -207,17 +213,23 @@ class _DenseGraph:
         n = self.n
         if idx.size == n:
             return _Segment(idx, self.W, True, self.d, self.diag, self._product(self.Wop, None))
-        inside = np.zeros(n)
-        inside[idx] = 1.0
-        # degrees within the segment: one float64 product with its indicator (symv: see
-        # _symmetric_product)
-        d = _symmetric_product(self.W)(inside[:, None])[idx, 0]
+        sub = _subgraph(self.Wop, idx) if idx.size <= COPY_MAX_FRACTION * n else None
+        product = self._product(self.Wop, idx) if sub is None else self._product(sub, None)
+        # degrees within the segment, in float64
+        if self.W.dtype == np.float64:
+            # one float64 product with the segment's indicator (symv: _symmetric_product)
+            inside = np.zeros(n)
+            inside[idx] = 1.0
+            d = _symmetric_product(self.W)(inside[:, None])[idx, 0]
+        elif sub is not None:
+            d = sub.sum(axis=1, dtype=np.float64)
+        else:
+            # all of a node's minus those to the few nodes outside the segment
+            outside = np.ones(n, dtype=bool)
+            outside[idx] = False
+            d = self.d[idx] - self.W[:, outside].sum(axis=1, dtype=np.float64)[idx]
         if np.any(d <= 0):
             raise PolarsegError("affinity has an isolated node (zero degree)")
-        if idx.size <= COPY_MAX_FRACTION * n:
-            product = self._product(_subgraph(self.Wop, idx), None)
-        else:
-            product = self._product(self.Wop, idx)
         return _Segment(idx, self.W, False, d, self.diag[idx], product)
 
     def _product(self, M: np.ndarray, idx: np.ndarray | None) -> Callable[[np.ndarray], np.ndarray]:
@@ -577,7 +589,7 @@ def best_split(W, y: np.ndarray, min_size: int = 1) -> tuple[np.ndarray | None, 
         diag = Ws.diagonal()
     else:
         W = np.asarray(W)
-        d = W.sum(axis=1)[order]
+        d = W.sum(axis=1, dtype=np.float64)[order]
         diag = np.diagonal(W)[order]
         lower = _lower_prefix_sums(W, order)
     return _split_from_sums(y, order, d, diag, lower, min_size)
@@ -653,7 +665,7 @@ def _lower_prefix_sums(
         block = W[part[0] : part[-1] + 1] if contiguous else W[part]
         before = rank[None, :] < rank[part, None]
         # (np.sum(..., where=before) reads the same but took twice as long)
-        sums[a:b] = np.where(before, block, 0.0).sum(axis=1)
+        sums[a:b] = np.where(before, block, block.dtype.type(0)).sum(axis=1, dtype=np.float64)
 
     step = max(1, 2**20 // max(n, 1))  # rows per chunk: ~8 MB of float64
     bounds = [(a, min(rows.size, a + step)) for a in range(0, rows.size, step)]
@@ -755,6 +767,8 @@ class CutTree:
                     result = (*_segment_split(seg, block[:, 0], self.min_size), block[:, 0])
             else:
                 sub = self.W if idx.size == self.W.shape[0] else _subgraph(self.W, idx)
+                if not sps.issparse(sub):
+                    sub = np.asarray(sub, dtype=float)  # small: solved and split in float64
                 warm = None if self.warm is None else self.warm.get(idx.tobytes())
                 result = _bipartition(sub, self.min_size, warm)
                 if result[2] is not None:
@@ -828,6 +842,22 @@ class CutTree:
         self._history.append(_first_appearance_order(labels))
         self._ncut_values.append(best_val)
         return True
+
+    def prefetch(self) -> Iterator[int]:
+        """Solve the candidate split of every current segment not solved yet.
+
+        What the next split (``labels(k + 1)`` after ``labels(k)`` reached the tree's
+        current k segments) computes first, so that afterwards it only compares the
+        candidates: an idle-time precomputation (the plugin runs it after showing a
+        result). Yields the position of each segment solved, so that a caller can stop
+        between two solves; the results are exactly those ``labels`` would compute.
+        """
+        if self._exhausted:
+            return
+        for pos in range(len(self._segments)):
+            if self._ids[pos] not in self._candidates:
+                self._candidate(pos)
+                yield pos
 
     def labels(self, k: int) -> np.ndarray:
         """Node labels 0..k'−1 for k' = min(k, reachable) segments."""
