@@ -6,7 +6,7 @@ import contextlib
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from magicgui.widgets import ComboBox, Container, Label, LineEdit, PushButton
+from magicgui.widgets import ComboBox, Container, Label, LineEdit, ProgressBar, PushButton
 from napari.layers import Image, Labels
 from napari.utils.notifications import show_error
 
@@ -58,11 +58,17 @@ class StackWidget(Container):
         )
         self.run_button = PushButton(text=self.run_text)
         self.cancel_button = PushButton(text="Cancel", enabled=False)
+        #: stages of the current (or last) run done; long runs also show in napari's
+        #: activity dock (see ``_runner.ACTIVITY_DELAY``)
+        self.progress = ProgressBar(label="progress", value=0, min=0, max=1)
         self.status = Label(value="")
         self.status.native.setWordWrap(True)
         self.extend([self.stack_layer, self.angles])
         self._slot = WorkerSlot(
-            self.progress_desc, on_status=self._set_status, on_idle=self._on_idle
+            self.progress_desc,
+            on_status=self._set_status,
+            on_idle=self._on_idle,
+            on_progress=self._set_progress,
         )
 
         self.stack_layer.changed.connect(self._on_stack_changed)
@@ -85,7 +91,7 @@ class StackWidget(Container):
     # -- building ---------------------------------------------------------------------
     def _add_parameters(self, widgets: list[Any]) -> None:
         """Append the parameter widgets, then the buttons and the status line."""
-        self.extend([*widgets, self.run_button, self.cancel_button, self.status])
+        self.extend([*widgets, self.run_button, self.cancel_button, self.progress, self.status])
 
     # -- stack and angles -------------------------------------------------------------
     def _stack_choices(self, _widget: Any = None) -> list[tuple[str, Layer]]:
@@ -184,13 +190,35 @@ class StackWidget(Container):
         """Subclasses: True while a run is scheduled but not yet submitted."""
         return False
 
-    def _submit(self, job: Any, args: tuple[Any, ...], total: int, on_result: Any) -> None:
-        self.cancel_button.enabled = True
-        self._slot.submit(job, args, total, on_result)
+    def _submit(
+        self,
+        job: Any,
+        args: tuple[Any, ...],
+        total: int,
+        on_result: Any,
+        on_partial: Any = None,
+        live: bool = False,
+    ) -> None:
+        """Run ``job`` in the widget's worker slot. A ``live`` rerun (after a parameter
+        change) enables Cancel and reports progress only if it still runs
+        ``_runner.REPORT_INTERVAL`` later: one that ends sooner repaints nothing before
+        its result."""
+        if not live:
+            self.cancel_button.enabled = True
+        self._slot.submit(job, args, total, on_result, on_partial, live)
 
     def _set_status(self, text: str) -> None:
         try:
             self.status.value = text
+        except RuntimeError:  # the widget was deleted while a worker ended
+            pass
+
+    def _set_progress(self, index: int, total: int) -> None:
+        try:
+            self.progress.max = max(total, 1)
+            self.progress.value = min(index, total)
+            if self._slot.worker is not None:
+                self.cancel_button.enabled = True
         except RuntimeError:  # the widget was deleted while a worker ended
             pass
 

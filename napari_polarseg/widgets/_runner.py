@@ -1,9 +1,11 @@
 """Running engine work off the GUI thread: one worker at a time, newest request wins.
 
 A widget hands :class:`WorkerSlot` a *job*: a generator function that calls the engine
-and yields ``(stage, index, total)`` between stages. The slot runs it in a napari
-generator worker (``napari.qt.threading.create_worker``) with a progress bar in the
-viewer, and guarantees:
+and yields ``(stage, index, total)`` between stages (and, optionally, :class:`Partial`
+results to show before the end). The slot runs it in a napari generator worker
+(``napari.qt.threading.create_worker``), reports each stage to the widget (status line,
+its own progress bar) and, for runs longer than :data:`ACTIVITY_DELAY`, in napari's
+activity dock, and guarantees:
 
 - at most one worker per slot; a request while one is running asks it to stop at its
   next stage boundary (``worker.quit()``) and runs the newest request when it has ended
@@ -38,12 +40,49 @@ from typing import Any
 import numpy as np
 from napari.qt.threading import GeneratorWorker, create_worker
 from napari.utils.notifications import show_error
-from qtpy.QtCore import QCoreApplication
+from qtpy.QtCore import QCoreApplication, QTimer
 
 from ..engine import Pipeline, PolarsegError, SegmentationResult, SegmentParams, validity_mask
 
 Stage = tuple[str, int, int]
-Job = Callable[..., Generator[Stage, None, Any]]
+Job = Callable[..., Generator[Any, None, Any]]
+
+#: Seconds a run must last before it appears in napari's activity dock (a progress bar
+#: there and an animated "in progress" spinner in the status bar). Interactive reruns end
+#: sooner and show their stages only in the widget: the spinner repaints the window ~25
+#: times a second, which on a software-rendered canvas (Mesa llvmpipe under Xvfb) took
+#: half of a 2-core machine and made the engine's stages up to twice as slow (issue 5).
+ACTIVITY_DELAY = 1.0
+
+#: Seconds between two reports (status line, progress bars) of a running job, and from
+#: its start to the first: a run that ends sooner changes nothing in the window until its
+#: result is shown. Every report repaints the window, which on a software-rendered canvas
+#: composes all of it again: 10–100 ms of CPU taken from the worker on the reference
+#: 2-core machine (eight reports per run made a 0.85 s rerun take 1.6 s).
+REPORT_INTERVAL = 0.25
+
+
+@dataclass(frozen=True)
+class Result:
+    """The result of a job that goes on with idle-time work (e.g. precomputing).
+
+    :class:`WorkerSlot` hands ``value`` to ``on_result`` at once, as if the job had
+    returned it; the rest of the job reports nothing and the next request stops it at its
+    next yield.
+    """
+
+    value: Any
+
+
+@dataclass(frozen=True)
+class Partial:
+    """A result a job yields before it ends (e.g. the segments before the error map).
+
+    :class:`WorkerSlot` hands ``value`` to the ``on_partial`` callback of the run in the
+    GUI thread, unless a newer run has been requested since.
+    """
+
+    value: Any
 
 
 class StageFailed(Exception):
@@ -54,15 +93,23 @@ class StageFailed(Exception):
     """
 
 
-class _BlasShare:
-    """Leave a core to the GUI thread while workers compute.
+#: Fewest cores on which workers leave one to the GUI thread (:class:`_BlasShare`).
+MIN_CORES_TO_SHARE = 3
 
-    OpenBLAS threads spin while they wait for work; on a machine with few cores they
-    compete with the GUI thread (and with Xvfb/Mesa) and slowed a worker's stages here by
-    up to 15 times while freezing the event loop for a third of a second. While at least
-    one worker runs, BLAS pools are limited to ``cpu_count - 1`` threads (at least 1);
-    the original limits come back when the last worker ends. Needs ``threadpoolctl``
-    (a scikit-learn dependency); without it nothing is changed.
+
+class _BlasShare:
+    """Leave a core to the GUI thread while workers compute, on machines with 3+ cores.
+
+    OpenBLAS threads spin while they wait for work; with as many of them as cores they
+    compete with the GUI thread (and with Xvfb/Mesa) and froze the event loop for a
+    third of a second here while a progress spinner was animating. While at least one
+    worker runs, BLAS pools are limited to ``cpu_count - 1`` threads; the original
+    limits come back when the last worker ends. With 2 cores (or 1) nothing is limited:
+    since runs no longer repaint the window while they compute (``REPORT_INTERVAL``,
+    ``ACTIVITY_DELAY``), one BLAS thread only made the eigensolver's products 1.7 times
+    slower (3.6 against 2.1 ms at 4,752 blocks) and left the event loop's longest stall
+    where it was (0.07–0.14 s either way, ``benchmarks/bench_gui.py``). Needs
+    ``threadpoolctl`` (a scikit-learn dependency); without it nothing is changed.
     """
 
     def __init__(self) -> None:
@@ -92,7 +139,10 @@ class _BlasShare:
             from threadpoolctl import threadpool_limits
         except ImportError:  # pragma: no cover - scikit-learn brings it
             return None
-        return threadpool_limits(limits=max(1, (os.cpu_count() or 2) - 1), user_api="blas")
+        cores = os.cpu_count() or 2
+        if cores < MIN_CORES_TO_SHARE:
+            return None
+        return threadpool_limits(limits=cores - 1, user_api="blas")
 
 
 blas_share = _BlasShare()
@@ -199,44 +249,61 @@ def scribble_stages(
     scribbles: np.ndarray,
     params: SegmentParams,
     reconstruction: bool = True,
-) -> Generator[Stage, None, ScribbleOutput]:
+) -> Generator[Any, None, ScribbleOutput]:
     """Run the stages the classifier needs (yielding after each), then classify.
 
-    ``len(SCRIBBLE_STAGES)`` yields (one fewer without the reconstruction); the
-    classifier (milliseconds) runs after the last one. The pipeline's cache is used and
-    kept as for a normalized-cut run: the cut's own stages (affinity, cut, labels) are
-    neither computed nor invalidated.
+    ``len(SCRIBBLE_STAGES)`` stage yields (one fewer without the reconstruction). The
+    classifier (milliseconds) runs after the block features; when the reconstruction
+    still has to be computed, its output is yielded as a :class:`Partial` first (the
+    classes are shown while the error map is computed) and the classifier's output is
+    assembled again with the error map at the end. The pipeline's cache is used and kept
+    as for a normalized-cut run: the cut's own stages (affinity, cut, labels) are neither
+    computed nor invalidated.
     """
     names = SCRIBBLE_STAGES if reconstruction else SCRIBBLE_STAGES[:-1]
     total = len(names)
     timings: dict[str, float] = {}
     recomputed: list[str] = []
-    for i, name in enumerate(names):
+    partial = reconstruction and not pipe.is_fresh("reconstruction")
+
+    def run_stage(i: int, name: str) -> Stage:
         before = pipe.calls[name]
         t0 = time.perf_counter()
         pipe.get(name)
         if pipe.calls[name] != before:
             timings[name] = time.perf_counter() - t0
             recomputed.append(name)
-        yield name, i + 1, total
-    if params != pipe.params:
-        raise PolarsegError("parameters changed while the pipeline was running")
-    try:
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always")
-            seg = pipe.scribble_segmentation(scribbles, reconstruction)
-    except PolarsegError as exc:
-        return ScribbleOutput(None, None, None, problem=str(exc))
-    notes = sorted({str(w.message) for w in caught})
-    timings["scribbles"] = seg.result.timings["scribbles"]
-    recomputed.append("scribbles")
-    result = replace(
-        seg.result,
-        params=params,
-        timings={name: timings.get(name, 0.0) for name in (*names, "scribbles")},
-        recomputed=recomputed,
-    )
-    return ScribbleOutput(result, seg.probabilities, seg.classes, seg.training_blocks, notes)
+        return name, i + 1, total
+
+    def classify(with_reconstruction: bool) -> ScribbleOutput:
+        if params != pipe.params:
+            raise PolarsegError("parameters changed while the pipeline was running")
+        try:
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always")
+                seg = pipe.scribble_segmentation(scribbles, with_reconstruction)
+        except PolarsegError as exc:
+            return ScribbleOutput(None, None, None, problem=str(exc))
+        stages = names if with_reconstruction or not reconstruction else names[:-1]
+        times = {**timings, "scribbles": seg.result.timings["scribbles"]}
+        result = replace(
+            seg.result,
+            params=params,
+            timings={name: times.get(name, 0.0) for name in (*stages, "scribbles")},
+            recomputed=[*recomputed, "scribbles"],
+        )
+        notes = sorted({str(w.message) for w in caught})
+        return ScribbleOutput(result, seg.probabilities, seg.classes, seg.training_blocks, notes)
+
+    for i, name in enumerate(names[:-1] if partial else names):
+        yield run_stage(i, name)
+    if partial:
+        first = classify(False)
+        if first.problem is not None:
+            return first
+        yield Partial(first)
+        yield run_stage(total - 1, names[-1])
+    return classify(reconstruction)
 
 
 @dataclass
@@ -330,6 +397,15 @@ class WorkerSlot:
         Receives short status texts ("running: harmonics", "cancelled", errors).
     on_idle : callable(), optional
         Called when the last worker has ended and nothing waits to run.
+    on_progress : callable(index, total), optional
+        Called with the stages done so far at each report of a running job (at its start,
+        or for a live rerun :data:`REPORT_INTERVAL` later; then at most every interval)
+        and with (total, total) when it has returned.
+    activity_delay : float
+        Seconds before a still-running job is shown in napari's activity dock
+        (:data:`ACTIVITY_DELAY`); 0 shows every run there at once.
+    report_interval : float
+        Least seconds between two stage reports (:data:`REPORT_INTERVAL`).
     """
 
     def __init__(
@@ -337,10 +413,19 @@ class WorkerSlot:
         desc: str,
         on_status: Callable[[str], None] | None = None,
         on_idle: Callable[[], None] | None = None,
+        on_progress: Callable[[int, int], None] | None = None,
+        activity_delay: float = ACTIVITY_DELAY,
+        report_interval: float = REPORT_INTERVAL,
     ) -> None:
         self.desc = desc
         self.on_status = on_status or (lambda text: None)
         self.on_idle = on_idle or (lambda: None)
+        self.on_progress = on_progress or (lambda index, total: None)
+        self.activity_delay = activity_delay
+        self.report_interval = report_interval
+        #: napari progress bar of the running job, once it is shown in the activity dock
+        self.activity: Any = None
+        self._quiet = False  # the running job has delivered its Result: idle work now
         self.run_id = 0
         self.worker: GeneratorWorker | None = None
         self._pending: Callable[[], None] | None = None
@@ -357,20 +442,29 @@ class WorkerSlot:
         args: tuple[Any, ...],
         total: int,
         on_result: Callable[[int, Any], None],
+        on_partial: Callable[[int, Any], None] | None = None,
+        live: bool = False,
     ) -> None:
         """Run ``job(*args)`` now, or as soon as the running worker has stopped.
 
-        ``on_result(run_id, value)`` receives the job's return value in the GUI thread;
-        compare ``run_id`` with :attr:`run_id` to drop results of superseded runs.
+        ``on_result(run_id, value)`` receives the job's result in the GUI thread: its
+        return value, or the value of a :class:`Result` it yields (the job then goes on
+        quietly: idle-time work that reports nothing and that the next request stops at
+        its next yield). ``on_partial(run_id, value)`` receives the value of every
+        :class:`Partial` it yields. Compare ``run_id`` with :attr:`run_id` to drop
+        results of superseded runs. The run is reported at once ("running…", progress 0)
+        unless it is ``live`` (a rerun after a parameter change): that one reports only
+        when still running :data:`REPORT_INTERVAL` later.
         """
 
         def launch() -> None:
-            self._launch(job, args, total, on_result)
+            self._launch(job, args, total, on_result, on_partial, live)
 
         if self.worker is not None:
             self._pending = launch  # replaces any older queued request
             self.worker.quit()
-            self.on_status("stopping the previous run…")
+            if not self._quiet:
+                self.on_status("stopping the previous run…")
         else:
             launch()
 
@@ -379,47 +473,95 @@ class WorkerSlot:
         self._pending = None
         if self.worker is not None:
             self.worker.quit()
-            self.on_status("cancelling…")
+            if not self._quiet:
+                self.on_status("cancelling…")
 
     def _launch(
-        self, job: Job, args: tuple[Any, ...], total: int, on_result: Callable[[int, Any], None]
+        self,
+        job: Job,
+        args: tuple[Any, ...],
+        total: int,
+        on_result: Callable[[int, Any], None],
+        on_partial: Callable[[int, Any], None] | None = None,
+        live: bool = False,
     ) -> None:
         self.run_id += 1
         run_id = self.run_id
-        worker = create_worker(
-            guarded,
-            job,
-            *args,
-            _start_thread=False,
-            _ignore_errors=True,
-            _progress={"total": total, "desc": self.desc},
-        )
+        worker = create_worker(guarded, job, *args, _start_thread=False, _ignore_errors=True)
 
         # Handlers may be re-entered: updating napari's progress bar can process pending
         # events, so a later stage (or the result) can be handled before an earlier one
         # finishes. ``ended`` makes stage messages that arrive after the end harmless.
         ended = False
+        delivered = False  # the job yielded its Result: what follows is quiet
+        partial = False  # a Partial was shown: its status line stays until the result
+        done = [0, ""]  # stages finished, name of the last one
+        last = [time.monotonic(), False]  # time of the last report, a report pending
 
-        def yielded(value: Stage) -> None:
-            stage, index, n = value
-            if ended or run_id != self.run_id:
+        def report() -> None:
+            last[:] = [time.monotonic(), False]
+            if ended or delivered or run_id != self.run_id:
                 return
-            self.on_status(f"running: {stage} ({index}/{n})")
-            pbar = getattr(worker, "pbar", None)
-            if pbar is not None:
+            index, stage = done
+            if not partial:
+                self.on_status(f"running: {stage} ({index}/{total})" if stage else "running…")
+            self.on_progress(index, total)
+            pbar = self.activity
+            if pbar is not None and self.worker is worker:
                 pbar.set_description(f"{self.desc}: {stage}")
+                pbar.update(index - pbar.n)
+
+        def show_activity() -> None:
+            if ended or delivered or self.worker is not worker or self.activity is not None:
+                return
+            from napari.utils import progress
+
+            self.activity = progress(total=total, desc=f"{self.desc}: {done[1] or 'starting'}")
+            self.activity.update(done[0])
+
+        def deliver(value: Any) -> None:
+            if run_id == self.run_id and self._pending is None:
+                self.on_progress(total, total)
+                on_result(run_id, value)
+
+        def yielded(value: Any) -> None:
+            nonlocal delivered, partial
+            if ended or delivered or run_id != self.run_id:
+                return
+            if isinstance(value, Result):
+                delivered = True
+                self._quiet = True
+                if self.activity is not None:
+                    with contextlib.suppress(Exception):
+                        self.activity.close()
+                    self.activity = None
+                deliver(value.value)
+                return
+            if isinstance(value, Partial):
+                if on_partial is not None and self._pending is None:
+                    partial = True
+                    on_partial(run_id, value.value)
+                return
+            stage, index, _ = value
+            done[:] = [index, stage]
+            wait = last[0] + self.report_interval - time.monotonic()
+            if wait <= 0:
+                report()
+            elif not last[1]:
+                last[1] = True
+                QTimer.singleShot(round(wait * 1000), report)
 
         def returned(value: Any) -> None:
             nonlocal ended
             ended = True
-            if run_id == self.run_id and self._pending is None:
-                on_result(run_id, value)
+            if not delivered:
+                deliver(value)
 
         def errored(exc: BaseException) -> None:
             nonlocal ended
             ended = True
-            if run_id != self.run_id or self._pending is not None:
-                return  # a newer run is queued; it reports its own problems
+            if run_id != self.run_id or self._pending is not None or delivered:
+                return  # a newer run is queued (it reports its own problems), or idle work
             message = error_message(exc)
             self.last_error = message
             self.on_status(f"error: {message}")
@@ -428,7 +570,7 @@ class WorkerSlot:
         def aborted() -> None:
             nonlocal ended
             ended = True
-            if run_id == self.run_id and self._pending is None:
+            if run_id == self.run_id and self._pending is None and not delivered:
                 self.on_status("cancelled")
 
         def finished() -> None:
@@ -440,6 +582,10 @@ class WorkerSlot:
                     gen.close()
             if self.worker is worker:
                 self.worker = None
+                if self.activity is not None:
+                    with contextlib.suppress(Exception):
+                        self.activity.close()
+                    self.activity = None
             if self._pending is not None and self.worker is None:
                 pending, self._pending = self._pending, None
                 pending()
@@ -452,7 +598,17 @@ class WorkerSlot:
         worker.aborted.connect(aborted)
         worker.finished.connect(finished)
         self.worker = worker
+        self._quiet = False
         self.last_error = None
+        if not live or self.report_interval <= 0:
+            report()
+        else:
+            last[1] = True  # the first report: one interval after the start
+            QTimer.singleShot(round(self.report_interval * 1000), report)
+        if self.activity_delay <= 0:
+            show_activity()
+        else:
+            QTimer.singleShot(round(self.activity_delay * 1000), show_activity)
         worker.start()
 
     def wait(self, timeout: float | None = None, extra: Callable[[], bool] | None = None) -> bool:

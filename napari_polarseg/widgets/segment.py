@@ -31,7 +31,9 @@ from ._base import StackWidget
 from ._layers import find_output, remove_output, show_output, source_key
 from ._runner import (
     SCRIBBLE_STAGES,
+    Partial,
     PipelineStore,
+    Result,
     ScribbleOutput,
     WorkerSlot,
     content_digest,
@@ -107,17 +109,39 @@ def segment_job(
     params: SegmentParams,
     region: np.ndarray | None = None,
     mask_key: str | None = None,
-) -> Generator[tuple[str, int, int], None, Any]:
+    prefetch: bool = False,
+) -> Generator[Any, None, Any]:
     """Worker job: run the stale stages of the layer's cached pipeline, then assemble.
 
     ``region`` (H, W bool, True = use) restricts the segmentation; saturated and black
     samples are left out in any case (:meth:`PipelineStore.obtain`). Yields ``(stage,
     index, total)`` after every stage; stopping the worker between two yields cancels the
-    run and leaves the stages computed so far cached.
+    run and leaves the stages computed so far cached. When the reconstruction (error map)
+    has to be recomputed, the result without it is yielded first as a
+    :class:`~napari_polarseg.widgets._runner.Partial`: the segments are shown while the
+    last stage runs (after a change of n or w it is a third of the run).
+
+    With ``prefetch``, the result is yielded as a
+    :class:`~napari_polarseg.widgets._runner.Result` and the job goes on in idle time
+    with :meth:`Pipeline.prefetch <napari_polarseg.engine.Pipeline.prefetch>` (the
+    eigensolves one more segment needs), stopping at the next request.
     """
     pipe = store.obtain(key, data, angles_rad, params, region=region, mask_key=mask_key)
-    yield from pipe.run_iter(reconstruction=True)
-    return pipe.result(reconstruction=True, params=params)
+    total = len(STAGES)
+    if pipe.is_fresh("reconstruction"):
+        yield from pipe.run_iter(reconstruction=True)
+    else:
+        for stage, index, _ in pipe.run_iter(reconstruction=False):
+            yield stage, index, total
+        yield Partial(pipe.result(reconstruction=False, params=params))
+        pipe.get("reconstruction")
+        yield STAGES[-1], total, total
+    result = pipe.result(reconstruction=True, params=params)
+    if prefetch:
+        yield Result(result)
+        for _ in pipe.prefetch():
+            yield "prefetch", total, total
+    return result
 
 
 def float_box(decimals: int, **kwargs: Any) -> FloatSpinBox:
@@ -297,6 +321,9 @@ class SegmentWidget(StackWidget):
         self._force = False  # a control changed: the next live run is not skipped
         self._watched: dict[str, Any] = {"mask": None, "scribbles": None}
         self._params_dir = Path.home()
+        #: the segments layer a partial result (no error map yet) was last shown in
+        self._partial_shown: Layer | None = None
+        self._live_run = False  # run() was called by the live update
         #: Per stack key: what *Export results…* writes (the last result shown).
         self._exports: dict[str, ExportRecord] = {}
         self._export_dir = Path.home()
@@ -483,7 +510,7 @@ class SegmentWidget(StackWidget):
                 self.live,
             ]
         )
-        self.insert(self.index(self.status), self.export_button)  # after Run and Cancel
+        self.insert(self.index(self.progress), self.export_button)  # after Run and Cancel
         self._timer = QTimer(self.native)  # deleted with the widget: never fires after it
         self._timer.setSingleShot(True)
         self._timer.setInterval(LIVE_DELAY_MS)
@@ -886,7 +913,11 @@ class SegmentWidget(StackWidget):
         force, self._force = self._force, False
         if not force and self.snapshot() == self._requested:
             return  # a layer event that changed nothing (e.g. a redraw)
-        self.run()
+        self._live_run = True
+        try:
+            self.run()
+        finally:
+            self._live_run = False
 
     def _waiting(self) -> bool:
         return self._timer.isActive() or self._export_slot.busy
@@ -933,12 +964,18 @@ class SegmentWidget(StackWidget):
                 return
             self._show(layer, angles_deg, result, time.perf_counter() - t0, inputs)
 
+        def on_partial(run_id: int, result: Any) -> None:
+            # the segments (or classes) before the error map; dropped like a result
+            if snap == self.snapshot() and layer in self._viewer.layers:
+                self._show(layer, angles_deg, result, time.perf_counter() - t0, inputs)
+
         if scribbles is None:
-            args = (self.store, key, layer.data, angles_rad, params, region, mask_key)
-            self._submit(segment_job, args, len(STAGES), on_result)
+            args = (self.store, key, layer.data, angles_rad, params, region, mask_key, True)
+            job, total = segment_job, len(STAGES)
         else:
             args = (self.store, key, layer.data, angles_rad, params, scribbles, region, mask_key)
-            self._submit(scribble_job, args, len(SCRIBBLE_STAGES), on_result)
+            job, total = scribble_job, len(SCRIBBLE_STAGES)
+        self._submit(job, args, total, on_result, on_partial, live=self._live_run)
 
     def _show(
         self,
@@ -948,6 +985,13 @@ class SegmentWidget(StackWidget):
         seconds: float,
         inputs: dict[str, Any] | None = None,
     ) -> None:
+        """Show a run's layers and summary.
+
+        A partial result (no reconstruction yet: the worker yielded it before its last
+        stage) updates the segments (and class probability) layers and the status line
+        only; the complete result that follows updates the rest and, when its labels are
+        those already shown, only the segments' metadata.
+        """
         inputs = inputs or {"mask": None, "scribbles": None}
         out = result if isinstance(result, ScribbleOutput) else None
         if out is not None:
@@ -955,6 +999,7 @@ class SegmentWidget(StackWidget):
             assert out.classes is not None
             result = out.result
         assert isinstance(result, SegmentationResult)
+        partial = result.reconstruction_error is None
         summary = result.summary()
         confidence = None
         if out is not None:
@@ -973,22 +1018,43 @@ class SegmentWidget(StackWidget):
             labels = np.asarray(out.classes, dtype=np.int32)[result.labels]
         else:
             labels = np.asarray(result.labels, dtype=np.int32) + 1  # a copy: painting is safe
-        # the error map (added hidden) goes below the segments, which overlay the stack
-        show_output(self._viewer, "error", np.array(result.reconstruction_error), layer, meta)
-        masked = np.zeros(labels.shape, dtype=np.uint8)
-        if result.valid is not None:
-            masked = (~np.asarray(result.valid, dtype=bool)).astype(np.uint8)
-        if self._shows_diagnostics(layer, result, masked):
-            show_output(self._viewer, "residual", np.array(result.residual), layer, meta)
-            show_output(self._viewer, "masked", masked, layer, meta)
+        if not partial:
+            # the error map (added hidden) goes below the segments, which overlay the stack
+            error = np.array(result.reconstruction_error)
+            self._show_below_segments("error", error, layer, meta)
+            masked = np.zeros(labels.shape, dtype=np.uint8)
+            if result.valid is not None:
+                masked = (~np.asarray(result.valid, dtype=bool)).astype(np.uint8)
+            if self._shows_diagnostics(layer, result, masked):
+                residual = np.array(result.residual)
+                self._show_below_segments("residual", residual, layer, meta)
+                self._show_below_segments("masked", masked, layer, meta)
         if out is not None:
             assert confidence is not None
-            self._show_probability(layer, confidence, meta)
+            self._show_below_segments("probability", confidence, layer, meta)
             self.probabilities, self.classes = out.probabilities, out.classes
         else:
             remove_output(self._viewer, "probability", layer)  # it would be stale
             self.probabilities, self.classes = None, None
-        show_output(self._viewer, "segments", labels, layer, meta)
+        segments = find_output(self._viewer, "segments", layer)
+        if (
+            not partial
+            and segments is not None
+            and self._partial_shown is segments
+            and np.array_equal(segments.data, labels)
+        ):
+            # the partial result already shows these labels: keep the data (no redraw)
+            segments.metadata = {**segments.metadata, **meta}
+        else:
+            segments = show_output(self._viewer, "segments", labels, layer, meta)
+        self._partial_shown = segments if partial else None
+        if partial:
+            parts = [f"{summary['n_segments']} segments"]
+            if out is not None:
+                parts = [f"{out.classes.size} materials from scribbles"]
+            parts += [f"{seconds:.2f} s", "computing the error map…"]
+            self._set_status(" · ".join(parts))
+            return
         self._shown[source_key(layer)] = (result, inputs)
         self._record_export(layer, angles_deg, result, out, inputs)
         if out is not None:
@@ -1014,14 +1080,17 @@ class SegmentWidget(StackWidget):
         parts.append(f"{seconds:.2f} s")
         self._done(" · ".join(parts))
 
-    def _show_probability(self, layer: Layer, confidence: np.ndarray, meta: dict) -> None:
-        """Add/update ``class probability``; a new one goes just below the segments."""
-        new = find_output(self._viewer, "probability", layer) is None
-        prob = show_output(self._viewer, "probability", confidence, layer, meta)
+    def _show_below_segments(self, role: str, data: np.ndarray, layer: Layer, meta: dict) -> None:
+        """Add/update the ``role`` layer; a new one goes just below the segments (which a
+        partial result may have shown first), an existing one keeps its place."""
+        new = find_output(self._viewer, role, layer) is None
+        shown = show_output(self._viewer, role, data, layer, meta)
         segments = find_output(self._viewer, "segments", layer)
         if new and segments is not None:
             layers = self._viewer.layers
-            layers.move(layers.index(prob), layers.index(segments))
+            below = layers.index(segments)
+            if layers.index(shown) > below:
+                layers.move(layers.index(shown), below)
 
     def _shows_diagnostics(self, layer: Layer, result: Any, masked: np.ndarray) -> bool:
         """Whether to add/update ``masked pixels`` and ``fit residual`` for this result.

@@ -47,3 +47,36 @@ def engine_result(layer: Any, params: SegmentParams) -> Any:
 def error_messages() -> list[str]:
     """Messages of the error notifications dispatched so far in this test."""
     return [str(n.message) for n in notification_manager.records if n.severity == "error"]
+
+
+class Gate:
+    """Makes ``module.name`` wait for ``release`` (deterministic mid-run actions).
+
+    ``entered`` is set when a call starts waiting; ``state`` counts the calls running at
+    once (``max_active`` shows whether two ever overlapped).
+    """
+
+    def __init__(self, monkeypatch: Any, module: Any, name: str) -> None:
+        import threading
+
+        self.entered, self.release = threading.Event(), threading.Event()
+        self.state = {"active": 0, "max_active": 0}
+        original = getattr(module, name)
+        entered, release, state = self.entered, self.release, self.state
+
+        def blocking(*args: Any, **kwargs: Any) -> Any:
+            state["active"] += 1
+            state["max_active"] = max(state["max_active"], state["active"])
+            entered.set()
+            try:
+                assert release.wait(30), f"test never released {name}"
+                return original(*args, **kwargs)
+            finally:
+                state["active"] -= 1
+
+        monkeypatch.setattr(module, name, blocking)
+
+    def arm(self) -> None:
+        """Block the next call (again)."""
+        self.entered.clear()
+        self.release.clear()

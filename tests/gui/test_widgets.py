@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from _gui_helpers import (
     SAMPLES,
+    Gate,
     click,
     engine_result,
     error_messages,
@@ -259,36 +260,9 @@ def test_changing_only_segments_reuses_cached_harmonics(
 @pytest.fixture
 def blocked_harmonics(monkeypatch):
     """Make the harmonics stage wait for ``release`` (deterministic mid-run actions)."""
-    import threading
-
     import napari_polarseg.engine.pipeline as pipeline_module
 
-    entered = threading.Event()
-    release = threading.Event()
-    state = {"active": 0, "max_active": 0}
-    original = pipeline_module.harmonics.block_coefficients
-
-    def blocking(*args, **kwargs):
-        state["active"] += 1
-        state["max_active"] = max(state["max_active"], state["active"])
-        entered.set()
-        try:
-            assert release.wait(30), "test never released the harmonics stage"
-            return original(*args, **kwargs)
-        finally:
-            state["active"] -= 1
-
-    monkeypatch.setattr(pipeline_module.harmonics, "block_coefficients", blocking)
-
-    class Gate:
-        def __init__(self):
-            self.entered, self.release, self.state = entered, release, state
-
-        def arm(self):
-            entered.clear()
-            release.clear()
-
-    return Gate()
+    return Gate(monkeypatch, pipeline_module.harmonics, "block_coefficients")
 
 
 def test_cancel_leaves_no_half_written_layer(

@@ -1,0 +1,158 @@
+"""How runs show up while they compute: segments before the error map, quiet live reruns,
+napari's activity dock only for long runs, and the idle-time prefetch of the next cut."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+from _gui_helpers import Gate, click, engine_result, error_messages, run_and_wait, wait_idle
+
+from napari_polarseg.widgets import _runner
+from napari_polarseg.widgets._runner import REPORT_INTERVAL, Result, WorkerSlot
+
+pytestmark = pytest.mark.gui
+
+FAST = {"window": 10, "degree": 5, "n_segments": 3}
+
+
+@pytest.fixture
+def blocked_reconstruction(monkeypatch):
+    import napari_polarseg.engine.pipeline as pipeline_module
+
+    return Gate(monkeypatch, pipeline_module.harmonics, "reconstruct_intensity")
+
+
+def test_segments_are_shown_before_the_error_map(
+    viewer, open_sample, add_widget, qtbot, blocked_reconstruction
+):
+    gate = blocked_reconstruction
+    stack = open_sample("leaves")
+    widget = add_widget("Segment by material")
+    widget.set_params(**FAST)
+    gate.arm()
+    click(qtbot, widget.run_button)
+    qtbot.waitUntil(gate.entered.is_set, timeout=60_000)
+    # the reconstruction has not run yet, but the segments are on screen
+    qtbot.waitUntil(lambda: widget.output("segments") is not None, timeout=10_000)
+    assert widget.output("error") is None
+    assert widget.busy and widget.status.value.endswith("computing the error map…")
+    shown = widget.output("segments")
+    early = shown.data.copy()
+    gate.release.set()
+    wait_idle(qtbot, widget)
+    assert error_messages() == []
+    want = engine_result(stack, widget.params())
+    np.testing.assert_array_equal(early, want.labels + 1)
+    error = widget.output("error")
+    np.testing.assert_allclose(error.data, want.reconstruction_error)
+    assert widget.output("segments") is shown and viewer.layers[-1] is shown  # on top
+    layers = list(viewer.layers)
+    assert layers.index(error) < layers.index(shown)
+    assert "mean reconstruction error" in widget.status.value
+    summary = shown.metadata["polarseg_summary"]
+    assert summary["mean_reconstruction_error"] == pytest.approx(want.mean_reconstruction_error)
+
+
+def test_live_rerun_reports_only_when_it_lasts(viewer, open_sample, add_widget, qtbot, monkeypatch):
+    import napari_polarseg.engine.pipeline as pipeline_module
+
+    open_sample("leaves")
+    widget = add_widget("Segment by material")
+    widget.set_params(**FAST)
+    run_and_wait(qtbot, widget)
+    done = widget.status.value
+    assert not widget.cancel_button.enabled and widget.progress.value == widget.progress.max
+    gate = Gate(monkeypatch, pipeline_module.harmonics, "block_coefficients")
+    gate.arm()
+    widget.live.value = True
+    widget.set_params(window=8)
+    qtbot.waitUntil(gate.entered.is_set, timeout=10_000)
+    started = time.monotonic()
+    # a live rerun changes nothing in the dock at first (every repaint costs CPU) ...
+    assert not widget.cancel_button.enabled and widget.status.value == done
+    # ... and reports, with Cancel, once it has lasted REPORT_INTERVAL
+    qtbot.waitUntil(lambda: widget.cancel_button.enabled, timeout=10_000)
+    assert time.monotonic() - started >= REPORT_INTERVAL * 0.5
+    assert widget.status.value.startswith("running")
+    assert 0 < widget.progress.value < widget.progress.max
+    gate.release.set()
+    wait_idle(qtbot, widget)
+    assert widget.params().window == 8 and "segments" in widget.status.value
+    assert not widget.cancel_button.enabled
+
+
+def test_activity_dock_only_for_runs_longer_than_the_delay(qtbot, monkeypatch):
+    import napari.utils
+
+    created = []
+
+    class Counting(napari.utils.progress):
+        def __init__(self, *args, **kwargs):
+            created.append(self)
+            super().__init__(*args, **kwargs)
+
+    monkeypatch.setattr(napari.utils, "progress", Counting)
+    results = []
+    slot = WorkerSlot("test", activity_delay=0.3, report_interval=0.05)
+
+    def quick():
+        yield "one", 1, 1
+        return "quick"
+
+    slot.submit(quick, (), 1, lambda run_id, value: results.append(value))
+    slot.wait(30)
+    qtbot.wait(400)  # past the delay: nothing may appear for a run that has ended
+    assert results == ["quick"] and created == []
+
+    def slow():
+        yield "one", 1, 2
+        time.sleep(1.0)
+        yield "two", 2, 2
+        return "slow"
+
+    slot.submit(slow, (), 2, lambda run_id, value: results.append(value))
+    qtbot.waitUntil(lambda: slot.activity is not None, timeout=5_000)
+    assert len(created) == 1 and slot.activity is created[0]
+    slot.wait(30)
+    assert results == ["quick", "slow"] and slot.activity is None
+
+
+def test_result_then_idle_work_that_the_next_request_stops(qtbot):
+    seen, idle_steps = [], []
+
+    def with_idle_work(steps):
+        yield "compute", 1, 1
+        yield Result("value")
+        for i in range(steps):
+            time.sleep(0.05)
+            idle_steps.append(i)
+            yield "idle", 1, 1
+        return "ignored"
+
+    statuses = []
+    slot = WorkerSlot("test", on_status=statuses.append, report_interval=0)
+    slot.submit(with_idle_work, (100,), 1, lambda run_id, value: seen.append(value))
+    qtbot.waitUntil(lambda: seen == ["value"], timeout=10_000)
+    assert slot.busy  # still doing its idle work, without reports
+    qtbot.waitUntil(lambda: len(idle_steps) >= 2, timeout=10_000)
+    slot.submit(with_idle_work, (0,), 1, lambda run_id, value: seen.append(value))
+    slot.wait(30)
+    assert seen == ["value", "value"] and len(idle_steps) < 100  # stopped at a yield
+    assert not any("idle" in s for s in statuses)
+    assert _runner.ACTIVITY_DELAY > REPORT_INTERVAL
+
+
+def test_next_cut_is_prefetched_after_a_result(viewer, open_sample, add_widget, qtbot):
+    stack = open_sample("camouflage")
+    widget = add_widget("Segment by material")
+    widget.set_params(**FAST)
+    run_and_wait(qtbot, widget)  # waits for the prefetch too: it runs in the same worker
+    tree = widget.pipeline.get("cut")
+    assert set(tree._candidates) == set(tree._ids)  # every segment's next cut is solved
+    widget.set_params(n_segments=4)
+    run_and_wait(qtbot, widget)
+    want = engine_result(stack, widget.params())
+    np.testing.assert_array_equal(widget.output("segments").data, want.labels + 1)
+    assert widget.pipeline.calls["cut"] == 1  # the same tree, one split further
