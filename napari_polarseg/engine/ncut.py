@@ -30,14 +30,15 @@ Eigensolvers
   takes the smallest of its Ritz values, and a segment that lost a few blocks to a
   cut has nearly its parent's next eigenvectors as its own: each child starts from its
   parent's vectors restricted to it (the Ritz vectors of those candidates).
-- Dense products: one float32 copy of the whole matrix (from :data:`FLOAT32_MIN_NODES`
-  nodes) serves the whole tree, multiplied with BLAS ``symv`` (it reads one triangle:
+- Dense products: one float32 matrix (from :data:`FLOAT32_MIN_NODES` nodes: W itself
+  when it is float32, as the pipeline stores its affinity there, else one float32 copy)
+  serves the whole tree, multiplied with BLAS ``symv`` (it reads one triangle:
   half the memory traffic of ``gemv``; 1.4 ms against 2.8 ms at 4,752 nodes). A segment
   with more than :data:`COPY_MAX_FRACTION` of the nodes is multiplied through the whole
   matrix (scatter into zeros, product, gather: W[s][:, s] x = (W x̃)[s]); a smaller one
   gets its own float32 copy. Float32 round-off (~1e-7 relative per product) is ten
-  times below :data:`EIG_TOL`; degrees, the split search and the Ncut values stay
-  float64.
+  times below :data:`EIG_TOL`; degrees, the split search and the Ncut values are
+  summed in float64.
 - Sparse W (k nearest neighbours, spatial neighbourhoods): Lanczos (``eigsh``, two
   eigenpairs of D^−½ W D^−½, tolerance EIG_TOL / 10). Products are cheap there and
   LOBPCG's per-iteration overhead dominates (4 s against 0.5 s on a 19,584-block
@@ -56,7 +57,8 @@ thresholds between distinct values of y, found in one pass with cumulative sums.
 Segments are split greedily: at each step the segment whose best bipartition has the
 lowest Ncut is split, until the requested number of segments, an Ncut threshold, or the
 minimum segment size stops it. The sequence of splits is cached, so asking for fewer or
-more segments later costs nothing or only the extra splits.
+more segments later costs nothing or only the extra splits; :meth:`CutTree.prefetch`
+solves the next split's candidates ahead (the plugin does it in idle time).
 """
 
 from __future__ import annotations

@@ -54,11 +54,12 @@ Job = Callable[..., Generator[Any, None, Any]]
 #: half of a 2-core machine and made the engine's stages up to twice as slow (issue 5).
 ACTIVITY_DELAY = 1.0
 
-#: Seconds between two reports (status line, progress bars) of a running job, and from
-#: its start to the first: a run that ends sooner changes nothing in the window until its
-#: result is shown. Every report repaints the window, which on a software-rendered canvas
-#: composes all of it again: 10–100 ms of CPU taken from the worker on the reference
-#: 2-core machine (eight reports per run made a 0.85 s rerun take 1.6 s).
+#: Least seconds between two reports (status line, progress bars) of a running job; a
+#: live rerun's first report comes one interval after its start, so a rerun that ends
+#: sooner changes nothing in the window until its result is shown. Every report repaints
+#: the window, which on a software-rendered canvas composes all of it again: 10–100 ms of
+#: CPU taken from the worker on the reference 2-core machine (eight reports per run made
+#: a 0.85 s rerun take 1.6 s).
 REPORT_INTERVAL = 0.25
 
 
