@@ -387,6 +387,18 @@ class PipelineStore:
             return len(self._entries)
 
 
+@dataclass(frozen=True)
+class _Request:
+    """What :meth:`WorkerSlot.submit` was asked to run (see there)."""
+
+    job: Job
+    args: tuple[Any, ...]
+    total: int
+    on_result: Callable[[int, Any], None]
+    on_partial: Callable[[int, Any], None] | None
+    live: bool
+
+
 class WorkerSlot:
     """Runs one job at a time in a napari worker; the newest request wins.
 
@@ -458,8 +470,10 @@ class WorkerSlot:
         when still running :data:`REPORT_INTERVAL` later.
         """
 
+        request = _Request(job, args, total, on_result, on_partial, live)
+
         def launch() -> None:
-            self._launch(job, args, total, on_result, on_partial, live)
+            self._launch(request)
 
         if self.worker is not None:
             self._pending = launch  # replaces any older queued request
@@ -477,15 +491,9 @@ class WorkerSlot:
             if not self._quiet:
                 self.on_status("cancelling…")
 
-    def _launch(
-        self,
-        job: Job,
-        args: tuple[Any, ...],
-        total: int,
-        on_result: Callable[[int, Any], None],
-        on_partial: Callable[[int, Any], None] | None = None,
-        live: bool = False,
-    ) -> None:
+    def _launch(self, request: _Request) -> None:
+        job, args, total = request.job, request.args, request.total
+        on_result, on_partial, live = request.on_result, request.on_partial, request.live
         self.run_id += 1
         run_id = self.run_id
         worker = create_worker(guarded, job, *args, _start_thread=False, _ignore_errors=True)

@@ -75,3 +75,14 @@ def add_widget(viewer: Any) -> Callable[[str], Any]:
         return widget
 
     return _add
+
+
+@pytest.fixture
+def gate(monkeypatch: Any) -> Callable[[str], Any]:
+    """``gate("block_coefficients")`` makes that function of the pipeline's harmonics
+    module wait for ``release`` (deterministic mid-run actions; see ``_gui_helpers.Gate``)."""
+    from _gui_helpers import Gate
+
+    import napari_polarseg.engine.pipeline as pipeline_module
+
+    return lambda name: Gate(monkeypatch, pipeline_module.harmonics, name)

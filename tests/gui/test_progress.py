@@ -7,7 +7,7 @@ import time
 
 import numpy as np
 import pytest
-from _gui_helpers import Gate, click, engine_result, error_messages, run_and_wait, wait_idle
+from _gui_helpers import click, engine_result, error_messages, run_and_wait, wait_idle
 
 from napari_polarseg.widgets import _runner
 from napari_polarseg.widgets._runner import REPORT_INTERVAL, Result, WorkerSlot
@@ -17,17 +17,8 @@ pytestmark = pytest.mark.gui
 FAST = {"window": 10, "degree": 5, "n_segments": 3}
 
 
-@pytest.fixture
-def blocked_reconstruction(monkeypatch):
-    import napari_polarseg.engine.pipeline as pipeline_module
-
-    return Gate(monkeypatch, pipeline_module.harmonics, "reconstruct_intensity")
-
-
-def test_segments_are_shown_before_the_error_map(
-    viewer, open_sample, add_widget, qtbot, blocked_reconstruction
-):
-    gate = blocked_reconstruction
+def test_segments_are_shown_before_the_error_map(viewer, open_sample, add_widget, qtbot, gate):
+    gate = gate("reconstruct_intensity")
     stack = open_sample("leaves")
     widget = add_widget("Segment by material")
     widget.set_params(**FAST)
@@ -55,16 +46,14 @@ def test_segments_are_shown_before_the_error_map(
     assert summary["mean_reconstruction_error"] == pytest.approx(want.mean_reconstruction_error)
 
 
-def test_live_rerun_reports_only_when_it_lasts(viewer, open_sample, add_widget, qtbot, monkeypatch):
-    import napari_polarseg.engine.pipeline as pipeline_module
-
+def test_live_rerun_reports_only_when_it_lasts(viewer, open_sample, add_widget, qtbot, gate):
     open_sample("leaves")
     widget = add_widget("Segment by material")
     widget.set_params(**FAST)
     run_and_wait(qtbot, widget)
     done = widget.status.value
     assert not widget.cancel_button.enabled and widget.progress.value == widget.progress.max
-    gate = Gate(monkeypatch, pipeline_module.harmonics, "block_coefficients")
+    gate = gate("block_coefficients")
     gate.arm()
     widget.live.value = True
     widget.set_params(window=8)

@@ -9,7 +9,6 @@ import numpy as np
 import pytest
 from _gui_helpers import (
     SAMPLES,
-    Gate,
     click,
     engine_result,
     error_messages,
@@ -258,11 +257,9 @@ def test_changing_only_segments_reuses_cached_harmonics(
 
 
 @pytest.fixture
-def blocked_harmonics(monkeypatch):
+def blocked_harmonics(gate):
     """Make the harmonics stage wait for ``release`` (deterministic mid-run actions)."""
-    import napari_polarseg.engine.pipeline as pipeline_module
-
-    return Gate(monkeypatch, pipeline_module.harmonics, "block_coefficients")
+    return gate("block_coefficients")
 
 
 def test_cancel_leaves_no_half_written_layer(
