@@ -282,3 +282,38 @@ def test_prefetch_makes_one_more_segment_free():
     pipe.run()
     assert not isinstance(pipe.get("cut"), ncut.CutTree)
     assert list(pipe.prefetch()) == []
+
+
+def test_matrix_pool_reuses_memory_but_never_an_array_still_held():
+    from napari_polarseg.engine.pipeline import MatrixPool
+
+    pool = MatrixPool(keep=3)
+    a = pool.take((6, 6), np.float32)
+    b = pool.take((6, 6), np.float32)
+    assert not np.shares_memory(a, b)
+    a_buffer = id(a.base)
+    del a
+    c = pool.take((6, 6), np.float32)
+    assert id(c.base) == a_buffer  # a's memory again: nothing of it was alive
+    view = c.T
+    del c
+    assert not np.shares_memory(pool.take((6, 6), np.float32), view)  # a view keeps it
+
+    # in the pipeline: reruns write new affinities into freed memory, never into an
+    # affinity the caller still holds
+    stack, _ = two_material_stack(shape=(96, 100))
+    pipe = Pipeline(stack, ANGLES, SegmentParams(window=4, degree=4, n_segments=2))
+    pipe.run(reconstruction=False)
+    held = pipe.get("affinity")
+    kept = held.copy()
+    buffers = set()
+    for s in (2.0, 3.0, 4.0, 5.0):
+        pipe.update(scale=s)
+        pipe.run(reconstruction=False)
+        buffers.add(id(pipe.get("affinity").base))
+    np.testing.assert_array_equal(held, kept)
+    assert len(buffers) <= 2 and id(held.base) not in buffers
+    fresh = Pipeline(stack, ANGLES, pipe.params)
+    fresh.run(reconstruction=False)
+    np.testing.assert_array_equal(pipe.get("affinity"), fresh.get("affinity"))
+    np.testing.assert_array_equal(pipe.get("labels")[0], fresh.get("labels")[0])

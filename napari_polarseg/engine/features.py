@@ -143,19 +143,25 @@ def whiten(features: np.ndarray) -> np.ndarray:
 
 
 def _sq_distances(
-    z: np.ndarray, scale: float | None = None, dtype: np.dtype | type = np.float64
+    z: np.ndarray,
+    scale: float | None = None,
+    dtype: np.dtype | type = np.float64,
+    out: np.ndarray | None = None,
 ) -> np.ndarray:
     """‖z_i − z_j‖² for all pairs (n × n), optionally turned into exp(−D / s).
 
     One fused pass per chunk of rows (matrix product, then in-place additions, clipping
     and exponential while the chunk is in cache), chunks spread over the cores. Each
-    chunk is computed in float64 and stored as ``dtype``.
+    chunk is computed in float64 and stored as ``dtype`` (into ``out`` when given).
     """
     from .harmonics import run_chunks
 
     n = z.shape[0]
     sq = np.einsum("ij,ij->i", z, z)
-    out = np.empty((n, n), dtype=dtype)
+    if out is None:
+        out = np.empty((n, n), dtype=dtype)
+    elif out.shape != (n, n) or out.dtype != np.dtype(dtype):
+        raise ValueError(f"out must be a ({n}, {n}) {np.dtype(dtype)} array")
     direct = out.dtype == np.float64
 
     def work(a: int, b: int) -> None:
@@ -177,14 +183,17 @@ def _sq_distances(
     return out
 
 
-def mahalanobis_sq(features: np.ndarray, dtype: np.dtype | type = np.float64) -> np.ndarray:
+def mahalanobis_sq(
+    features: np.ndarray, dtype: np.dtype | type = np.float64, out: np.ndarray | None = None
+) -> np.ndarray:
     """Dense matrix of squared Mahalanobis distances D_k1k2 between blocks (eq. 4.27, Σ⁻¹).
 
     D = (A_k1 − A_k2)ᵀ Σ⁻¹ (A_k1 − A_k2), computed as ‖z_i‖² + ‖z_j‖² − 2 z_i·z_j on the
     whitened features z (a matrix product instead of a pairwise loop), in float64 and
-    stored as ``dtype`` (float32 halves the memory of a large graph). Dimensionless.
+    stored as ``dtype`` (float32 halves the memory of a large graph), into ``out`` when
+    given. Dimensionless.
     """
-    return _sq_distances(whiten(features), dtype=dtype)
+    return _sq_distances(whiten(features), dtype=dtype, out=out)
 
 
 def median_offdiagonal(d: np.ndarray) -> float:

@@ -148,18 +148,22 @@ def test_thesis_defaults_run_off_the_gui_thread(
     assert returned_after < 0.25, f"Run blocked the GUI thread for {returned_after:.3f} s"
     wait_idle(qtbot, widget)
     timer.stop()
+    # until the segments are shown (the error map follows; drawing the new layer then
+    # is GUI-thread work)
     computing = delivered[0] - t0
     gaps = np.diff(np.concatenate([[t0], [t for t in ticks if t < delivered[0]]]))
     # ...while the GUI thread keeps processing events: the 10 ms timer keeps ticking.
     # (Computing in the GUI thread would show as one gap as long as the computation.
     # Short gaps remain: the worker's Python code and some C code hold the GIL, and
     # this machine may be busy; hence the generous bounds.)
-    assert computing > 0.3, "the run was too short to show anything"
+    # (0.35-0.45 s to the segments here; computing in the GUI thread would be one gap)
+    assert computing > 0.15, "the run was too short to show anything"
     stalled = gaps[gaps > 0.1].sum()
     assert stalled < 0.5 * computing, f"event loop stalled {stalled:.2f} of {computing:.2f} s"
     assert gaps.max() < max(1.0, 0.5 * computing), f"event loop stalled {gaps.max():.2f} s"
-    # showing the result (napari creating two layers) is the only GUI-thread work
-    assert delivered[1] - delivered[0] < 1.5
+    # showing the results (napari creating the layers) is the only GUI-thread work
+    assert len(delivered) == 4  # the segments, then everything
+    assert max(np.diff(delivered)[::2]) < 1.5
     ref = engine_result(stack, SegmentParams())
     np.testing.assert_array_equal(viewer.layers["segments"].data, ref.labels + 1)
     np.testing.assert_allclose(
