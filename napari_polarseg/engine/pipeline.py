@@ -256,6 +256,18 @@ class MatrixPool:
     def _free(self, buffer: np.ndarray) -> bool:
         return self._references(buffer) <= self._unused + 1  # + _free's own argument
 
+    def reserve(self, shape: tuple[int, ...], dtype: np.dtype | type) -> None:
+        """Make sure a free buffer of ``shape`` and ``dtype`` is kept, its pages touched
+        (idle-time preparation: the next :meth:`take` of that size then writes into
+        memory the process already has)."""
+        dtype = np.dtype(dtype)
+        size = int(np.prod(shape))
+        if any(b.dtype == dtype and b.size == size and self._free(b) for b in self._buffers):
+            return
+        spare = self.take(shape, dtype)
+        if any(spare.base is b for b in self._buffers):
+            spare.fill(0)  # touch every page now
+
     def take(self, shape: tuple[int, ...], dtype: np.dtype | type) -> np.ndarray:
         """An uninitialised array of ``shape`` and ``dtype``."""
         dtype = np.dtype(dtype)
@@ -611,8 +623,9 @@ class Pipeline:
         tree stops at the current number of segments, solves the candidate split of every
         segment (:meth:`ncut.CutTree.prefetch`), yielding after each; a later change of
         ``n_segments`` to k + 1 then costs only the split (milliseconds instead of one
-        or two eigensolves). Does nothing otherwise. Stopping the iteration between
-        yields is safe.
+        or two eigensolves). Then keeps a touched buffer for the next dense affinity
+        (:meth:`MatrixPool.reserve`; yields −1). Does nothing otherwise. Stopping the
+        iteration between yields is safe.
         """
         p = self.params
         if p.clustering != "recursive" or not self.is_fresh("labels"):
@@ -620,6 +633,12 @@ class Pipeline:
         tree = self._cache["cut"][1]
         if isinstance(tree, ncut.CutTree) and len(tree.ncut_values) + 1 <= p.n_segments:
             yield from tree.prefetch()
+        W = self._cache["affinity"][1]
+        if isinstance(W, np.ndarray) and any(W.base is b for b in self._matrices._buffers):
+            # memory for the next affinity (a change of the scale, n or w): touched now
+            # rather than while the user waits
+            self._matrices.reserve(W.shape, W.dtype)
+            yield -1
 
     def result(
         self, reconstruction: bool = True, params: SegmentParams | None = None
