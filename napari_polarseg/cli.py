@@ -84,7 +84,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import json
 import sys
 import time
 import warnings
@@ -570,22 +569,6 @@ def build_parser() -> argparse.ArgumentParser:
 # -- parameters -----------------------------------------------------------------------------
 
 
-def _load_params_file(path: str) -> dict[str, Any]:
-    try:
-        text = Path(path).read_text(encoding="utf-8")
-    except OSError as exc:
-        raise PolarsegError(f"{path}: cannot read the parameters file ({exc.strerror})") from None
-    try:
-        data = json.loads(text)
-    except ValueError as exc:
-        raise PolarsegError(f"{path}: parameters file is not valid JSON ({exc})") from None
-    if isinstance(data, dict) and isinstance(data.get("params"), dict):
-        data = data["params"]  # a params.json written by polarseg
-    if not isinstance(data, dict):
-        raise PolarsegError(f"{path}: parameters file must hold a JSON object")
-    return data
-
-
 def _params_from_args(
     args: argparse.Namespace, base: dict[str, Any] | None = None
 ) -> SegmentParams:
@@ -595,7 +578,7 @@ def _params_from_args(
     source = "parameters"
     if args.params:
         source = args.params
-        values.update(_load_params_file(args.params))
+        values.update(pio.read_params_dict(args.params))
     try:
         params = SegmentParams.from_dict(values)
     except PolarsegError as exc:

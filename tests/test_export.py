@@ -18,6 +18,7 @@ from napari_polarseg.engine import Pipeline, PolarsegError, SegmentParams
 from napari_polarseg.engine.evaluation import evaluate
 from napari_polarseg.engine.synthetic import make_scene
 from napari_polarseg.export import OutputError, write_result_folder
+from napari_polarseg.io import read_params_dict
 
 SHAPE = (64, 72)
 PARAMS = SegmentParams(window=8, degree=4, n_segments=3)
@@ -75,7 +76,7 @@ def test_writes_the_segment_folder_from_a_pipeline_result(tmp_path, scene, run):
     assert info["saturation_level"] == pipe.mask.saturation_level
     assert info["registration"] == {"ran": False, "reference_frame": None, "shifts_px": None}
     # the CLI reads it back with --params
-    assert SegmentParams.from_dict(cli._load_params_file(str(out / "params.json"))) == PARAMS
+    assert SegmentParams.from_dict(read_params_dict(str(out / "params.json"))) == PARAMS
 
     summary = json.loads((out / "summary.json").read_text(encoding="utf-8"))
     assert summary["n_segments"] == result.n_segments

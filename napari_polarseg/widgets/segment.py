@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import contextlib
-import json
 import time
 from collections.abc import Generator
 from dataclasses import dataclass, field
@@ -27,6 +26,7 @@ from ..engine.params import (
     SCALE_MODES,
     SPECULAR_BRANCHES,
 )
+from ..io import read_params_file
 from ._base import StackWidget
 from ._layers import find_output, remove_output, show_output, source_key
 from ._runner import (
@@ -215,35 +215,6 @@ def export_job(
         return write_result_folder(folder, **kwargs)
     except OutputError as exc:
         raise PolarsegError(str(exc)) from None
-
-
-def read_params_file(path: str | Path) -> SegmentParams:
-    """SegmentParams from a JSON file, as ``polarseg segment --params`` reads it.
-
-    Either a SegmentParams object (``SegmentParams.to_json``, what *Save parameters…*
-    writes) or a ``params.json`` written by ``polarseg`` (its ``"params"`` entry).
-    Missing fields take the thesis defaults; an unknown field, a value out of range,
-    invalid JSON or an unreadable file raise :class:`PolarsegError` naming the file.
-    """
-    try:
-        text = Path(path).read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        reason = getattr(exc, "strerror", None) or str(exc)
-        raise PolarsegError(f"{path}: cannot read the parameters file ({reason})") from None
-    try:
-        data = json.loads(text)
-    except ValueError as exc:
-        raise PolarsegError(f"{path}: parameters file is not valid JSON ({exc})") from None
-    if isinstance(data, dict) and isinstance(data.get("params"), dict):
-        data = data["params"]  # a params.json written by polarseg
-    if not isinstance(data, dict):
-        raise PolarsegError(f"{path}: parameters file must hold a JSON object")
-    try:
-        return SegmentParams.from_dict(data)
-    except PolarsegError as exc:
-        raise PolarsegError(f"{path}: {exc}") from None
-    except (TypeError, ValueError) as exc:
-        raise PolarsegError(f"{path}: a parameter has the wrong type ({exc})") from None
 
 
 def mask_text(counts: dict[str, Any]) -> str:

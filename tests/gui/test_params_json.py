@@ -12,6 +12,7 @@ from napari_polarseg import cli
 from napari_polarseg._sample_data import SAMPLE_DIR
 from napari_polarseg.engine import SegmentParams
 from napari_polarseg.engine.params import CLUSTERING_METHODS, FEATURE_KINDS, RECOMMENDED
+from napari_polarseg.io import read_params_dict
 from napari_polarseg.widgets.segment import CONTROLLED, SegmentWidget
 
 pytestmark = pytest.mark.gui
@@ -64,7 +65,7 @@ def test_save_then_load_restores_every_control(viewer, add_widget, tmp_path):
     assert text == CUSTOM.to_json() + "\n"
     assert set(json.loads(text)) == {f.name for f in fields(SegmentParams)}
     assert SegmentParams.from_json(text) == CUSTOM
-    assert SegmentParams.from_dict(cli._load_params_file(str(path))) == CUSTOM
+    assert SegmentParams.from_dict(read_params_dict(str(path))) == CUSTOM
 
     widget.preset.value = "recommended"
     assert widget.params() == RECOMMENDED
