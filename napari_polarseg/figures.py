@@ -254,43 +254,17 @@ def _plot_makers(
     }
 
 
-def save_plots(
-    result: SegmentationResult,
-    out_dir: str | Path,
-    *,
-    degrees: Sequence[int] = (4, 12, 20),
-    windows: Sequence[int] | None = None,
-    table_degrees: Sequence[int] | None = None,
-    pairs: Sequence[tuple[int, int]] | None = None,
-    n_components: int = 3,
-    max_points: int = 20000,
-    seed: int = 0,
-    dpi: int = 100,
-    theme: dict[str, str] = LIGHT,
-) -> dict[str, Path]:
+def save_plots(result: SegmentationResult, out_dir: str | Path, **options: Any) -> dict[str, Path]:
     """Write the six plots of ``result`` as PNGs into ``out_dir`` (created if missing).
 
-    ``windows`` and ``table_degrees`` of the error table default to the result's window
-    and (4, 8, 12, 16, 20); ``pairs`` (l, m) of the coefficient maps to
-    :data:`~napari_polarseg.engine.plots.DEFAULT_PAIRS` up to the result's degree.
-    Returns the path of each file by its name (:data:`PLOT_FILES`).
+    ``options`` are those of :func:`render_plots` (degrees, windows and table degrees of
+    the error table, coefficient pairs, components, points, seed, dpi, theme). Returns
+    the path of each file by its name (:data:`PLOT_FILES`).
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    figures = _plot_makers(
-        result,
-        degrees=degrees,
-        windows=windows,
-        table_degrees=table_degrees,
-        pairs=pairs,
-        n_components=n_components,
-        max_points=max_points,
-        seed=seed,
-        theme=theme,
-    )
     paths = {}
-    for name, make in figures.items():  # one figure at a time: bounded memory
-        content = png_bytes(make(), dpi)
+    for name, content in render_plots(result, **options).items():
         with pio.atomic_output(out / name) as tmp:
             tmp.write_bytes(content)
         paths[name] = out / name
@@ -320,10 +294,14 @@ def render_plots(
     dpi: int = 100,
     theme: dict[str, str] = LIGHT,
 ) -> dict[str, bytes]:
-    """The PNGs :func:`save_plots` writes, as file contents by name, in memory.
+    """The six plots of ``result`` as PNG file contents by name, in memory.
 
     For callers that compute everything before writing anything (``polarseg segment
-    --plots``); the arguments are those of :func:`save_plots`.
+    --plots``); :func:`save_plots` writes them. ``windows`` and ``table_degrees`` of the
+    error table default to the result's window and (4, 8, 12, 16, 20); ``pairs`` (l, m)
+    of the coefficient maps to :data:`~napari_polarseg.engine.plots.DEFAULT_PAIRS` up to
+    the result's degree. Each figure is drawn and turned into bytes before the next
+    (bounded memory).
     """
     makers = _plot_makers(
         result,
