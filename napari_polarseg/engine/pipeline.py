@@ -265,8 +265,12 @@ class MatrixPool:
         if any(b.dtype == dtype and b.size == size and self._free(b) for b in self._buffers):
             return
         spare = self.take(shape, dtype)
-        if any(spare.base is b for b in self._buffers):
+        if self.owns(spare):
             spare.fill(0)  # touch every page now
+
+    def owns(self, array: np.ndarray) -> bool:
+        """True if ``array`` was handed out from a buffer the pool keeps."""
+        return any(array.base is b for b in self._buffers)
 
     def take(self, shape: tuple[int, ...], dtype: np.dtype | type) -> np.ndarray:
         """An uninitialised array of ``shape`` and ``dtype``."""
@@ -634,7 +638,7 @@ class Pipeline:
         if isinstance(tree, ncut.CutTree) and len(tree.ncut_values) + 1 <= p.n_segments:
             yield from tree.prefetch()
         W = self._cache["affinity"][1]
-        if isinstance(W, np.ndarray) and any(W.base is b for b in self._matrices._buffers):
+        if isinstance(W, np.ndarray) and self._matrices.owns(W):
             # memory for the next affinity (a change of the scale, n or w): touched now
             # rather than while the user waits
             self._matrices.reserve(W.shape, W.dtype)

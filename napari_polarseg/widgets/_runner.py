@@ -540,10 +540,7 @@ class WorkerSlot:
             if isinstance(value, Result):
                 delivered = True
                 self._quiet = True
-                if self.activity is not None:
-                    with contextlib.suppress(Exception):
-                        self.activity.close()
-                    self.activity = None
+                self._close_activity()
                 deliver(value.value)
                 return
             if isinstance(value, Partial):
@@ -591,10 +588,7 @@ class WorkerSlot:
                     gen.close()
             if self.worker is worker:
                 self.worker = None
-                if self.activity is not None:
-                    with contextlib.suppress(Exception):
-                        self.activity.close()
-                    self.activity = None
+                self._close_activity()
             if self._pending is not None and self.worker is None:
                 pending, self._pending = self._pending, None
                 pending()
@@ -619,6 +613,13 @@ class WorkerSlot:
         else:
             QTimer.singleShot(round(self.activity_delay * 1000), show_activity)
         worker.start()
+
+    def _close_activity(self) -> None:
+        """End the running job's entry in napari's activity dock, if it has one."""
+        if self.activity is not None:
+            with contextlib.suppress(Exception):
+                self.activity.close()
+            self.activity = None
 
     def wait(self, timeout: float | None = None, extra: Callable[[], bool] | None = None) -> bool:
         """Process Qt events until idle (and ``extra()`` is False); True if idle in time.

@@ -292,8 +292,6 @@ class SegmentWidget(StackWidget):
         self._force = False  # a control changed: the next live run is not skipped
         self._watched: dict[str, Any] = {"mask": None, "scribbles": None}
         self._params_dir = Path.home()
-        #: the segments layer a partial result (no error map yet) was last shown in
-        self._partial_shown: Layer | None = None
         self._live_run = False  # run() was called by the live update
         #: Per stack key: what *Export results…* writes (the last result shown).
         self._exports: dict[str, ExportRecord] = {}
@@ -960,8 +958,8 @@ class SegmentWidget(StackWidget):
 
         A partial result (no reconstruction yet: the worker yielded it before its last
         stage) updates the segments (and class probability) layers and the status line
-        only; the complete result that follows updates the rest and, when its labels are
-        those already shown, only the segments' metadata.
+        only; the complete result that follows updates the rest. Labels equal to those
+        already shown only update the segments' metadata.
         """
         inputs = inputs or {"mask": None, "scribbles": None}
         out = result if isinstance(result, ScribbleOutput) else None
@@ -1008,26 +1006,11 @@ class SegmentWidget(StackWidget):
             remove_output(self._viewer, "probability", layer)  # it would be stale
             self.probabilities, self.classes = None, None
         segments = find_output(self._viewer, "segments", layer)
-        if (
-            not partial
-            and segments is not None
-            and self._partial_shown is segments
-            and np.array_equal(segments.data, labels)
-        ):
-            # the partial result already shows these labels: keep the data (no redraw)
+        if segments is not None and np.array_equal(segments.data, labels):
+            # e.g. the partial result already shows these labels: keep the data (no redraw)
             segments.metadata = {**segments.metadata, **meta}
         else:
-            segments = show_output(self._viewer, "segments", labels, layer, meta)
-        self._partial_shown = segments if partial else None
-        if partial:
-            parts = [f"{summary['n_segments']} segments"]
-            if out is not None:
-                parts = [f"{out.classes.size} materials from scribbles"]
-            parts += [f"{seconds:.2f} s", "computing the error map…"]
-            self._set_status(" · ".join(parts))
-            return
-        self._shown[source_key(layer)] = (result, inputs)
-        self._record_export(layer, angles_deg, result, out, inputs)
+            show_output(self._viewer, "segments", labels, layer, meta)
         if out is not None:
             assert out.classes is not None and confidence is not None
             names = ", ".join(str(int(c)) for c in out.classes)
@@ -1038,6 +1021,11 @@ class SegmentWidget(StackWidget):
             ]
         else:
             parts = [f"{summary['n_segments']} segments"]
+        if partial:
+            self._set_status(" · ".join([*parts, f"{seconds:.2f} s", "computing the error map…"]))
+            return
+        self._shown[source_key(layer)] = (result, inputs)
+        self._record_export(layer, angles_deg, result, out, inputs)
         parts += [
             f"{summary['n_components']} PCA components "
             f"({summary['explained_variance']:.0%} variance)",
