@@ -583,6 +583,10 @@ class Pipeline:
             if outer:
                 self._active = None
 
+    def stage_seconds(self, stage: str) -> float:
+        """Seconds the last computation of ``stage`` took (0 if never computed)."""
+        return self._seconds.get(stage, 0.0)
+
     # -- running ----------------------------------------------------------------------
     def run_iter(self, reconstruction: bool = True) -> Iterator[tuple[str, int, int]]:
         """Run stage by stage, yielding ``(stage, index, total)`` after each.
@@ -652,7 +656,7 @@ class Pipeline:
             raise PolarsegError("parameters changed while the pipeline was running")
         block, labels, ncut_values = self.get("labels")
         names = STAGES if reconstruction else STAGES[:-1]
-        return self._assemble(
+        return self.assemble_result(
             block,
             labels,
             ncut_values,
@@ -661,7 +665,7 @@ class Pipeline:
             recomputed=[s for s in names if s in self._recomputed],
         )
 
-    def _assemble(
+    def assemble_result(
         self,
         block: np.ndarray,
         labels: np.ndarray,
@@ -670,7 +674,11 @@ class Pipeline:
         timings: dict[str, float],
         recomputed: list[str],
     ) -> SegmentationResult:
-        """A :class:`SegmentationResult` of the cached stages and the given labels."""
+        """A :class:`SegmentationResult` of the cached stages and the given labels.
+
+        Used by the runs whose labels do not come from the cut (block and pixel
+        classifiers): ``block`` (R, C) and ``labels`` (H, W) are theirs.
+        """
         pol, nrm = self.get("polarisation"), self.get("normals")
         coef, pca = self.get("harmonics"), self.get("pca")
         rec = self.get("reconstruction") if reconstruction else None
@@ -716,7 +724,7 @@ class Pipeline:
         timings = {s: self._seconds.get(s, 0.0) for s in names}
         timings["scribbles"] = seconds
         recomputed = [s for s in names if s in self._recomputed] + ["scribbles"]
-        result = self._assemble(block, labels, [], reconstruction, timings, recomputed)
+        result = self.assemble_result(block, labels, [], reconstruction, timings, recomputed)
         return ScribbleSegmentation(result, maps, classes, n_train)
 
     def scribble_result(self, scribbles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -1,0 +1,148 @@
+"""Scribble-guided segmentation of a pipeline's image by the pixel classifier.
+
+:class:`PixelSegmenter` sits beside a :class:`~.pipeline.Pipeline`: it takes the
+pipeline's polarisation image (Î, ρ, φ; thesis eq. 3.14), keeps the pixel feature stack
+(:mod:`.pixel_features`) while the feature parameters stay the same, trains the pixel
+classifier (:mod:`.pixel_classifier`) on scribbles or applies a trained one, and
+assembles a :class:`~.pipeline.SegmentationResult` whose labels are the classifier's —
+the thesis stages (harmonics, PCA, reconstruction) still give the maps and the error map
+of the segmentation contract; affinity and cut are not computed.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from .pipeline import Pipeline, SegmentationResult
+from .pixel_classifier import (
+    ClassifierParams,
+    PixelClassifier,
+    PixelPrediction,
+    predict_pixels,
+    train_pixel_classifier,
+)
+from .pixel_features import EPS_INTENSITY, FeatureStack, PixelFeatureParams, pixel_features
+
+
+@dataclass(frozen=True)
+class PixelSegmentation:
+    """What :meth:`PixelSegmenter.segment` returns.
+
+    Attributes
+    ----------
+    result : SegmentationResult
+        Labels = class index 0..K−1 at pixel resolution (block labels: the label at each
+        block's top-left pixel); no Ncut values.
+    prediction : PixelPrediction
+        Probabilities (K, H, W), uncertainty (H, W), classes.
+    classifier : PixelClassifier
+        The classifier that was trained or applied.
+    seconds : dict
+        ``features``, ``train`` (0 when applied), ``predict``.
+    """
+
+    result: SegmentationResult
+    prediction: PixelPrediction
+    classifier: PixelClassifier
+    seconds: dict[str, float] = field(default_factory=dict)
+
+
+@dataclass
+class PixelSegmenter:
+    """Pixel features and the pixel classifier on a pipeline's polarisation image.
+
+    Parameters
+    ----------
+    pipeline : Pipeline
+        Its ``polarisation`` stage gives Î, ρ, φ and the invalid pixels (which do not
+        train the classifier).
+    """
+
+    pipeline: Pipeline
+    _features: tuple[Any, FeatureStack] | None = field(default=None, init=False, repr=False)
+
+    def features(self, params: PixelFeatureParams | None = None) -> FeatureStack:
+        """The feature stack for ``params`` (kept while the image and params stay)."""
+        params = params or PixelFeatureParams()
+        pol = self.pipeline.get("polarisation")
+        key = (id(pol), params)
+        if self._features is None or self._features[0] != key:
+            feats = pixel_features(pol.intensity, pol.dop, pol.phase, params)
+            self._features = (key, feats)
+        return self._features[1]
+
+    def guide(self) -> np.ndarray:
+        """Guide image of the edge-aware smoothing: log Î."""
+        pol = self.pipeline.get("polarisation")
+        return np.log(np.maximum(pol.intensity, EPS_INTENSITY)).astype(np.float32)
+
+    def train(
+        self,
+        scribbles: np.ndarray,
+        feature_params: PixelFeatureParams | None = None,
+        params: ClassifierParams | None = None,
+    ) -> PixelClassifier:
+        """Fit the classifier on the scribbled valid pixels."""
+        feats = self.features(feature_params)
+        valid = ~self.pipeline.get("polarisation").invalid
+        return train_pixel_classifier(feats, scribbles, params, valid=valid)
+
+    def segment(
+        self,
+        scribbles: np.ndarray | None = None,
+        classifier: PixelClassifier | None = None,
+        *,
+        feature_params: PixelFeatureParams | None = None,
+        params: ClassifierParams | None = None,
+        reconstruction: bool = True,
+        cancel: Any = None,
+    ) -> PixelSegmentation:
+        """Train on ``scribbles`` (or apply ``classifier``) and label every pixel.
+
+        Exactly one of ``scribbles`` and ``classifier`` is given. A given classifier
+        brings its own feature parameters (``feature_params`` is then ignored).
+        """
+        if (scribbles is None) == (classifier is None):
+            raise ValueError("give scribbles or a classifier, not both or neither")
+        seconds: dict[str, float] = {}
+        t0 = time.perf_counter()
+        fparams = classifier.feature_params if classifier is not None else feature_params
+        feats = self.features(fparams)
+        seconds["features"] = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        if classifier is None:
+            classifier = self.train(scribbles, feats.params, params)
+        seconds["train"] = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        guide = self.guide() if classifier.params.smoothing > 0 else None
+        prediction = predict_pixels(classifier, feats, guide=guide, cancel=cancel)
+        seconds["predict"] = time.perf_counter() - t0
+        result = self.result(prediction.labels, reconstruction, seconds)
+        return PixelSegmentation(result, prediction, classifier, seconds)
+
+    def result(
+        self, labels: np.ndarray, reconstruction: bool, seconds: dict[str, float]
+    ) -> SegmentationResult:
+        """A :class:`SegmentationResult` of the pipeline's maps and these pixel labels."""
+        pipe = self.pipeline
+        window = pipe.params.window
+        grid = pipe.get("harmonics").shape[:2]
+        block = labels[: grid[0] * window : window, : grid[1] * window : window]
+        names = ["polarisation", "normals", "harmonics", "pca"]
+        names += ["reconstruction"] if reconstruction else []
+        for name in names:
+            pipe.get(name)
+        timings = {s: pipe.stage_seconds(s) for s in names}
+        timings["pixel_classifier"] = float(sum(seconds.values()))
+        return pipe.assemble_result(
+            np.ascontiguousarray(block),
+            labels.astype(np.int64),
+            [],
+            reconstruction,
+            timings=timings,
+            recomputed=names + ["pixel_classifier"],
+        )

@@ -1,0 +1,138 @@
+"""Pixel feature stacks: names, the Stokes-averaged DoLP, the coarse-grid smoothing, filters."""
+
+import numpy as np
+import pytest
+from scipy import ndimage
+
+from napari_polarseg.engine.errors import PolarsegError
+from napari_polarseg.engine.pixel_features import (
+    GROUPS,
+    PixelFeatureParams,
+    gaussian_smooth,
+    multichannel_features,
+    pixel_features,
+    pyramid_factor,
+    upsample,
+)
+
+
+def _image(shape=(96, 104), seed=0):
+    rng = np.random.default_rng(seed)
+    intensity = 0.4 + 0.1 * ndimage.gaussian_filter(rng.standard_normal(shape), 4)
+    dop = np.clip(0.05 + 0.02 * ndimage.gaussian_filter(rng.standard_normal(shape), 3), 0, 1)
+    phase = np.mod(ndimage.gaussian_filter(rng.standard_normal(shape), 5) * 3, np.pi)
+    return intensity, dop, phase
+
+
+def test_names_shapes_and_dtype():
+    params = PixelFeatureParams(scales=(1.0, 4.0, 16.0), groups=GROUPS)
+    f = pixel_features(*_image(), params)
+    assert f.planes.dtype == np.float32
+    assert f.planes.shape == (len(f.names), 96, 104)
+    assert f.data.shape == (96, 104, len(f.names))
+    assert len(set(f.names)) == len(f.names)
+    per_scale = len(f.names) // 3
+    assert {n.split("@")[1] for n in f.names} == {"1", "4", "16"}
+    assert all(sum(n.endswith(f"@{s}") for n in f.names) == per_scale for s in ("1", "4", "16"))
+    assert np.isfinite(f.planes).all()
+    # data is a view of planes, rows() and pixels() agree with it
+    np.testing.assert_array_equal(f.rows(10, 12), f.data[10:12].reshape(-1, len(f.names)))
+    where = np.zeros((96, 104), bool)
+    where[5, 7] = where[50, 3] = True
+    np.testing.assert_array_equal(f.pixels(where), f.data[where])
+
+
+def test_stokes_dolp_is_unbiased_where_mean_dop_is_not():
+    """Noise on the sinusoid: the mean of per-pixel ρ is biased up, DoLP_σ is not."""
+    rng = np.random.default_rng(1)
+    shape = (128, 128)
+    angles = np.deg2rad([0, 45, 90, 135])
+    true_rho, true_phase = 0.02, 0.7
+    stack = 1 + true_rho * np.cos(2 * angles[:, None, None] - 2 * true_phase)
+    stack = stack + 0.03 * rng.standard_normal((4,) + shape)
+    from napari_polarseg.engine import polarisation_image
+
+    p = polarisation_image(stack, angles)
+    f = pixel_features(p.intensity, p.dop, p.phase, PixelFeatureParams(scales=(8.0,)))
+    dolp = f.planes[f.names.index("dolp@8")][32:-32, 32:-32]
+    mean_dop = f.planes[f.names.index("dop@8")][32:-32, 32:-32]
+    assert abs(float(np.median(dolp)) - true_rho) < 0.002
+    assert float(np.median(mean_dop)) > true_rho + 0.003  # the bias the DoLP avoids
+    coherence = f.planes[f.names.index("aolp_coherence@8")]
+    assert 0 < float(np.median(coherence)) < 1
+
+
+@pytest.mark.parametrize("sigma", [4.0, 8.0, 16.0])
+def test_coarse_grid_smoothing_matches_full_resolution(sigma):
+    rng = np.random.default_rng(2)
+    a = ndimage.gaussian_filter(rng.standard_normal((200, 230)), 2).cumsum(0).astype(np.float32)
+    full = ndimage.gaussian_filter(a, sigma, truncate=3.0)
+    fast = gaussian_smooth(a, sigma)
+    assert pyramid_factor(sigma) > 1
+    inner = (slice(60, -60), slice(60, -60))
+    assert np.abs(full - fast)[inner].max() < 0.005 * np.ptp(full)
+
+
+@pytest.mark.parametrize("f", [2, 4])
+def test_upsample_is_linear_interpolation_on_the_pixel_area_grid(f):
+    small = np.random.default_rng(3).random((17, 23)).astype(np.float32)
+    expected = ndimage.zoom(small, f, order=1, grid_mode=True, mode="nearest")
+    np.testing.assert_allclose(upsample(small, f, expected.shape), expected, atol=1e-6)
+    cropped = upsample(small, f, (17 * f - 1, 23 * f - 3))
+    np.testing.assert_allclose(cropped, expected[: 17 * f - 1, : 23 * f - 3], atol=1e-6)
+
+
+@pytest.mark.parametrize("sigma", [1.0, 4.0, 16.0])
+def test_filters_are_in_per_pixel_units_at_every_scale(sigma):
+    """A log-intensity ramp of slope 0.01/px and a paraboloid of known curvature."""
+    rows, cols = np.mgrid[0:160, 0:160].astype(float)
+    ramp = np.exp(0.01 * cols)  # log Î = 0.01 · col
+    shape = ramp.shape
+    params = PixelFeatureParams(scales=(sigma,), groups=("filters",))
+    f = pixel_features(ramp, np.full(shape, 0.05), np.zeros(shape), params)
+    inner = (slice(60, 100), slice(60, 100))
+    grad = f.planes[f.names.index(f"log_intensity_gradient@{sigma:g}")][inner]
+    np.testing.assert_allclose(grad, 0.01, rtol=0.02)
+    dop = 0.05 + 1e-4 * ((rows - 80) ** 2 + 3 * (cols - 80) ** 2)
+    f = pixel_features(np.ones(shape), dop, np.zeros(shape), params)
+    lap = f.planes[f.names.index(f"dop_laplacian@{sigma:g}")][inner]
+    hmax = f.planes[f.names.index(f"dop_hessian_max@{sigma:g}")][inner]
+    hmin = f.planes[f.names.index(f"dop_hessian_min@{sigma:g}")][inner]
+    np.testing.assert_allclose(lap, 8e-4, rtol=0.03)
+    np.testing.assert_allclose(hmax, 6e-4, rtol=0.03)
+    np.testing.assert_allclose(hmin, 2e-4, rtol=0.05)
+
+
+def test_invariant_features_do_not_change_with_the_shading_level():
+    i, d, p = _image()
+    params = PixelFeatureParams(scales=(2.0, 8.0), groups=("intensity", "invariant"))
+    a = pixel_features(i, d, p, params)
+    b = pixel_features(3.0 * i, d, p, params)
+    for k, name in enumerate(a.names):
+        if name.startswith("log_intensity@"):
+            np.testing.assert_allclose(b.planes[k] - a.planes[k], np.log(3.0), atol=1e-5)
+        else:
+            # float32 local covariances: differences of means, ~1 % of a small value
+            np.testing.assert_allclose(b.planes[k], a.planes[k], rtol=1e-2, atol=2e-4)
+
+
+def test_multichannel_names_carry_the_channel():
+    i, d, p = _image()
+    params = PixelFeatureParams(scales=(2.0,), groups=("polarisation",))
+    f = multichannel_features([(i, d, p), (2 * i, d / 2, p)], params, ["red", "green"])
+    assert f.names[0].startswith("red:") and f.names[-1].startswith("green:")
+    assert f.planes.shape[0] == 2 * len(pixel_features(i, d, p, params).names)
+    assert multichannel_features([(i, d, p)], params).names == pixel_features(i, d, p, params).names
+
+
+def test_bad_parameters_and_maps_raise():
+    with pytest.raises(PolarsegError, match="scales"):
+        PixelFeatureParams(scales=(0.0,))
+    with pytest.raises(PolarsegError, match="groups"):
+        PixelFeatureParams(groups=("colour",))
+    with pytest.raises(PolarsegError, match="one shape"):
+        pixel_features(np.ones((4, 4)), np.ones((4, 5)), np.ones((4, 4)))
+    with pytest.raises(PolarsegError, match="unknown"):
+        PixelFeatureParams.from_dict({"scales": [1], "colour": 1})
+    p = PixelFeatureParams(scales=(1.0, 3.0), groups=("intensity",))
+    assert PixelFeatureParams.from_dict(p.to_dict()) == p
