@@ -86,6 +86,7 @@ from sklearn.tree._tree import Tree
 from . import __version__
 from .engine.errors import PolarsegError
 from .engine.limits import format_bytes, memory_limit
+from .engine.pixel_classifier import PixelClassifier
 from .io import atomic_output
 
 PathLike = str | os.PathLike
@@ -912,3 +913,24 @@ def _short(value: Any) -> str:
 def _short_list(names: list[str]) -> str:
     shown = ", ".join(_short(n) for n in names[:5])
     return shown + (f" and {len(names) - 5} more" if len(names) > 5 else "")
+
+
+def save_pixel_classifier(path: PathLike, classifier: PixelClassifier) -> None:
+    """Write a trained :class:`~napari_polarseg.engine.pixel_classifier.PixelClassifier`.
+
+    Its :meth:`~napari_polarseg.engine.pixel_classifier.PixelClassifier.metadata`
+    (classes, feature names and parameters, training summary) is the file's metadata,
+    with the package and format versions of :func:`classifier_metadata`.
+    """
+    meta = classifier.metadata()
+    base = classifier_metadata(classifier.model, meta["feature_names"], meta["feature_params"])
+    save_classifier(path, classifier.model, {**base, **meta})
+
+
+def load_pixel_classifier(path: PathLike) -> PixelClassifier:
+    """Read a file of :func:`save_pixel_classifier` (checked as :func:`load_classifier`)."""
+    model, meta = load_classifier(path)
+    try:
+        return PixelClassifier.from_metadata(model, meta)
+    except PolarsegError as exc:
+        raise _error(path, f"not a pixel classifier of this package ({exc})") from None

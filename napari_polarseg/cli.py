@@ -8,7 +8,8 @@
                          [--dark-level LEVEL] [--mask FILE] [--register] [--fit robust]
                          [--window W] [--degree L] [--refractive-index N]
                          [--segments K] [--params FILE.json] [--max-memory GIB]
-                         [--scribbles FILE] [--ground-truth FILE] [...]
+                         [--scribbles FILE [--save-classifier FILE.polarseg-clf]
+                          | --classifier FILE.polarseg-clf] [--ground-truth FILE] [...]
     polarseg demo [--out DIR] [--scene leaves] [--plots]
     polarseg sweep INPUT --out DIR [--windows 8,10,12] [--degrees 4,8,12]
                          [--refractive-indices 1.45,1.6] [--ground-truth FILE]
@@ -41,9 +42,13 @@ frame, in frame order); the engine gets radians. ``segment`` writes into DIR:
 ``segments.csv``            one row per segment: pixels, area fraction, mean Î, ρ,
                             θ (degrees), circular mean of φ (degrees) and the means of
                             the first 3 PCA features
-``probabilities.tif``       with ``--scribbles``: probability of each scribbled class
-                            per pixel (float32, K × H × W; class k = the k-th smallest
-                            scribble value, as in ``labels.tif``)
+``probabilities.tif``       with ``--scribbles`` or ``--classifier``: probability of
+                            each class of the pixel classifier per pixel (float32,
+                            K × H × W; class k = the k-th smallest scribble value, as
+                            in ``labels.tif``)
+``uncertainty.tif``         with ``--scribbles`` or ``--classifier``: 1 − (p1 − p2),
+                            one minus the margin of the two most probable classes
+                            (float32, H × W; 0 = sure, 1 = a tie)
 ``evaluation.json``         with ``--ground-truth``: adjusted Rand index, IoU per true
                             segment and its mean, block accuracy (worst, optimistic);
                             the figures are also added to ``summary.json``
@@ -83,7 +88,6 @@ could not be written, 130 interrupted.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import sys
 import time
 import warnings
@@ -432,13 +436,26 @@ def build_parser() -> argparse.ArgumentParser:
         help="align the frames to the first by sub-pixel phase correlation first (shifts "
         "are reported and written to params.json)",
     )
-    seg.add_argument(
+    labels_from = seg.add_mutually_exclusive_group()
+    labels_from.add_argument(
         "--scribbles",
         metavar="FILE",
         help="strokes (labels image: TIFF, PNG, .npy/.npz; the outputs' height x width; 0 = "
-        "unlabelled, 1, 2, ... = materials, at least two): the labels come from a classifier "
-        "of the block features trained on the scribbled blocks instead of the normalized "
-        "cut; also writes probabilities.tif",
+        "unlabelled, 1, 2, ... = materials, at least two): the labels come from a pixel "
+        "classifier (random forest on multi-scale polarisation features) trained on the "
+        "scribbled pixels instead of the normalized cut; also writes probabilities.tif and "
+        "uncertainty.tif",
+    )
+    labels_from.add_argument(
+        "--classifier",
+        metavar="FILE",
+        help="apply a saved pixel classifier (.polarseg-clf, from --save-classifier or the "
+        "plugin's Save classifier...) instead of the normalized cut; nothing is retrained",
+    )
+    seg.add_argument(
+        "--save-classifier",
+        metavar="FILE",
+        help="with --scribbles: also write the trained classifier to FILE (.polarseg-clf)",
     )
     seg.add_argument(
         "--ground-truth",
@@ -508,6 +525,12 @@ def build_parser() -> argparse.ArgumentParser:
         dest="resume",
         action="store_false",
         help="redo every scene, also those already complete",
+    )
+    bat.add_argument(
+        "--classifier",
+        metavar="FILE",
+        help="label every scene with this saved pixel classifier (.polarseg-clf) instead of "
+        "the normalized cut",
     )
     _add_input_options(bat, "scene")
     _add_param_options(bat)
@@ -646,6 +669,7 @@ def _segment(
     verbose: bool,
     mask: PixelMask | None = None,
     max_bytes: int | None = None,
+    labels_by: LabelSource | None = None,
 ) -> Run:
     seconds: dict[str, float] = {}
     stack, shifts = data.stack, None
@@ -661,9 +685,13 @@ def _segment(
         seconds["register"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     pipe = Pipeline(stack, data.angles_rad, params, mask=mask)
-    result = pipe.run(progress=_progress(verbose))
+    run = Run(data, params, stack, None, shifts, seconds, mask, pipe)  # type: ignore[arg-type]
+    if labels_by is None:
+        run.result = pipe.run(progress=_progress(verbose))
+    else:
+        labels_by.label(run)
     seconds["segment"] = time.perf_counter() - t0
-    return Run(data, params, stack, result, shifts, seconds, mask, pipe)
+    return run
 
 
 def _resolved(name: str | None) -> str | None:
@@ -803,26 +831,47 @@ def read_labels_image(path: str, shape: Sequence[int], what: str) -> np.ndarray:
     return data.astype(np.int64)
 
 
-def _scribble_run(run: Run, scribbles: np.ndarray, path: str) -> tuple[Run, np.ndarray, list]:
-    """Replace the cut's labels by the scribble classifier's (labels, probabilities)."""
-    from .engine.scribbles import training_blocks
+@dataclass
+class LabelSource:
+    """Labels from the pixel classifier instead of the cut: trained on ``scribbles`` or
+    the classifier saved in ``classifier_file``; what it produced is kept here."""
 
-    pipe = run.pipeline
-    assert pipe is not None
-    t0 = time.perf_counter()
-    try:
-        labels, proba = pipe.scribble_result(scribbles)
-    except PolarsegError as exc:
-        raise PolarsegError(f"{path}: {exc}") from None
-    window = run.params.window
-    grid = run.result.block_labels.shape
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        classes = training_blocks(scribbles, grid, window)[2].tolist()
-    block = labels[: grid[0] * window : window, : grid[1] * window : window]
-    result = dataclasses.replace(run.result, labels=labels, block_labels=block, ncut_values=[])
-    seconds = {**run.seconds, "scribbles": time.perf_counter() - t0}
-    return dataclasses.replace(run, result=result, seconds=seconds), proba, classes
+    scribbles: np.ndarray | None = None
+    scribbles_file: str | None = None
+    classifier_file: str | None = None
+    segmentation: Any = None
+
+    def label(self, run: Run) -> None:
+        from .classifier_file import load_pixel_classifier
+        from .engine.pixel_segmentation import PixelSegmenter
+
+        classifier = None
+        if self.classifier_file:
+            classifier = load_pixel_classifier(self.classifier_file)
+        try:
+            out = PixelSegmenter(run.pipeline).segment(self.scribbles, classifier)
+        except PolarsegError as exc:
+            where = self.scribbles_file or self.classifier_file
+            raise PolarsegError(f"{where}: {exc}") from None
+        self.segmentation = out
+        run.result = out.result
+        run.seconds["classifier"] = float(sum(out.seconds.values()))
+
+    def summary(self) -> dict[str, Any]:
+        out = self.segmentation
+        clf = out.classifier
+        top = list(clf.importances().items())[:5]
+        return {
+            "labels_from": "scribbles" if self.scribbles is not None else "classifier",
+            "scribble_classes": [int(c) for c in clf.classes],
+            "classifier": {
+                "model": clf.params.model,
+                "n_features": len(clf.feature_names),
+                "n_training_pixels": clf.n_training_pixels,
+                "seconds": {k: round(v, 6) for k, v in out.seconds.items()},
+                "top_features": {k: round(v, 4) for k, v in top},
+            },
+        }
 
 
 def _job(
@@ -841,15 +890,21 @@ def _job(
     truth_file = getattr(args, "ground_truth", None)
     scribbles = read_labels_image(scribble_file, shape, "scribbles") if scribble_file else None
     truth = read_labels_image(truth_file, shape, "ground truth") if truth_file else None
-    run = _segment(data, params, register, args.verbose, mask, _max_bytes(args))
-    probabilities = None
-    scribble_info: dict[str, Any] = {}
-    if scribbles is not None:
-        run, probabilities, classes = _scribble_run(run, scribbles, scribble_file)
-        scribble_info = {"labels_from": "scribbles", "scribble_classes": classes}
-    summary = {**_summary(run, read_seconds), **(extra or {}), **scribble_info}
-    if "scribbles" in run.seconds:
-        summary["scribble_seconds"] = round(run.seconds["scribbles"], 6)
+    classifier_file = getattr(args, "classifier", None)
+    save_file = getattr(args, "save_classifier", None)
+    if save_file and scribbles is None:
+        raise PolarsegError("--save-classifier needs --scribbles (a classifier to train)")
+    source = None
+    if scribbles is not None or classifier_file:
+        source = LabelSource(scribbles, scribble_file, classifier_file)
+    run = _segment(data, params, register, args.verbose, mask, _max_bytes(args), source)
+    probabilities = uncertainty = None
+    summary = {**_summary(run, read_seconds), **(extra or {})}
+    if source is not None:
+        probabilities = source.segmentation.prediction.probabilities
+        uncertainty = source.segmentation.prediction.uncertainty
+        summary.update(source.summary())
+        summary["classifier_seconds"] = round(run.seconds["classifier"], 6)
     if data.ground_truth is not None:
         summary["adjusted_rand_index"] = adjusted_rand_index(data.ground_truth, run.result.labels)
     evaluation = None
@@ -862,6 +917,8 @@ def _job(
     info = _input_info(data, args)
     if scribble_file:
         info["scribbles_file"] = str(Path(scribble_file).resolve())
+    if classifier_file:
+        info["classifier_file"] = str(Path(classifier_file).resolve())
     if truth_file:
         info["ground_truth_file"] = str(Path(truth_file).resolve())
     written = write_result_folder(
@@ -875,12 +932,27 @@ def _job(
         overview=bool(args.overview),
         plots=bool(getattr(args, "plots", False)),
         probabilities=probabilities,
+        uncertainty=uncertainty,
         evaluation=evaluation,
         shifts=run.shifts,
         info=info,
         summary=summary,
     )
     _report(out, run, written)
+    if source is not None:
+        clf = source.segmentation.classifier
+        if source.classifier_file:
+            print(f"{PROG}: applied the classifier {source.classifier_file} (not retrained)")
+        else:
+            print(
+                f"{PROG}: pixel classifier trained on {clf.n_training_pixels} scribbled "
+                f"pixels of {clf.classes.size} materials, {len(clf.feature_names)} features"
+            )
+        if save_file:
+            from .classifier_file import save_pixel_classifier
+
+            save_pixel_classifier(save_file, clf)
+            print(f"{PROG}: wrote the classifier to {save_file}")
     if evaluation is not None:
         print(
             f"{PROG}: against the ground truth: adjusted Rand index "
@@ -1213,6 +1285,7 @@ BATCH_FORWARD = {
     "demosaic": "--demosaic",
     "channel": "--channel",
     "max_memory": "--max-memory",
+    "classifier": "--classifier",
 }
 
 
@@ -1225,6 +1298,8 @@ def _batch_segment_args(args: argparse.Namespace) -> list[str]:
             continue
         if isinstance(value, np.ndarray):
             value = ",".join(f"{v:g}" for v in value)
+        if dest == "classifier":
+            value = Path(value).resolve()
         out += [flag, str(value)]
     if args.register:
         out.append("--register")
@@ -1239,6 +1314,10 @@ def _cmd_batch(args: argparse.Namespace) -> int:
     params = _params_from_args(args)
     if args.workers is not None and args.workers < 1:
         raise PolarsegError(f"--workers must be at least 1, got {args.workers}")
+    if args.classifier:
+        from .classifier_file import load_pixel_classifier
+
+        load_pixel_classifier(args.classifier)  # a bad file stops here, not in every scene
     scenes = batch.plan(args.input, args.out)
     if not scenes:
         raise PolarsegError("no input scenes (every INPUT is inside --out)")

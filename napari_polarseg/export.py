@@ -55,9 +55,15 @@ MASK_META = {
 }
 
 PROBABILITY_META = {
-    "quantity": "class probability from the scribble classifier",
+    "quantity": "class probability from the pixel classifier",
     "unit": "1",
     "axes": "class, row, column (class k = the k-th smallest scribble value)",
+}
+
+UNCERTAINTY_META = {
+    "quantity": "uncertainty of the pixel classifier: 1 - (p1 - p2), one minus the margin "
+    "between the two most probable classes",
+    "unit": "1",
 }
 
 #: Figures of an ``evaluation.json`` that ``summary.json`` repeats under ``"evaluation"``.
@@ -264,6 +270,7 @@ def write_outputs(
     *,
     segments: list[dict[str, Any]] | None = None,
     probabilities: np.ndarray | None = None,
+    uncertainty: np.ndarray | None = None,
     evaluation: dict[str, Any] | None = None,
     plots: dict[str, bytes] | None = None,
 ) -> list[str]:
@@ -303,6 +310,12 @@ def write_outputs(
                 out / "probabilities.tif", probabilities.astype(np.float32), PROBABILITY_META
             )
             written.append("probabilities.tif")
+        if uncertainty is not None:
+            name = str(out / "uncertainty.tif")
+            pio.write_tiff(
+                out / "uncertainty.tif", uncertainty.astype(np.float32), UNCERTAINTY_META
+            )
+            written.append("uncertainty.tif")
         if evaluation is not None:
             name = str(out / "evaluation.json")
             pio.write_json(out / "evaluation.json", evaluation)
@@ -344,6 +357,7 @@ def write_result_folder(
     overview: bool = True,
     plots: bool = False,
     probabilities: np.ndarray | None = None,
+    uncertainty: np.ndarray | None = None,
     evaluation: dict[str, Any] | None = None,
     shifts: np.ndarray | None = None,
     info: dict[str, Any] | None = None,
@@ -373,7 +387,9 @@ def write_result_folder(
         Also write ``overview.png`` (:func:`render_overview`), and the analyst's plots
         into ``plots/`` (:func:`napari_polarseg.figures.render_plots`).
     probabilities : array (K, H, W), optional
-        Class probabilities of a scribble-guided run: ``probabilities.tif``.
+        Class probabilities of a classifier run: ``probabilities.tif``.
+    uncertainty : array (H, W), optional
+        The pixel classifier's uncertainty: ``uncertainty.tif``.
     evaluation : dict, optional
         :func:`~napari_polarseg.engine.evaluation.evaluate` figures (plus e.g. the ground
         truth's file): ``evaluation.json``, repeated in ``summary.json``.
@@ -412,6 +428,11 @@ def write_result_folder(
                 f"the probabilities {probabilities.shape} do not match the result's "
                 f"{shape[0]} x {shape[1]} pixels"
             )
+    if uncertainty is not None and np.shape(uncertainty) != shape:
+        raise PolarsegError(
+            f"the uncertainty {np.shape(uncertainty)} does not match the result's "
+            f"{shape[0]} x {shape[1]} pixels"
+        )
     params_json = run_info(
         result,
         command=command,
@@ -442,6 +463,7 @@ def write_result_folder(
         picture,
         segments=rows,
         probabilities=probabilities,
+        uncertainty=uncertainty,
         evaluation=evaluation,
         plots=pngs,
     )

@@ -548,11 +548,19 @@ def test_segment_with_scribbles_and_ground_truth(tmp_path, capsys, scene_tif):
         capsys, "segment", path, "--out", out, *FAST, "--scribbles", scribbles, "--ground-truth", gt
     )
     assert code == 0, err
-    assert set(os.listdir(out)) == CONTRACT | {"probabilities.tif", "evaluation.json"}
+    assert set(os.listdir(out)) == CONTRACT | {
+        "probabilities.tif",
+        "uncertainty.tif",
+        "evaluation.json",
+    }
     labels = read_tif(out / "labels.tif")
     assert labels.shape == (H, W) and set(np.unique(labels)) == {0, 1}
+    uncertainty = read_tif(out / "uncertainty.tif")
+    assert uncertainty.shape == (H, W) and 0 <= uncertainty.min() <= uncertainty.max() <= 1
     assert adjusted_rand_score(truth.ravel(), labels.ravel()) > 0.9
-    assert np.array_equal(labels[:, :30] == 0, np.ones((H, 30), bool))  # class 0 = value 1
+    # class 0 = value 1, left of the boundary at column 30 (pixel labels: a few pixels'
+    # band at the boundary may go either way)
+    assert np.all(labels[:, :26] == 0) and np.all(labels[:, 34:] == 1)
     proba = read_tif(out / "probabilities.tif")
     assert proba.shape == (2, H, W) and proba.dtype == np.float32
     np.testing.assert_allclose(proba.sum(axis=0), 1.0, atol=1e-5)
@@ -572,6 +580,65 @@ def test_segment_with_scribbles_and_ground_truth(tmp_path, capsys, scene_tif):
     assert "adjusted Rand index" in stdout and "block accuracy" in stdout
     params = json.loads((out / "params.json").read_text())
     assert params["scribbles_file"] == str(scribbles.resolve())
+
+
+def test_saved_classifier_applies_to_another_stack_without_retraining(tmp_path, capsys, scene_tif):
+    """--save-classifier then --classifier on another stack: the same labels as training
+    there would give from the same classifier, and a bad classifier file is one line."""
+    path, truth, _ = scene_tif
+    scribbles = tmp_path / "strokes.tif"
+    tifffile.imwrite(scribbles, _strokes())
+    clf = tmp_path / "mine.polarseg-clf"
+    code, stdout, err = run(
+        capsys,
+        "segment",
+        path,
+        "--out",
+        tmp_path / "a",
+        *FAST,
+        "--scribbles",
+        scribbles,
+        "--save-classifier",
+        clf,
+    )
+    assert code == 0, err and clf.is_file()
+    assert f"wrote the classifier to {clf}" in stdout
+    # the same stack with the saved classifier: identical labels and probabilities
+    code, stdout, err = run(
+        capsys, "segment", path, "--out", tmp_path / "b", *FAST, "--classifier", clf
+    )
+    assert code == 0, err and "not retrained" in stdout
+    np.testing.assert_array_equal(
+        read_tif(tmp_path / "a" / "labels.tif"), read_tif(tmp_path / "b" / "labels.tif")
+    )
+    np.testing.assert_array_equal(
+        read_tif(tmp_path / "a" / "probabilities.tif"),
+        read_tif(tmp_path / "b" / "probabilities.tif"),
+    )
+    summary = json.loads((tmp_path / "b" / "summary.json").read_text())
+    assert summary["labels_from"] == "classifier"
+    assert summary["classifier"]["seconds"]["train"] == 0
+    # another stack (its frames reversed left-right): the materials swap sides
+    other = tmp_path / "mirrored.tif"
+    pio.write_stack_tiff(other, read_tif(path)[..., ::-1].copy(), ANGLES)
+    code, _, err = run(
+        capsys, "segment", other, "--out", tmp_path / "c", *FAST, "--classifier", clf
+    )
+    assert code == 0, err
+    labels = read_tif(tmp_path / "c" / "labels.tif")
+    assert adjusted_rand_score(truth[:, ::-1].ravel(), labels.ravel()) > 0.9
+    # a tampered file: one line, exit 2, no output folder
+    bad = tmp_path / "bad.polarseg-clf"
+    data = bytearray(clf.read_bytes())
+    data[len(data) // 2] ^= 0xFF
+    bad.write_bytes(bytes(data))
+    code, _, err = run(capsys, "segment", path, "--out", tmp_path / "d", *FAST, "--classifier", bad)
+    assert code == 2 and len(err.strip().splitlines()) == 1 and "bad.polarseg-clf" in err
+    assert not (tmp_path / "d").exists()
+    code, _, err = run(
+        capsys, "segment", path, "--out", tmp_path / "e", *FAST, "--save-classifier", clf
+    )
+    assert code == 2 and "--save-classifier needs --scribbles" in err
 
 
 def test_segment_ground_truth_only_and_segments_csv(tmp_path, capsys, scene_tif):

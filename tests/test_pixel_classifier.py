@@ -118,7 +118,7 @@ def test_training_pixels_sampling_and_errors():
     np.testing.assert_array_equal(index, again)  # seeded
     valid = np.ones_like(s, dtype=bool)
     valid[30:] = False
-    with pytest.raises(PolarsegError, match="at least two materials"):
+    with pytest.raises(PolarsegError, match="at least 2 materials"):
         training_pixels(s, ClassifierParams(), valid)
     with pytest.raises(PolarsegError, match="integer"):
         train_pixel_classifier(

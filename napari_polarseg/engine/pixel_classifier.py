@@ -137,8 +137,10 @@ class PixelClassifier:
             "classes": [int(c) for c in self.classes],
             "feature_names": list(self.feature_names),
             "feature_params": self.feature_params.to_dict(),
-            "classifier_params": self.params.to_dict(),
-            "n_training_pixels": int(self.n_training_pixels),
+            "training": {
+                "n_pixels": int(self.n_training_pixels),
+                "classifier_params": self.params.to_dict(),
+            },
         }
 
     @classmethod
@@ -148,8 +150,9 @@ class PixelClassifier:
             classes = np.asarray(meta["classes"], dtype=np.int64)
             names = tuple(str(n) for n in meta["feature_names"])
             fparams = PixelFeatureParams.from_dict(dict(meta["feature_params"]))
-            cparams = ClassifierParams.from_dict(dict(meta["classifier_params"]))
-            n_train = int(meta["n_training_pixels"])
+            training = dict(meta["training"])
+            cparams = ClassifierParams.from_dict(dict(training["classifier_params"]))
+            n_train = int(training["n_pixels"])
         except (KeyError, TypeError, ValueError) as exc:
             raise PolarsegError(f"the classifier's description is incomplete ({exc})") from None
         model_classes = np.asarray(getattr(model, "classes_", []))
@@ -212,15 +215,17 @@ def training_pixels(
     """
     flat = scribbles.ravel()
     marked = flat > 0
+    if not marked.any():
+        raise PolarsegError("the scribbles label no pixel (0 = unlabelled everywhere)")
     if valid is not None:
         marked &= np.asarray(valid, dtype=bool).ravel()
     index = np.flatnonzero(marked)
     values = flat[index]
     classes = np.unique(values)
     if classes.size < 2:
+        found = "none" if classes.size == 0 else f"only label {int(classes[0])}"
         raise PolarsegError(
-            "scribbles must mark at least two materials (found "
-            f"{classes.size}: {', '.join(map(str, classes)) or 'none'})"
+            f"scribbles must mark at least 2 materials (non-zero labels), found {found}"
         )
     cap = int(params.max_pixels_per_class)
     if cap:
