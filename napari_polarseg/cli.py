@@ -119,7 +119,7 @@ from .engine.pipeline import Pipeline, SegmentationResult
 from .engine.polarimage import PixelMask, validity_mask
 from .engine.registration import register_stack
 from .export import FLOAT_OUTPUTS as FLOAT_OUTPUTS  # the output contract (batch.py reads it)
-from .export import OutputError, write_result_folder
+from .export import OutputError, classifier_summary, write_result_folder
 from .export import labels_image as _labels_image
 
 PROG = "polarseg"
@@ -858,20 +858,8 @@ class LabelSource:
         run.seconds["classifier"] = float(sum(out.seconds.values()))
 
     def summary(self) -> dict[str, Any]:
-        out = self.segmentation
-        clf = out.classifier
-        top = list(clf.importances().items())[:5]
-        return {
-            "labels_from": "scribbles" if self.scribbles is not None else "classifier",
-            "scribble_classes": [int(c) for c in clf.classes],
-            "classifier": {
-                "model": clf.params.model,
-                "n_features": len(clf.feature_names),
-                "n_training_pixels": clf.n_training_pixels,
-                "seconds": {k: round(v, 6) for k, v in out.seconds.items()},
-                "top_features": {k: round(v, 4) for k, v in top},
-            },
-        }
+        labels_from = "scribbles" if self.scribbles is not None else "classifier"
+        return classifier_summary(self.segmentation, labels_from)
 
 
 def _job(

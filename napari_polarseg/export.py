@@ -258,6 +258,28 @@ def evaluation_summary(evaluation: dict[str, Any]) -> dict[str, Any]:
     }
 
 
+def classifier_summary(segmentation: Any, labels_from: str) -> dict[str, Any]:
+    """What ``summary.json`` says of labels from the pixel classifier.
+
+    ``segmentation`` is a :class:`~napari_polarseg.engine.pixel_segmentation.PixelSegmentation`;
+    ``labels_from`` is ``"scribbles"`` (trained on them) or ``"classifier"`` (a saved
+    classifier applied). Shared by ``polarseg segment`` and the plugin's export.
+    """
+    clf = segmentation.classifier
+    top = list(clf.importances().items())[:5]
+    return {
+        "labels_from": labels_from,
+        "scribble_classes": [int(c) for c in clf.classes],
+        "classifier": {
+            "model": clf.params.model,
+            "n_features": len(clf.feature_names),
+            "n_training_pixels": clf.n_training_pixels,
+            "seconds": {k: round(v, 6) for k, v in segmentation.seconds.items()},
+            "top_features": {k: round(v, 4) for k, v in top},
+        },
+    }
+
+
 # -- writing --------------------------------------------------------------------------------
 
 

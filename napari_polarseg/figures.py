@@ -128,6 +128,26 @@ def explained_variance_figure(
     return fig
 
 
+def importances_figure(
+    data: plots.FeatureImportances, fig: Figure | None = None, theme: dict[str, str] = LIGHT
+) -> Figure:
+    """Horizontal bars of a pixel classifier's largest feature importances, largest on top."""
+    fig = _figure(fig, (5.0, 4.0), theme)
+    ax = fig.add_subplot(1, 1, 1)
+    y = np.arange(len(data.names))
+    ax.barh(y, data.values, color=theme["accent"])
+    ax.set_yticks(y, data.names, fontsize="small")
+    ax.invert_yaxis()
+    ax.set_xlabel("importance (mean impurity decrease)")
+    ax.set_title(
+        f"top {len(data.names)} of {data.n_features} features "
+        f"({data.shown_share:.0%} of the importance)",
+        fontsize="medium",
+    )
+    _style(ax, theme)
+    return fig
+
+
 def _map_grid(
     maps: np.ndarray,
     titles: Sequence[str],

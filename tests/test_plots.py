@@ -124,3 +124,23 @@ def test_figures_hold_the_data(result):
     ev = plots.explained_variance(result)
     fig = figures.explained_variance_figure(ev, theme=figures.DARK)
     assert len(fig.axes[0].patches) == ev.ratio.size
+
+
+def test_feature_importances_keep_the_largest_in_order():
+    from napari_polarseg import figures
+
+    values = {"a@1": 0.1, "b@2": 0.4, "c@4": 0.05, "d@8": 0.3, "e@16": 0.15}
+    data = plots.feature_importances(values, top=3)
+    assert data.names == ["b@2", "d@8", "e@16"]
+    np.testing.assert_allclose(data.values, [0.4, 0.3, 0.15])
+    assert data.n_features == 5 and data.shown_share == pytest.approx(0.85)
+    assert plots.feature_importances(values, top=50).names == sorted(values, key=values.get)[::-1]
+    assert plots.feature_importances({}).names == []
+    with pytest.raises(PolarsegError, match="top must be >= 1"):
+        plots.feature_importances(values, top=0)
+
+    fig = figures.importances_figure(data, theme=figures.DARK)
+    (ax,) = fig.axes
+    assert [t.get_text() for t in ax.get_yticklabels()] == data.names  # largest on top
+    np.testing.assert_allclose([p.get_width() for p in ax.patches], data.values)
+    assert "top 3 of 5 features (85% of the importance)" in ax.get_title()

@@ -75,6 +75,15 @@ class PixelSegmenter:
             self._features = (key, feats)
         return self._features[1]
 
+    @property
+    def cached_features(self) -> FeatureStack | None:
+        """The feature stack kept from the last :meth:`features` call (None before).
+
+        The same object until the polarisation image or the feature parameters change:
+        retraining on new scribbles does not recompute it.
+        """
+        return None if self._features is None else self._features[1]
+
     def guide(self) -> np.ndarray:
         """Guide image of the edge-aware smoothing: log Î."""
         pol = self.pipeline.get("polarisation")

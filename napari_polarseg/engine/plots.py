@@ -11,7 +11,9 @@ and :mod:`napari_polarseg.widgets.plots` for the napari dock widget).
 - :func:`reconstruction_histograms` — histograms of Î and of its reconstructions at
   several degrees on shared bins (figure 5.17);
 - :func:`reconstruction_error_table` — mean |Î rebuilt − Î| per window and degree
-  (table 5.1).
+  (table 5.1);
+- :func:`feature_importances` — the largest feature importances of a trained pixel
+  classifier.
 """
 
 from __future__ import annotations
@@ -54,6 +56,21 @@ class ExplainedVariance:
 
     ratio: np.ndarray
     cumulative: np.ndarray
+
+
+@dataclass
+class FeatureImportances:
+    """The ``top`` largest importances of a pixel classifier, largest first.
+
+    ``names`` and ``values`` of the shown features; ``n_features`` the classifier's
+    number of features and ``shown_share`` the sum of the shown values (importances of
+    a forest sum to 1 over all features).
+    """
+
+    names: list[str]
+    values: np.ndarray
+    n_features: int
+    shown_share: float
 
 
 @dataclass
@@ -144,6 +161,23 @@ def explained_variance(result: SegmentationResult) -> ExplainedVariance:
     """Per-component explained-variance share of the kept PCA components and its cumsum."""
     ratio = np.asarray(result.explained_variance_ratio, dtype=float).ravel()
     return ExplainedVariance(ratio=ratio.copy(), cumulative=np.cumsum(ratio))
+
+
+def feature_importances(importances: dict[str, float], top: int = 15) -> FeatureImportances:
+    """The ``top`` largest of ``importances`` (feature name → importance, e.g.
+    :meth:`PixelClassifier.importances
+    <napari_polarseg.engine.pixel_classifier.PixelClassifier.importances>`), largest
+    first; ties keep the given order. Empty for a model without importances."""
+    if top < 1:
+        raise PolarsegError(f"top must be >= 1, got {top}")
+    items = sorted(importances.items(), key=lambda kv: -kv[1])[:top]
+    values = np.asarray([v for _, v in items], dtype=float)
+    return FeatureImportances(
+        names=[k for k, _ in items],
+        values=values,
+        n_features=len(importances),
+        shown_share=float(values.sum()),
+    )
 
 
 def coefficient_maps(
