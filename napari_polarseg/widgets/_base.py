@@ -198,14 +198,16 @@ class StackWidget(Container):
         on_result: Any,
         on_partial: Any = None,
         live: bool = False,
+        cancellable: bool = False,
     ) -> None:
         """Run ``job`` in the widget's worker slot. A ``live`` rerun (after a parameter
         change) enables Cancel and reports progress only if it still runs
         ``_runner.REPORT_INTERVAL`` later: one that ends sooner repaints nothing before
-        its result."""
+        its result. A ``cancellable`` job gets a ``cancel`` callable
+        (:meth:`~napari_polarseg.widgets._runner.WorkerSlot.submit`)."""
         if not live:
             self.cancel_button.enabled = True
-        self._slot.submit(job, args, total, on_result, on_partial, live)
+        self._slot.submit(job, args, total, on_result, on_partial, live, cancellable)
 
     def _set_status(self, text: str) -> None:
         try:

@@ -61,6 +61,11 @@ ROLES: dict[str, LayerStyle] = {
     "probability": LayerStyle(
         "class probability", colormap="cividis", limits=(0.0, 1.0), extra={"visible": False}
     ),
+    # scribble mode: the pixel classifier's uncertainty 1 - (p1 - p2), 0 sure .. 1 a tie;
+    # bright where another stroke would help most
+    "uncertainty": LayerStyle(
+        "uncertainty", colormap="inferno", limits=(0.0, 1.0), extra={"visible": False}
+    ),
 }
 
 

@@ -11,6 +11,9 @@ activity dock, and guarantees:
   next stage boundary (``worker.quit()``) and runs the newest request when it has ended
   (older queued requests are dropped);
 - every run gets a number; results of a run that is no longer the newest are dropped;
+- a job submitted ``cancellable`` gets a ``cancel`` keyword argument, a callable that
+  turns True once the run is asked to stop, to stop inside a long stage (the engine
+  raises :class:`~napari_polarseg.engine.errors.Cancelled`, reported as a cancelled run);
 - errors raised in the worker arrive in the GUI thread as a napari error notification
   carrying the engine's one-line message (never as an exception in the event loop).
 
@@ -18,10 +21,14 @@ activity dock, and guarantees:
 angle-stack layer so that a rerun only recomputes the stages a parameter change made
 stale; a different mask (another region, an edited one, or none) builds a new one.
 
-:func:`scribble_stages` is the scribble mode's job body: the pipeline's stages up to the
-block features, then the classifier trained on the user's strokes
-(:meth:`~napari_polarseg.engine.Pipeline.scribble_result`) instead of affinity and cut,
-assembled into a :class:`~napari_polarseg.engine.SegmentationResult` like the cut's.
+:func:`classifier_stages` is the scribble mode's job body: the pipeline's stages up to the
+block features, the pixel feature stack (kept by a
+:class:`~napari_polarseg.engine.pixel_segmentation.PixelSegmenter` per pipeline), then the
+pixel classifier trained on the user's strokes (or a loaded one) instead of affinity and
+cut, assembled into a :class:`~napari_polarseg.engine.SegmentationResult` like the cut's.
+A job that accepts it gets a ``cancel`` callable (``WorkerSlot.submit(...,
+cancellable=True)``) that turns True when a newer request or Cancel stops the run, so
+the prediction stops between chunks instead of at the next stage boundary.
 """
 
 from __future__ import annotations
@@ -32,10 +39,9 @@ import os
 import re
 import threading
 import time
-import warnings
 from collections.abc import Callable, Generator, Iterator
-from dataclasses import dataclass, field, replace
-from typing import Any
+from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from napari.qt.threading import GeneratorWorker, create_worker
@@ -43,6 +49,12 @@ from napari.utils.notifications import show_error
 from qtpy.QtCore import QCoreApplication, QTimer
 
 from ..engine import Pipeline, PolarsegError, SegmentationResult, SegmentParams, validity_mask
+from ..engine.errors import Cancelled
+from ..engine.pixel_segmentation import PixelSegmenter
+
+if TYPE_CHECKING:
+    from ..engine.pixel_classifier import PixelClassifier, PixelPrediction
+    from ..engine.pixel_segmentation import PixelSegmentation
 
 Stage = tuple[str, int, int]
 Job = Callable[..., Generator[Any, None, Any]]
@@ -149,12 +161,12 @@ class _BlasShare:
 blas_share = _BlasShare()
 
 
-def guarded(job: Job, *args: Any) -> Generator[Stage, None, Any]:
-    """Run ``job(*args)`` as a generator with BLAS threads limited (:class:`_BlasShare`),
-    turning a ``RuntimeError`` into :class:`StageFailed`."""
+def guarded(job: Job, *args: Any, **kwargs: Any) -> Generator[Stage, None, Any]:
+    """Run ``job(*args, **kwargs)`` as a generator with BLAS threads limited
+    (:class:`_BlasShare`), turning a ``RuntimeError`` into :class:`StageFailed`."""
     with blas_share():
         try:
-            result = yield from job(*args)
+            result = yield from job(*args, **kwargs)
         except RuntimeError as exc:
             raise StageFailed(f"{type(exc).__name__}: {exc}") from exc
     return result
@@ -207,8 +219,12 @@ def content_digest(array: Any) -> str | None:
 
 # -- scribble mode ----------------------------------------------------------------------
 
-#: Pipeline stages the scribble mode runs; the classifier replaces affinity, cut, labels.
-SCRIBBLE_STAGES = ("polarisation", "normals", "harmonics", "pca", "reconstruction")
+#: Stages of the scribble mode: the pipeline's maps and block features (for the result's
+#: plots and error map), the pixel features, the classifier (training and prediction, or
+#: prediction only for a loaded classifier) and the reconstruction. The cut's own stages
+#: (affinity, cut, labels) are neither computed nor invalidated.
+PIPELINE_STAGES = ("polarisation", "normals", "harmonics", "pca")
+CLASSIFIER_STAGES = (*PIPELINE_STAGES, "pixel features", "pixel classifier", "reconstruction")
 
 
 def scribble_problem(scribbles: np.ndarray) -> str | None:
@@ -227,41 +243,61 @@ def scribble_problem(scribbles: np.ndarray) -> str | None:
 
 
 @dataclass
-class ScribbleOutput:
-    """What a scribble-mode job returns.
+class ClassifierOutput:
+    """What a scribble-mode job returns (or yields as a :class:`Partial`).
 
-    ``result.labels`` and ``result.block_labels`` hold the class index 0..K-1;
-    ``classes[k]`` is the scribble value (label) of class k; ``probabilities`` is
-    (K, H, W) and sums to 1 over K. When the strokes cannot train the classifier
-    (e.g. one material holds the majority of no block) ``problem`` says why and the
-    other fields are None.
+    ``segmentation`` is the engine's
+    :class:`~napari_polarseg.engine.pixel_segmentation.PixelSegmentation`: its
+    ``result.labels`` hold the class index 0..K-1, ``prediction.classes[k]`` is the
+    scribble value (label) of class k, ``prediction.probabilities`` is (K, H, W) and
+    sums to 1 over K, ``prediction.uncertainty`` is (H, W) in [0, 1]. ``trained`` is
+    False when a loaded classifier was applied. When the strokes cannot train the
+    classifier (e.g. every pixel of a material is masked) or the classifier does not
+    fit the stack, ``problem`` says why and ``segmentation`` is None.
     """
 
-    result: SegmentationResult | None
-    probabilities: np.ndarray | None
-    classes: np.ndarray | None
-    training_blocks: int = 0
-    notes: list[str] = field(default_factory=list)
+    segmentation: PixelSegmentation | None
+    trained: bool = True
     problem: str | None = None
 
+    @property
+    def result(self) -> SegmentationResult:
+        assert self.segmentation is not None
+        return self.segmentation.result
 
-def scribble_stages(
+    @property
+    def prediction(self) -> PixelPrediction:
+        assert self.segmentation is not None
+        return self.segmentation.prediction
+
+    @property
+    def classifier(self) -> PixelClassifier:
+        assert self.segmentation is not None
+        return self.segmentation.classifier
+
+
+def classifier_stages(
     pipe: Pipeline,
-    scribbles: np.ndarray,
+    segmenter: PixelSegmenter,
     params: SegmentParams,
+    scribbles: np.ndarray | None = None,
+    classifier: PixelClassifier | None = None,
     reconstruction: bool = True,
-) -> Generator[Any, None, ScribbleOutput]:
-    """Run the stages the classifier needs (yielding after each), then classify.
+    cancel: Callable[[], bool] | None = None,
+) -> Generator[Any, None, ClassifierOutput]:
+    """Run the stages the scribble mode needs (yielding after each), then classify.
 
-    ``len(SCRIBBLE_STAGES)`` stage yields (one fewer without the reconstruction). The
-    classifier (milliseconds) runs after the block features; when the reconstruction
-    still has to be computed, its output is yielded as a :class:`Partial` first (the
-    classes are shown while the error map is computed) and the classifier's output is
-    assembled again with the error map at the end. The pipeline's cache is used and kept
-    as for a normalized-cut run: the cut's own stages (affinity, cut, labels) are neither
-    computed nor invalidated.
+    Trains the pixel classifier on ``scribbles``, or applies ``classifier`` (exactly one
+    of them). ``len(CLASSIFIER_STAGES)`` stage yields (one fewer without the
+    reconstruction). The pipeline's cached stages and ``segmenter``'s feature stack are
+    reused: once they are computed, a new stroke reruns only training and prediction.
+    When the reconstruction still has to be computed, the output without it is yielded
+    as a :class:`Partial` first (the segments are shown while the error map is
+    computed). ``cancel`` is handed to the prediction, which raises
+    :class:`~napari_polarseg.engine.errors.Cancelled` between chunks when it returns
+    True.
     """
-    names = SCRIBBLE_STAGES if reconstruction else SCRIBBLE_STAGES[:-1]
+    names = CLASSIFIER_STAGES if reconstruction else CLASSIFIER_STAGES[:-1]
     total = len(names)
     timings: dict[str, float] = {}
     recomputed: list[str] = []
@@ -276,35 +312,48 @@ def scribble_stages(
             recomputed.append(name)
         return name, i + 1, total
 
-    def classify(with_reconstruction: bool) -> ScribbleOutput:
-        if params != pipe.params:
-            raise PolarsegError("parameters changed while the pipeline was running")
-        try:
-            with warnings.catch_warnings(record=True) as caught:
-                warnings.simplefilter("always")
-                seg = pipe.scribble_segmentation(scribbles, with_reconstruction)
-        except PolarsegError as exc:
-            return ScribbleOutput(None, None, None, problem=str(exc))
-        stages = names if with_reconstruction or not reconstruction else names[:-1]
-        times = {**timings, "scribbles": seg.result.timings["scribbles"]}
-        result = replace(
-            seg.result,
-            params=params,
-            timings={name: times.get(name, 0.0) for name in (*stages, "scribbles")},
-            recomputed=[*recomputed, "scribbles"],
-        )
-        notes = sorted({str(w.message) for w in caught})
-        return ScribbleOutput(result, seg.probabilities, seg.classes, seg.training_blocks, notes)
-
-    for i, name in enumerate(names[:-1] if partial else names):
+    for i, name in enumerate(PIPELINE_STAGES):
         yield run_stage(i, name)
-    if partial:
-        first = classify(False)
-        if first.problem is not None:
-            return first
-        yield Partial(first)
-        yield run_stage(total - 1, names[-1])
-    return classify(reconstruction)
+    fparams = None if classifier is None else classifier.feature_params
+    before = segmenter.cached_features
+    t0 = time.perf_counter()
+    segmenter.features(fparams)
+    if segmenter.cached_features is not before:
+        timings["pixel features"] = time.perf_counter() - t0
+        recomputed.append("pixel features")
+    yield "pixel features", len(PIPELINE_STAGES) + 1, total
+    if params != pipe.params:
+        raise PolarsegError("parameters changed while the pipeline was running")
+    try:
+        seg = segmenter.segment(
+            scribbles,
+            classifier,
+            feature_params=fparams,
+            reconstruction=reconstruction and not partial,
+            cancel=cancel,
+        )
+    except PolarsegError as exc:
+        return ClassifierOutput(None, classifier is None, problem=str(exc))
+    timings["pixel classifier"] = seg.seconds.get("train", 0.0) + seg.seconds.get("predict", 0.0)
+    recomputed.append("pixel classifier")
+
+    def output(segmentation: PixelSegmentation, with_reconstruction: bool) -> ClassifierOutput:
+        stages = names if with_reconstruction else names[:-1]
+        result = replace(
+            segmentation.result,
+            params=params,
+            timings={name: timings.get(name, 0.0) for name in stages},
+            recomputed=[name for name in stages if name in recomputed],
+        )
+        return ClassifierOutput(replace(segmentation, result=result), classifier is None)
+
+    yield "pixel classifier", len(PIPELINE_STAGES) + 2, total
+    if not partial:
+        return output(seg, reconstruction)
+    yield Partial(output(seg, False))
+    yield run_stage(total - 1, names[-1])
+    result = segmenter.result(seg.prediction.labels, True, seg.seconds)
+    return output(replace(seg, result=result), True)
 
 
 @dataclass
@@ -314,6 +363,7 @@ class _Entry:
     mask_key: str | None
     region: np.ndarray | None
     pipeline: Pipeline
+    segmenter: PixelSegmenter | None = None
 
     def matches(
         self, data: Any, angles: tuple[float, ...], mask_key: str | None, region: Any
@@ -330,7 +380,10 @@ class PipelineStore:
 
     The pipeline is rebuilt when the layer's data object, the angles or the mask (its
     ``mask_key`` or the content of its ``region``) change; otherwise the same object is
-    reused so cached stages survive parameter changes. Safe to call from a worker thread
+    reused so cached stages survive parameter changes. Beside each pipeline it keeps one
+    :class:`~napari_polarseg.engine.pixel_segmentation.PixelSegmenter`
+    (:meth:`segmenter`), so the scribble mode computes the pixel features once per
+    stack and a new stroke only retrains and predicts. Safe to call from a worker thread
     (the slot runs one worker at a time; a lock guards the dict).
     """
 
@@ -376,6 +429,17 @@ class PipelineStore:
         entry.pipeline.params = params
         return entry.pipeline
 
+    def segmenter(self, key: str) -> PixelSegmenter | None:
+        """The pixel segmenter beside ``key``'s pipeline (made at the first call; None
+        without a pipeline). A rebuilt pipeline gets a new one."""
+        with self._lock:
+            entry = self._entries.get(key)
+            if entry is None:
+                return None
+            if entry.segmenter is None:
+                entry.segmenter = PixelSegmenter(entry.pipeline)
+            return entry.segmenter
+
     def discard(self, keep: set[str]) -> None:
         """Forget the pipelines of every key not in ``keep`` (layers that were removed)."""
         with self._lock:
@@ -397,6 +461,7 @@ class _Request:
     on_result: Callable[[int, Any], None]
     on_partial: Callable[[int, Any], None] | None
     live: bool
+    cancellable: bool = False
 
 
 class WorkerSlot:
@@ -457,6 +522,7 @@ class WorkerSlot:
         on_result: Callable[[int, Any], None],
         on_partial: Callable[[int, Any], None] | None = None,
         live: bool = False,
+        cancellable: bool = False,
     ) -> None:
         """Run ``job(*args)`` now, or as soon as the running worker has stopped.
 
@@ -467,10 +533,14 @@ class WorkerSlot:
         :class:`Partial` it yields. Compare ``run_id`` with :attr:`run_id` to drop
         results of superseded runs. The run is reported at once ("running…", progress 0)
         unless it is ``live`` (a rerun after a parameter change): that one reports only
-        when still running :data:`REPORT_INTERVAL` later.
+        when still running :data:`REPORT_INTERVAL` later. A ``cancellable`` job is called
+        as ``job(*args, cancel=stop)``: ``stop()`` is True once a newer request or
+        :meth:`cancel` has asked the run to stop (the job may then raise
+        :class:`~napari_polarseg.engine.errors.Cancelled`, which ends the run as if it
+        had been stopped between stages).
         """
 
-        request = _Request(job, args, total, on_result, on_partial, live)
+        request = _Request(job, args, total, on_result, on_partial, live, cancellable)
 
         def launch() -> None:
             self._launch(request)
@@ -496,7 +566,16 @@ class WorkerSlot:
         on_result, on_partial, live = request.on_result, request.on_partial, request.live
         self.run_id += 1
         run_id = self.run_id
-        worker = create_worker(guarded, job, *args, _start_thread=False, _ignore_errors=True)
+        started: list[GeneratorWorker] = []  # the worker, once made: its stop request
+
+        def stop() -> bool:
+            return bool(started) and bool(started[0].abort_requested)
+
+        kwargs: dict[str, Any] = {"cancel": stop} if request.cancellable else {}
+        worker = create_worker(
+            guarded, job, *args, _start_thread=False, _ignore_errors=True, **kwargs
+        )
+        started.append(worker)
 
         # Handlers may be re-entered: updating napari's progress bar can process pending
         # events, so a later stage (or the result) can be handled before an earlier one
@@ -565,6 +644,9 @@ class WorkerSlot:
 
         def errored(exc: BaseException) -> None:
             nonlocal ended
+            if isinstance(exc, Cancelled):  # stopped inside a stage: as between stages
+                aborted()
+                return
             ended = True
             if run_id != self.run_id or self._pending is not None or delivered:
                 return  # a newer run is queued (it reports its own problems), or idle work

@@ -17,13 +17,14 @@ from .. import figures
 from ..engine import STAGES, Pipeline, PolarsegError, SegmentParams, plots, validity_mask
 from ._base import StackWidget
 from ._layers import TAG, find_output, fitted_limits, source_key
-from ._runner import SCRIBBLE_STAGES, content_digest, scribble_stages
+from ._runner import CLASSIFIER_STAGES, ClassifierOutput, classifier_stages, content_digest
 
 if TYPE_CHECKING:
     import napari
     from napari.layers import Layer
 
     from ..engine.pipeline import SegmentationResult
+    from ..engine.pixel_classifier import PixelClassifier
 
 #: Plot menu: text shown → key.
 PLOTS = (
@@ -31,7 +32,10 @@ PLOTS = (
     ("scatter Î–φ", "scatter_phase"),
     ("explained variance", "variance"),
     ("histograms", "histograms"),
+    ("feature importances", "importances"),
 )
+#: Features the importance chart shows at most.
+TOP_FEATURES = 15
 #: Degrees of the reconstruction histograms (thesis figure 5.17).
 HISTOGRAM_DEGREES = (4, 12, 20)
 #: Pixels drawn at most in a scatter plot.
@@ -51,20 +55,33 @@ def segment_job(
     params: SegmentParams,
     region: np.ndarray | None = None,
     scribbles: np.ndarray | None = None,
-) -> Generator[tuple[str, int, int], None, Any]:
+    classifier_file: str | None = None,
+) -> Generator[Any, None, SegmentationResult | ClassifierOutput]:
     """Worker job: the segmentation of a stack with ``params`` (as the Segment widget).
 
     ``region`` (H, W bool, True = use) is the user's mask; with ``scribbles`` (H, W
-    labels) the scribble classifier replaces the normalized cut.
+    labels) the pixel classifier trained on them replaces the normalized cut, with
+    ``classifier_file`` the classifier saved there (read again, checked, not retrained).
+    Returns the result, or for the classifier the
+    :class:`~napari_polarseg.widgets._runner.ClassifierOutput` (result and classifier).
     """
+    from ..engine.pixel_segmentation import PixelSegmenter
+
     stack = np.asarray(data)
     mask = validity_mask(stack, saturation="auto", dark_level=0, region=region)
     pipe = Pipeline(stack, np.asarray(angles_rad, dtype=float), params, mask=mask)
-    if scribbles is not None:
-        out = yield from scribble_stages(pipe, scribbles, params, reconstruction=True)
+    if scribbles is not None or classifier_file is not None:
+        classifier = None
+        if classifier_file is not None:
+            from ..classifier_file import load_pixel_classifier
+
+            classifier, scribbles = load_pixel_classifier(classifier_file), None
+        segmenter = PixelSegmenter(pipe)
+        out = yield from classifier_stages(pipe, segmenter, params, scribbles, classifier)
         if out.problem is not None:
-            raise PolarsegError(f"scribbles: {out.problem}")
-        return out.result
+            where = "scribbles" if out.trained else "classifier"
+            raise PolarsegError(f"{where}: {out.problem}")
+        return out
     yield from pipe.run_iter(reconstruction=True)
     return pipe.result(reconstruction=True, params=params)
 
@@ -103,6 +120,12 @@ class PlotsWidget(StackWidget):
     against ρ or φ coloured by segment, the PCA's explained variance, or histograms of Î
     and of its reconstructions at L = 4, 12, 20. *Add component maps* adds the first
     principal components at pixel resolution as image layers (replaced in place).
+
+    *feature importances* shows the largest importances (at most :data:`TOP_FEATURES`)
+    of the pixel classifier behind the segments when they come from scribbles or a
+    loaded classifier; a docked *Segment by material* widget hands over every
+    retrained classifier of the chosen stack (:meth:`set_classifier`), so the chart
+    follows the strokes as they are painted.
     """
 
     run_text = "Load segmentation"
@@ -115,6 +138,8 @@ class PlotsWidget(StackWidget):
         super().__init__(viewer)
         self.result: SegmentationResult | None = None
         self.histograms: plots.ReconstructionHistograms | None = None
+        #: The pixel classifier of the chosen stack's segments (None: not from one).
+        self.classifier: PixelClassifier | None = None
         self._source: Layer | None = None
         self.plot = ComboBox(
             label="plot", choices=list(PLOTS), value="scatter_dop", tooltip="What to plot"
@@ -147,7 +172,8 @@ class PlotsWidget(StackWidget):
         """The mask region and scribbles of the stack's last segmentation, and notes.
 
         Read from the layers the ``segments`` layer's metadata names (raises
-        PolarsegError if one was removed); a note says when one was edited since.
+        PolarsegError if one was removed); a note says when one was edited since. (A
+        classifier file the segments came from is :meth:`segmentation_classifier_file`.)
         """
         segments = find_output(self._viewer, "segments", layer)
         inputs = None if segments is None else segments.metadata.get("polarseg_inputs")
@@ -172,6 +198,27 @@ class PlotsWidget(StackWidget):
             found[role] = data
         return found["mask"], found["scribbles"], notes
 
+    def segmentation_classifier_file(self, layer: Layer) -> str | None:
+        """The classifier file the stack's last segmentation applied, if any."""
+        segments = find_output(self._viewer, "segments", layer)
+        inputs = None if segments is None else segments.metadata.get("polarseg_inputs")
+        path = inputs.get("classifier") if isinstance(inputs, dict) else None
+        return path if isinstance(path, str) else None
+
+    def _segment_widget_classifier(self) -> PixelClassifier | None:
+        """The docked Segment widget's pixel classifier of the chosen stack, if any."""
+        from .segment import SegmentWidget
+
+        layer = self.stack_layer.value
+        if layer is None:
+            return None
+        for widget in self._viewer.window.dock_widgets.values():
+            if isinstance(widget, SegmentWidget):
+                classifier = widget.shown_classifier(layer)
+                if classifier is not None:
+                    return classifier
+        return None
+
     def _layer_by_key(self, key: Any) -> Layer | None:
         for candidate in self._viewer.layers:
             if source_key(candidate) == key:
@@ -180,13 +227,21 @@ class PlotsWidget(StackWidget):
 
     def cached_result(self, layer: Layer, params: SegmentParams) -> SegmentationResult | None:
         """The docked Segment widget's result behind ``layer``'s ``segments`` layer."""
+        found = self._cached(layer, params)
+        return None if found is None else found[0]
+
+    def _cached(
+        self, layer: Layer, params: SegmentParams
+    ) -> tuple[SegmentationResult, PixelClassifier | None] | None:
+        """The docked Segment widget's result behind ``layer``'s segments and its
+        pixel classifier (None when the labels came from the cut)."""
         from .segment import SegmentWidget
 
         for widget in self._viewer.window.dock_widgets.values():
             if isinstance(widget, SegmentWidget):
                 result = widget.shown_result(layer)
                 if result is not None and result.params == params:
-                    return result
+                    return result, widget.shown_classifier(layer)
         return None
 
     def run(self, *_: Any) -> None:
@@ -197,37 +252,66 @@ class PlotsWidget(StackWidget):
         except PolarsegError as exc:
             self._fail(exc)
             return
-        result = self.cached_result(layer, params)
-        if result is not None:
-            self.set_result(layer, result)
+        cached = self._cached(layer, params)
+        if cached is not None:
+            self.set_result(layer, cached[0], classifier=cached[1])
             return
         try:
             region, scribbles, notes = self.segmentation_inputs(layer)
         except PolarsegError as exc:
             self._fail(exc)
             return
+        classifier_file = self.segmentation_classifier_file(layer)
 
         def on_result(run_id: int, value: Any) -> None:
             if layer in self._viewer.layers and self.stack_layer.value is layer:
-                self.set_result(layer, value, notes)
+                if isinstance(value, ClassifierOutput):
+                    self.set_result(layer, value.result, notes, value.classifier)
+                else:
+                    self.set_result(layer, value, notes)
 
-        args = (layer.data, np.deg2rad(angles_deg), params, region, scribbles)
-        total = len(STAGES) if scribbles is None else len(SCRIBBLE_STAGES)
+        args = (layer.data, np.deg2rad(angles_deg), params, region, scribbles, classifier_file)
+        classify = scribbles is not None or classifier_file is not None
+        total = len(CLASSIFIER_STAGES) if classify else len(STAGES)
         self._submit(segment_job, args, total, on_result)
 
     def set_result(
-        self, layer: Layer, result: SegmentationResult, notes: list[str] | None = None
+        self,
+        layer: Layer,
+        result: SegmentationResult,
+        notes: list[str] | None = None,
+        classifier: PixelClassifier | None = None,
     ) -> None:
-        """Plot ``result`` (a segmentation of ``layer``)."""
+        """Plot ``result`` (a segmentation of ``layer``; ``classifier``: the pixel
+        classifier its labels came from, for the feature importances)."""
         self.result, self._source, self.histograms = result, layer, None
+        self.classifier = classifier
         parts = [f"{result.n_segments} segments", f"{result.features.shape[1]} components"]
         self._done(" · ".join([*parts, *(notes or [])]))
         self.draw()
 
+    def set_classifier(self, layer: Layer, classifier: PixelClassifier | None) -> None:
+        """A new pixel classifier behind ``layer``'s segments (None: they no longer come
+        from one). Kept when ``layer`` is the chosen stack; the chart is redrawn only
+        while it is shown."""
+        try:
+            if self.stack_layer.value is not layer:
+                return
+            self.classifier = classifier
+            if self.plot.value == "importances":
+                self.draw()
+        except RuntimeError:  # the widget was deleted
+            pass
+
     def _on_stack_changed(self, layer: Layer | None) -> None:
         super()._on_stack_changed(layer)
-        if getattr(self, "result", None) is not None and layer is not self._source:
+        if getattr(self, "plot", None) is None:  # the base class initialises
+            return
+        self.classifier = None  # the new stack's comes from the Segment widget
+        if self.result is not None and layer is not self._source:
             self.result, self._source, self.histograms = None, None, None
+            self.draw()
+        elif self.plot.value == "importances":
             self.draw()
 
     # -- drawing -----------------------------------------------------------------------
@@ -236,7 +320,9 @@ class PlotsWidget(StackWidget):
         kind = self.plot.value
         result = self.result
         fig, theme = self.figure, self.theme
-        if result is None:
+        if kind == "importances":
+            self._draw_importances()
+        elif result is None:
             self._message("press 'Load segmentation' to plot the stack's last segmentation")
         elif kind in ("scatter_dop", "scatter_phase"):
             data = plots.scatter_data(result, MAX_POINTS)
@@ -259,6 +345,22 @@ class PlotsWidget(StackWidget):
 
             self._submit(histogram_job, (result, HISTOGRAM_DEGREES), 1, on_result)
         self.canvas.draw_idle()
+
+    def _draw_importances(self) -> None:
+        clf = self.classifier
+        if clf is None:
+            clf = self.classifier = self._segment_widget_classifier()
+        if clf is None:
+            self._message(
+                "no pixel classifier: paint scribbles (or load a classifier) in 'Segment "
+                "by material', or press 'Load segmentation'"
+            )
+            return
+        data = plots.feature_importances(clf.importances(), TOP_FEATURES)
+        if not data.names:
+            self._message(f"the {clf.params.model} classifier has no feature importances")
+            return
+        figures.importances_figure(data, self.figure, self.theme)
 
     def _message(self, text: str) -> None:
         self.figure.clear()

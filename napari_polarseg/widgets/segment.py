@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import time
-from collections.abc import Generator
+from collections.abc import Callable, Generator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -30,20 +30,22 @@ from ..io import read_params_file
 from ._base import StackWidget
 from ._layers import find_output, remove_output, show_output, source_key
 from ._runner import (
-    SCRIBBLE_STAGES,
+    CLASSIFIER_STAGES,
+    ClassifierOutput,
     Partial,
     PipelineStore,
     Result,
-    ScribbleOutput,
     WorkerSlot,
+    classifier_stages,
     content_digest,
     scribble_problem,
-    scribble_stages,
 )
 
 if TYPE_CHECKING:
     import napari
     from napari.layers import Layer
+
+    from ..engine.pixel_classifier import PixelClassifier
 
 #: Milliseconds the live update waits after the last change before it reruns.
 LIVE_DELAY_MS = 150
@@ -155,21 +157,76 @@ def float_box(decimals: int, **kwargs: Any) -> FloatSpinBox:
     return box
 
 
-def scribble_job(
+def classifier_job(
     store: PipelineStore,
     key: str,
     data: Any,
     angles_rad: np.ndarray,
     params: SegmentParams,
-    scribbles: np.ndarray,
+    scribbles: np.ndarray | None,
+    classifier: PixelClassifier | None,
     region: np.ndarray | None = None,
     mask_key: str | None = None,
-) -> Generator[tuple[str, int, int], None, ScribbleOutput]:
+    cancel: Callable[[], bool] | None = None,
+) -> Generator[Any, None, ClassifierOutput]:
     """Worker job of the scribble mode: the cached pipeline's stages up to the block
-    features (and the reconstruction), then the classifier trained on ``scribbles``
-    (:func:`~napari_polarseg.widgets._runner.scribble_stages`)."""
+    features, the stack's kept pixel features, then the pixel classifier trained on
+    ``scribbles`` (or the loaded ``classifier`` applied) and the reconstruction
+    (:func:`~napari_polarseg.widgets._runner.classifier_stages`). ``cancel`` stops the
+    prediction between chunks."""
     pipe = store.obtain(key, data, angles_rad, params, region=region, mask_key=mask_key)
-    return (yield from scribble_stages(pipe, scribbles, params, reconstruction=True))
+    segmenter = store.segmenter(key)
+    assert segmenter is not None
+    return (
+        yield from classifier_stages(
+            pipe, segmenter, params, scribbles, classifier, reconstruction=True, cancel=cancel
+        )
+    )
+
+
+def read_classifier_job(path: Path) -> Generator[tuple[str, int, int], None, PixelClassifier]:
+    """Worker job of *Load classifier…*: the checked classifier file (never runs code
+    from it; a bad file raises a one-line :class:`PolarsegError`)."""
+    from ..classifier_file import load_pixel_classifier
+
+    yield "reading", 1, 1
+    return load_pixel_classifier(path)
+
+
+def write_classifier_job(
+    path: Path, classifier: PixelClassifier
+) -> Generator[tuple[str, int, int], None, Path]:
+    """Worker job of *Save classifier…*: the classifier file, written atomically."""
+    from ..classifier_file import save_pixel_classifier
+
+    yield "writing", 1, 1
+    save_pixel_classifier(path, classifier)
+    return path
+
+
+def classifier_text(classifier: PixelClassifier) -> str:
+    """``"random_forest, 3 classes (1, 2, 3), 30 features, trained on 273 pixels"``."""
+    classes = ", ".join(str(int(c)) for c in classifier.classes)
+    return (
+        f"{classifier.params.model}, {classifier.classes.size} classes ({classes}), "
+        f"{len(classifier.feature_names)} features, "
+        f"trained on {classifier.n_training_pixels} pixels"
+    )
+
+
+@dataclass(eq=False)
+class LoadedClassifier:
+    """A classifier read by *Load classifier…*, applied instead of training.
+
+    ``strokes`` is the (layer key, content digest) of the chosen scribbles when it was
+    loaded: once they differ (the user painted, or chose other strokes) the widget
+    trains on the strokes again. ``serial`` tells one load from another in snapshots.
+    """
+
+    classifier: PixelClassifier
+    path: Path
+    strokes: tuple[str | None, str | None]
+    serial: int
 
 
 @dataclass
@@ -186,6 +243,7 @@ class ExportRecord:
     mask: Any = None
     source: str | None = None
     probabilities: np.ndarray | None = None
+    uncertainty: np.ndarray | None = None
     info: dict[str, Any] = field(default_factory=dict)
     summary: dict[str, Any] = field(default_factory=dict)
 
@@ -198,6 +256,7 @@ class ExportRecord:
             "source": self.source,
             "command": "napari",
             "probabilities": self.probabilities,
+            "uncertainty": self.uncertainty,
             "info": self.info,
             "summary": self.summary,
         }
@@ -238,17 +297,26 @@ class SegmentWidget(StackWidget):
     mode, clustering (recursive two-way cuts or k-way spectral), minimum segment size,
     number of segments, the sinusoid fit (least squares or robust), a mask (none, or a
     Labels layer of the stack's height x width: non-zero = segment the pixel) and
-    scribbles (none = unsupervised, or a Labels layer of strokes, 1, 2, … = materials);
-    *New scribbles layer*; Run and Cancel; a live-update toggle that reruns after every
-    change, including every stroke painted into the chosen mask or scribbles layer;
-    *Export results…* (:meth:`export_results`: the chosen stack's last result as the
-    folder ``polarseg segment --out`` writes).
+    scribbles (none = unsupervised, or a Labels layer of strokes, 1, 2, … = materials:
+    the pixel classifier trained on the strokes replaces the normalized cut);
+    *New scribbles layer*; *Load classifier…*, *Save classifier…* and *Clear classifier*
+    (:meth:`load_classifier`, :meth:`save_classifier`, :meth:`clear_classifier`: the
+    ``.polarseg-clf`` files of ``polarseg segment --classifier / --save-classifier``);
+    Run and Cancel; a live-update toggle that reruns after every change, including every
+    stroke painted into the chosen mask or scribbles layer; *Export results…*
+    (:meth:`export_results`: the chosen stack's last result as the folder ``polarseg
+    segment --out`` writes).
     Saturated samples (at the integer dtype's maximum) and black ones (at or below 0)
     are always left out of the fit and counted in the status line.
 
     One :class:`~napari_polarseg.engine.Pipeline` is kept per stack layer, so a rerun
     computes only the stages a change made stale (changing the number of segments
-    recomputes only the labels; repainting scribbles only retrains the classifier). The
+    recomputes only the labels). Beside it a
+    :class:`~napari_polarseg.engine.pixel_segmentation.PixelSegmenter` keeps the stack's
+    pixel features, so a painted stroke only retrains the pixel classifier and predicts
+    again; a new stroke (or any change) during a retraining stops its prediction between
+    chunks and starts the newest request. A loaded classifier is applied to the chosen
+    stack without retraining until the strokes change or it is cleared. The
     mask is read at every run: choosing another one, or painting the chosen Labels
     layer, builds a new pipeline at the next run. At most one worker runs at a time; a
     change during a run stops it at the next stage boundary and starts the newest
@@ -263,10 +331,14 @@ class SegmentWidget(StackWidget):
     Once a run leaves pixels out (mask, saturated, black) or uses the robust fit, also
     ``masked pixels`` (Labels, 1 where a pixel was left out of the fit and the features)
     and ``fit residual`` (Image, RMS residual of the per-pixel sinusoid fit), both added
-    hidden and updated on every later run. With scribbles, also ``class probability``
-    (Image, hidden: the classifier's probability of the chosen class, 1/K … 1, low where
-    it hesitates between materials); the probabilities of every class are
-    :attr:`probabilities` (K, H, W) with their labels in :attr:`classes`.
+    hidden and updated on every later run. With scribbles (or a loaded classifier), also
+    ``class probability`` (Image, hidden: the classifier's probability of the chosen
+    class, 1/K … 1, low where it hesitates between materials) and ``uncertainty``
+    (Image, hidden: 1 − (p1 − p2), one minus the margin between the two most probable
+    classes, 0 sure … 1 a tie: where another stroke helps most); the probabilities of
+    every class are :attr:`probabilities` (K, H, W) with their labels in
+    :attr:`classes`, the uncertainty is :attr:`uncertainty`. A docked *Polarisation
+    plots* widget is handed every new classifier (its feature importances).
 
     Parameters
     ----------
@@ -288,6 +360,15 @@ class SegmentWidget(StackWidget):
         #: scribble label of each class (None after an unsupervised run).
         self.probabilities: np.ndarray | None = None
         self.classes: np.ndarray | None = None
+        #: Uncertainty (H, W) of the last scribble run shown (None after an unsupervised run).
+        self.uncertainty: np.ndarray | None = None
+        #: Per stack key: the pixel classifier behind the stack's ``segments`` layer.
+        self._classifiers: dict[str, PixelClassifier] = {}
+        #: The classifier *Load classifier…* read, while it is applied.
+        self.loaded: LoadedClassifier | None = None
+        self._loads = 0  # serial number of the last load
+        self._classifier_dir = Path.home()
+        self._classifier_slot = WorkerSlot("Classifier file", on_status=self._set_status)
         self._requested: tuple[Any, ...] | None = None  # snapshot of the last request
         self._force = False  # a control changed: the next live run is not skipped
         self._watched: dict[str, Any] = {"mask": None, "scribbles": None}
@@ -447,8 +528,10 @@ class SegmentWidget(StackWidget):
             choices=self._labels_choices,
             nullable=True,
             tooltip="Strokes per material in a Labels layer of the stack's height x width "
-            "(0 = unlabelled, 1, 2, … = materials, at least two): a classifier of the "
-            "block features trained on the scribbled blocks replaces the normalized cut",
+            "(0 = unlabelled, 1, 2, … = materials, at least two): a pixel classifier "
+            "(random forest on multi-scale polarisation features) trained on the "
+            "scribbled pixels replaces the normalized cut; with live update every stroke "
+            "retrains it",
         )
         self.scribbles_layer.null_string = NO_SCRIBBLES
         self.scribbles_layer.reset_choices()
@@ -459,6 +542,36 @@ class SegmentWidget(StackWidget):
             "scribbles and start the paint brush: paint label 1 on one material, 2 on "
             "another, …",
         )
+        self.load_classifier_button = PushButton(
+            text="Load classifier…",
+            tooltip="Apply a saved pixel classifier (.polarseg-clf, from 'Save classifier…' "
+            "or polarseg segment --save-classifier) to the chosen stack without "
+            "retraining, until the strokes change or it is cleared. The file is checked "
+            "and never runs code",
+        )
+        self.save_classifier_button = PushButton(
+            text="Save classifier…",
+            enabled=False,
+            tooltip="Write the pixel classifier behind the chosen stack's segments to a "
+            ".polarseg-clf file (for 'Load classifier…' and polarseg segment --classifier)",
+        )
+        self.clear_classifier_button = PushButton(
+            text="Clear",
+            enabled=False,
+            tooltip="Stop applying the loaded classifier: train on the strokes again (or "
+            "segment without supervision)",
+        )
+        self.classifier_file = Container(
+            layout="horizontal",
+            widgets=[
+                self.load_classifier_button,
+                self.save_classifier_button,
+                self.clear_classifier_button,
+            ],
+            labels=False,
+            label="classifier",
+        )
+        self.classifier_file.margins = (0, 0, 0, 0)
         self.export_button = PushButton(
             text="Export results…",
             enabled=False,
@@ -476,6 +589,7 @@ class SegmentWidget(StackWidget):
                 self.mask_layer,
                 self.scribbles_layer,
                 self.new_scribbles_button,
+                self.classifier_file,
                 self.live,
             ]
         )
@@ -499,6 +613,10 @@ class SegmentWidget(StackWidget):
         self.load_button.changed.connect(self._on_load_clicked)
         self.save_button.changed.connect(self._on_save_clicked)
         self.export_button.changed.connect(self._on_export_clicked)
+        self.load_classifier_button.changed.connect(self._on_load_classifier_clicked)
+        self.save_classifier_button.changed.connect(self._on_save_classifier_clicked)
+        self.clear_classifier_button.changed.connect(self.clear_classifier)
+        self.stack_layer.changed.connect(self._update_classifier_buttons)
         self.stack_layer.changed.connect(self._update_export_button)
         watches, on_edit = self._watched, self._on_layer_edited
 
@@ -629,6 +747,150 @@ class SegmentWidget(StackWidget):
         if path:
             self.load_params(path)
 
+    # -- classifier files -------------------------------------------------------------
+    @property
+    def classifier(self) -> PixelClassifier | None:
+        """The pixel classifier behind the chosen stack's segments (None if they did not
+        come from it): what *Save classifier…* writes."""
+        layer = self.stack_layer.value
+        return None if layer is None else self.shown_classifier(layer)
+
+    def shown_classifier(self, layer: Layer) -> PixelClassifier | None:
+        """The pixel classifier behind ``layer``'s ``segments`` layer, if this widget made
+        them with one (trained on strokes or loaded)."""
+        if self.shown_result(layer) is None:
+            return None
+        return self._classifiers.get(source_key(layer))
+
+    def save_classifier(self, path: str | Path) -> bool:
+        """Write the chosen stack's pixel classifier to ``path`` in a worker thread.
+
+        The ``.polarseg-clf`` format of ``polarseg segment --save-classifier`` (the suffix
+        is added when missing). Returns whether the writing started; the status line then
+        says where it went, or why it could not be written (also as a notification).
+        """
+        classifier = self.classifier
+        if classifier is None:
+            self._fail(
+                PolarsegError(
+                    "no classifier to save: paint strokes of at least 2 materials into the "
+                    "scribbles layer and run first"
+                )
+            )
+            return False
+        from ..classifier_file import SUFFIX
+
+        path = Path(path)
+        if not path.name.endswith(SUFFIX):
+            path = path.with_name(path.name + SUFFIX)
+
+        def on_result(run_id: int, written: Path) -> None:
+            self._classifier_dir = written.parent
+            self._set_status(f"saved the classifier to {written}")
+
+        self._set_status(f"saving the classifier to {path}…")
+        self._classifier_slot.submit(write_classifier_job, (path, classifier), 1, on_result)
+        return True
+
+    def load_classifier(self, path: str | Path) -> bool:
+        """Read a classifier file in a worker thread and apply it to the chosen stack.
+
+        The file is checked before anything in it is used and never runs code
+        (:func:`napari_polarseg.classifier_file.load_pixel_classifier`). A bad file is
+        reported in the status line (and a notification) and changes nothing else. A good
+        one is applied, without retraining, to the chosen stack at once and at every
+        later run, until the scribbles change (painting, another layer) or
+        :meth:`clear_classifier`. Returns whether the reading started.
+        """
+        path = Path(path)
+
+        def on_result(run_id: int, classifier: PixelClassifier) -> None:
+            try:
+                key, strokes = self.current_scribbles()
+            except PolarsegError:
+                key, strokes = None, None
+            self._loads += 1
+            self.loaded = LoadedClassifier(
+                classifier, path, (key, content_digest(strokes)), self._loads
+            )
+            self._classifier_dir = path.parent
+            self._update_classifier_buttons()
+            self._on_scribbles_changed()
+            self._set_status(f"loaded the classifier {path.name}: {classifier_text(classifier)}")
+            if self.stack_layer.value is not None:
+                self.run()
+
+        self._set_status(f"reading the classifier {path}…")
+        self._classifier_slot.submit(read_classifier_job, (path,), 1, on_result)
+        return True
+
+    def clear_classifier(self, *_: Any) -> None:
+        """Stop applying the loaded classifier (a rerun trains on the strokes again, or
+        segments without supervision when no scribbles layer is chosen)."""
+        if self.loaded is None:
+            return
+        name, self.loaded = self.loaded.path.name, None
+        self._update_classifier_buttons()
+        self._on_scribbles_changed()
+        self._set_status(f"the classifier {name} is no longer applied")
+        self._on_value_changed()
+
+    def _applied(self, scribble_key: str | None, digest: str | None) -> LoadedClassifier | None:
+        """The loaded classifier if it still applies (the strokes are as when loaded)."""
+        loaded = self.loaded
+        if loaded is None or loaded.strokes != (scribble_key, digest):
+            return None
+        return loaded
+
+    def _ask_classifier_path(self, save: bool) -> str | None:
+        """A classifier file chosen in a Qt dialog (None when cancelled)."""
+        from qtpy.QtWidgets import QFileDialog
+
+        from ..classifier_file import SUFFIX
+
+        filters = f"Classifier (*{SUFFIX});;All files (*)"
+        if save:
+            layer = self.stack_layer.value
+            stem = "classifier" if layer is None else f"{layer.name} classifier"
+            start = str(self._classifier_dir / f"{stem}{SUFFIX}")
+            path, _ = QFileDialog.getSaveFileName(self.native, "Save classifier", start, filters)
+        else:
+            start = str(self._classifier_dir)
+            path, _ = QFileDialog.getOpenFileName(self.native, "Load classifier", start, filters)
+        return path or None
+
+    def _on_save_classifier_clicked(self, *_: Any) -> None:
+        path = self._ask_classifier_path(save=True)
+        if path:
+            self.save_classifier(path)
+
+    def _on_load_classifier_clicked(self, *_: Any) -> None:
+        path = self._ask_classifier_path(save=False)
+        if path:
+            self.load_classifier(path)
+
+    def _update_classifier_buttons(self, *_: Any) -> None:
+        button = getattr(self, "save_classifier_button", None)  # None while being built
+        if button is None:
+            return
+        try:
+            button.enabled = self.classifier is not None
+            self.clear_classifier_button.enabled = self.loaded is not None
+        except RuntimeError:  # the widget was deleted
+            pass
+
+    def _notify_plots(self, layer: Layer, classifier: PixelClassifier | None) -> None:
+        """Hand a docked *Polarisation plots* widget the stack's new classifier."""
+        from .plots import PlotsWidget
+
+        try:
+            docked = list(self._viewer.window.dock_widgets.values())
+        except (AttributeError, RuntimeError):  # no window (headless viewer) or closing
+            return
+        for widget in docked:
+            if isinstance(widget, PlotsWidget):
+                widget.set_classifier(layer, classifier)
+
     # -- exporting --------------------------------------------------------------------
     def export_results(
         self, folder: str | Path, *, overview: bool = True, plots: bool = False
@@ -640,12 +902,12 @@ class SegmentWidget(StackWidget):
         class index, 0 = smallest scribble value), the float maps, ``mask.tif``,
         ``segments.csv``, ``params.json`` (reloads with :meth:`load_params` and ``polarseg
         segment --params``), ``summary.json``, ``overview.png`` (unless ``overview`` is
-        False), the analyst's plots in ``plots/`` with ``plots``, and after a scribble run
-        ``probabilities.tif``. The result is the one the stack's ``segments`` layer was
-        made from, with the stack, angles, parameters and mask of that run. Returns
-        whether the export started; the status line then says how many files were
-        written, or why they could not be (also as a notification). :meth:`wait` waits for
-        it.
+        False), the analyst's plots in ``plots/`` with ``plots``, and when the labels came
+        from the pixel classifier ``probabilities.tif`` and ``uncertainty.tif``. The
+        result is the one the stack's ``segments`` layer was made from, with the stack,
+        angles, parameters and mask of that run. Returns whether the export started; the
+        status line then says how many files were written, or why they could not be (also
+        as a notification). :meth:`wait` waits for it.
         """
         layer = self.stack_layer.value
         record = None if layer is None else self._exports.get(source_key(layer))
@@ -687,33 +949,33 @@ class SegmentWidget(StackWidget):
         layer: Layer,
         angles_deg: np.ndarray,
         result: SegmentationResult,
-        out: ScribbleOutput | None,
+        out: ClassifierOutput | None,
         inputs: dict[str, Any],
     ) -> None:
         """Keep what *Export results…* needs of the result just shown for ``layer``."""
+        from ..export import classifier_summary
+
         key = source_key(layer)
         pipe = self.store.get(key)  # the pipeline that made the result (its pixel mask)
         source = getattr(getattr(layer, "source", None), "path", None)
         summary: dict[str, Any] = {}
         if out is not None:
-            assert out.classes is not None
-            summary = {
-                "labels_from": "scribbles",
-                "scribble_classes": [int(c) for c in out.classes],
-                "scribble_training_blocks": out.training_blocks,
-            }
+            labels_from = "scribbles" if out.trained else "classifier"
+            summary = classifier_summary(out.segmentation, labels_from)
         self._exports[key] = ExportRecord(
             stack=layer.data,
             angles_deg=np.asarray(angles_deg, dtype=float),
             result=result,
             mask=None if pipe is None else pipe.mask,
             source=None if source is None else str(source),
-            probabilities=None if out is None else out.probabilities,
+            probabilities=None if out is None else out.prediction.probabilities,
+            uncertainty=None if out is None else out.prediction.uncertainty,
             info={
                 "napari": {
                     "stack_layer": layer.name,
                     "mask_layer": inputs.get("mask"),
                     "scribbles_layer": inputs.get("scribbles"),
+                    "classifier_file": inputs.get("classifier"),
                 }
             },
             summary=summary,
@@ -729,7 +991,7 @@ class SegmentWidget(StackWidget):
                 chooser.reset_choices()
         if getattr(self, "scribbles_layer", None) is not None:
             self._sync_watches()
-            self._on_scribbles_changed(self.scribbles_layer.value)
+            self._on_scribbles_changed()
 
     def current_mask(self) -> tuple[str | None, np.ndarray | None]:
         """Key and (H, W) bool region (a copy; True = use) of the chosen mask, or Nones."""
@@ -777,9 +1039,11 @@ class SegmentWidget(StackWidget):
         )
         return layer
 
-    def _on_scribbles_changed(self, layer: Layer | None = None) -> None:
-        for name in CUT_ONLY:  # the classifier replaces the cut: its controls do nothing
-            getattr(self, name).enabled = layer is None
+    def _on_scribbles_changed(self, *_: Any) -> None:
+        # the classifier replaces the cut: its controls do nothing
+        unsupervised = self.scribbles_layer.value is None and self.loaded is None
+        for name in CUT_ONLY:
+            getattr(self, name).enabled = unsupervised
 
     def _sync_watches(self, *_: Any) -> None:
         """Listen to edits of the chosen mask and scribbles layers (and no others)."""
@@ -825,6 +1089,8 @@ class SegmentWidget(StackWidget):
     ) -> tuple[Any, ...]:
         layer = self.stack_layer.value
         key = None if layer is None else source_key(layer)
+        digest = content_digest(scribbles)
+        loaded = self._applied(scribble_key, digest)
         return (
             key,
             self.angles.value,
@@ -832,7 +1098,8 @@ class SegmentWidget(StackWidget):
             mask_key,
             region_digest(region),
             scribble_key,
-            content_digest(scribbles),
+            digest,
+            None if loaded is None else loaded.serial,
         )
 
     @property
@@ -869,6 +1136,11 @@ class SegmentWidget(StackWidget):
             for key in set(exports) - keep:
                 del exports[key]
             self._update_export_button()
+        classifiers = getattr(self, "_classifiers", None)
+        if classifiers is not None:
+            for key in set(classifiers) - keep:
+                del classifiers[key]
+            self._update_classifier_buttons()
 
     def _on_model_changed(self, model: str) -> None:
         self.specular_branch.visible = model == "specular"
@@ -889,14 +1161,17 @@ class SegmentWidget(StackWidget):
             self._live_run = False
 
     def _waiting(self) -> bool:
-        return self._timer.isActive() or self._export_slot.busy
+        return self._timer.isActive() or self._export_slot.busy or self._classifier_slot.busy
 
     # -- running ----------------------------------------------------------------------
     def run(self, *_: Any) -> None:
         """Start (or queue) a run with the current values in a worker; returns at once.
 
-        With a scribbles layer chosen, the classifier replaces the normalized cut; strokes
-        of fewer than two materials are reported in the status line and nothing runs.
+        With a scribbles layer chosen, the pixel classifier trained on its strokes
+        replaces the normalized cut; strokes of fewer than two materials are reported in
+        the status line and nothing runs. A loaded classifier is applied instead of
+        training while the strokes are as they were when it was loaded; once they have
+        changed, it is dropped and the strokes train the classifier again.
         """
         self._timer.stop()
         self._force = False
@@ -911,14 +1186,22 @@ class SegmentWidget(StackWidget):
             return
         snap = self._snapshot_of(params, mask_key, region, scribble_key, scribbles)
         self._requested = snap
-        if scribbles is not None:
+        loaded = self._applied(scribble_key, snap[6])
+        if self.loaded is not None and loaded is None:  # painted since: train again
+            self.loaded = None
+            self._update_classifier_buttons()
+            self._on_scribbles_changed()
+        if scribbles is not None and loaded is None:
             problem = scribble_problem(scribbles)
             if problem is not None:
                 self._set_status(f"scribbles: {problem}")
                 return
         inputs = {
             "mask": _input_info(self.mask_layer.value, mask_key, snap[4]),
-            "scribbles": _input_info(self.scribbles_layer.value, scribble_key, snap[6]),
+            "scribbles": None
+            if loaded is not None
+            else _input_info(self.scribbles_layer.value, scribble_key, snap[6]),
+            "classifier": None if loaded is None else str(loaded.path),
         }
         key = source_key(layer)
         t0 = time.perf_counter()
@@ -928,8 +1211,9 @@ class SegmentWidget(StackWidget):
             if snap != self.snapshot() or layer not in self._viewer.layers:
                 self._set_status("result dropped: the parameters changed while it was computed")
                 return
-            if isinstance(result, ScribbleOutput) and result.problem is not None:
-                self._set_status(f"scribbles: {result.problem}")
+            if isinstance(result, ClassifierOutput) and result.problem is not None:
+                where = "scribbles" if result.trained else "classifier"
+                self._set_status(f"{where}: {result.problem}")
                 return
             self._show(layer, angles_deg, result, time.perf_counter() - t0, inputs)
 
@@ -938,45 +1222,49 @@ class SegmentWidget(StackWidget):
             if snap == self.snapshot() and layer in self._viewer.layers:
                 self._show(layer, angles_deg, result, time.perf_counter() - t0, inputs)
 
-        if scribbles is None:
+        if scribbles is None and loaded is None:
             args = (self.store, key, layer.data, angles_rad, params, region, mask_key, True)
             job, total = segment_job, len(STAGES)
         else:
-            args = (self.store, key, layer.data, angles_rad, params, scribbles, region, mask_key)
-            job, total = scribble_job, len(SCRIBBLE_STAGES)
-        self._submit(job, args, total, on_result, on_partial, live=self._live_run)
+            classifier = None if loaded is None else loaded.classifier
+            strokes = None if loaded is not None else scribbles
+            args = (self.store, key, layer.data, angles_rad, params, strokes, classifier)
+            args += (region, mask_key)
+            job, total = classifier_job, len(CLASSIFIER_STAGES)
+        cancellable = job is classifier_job  # a new stroke stops the prediction at once
+        self._submit(job, args, total, on_result, on_partial, self._live_run, cancellable)
 
     def _show(
         self,
         layer: Layer,
         angles_deg: np.ndarray,
-        result: SegmentationResult | ScribbleOutput,
+        result: SegmentationResult | ClassifierOutput,
         seconds: float,
         inputs: dict[str, Any] | None = None,
     ) -> None:
         """Show a run's layers and summary.
 
         A partial result (no reconstruction yet: the worker yielded it before its last
-        stage) updates the segments (and class probability) layers and the status line
-        only; the complete result that follows updates the rest. Labels equal to those
-        already shown only update the segments' metadata.
+        stage) updates the segments (and class probability, uncertainty) layers and the
+        status line only; the complete result that follows updates the rest. Labels equal
+        to those already shown only update the segments' metadata.
         """
-        inputs = inputs or {"mask": None, "scribbles": None}
-        out = result if isinstance(result, ScribbleOutput) else None
+        inputs = inputs or {"mask": None, "scribbles": None, "classifier": None}
+        out = result if isinstance(result, ClassifierOutput) else None
         if out is not None:
-            assert out.result is not None and out.probabilities is not None
-            assert out.classes is not None
             result = out.result
         assert isinstance(result, SegmentationResult)
         partial = result.reconstruction_error is None
         summary = result.summary()
         confidence = None
         if out is not None:
-            confidence = out.probabilities.max(axis=0).astype(np.float32)
-            summary["scribbles"] = {
-                "classes": [int(c) for c in out.classes],
-                "training_blocks": out.training_blocks,
+            confidence = out.prediction.probabilities.max(axis=0).astype(np.float32)
+            summary["classifier"] = {
+                "labels_from": "scribbles" if out.trained else "classifier",
+                "classes": [int(c) for c in out.prediction.classes],
+                "training_pixels": out.classifier.n_training_pixels,
                 "mean_class_probability": float(confidence.mean()),
+                "mean_uncertainty": float(out.prediction.uncertainty.mean()),
             }
         meta = {
             "polarseg_params": {**result.params.to_dict(), "angles_deg": angles_deg.tolist()},
@@ -984,7 +1272,7 @@ class SegmentWidget(StackWidget):
             "polarseg_inputs": inputs,
         }
         if out is not None:  # the scribble value of the chosen class: strokes' colours
-            labels = np.asarray(out.classes, dtype=np.int32)[result.labels]
+            labels = np.asarray(out.prediction.classes, dtype=np.int32)[result.labels]
         else:
             labels = np.asarray(result.labels, dtype=np.int32) + 1  # a copy: painting is safe
         if not partial:
@@ -1000,11 +1288,15 @@ class SegmentWidget(StackWidget):
                 self._show_below_segments("masked", masked, layer, meta)
         if out is not None:
             assert confidence is not None
+            prediction = out.prediction
             self._show_below_segments("probability", confidence, layer, meta)
-            self.probabilities, self.classes = out.probabilities, out.classes
+            self._show_below_segments("uncertainty", prediction.uncertainty, layer, meta)
+            self.probabilities, self.classes = prediction.probabilities, prediction.classes
+            self.uncertainty = prediction.uncertainty
         else:
-            remove_output(self._viewer, "probability", layer)  # it would be stale
-            self.probabilities, self.classes = None, None
+            for role in ("probability", "uncertainty"):  # they would be stale
+                remove_output(self._viewer, role, layer)
+            self.probabilities, self.classes, self.uncertainty = None, None, None
         segments = find_output(self._viewer, "segments", layer)
         if segments is not None and np.array_equal(segments.data, labels):
             # e.g. the partial result already shows these labels: keep the data (no redraw)
@@ -1012,19 +1304,15 @@ class SegmentWidget(StackWidget):
         else:
             show_output(self._viewer, "segments", labels, layer, meta)
         if out is not None:
-            assert out.classes is not None and confidence is not None
-            names = ", ".join(str(int(c)) for c in out.classes)
-            parts = [
-                f"{out.classes.size} materials from scribbles (labels {names})",
-                f"{out.training_blocks} training blocks",
-                f"mean class probability {float(confidence.mean()):.2f}",
-            ]
+            assert confidence is not None
+            parts = classifier_parts(out, confidence, inputs.get("classifier"))
         else:
             parts = [f"{summary['n_segments']} segments"]
         if partial:
             self._set_status(" · ".join([*parts, f"{seconds:.2f} s", "computing the error map…"]))
             return
         self._shown[source_key(layer)] = (result, inputs)
+        self._record_classifier(layer, None if out is None else out.classifier)
         self._record_export(layer, angles_deg, result, out, inputs)
         parts += [
             f"{summary['n_components']} PCA components "
@@ -1034,10 +1322,21 @@ class SegmentWidget(StackWidget):
         masked_text = mask_text(result.mask_counts)
         if masked_text:
             parts.append(masked_text)
-        if out is not None:
-            parts += out.notes
         parts.append(f"{seconds:.2f} s")
         self._done(" · ".join(parts))
+
+    def _record_classifier(self, layer: Layer, classifier: PixelClassifier | None) -> None:
+        """Keep the classifier behind ``layer``'s segments (for *Save classifier…* and
+        the plots' feature importances)."""
+        key = source_key(layer)
+        if classifier is None and key not in self._classifiers:
+            return
+        if classifier is None:
+            del self._classifiers[key]
+        else:
+            self._classifiers[key] = classifier
+        self._update_classifier_buttons()
+        self._notify_plots(layer, classifier)
 
     def _show_below_segments(self, role: str, data: np.ndarray, layer: Layer, meta: dict) -> None:
         """Add/update the ``role`` layer; a new one goes just below the segments (which a
@@ -1060,6 +1359,20 @@ class SegmentWidget(StackWidget):
         if result.params.fit != "lsq" or bool(masked.any()):
             return True
         return any(find_output(self._viewer, r, layer) is not None for r in ("masked", "residual"))
+
+
+def classifier_parts(
+    out: ClassifierOutput, confidence: np.ndarray, path: str | None = None
+) -> list[str]:
+    """The status line's first parts for labels from the pixel classifier."""
+    classes = out.prediction.classes
+    names = ", ".join(str(int(c)) for c in classes)
+    source = "from scribbles" if out.trained else f"from the classifier {Path(path or '').name}"
+    parts = [f"{classes.size} materials {source} (labels {names})"]
+    if out.trained:
+        parts.append(f"{out.classifier.n_training_pixels} training pixels")
+    parts.append(f"mean class probability {float(confidence.mean()):.2f}")
+    return parts
 
 
 def _input_info(layer: Layer | None, key: str | None, digest: str | None) -> dict | None:

@@ -63,7 +63,7 @@ def test_export_button_writes_the_folder_and_params_load_back(
     assert widget.params() == params
 
 
-def test_export_after_a_scribble_run_writes_the_probabilities(
+def test_export_after_a_scribble_run_writes_probabilities_and_uncertainty(
     viewer, open_sample, add_widget, qtbot, tmp_path
 ):
     open_sample("leaves")
@@ -80,16 +80,24 @@ def test_export_after_a_scribble_run_writes_the_probabilities(
     assert widget.export_results(tmp_path / "new" / "folder")  # created
     wait_idle(qtbot, widget)
     out = tmp_path / "new" / "folder"
-    assert set(os.listdir(out)) == FOLDER | {"probabilities.tif"}
+    assert set(os.listdir(out)) == FOLDER | {"probabilities.tif", "uncertainty.tif"}
     proba = tifffile.imread(out / "probabilities.tif")
     np.testing.assert_array_equal(proba, widget.probabilities.astype(np.float32))
+    uncertainty = tifffile.imread(out / "uncertainty.tif")
+    np.testing.assert_array_equal(uncertainty, widget.uncertainty)
+    np.testing.assert_array_equal(uncertainty, widget.output("uncertainty").data)
     labels = tifffile.imread(out / "labels.tif")
     np.testing.assert_array_equal(widget.classes[labels], widget.output("segments").data)
     summary = json.loads((out / "summary.json").read_text(encoding="utf-8"))
     assert summary["labels_from"] == "scribbles"
     assert summary["scribble_classes"] == [int(c) for c in widget.classes]
+    clf = summary["classifier"]
+    assert clf["n_training_pixels"] == widget.classifier.n_training_pixels
+    assert clf["n_features"] == len(widget.classifier.feature_names)
+    assert list(clf["top_features"]) == list(widget.classifier.importances())[:5]
     info = json.loads((out / "params.json").read_text(encoding="utf-8"))
     assert info["napari"]["scribbles_layer"]["name"] == scribbles.name
+    assert info["napari"]["classifier_file"] is None
 
 
 def test_unwritable_folder_and_nothing_to_export_report_in_the_status_line(

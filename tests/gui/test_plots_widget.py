@@ -7,6 +7,7 @@ from _gui_helpers import click, engine_result, error_messages, run_and_wait, wai
 from napari.layers import Image
 
 from napari_polarseg.engine import Pipeline, SegmentParams, validity_mask
+from napari_polarseg.engine.pixel_segmentation import PixelSegmenter
 from napari_polarseg.widgets._layers import TAG
 from napari_polarseg.widgets.plots import N_COMPONENTS, PlotsWidget
 
@@ -85,8 +86,8 @@ def _reference(stack, params, region=None, scribbles=None):
     angles = np.deg2rad(stack.metadata["angles_deg"])
     mask = None if region is None else validity_mask(np.asarray(stack.data), region=region)
     pipe = Pipeline(np.asarray(stack.data), angles, params, mask=mask)
-    if scribbles is not None:
-        return pipe.scribble_result(scribbles)[0]
+    if scribbles is not None:  # the pixel classifier trained on them
+        return PixelSegmenter(pipe).segment(scribbles).result.labels
     return pipe.run().labels
 
 
