@@ -76,11 +76,15 @@ import numpy as np
 import sklearn
 import skops
 import skops.io as sio
-from sklearn.ensemble import HistGradientBoostingClassifier, RandomForestClassifier
+from sklearn.ensemble import (
+    ExtraTreesClassifier,
+    HistGradientBoostingClassifier,
+    RandomForestClassifier,
+)
 from sklearn.ensemble._hist_gradient_boosting.binning import _BinMapper
 from sklearn.ensemble._hist_gradient_boosting.common import PREDICTOR_RECORD_DTYPE
 from sklearn.ensemble._hist_gradient_boosting.predictor import TreePredictor
-from sklearn.tree import DecisionTreeClassifier
+from sklearn.tree import DecisionTreeClassifier, ExtraTreeClassifier
 from sklearn.tree._tree import Tree
 
 from . import __version__
@@ -105,10 +109,15 @@ METADATA_NAME = "metadata.json"
 MEMBERS = (MANIFEST_NAME, MODEL_NAME, METADATA_NAME)
 
 _RF = "sklearn.ensemble._forest.RandomForestClassifier"
+_ET = "sklearn.ensemble._forest.ExtraTreesClassifier"
 _HGB = "sklearn.ensemble._hist_gradient_boosting.gradient_boosting.HistGradientBoostingClassifier"
 #: The estimators a classifier file may hold (the type at the root of the payload).
 ALLOWED_MODEL_TYPES = MappingProxyType(
-    {_RF: RandomForestClassifier, _HGB: HistGradientBoostingClassifier}
+    {
+        _RF: RandomForestClassifier,
+        _ET: ExtraTreesClassifier,
+        _HGB: HistGradientBoostingClassifier,
+    }
 )
 
 #: Every type the payload's object tree may name, as skops writes it
@@ -144,9 +153,11 @@ ALLOWED_TYPES = frozenset(
         # random_state=RandomState(...) and HGB's feature-subsampling generator
         "numpy.random.mtrand.RandomState",
         "numpy.random._generator.Generator",
-        # the random forest
+        # the random forests (and extremely randomised trees)
         _RF,
+        _ET,
         "sklearn.tree._classes.DecisionTreeClassifier",
+        "sklearn.tree._classes.ExtraTreeClassifier",
         "sklearn.tree._tree.Tree",
         # histogram gradient boosting
         _HGB,
@@ -336,8 +347,8 @@ def describe_classifier(path: PathLike) -> str:
         As :func:`load_classifier`.
     """
     model, metadata, _ = _read(path)
-    if isinstance(model, RandomForestClassifier):
-        kind = f"RandomForestClassifier ({len(model.estimators_)} trees)"
+    if isinstance(model, RandomForestClassifier | ExtraTreesClassifier):
+        kind = f"{type(model).__name__} ({len(model.estimators_)} trees)"
     else:
         kind = f"HistGradientBoostingClassifier ({len(model._predictors)} iterations)"
     classes = [str(c) for c in model.classes_.tolist()]
@@ -424,7 +435,7 @@ def check_model(model: Any) -> None:
     name = _type_name(type(model))
     if name not in ALLOWED_MODEL_TYPES or type(model) is not ALLOWED_MODEL_TYPES[name]:
         raise ValueError(
-            f"the model is a {name}; only RandomForestClassifier and "
+            f"the model is a {name}; only RandomForestClassifier, ExtraTreesClassifier and "
             "HistGradientBoostingClassifier (not subclasses or pipelines) are allowed"
         )
     n_features = getattr(model, "n_features_in_", None)
@@ -438,7 +449,7 @@ def check_model(model: Any) -> None:
             f"the model's class values have dtype {classes.dtype}; train on integer, float "
             "or str labels"
         )
-    if isinstance(model, RandomForestClassifier):
+    if isinstance(model, RandomForestClassifier | ExtraTreesClassifier):
         _check_forest(model, n_features, classes.size)
     else:
         _check_boosting(model, n_features, classes.size)
@@ -695,7 +706,15 @@ def _check_model_or_raise(path: Path, model: Any) -> None:
         raise _error(path, f"the model is malformed ({_first_line(exc)})") from None
 
 
-def _check_forest(model: RandomForestClassifier, n_features: int, n_classes: int) -> None:
+#: The tree type of each forest type.
+FOREST_TREES = MappingProxyType(
+    {RandomForestClassifier: DecisionTreeClassifier, ExtraTreesClassifier: ExtraTreeClassifier}
+)
+
+
+def _check_forest(
+    model: RandomForestClassifier | ExtraTreesClassifier, n_features: int, n_classes: int
+) -> None:
     if model.n_outputs_ != 1 or model.n_classes_ != n_classes:
         raise ValueError("the forest is not a single-output classifier of its classes")
     if model.n_jobs is not None and not _is_int(model.n_jobs):
@@ -704,7 +723,7 @@ def _check_forest(model: RandomForestClassifier, n_features: int, n_classes: int
     if not isinstance(trees, list) or not trees:
         raise ValueError("the forest has no trees")
     for i, est in enumerate(trees):
-        if type(est) is not DecisionTreeClassifier:
+        if type(est) is not FOREST_TREES[type(model)]:
             raise ValueError(f"tree {i} of the forest is a {_type_name(type(est))}")
         if est.n_features_in_ != n_features or est.n_outputs_ != 1 or est.n_classes_ != n_classes:
             raise ValueError(f"tree {i} of the forest does not match the forest's shape")

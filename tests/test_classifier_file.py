@@ -23,6 +23,7 @@ import pytest
 import skops.io as sio
 from sklearn.ensemble import (
     ExtraTreesClassifier,
+    GradientBoostingClassifier,
     HistGradientBoostingClassifier,
     RandomForestClassifier,
 )
@@ -303,8 +304,17 @@ def test_hist_gradient_boosting_round_trip(tmp_path: Path, kind: str, params: di
         ),
         RandomForestClassifier(n_estimators=3, max_leaf_nodes=8, bootstrap=False),
         HistGradientBoostingClassifier(max_iter=5, interaction_cst=[[0, 1], [2, 3, 4, 5]]),
+        ExtraTreesClassifier(n_estimators=5, n_jobs=-1, random_state=0),
+        ExtraTreesClassifier(n_estimators=3, class_weight="balanced", bootstrap=True),
     ],
-    ids=["class-weight-dict", "oob-randomstate", "max-leaf-nodes", "interaction-cst"],
+    ids=[
+        "class-weight-dict",
+        "oob-randomstate",
+        "max-leaf-nodes",
+        "interaction-cst",
+        "extra-trees",
+        "extra-trees-bootstrap",
+    ],
 )
 def test_more_settings_round_trip(tmp_path: Path, model: Any) -> None:
     model = _fit(model, kind="int32", n=200)
@@ -369,7 +379,9 @@ def test_save_is_atomic_and_overwrites(tmp_path: Path) -> None:
     [
         (lambda: SVC().fit(_data(0, 50), _labels("int64", 50)), {}, "only RandomForest"),
         (
-            lambda: ExtraTreesClassifier(n_estimators=2).fit(_data(0, 50), _labels("int64", 50)),
+            lambda: GradientBoostingClassifier(n_estimators=2).fit(
+                _data(0, 50), _labels("int64", 50)
+            ),
             {},
             "only RandomForest",
         ),
@@ -646,10 +658,10 @@ def test_bad_digests_in_manifest_are_refused(tmp_path: Path) -> None:
         lambda x, y: make_pipeline(
             FunctionTransformer(np.log1p), RandomForestClassifier(n_estimators=2)
         ).fit(np.abs(x), y),
-        lambda x, y: ExtraTreesClassifier(n_estimators=2).fit(x, y),
+        lambda x, y: GradientBoostingClassifier(n_estimators=2).fit(x, y),
         lambda x, y: DecisionTreeClassifier().fit(x, y),
     ],
-    ids=["SVC", "Pipeline-FunctionTransformer", "ExtraTrees", "DecisionTree"],
+    ids=["SVC", "Pipeline-FunctionTransformer", "GradientBoosting", "DecisionTree"],
 )
 def test_disallowed_estimators_are_refused(tmp_path: Path, make: Callable) -> None:
     x, y = _data(0, 80), _labels("int64", 80)

@@ -22,7 +22,13 @@ from napari_polarseg.engine.pixel_segmentation import PixelSegmenter
 ANGLES = np.deg2rad([0.0, 45.0, 90.0, 135.0])
 
 
-def planted_scene(shape=(90, 120), seed=0):
+#: Pixel features without the superpixel regions and a classifier without smoothing:
+#: the planted scene has no intensity edge at its material boundaries, which both follow.
+PIXEL_ONLY = PixelFeatureParams(scales=(0.5, 1.0), groups=("intensity", "polarisation"))
+NO_SMOOTHING = ClassifierParams(smoothing=0.0)
+
+
+def planted_scene(shape=(90, 120), seed=0, albedo=(1.0, 1.0, 1.0)):
     """Two materials in two discs on a background; shading varies across each material.
 
     Material ρ differs (0.06 / 0.02 / 0.12 at the same shading), while Î is a ramp that
@@ -33,7 +39,7 @@ def planted_scene(shape=(90, 120), seed=0):
     truth = np.zeros(shape, dtype=np.int64)
     truth[(rows - 45) ** 2 + (cols - 30) ** 2 < 22**2] = 1
     truth[(rows - 45) ** 2 + (cols - 88) ** 2 < 22**2] = 2
-    intensity = 0.3 + 0.4 * cols / shape[1]
+    intensity = (0.3 + 0.4 * cols / shape[1]) * np.asarray(albedo)[truth]
     rho = np.array([0.06, 0.02, 0.12])[truth]  # no class between two neighbours
     phase = np.mod(0.02 * rows + 0.01 * cols, np.pi)
     stack = intensity * (1 + rho * np.cos(2 * ANGLES[:, None, None] - 2 * phase))
@@ -58,7 +64,7 @@ def planted():
 
 def test_planted_materials_are_recovered_exactly(planted):
     _, truth, strokes, seg = planted
-    out = seg.segment(strokes, feature_params=PixelFeatureParams(scales=(0.5, 1.0)))
+    out = seg.segment(strokes, feature_params=PIXEL_ONLY, params=NO_SMOOTHING)
     # stroke values 1 (background), 2, 3 → labels 0, 1, 2 = truth
     np.testing.assert_array_equal(out.prediction.classes, [1, 2, 3])
     assert adjusted_rand_score(truth.ravel(), out.result.labels.ravel()) == 1.0
@@ -73,6 +79,20 @@ def test_planted_materials_are_recovered_exactly(planted):
     assert out.result.summary()["n_segments"] == 3
 
 
+def test_planted_materials_with_edges_are_recovered_exactly_with_the_defaults():
+    """Default features (with superpixel regions, scales to σ = 16) and smoothing:
+    materials whose albedo differs a little come out exactly away from the boundaries
+    (the coarse scales blur the last few pixels of each side)."""
+    stack, truth, strokes = planted_scene(albedo=(1.0, 0.9, 1.1))
+    out = PixelSegmenter(Pipeline(stack, ANGLES, SegmentParams(window=10))).segment(strokes)
+    assert out.classifier.feature_params == PixelFeatureParams()
+    assert any(n.startswith("region:") for n in out.classifier.feature_names)
+    edge = ndimage.morphological_gradient(truth, size=3) > 0
+    near = ndimage.binary_dilation(edge, iterations=3)
+    np.testing.assert_array_equal(out.result.labels[~near], truth[~near])
+    assert adjusted_rand_score(truth.ravel(), out.result.labels.ravel()) > 0.95
+
+
 def test_features_are_kept_between_retrainings(planted):
     _, _, strokes, seg = planted
     params = PixelFeatureParams(scales=(0.5, 1.0))
@@ -84,11 +104,11 @@ def test_features_are_kept_between_retrainings(planted):
 
 def test_a_trained_classifier_applies_to_another_image(planted):
     _, truth, strokes, seg = planted
-    trained = seg.segment(strokes, feature_params=PixelFeatureParams(scales=(0.5, 1.0)))
+    trained = seg.segment(strokes, feature_params=PIXEL_ONLY, params=NO_SMOOTHING)
     stack2, truth2, _ = planted_scene(seed=5)
     other = PixelSegmenter(Pipeline(stack2, ANGLES, SegmentParams(window=10)))
     applied = other.segment(classifier=trained.classifier)
-    np.testing.assert_array_equal(applied.result.labels, truth2)
+    assert np.mean(applied.result.labels != truth2) < 1e-3  # new noise: a pixel or two
     assert applied.seconds["train"] < trained.seconds["train"] + 1
 
 
@@ -102,9 +122,12 @@ def test_intensity_alone_cannot_separate_the_planted_materials():
         np.zeros_like(i),
         PixelFeatureParams(scales=(1.0, 2.0), groups=("intensity",)),
     )
-    clf = train_pixel_classifier(f, strokes)
+    clf = train_pixel_classifier(f, strokes, NO_SMOOTHING)
     labels = predict_pixels(clf, f).labels
     assert adjusted_rand_score(truth.ravel(), labels.ravel()) < 0.5
+    smoothing = train_pixel_classifier(f, strokes)
+    with pytest.raises(PolarsegError, match="guide"):
+        predict_pixels(smoothing, f)
 
 
 def test_training_pixels_sampling_and_errors():

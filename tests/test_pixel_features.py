@@ -14,6 +14,7 @@ from napari_polarseg.engine.pixel_features import (
     pyramid_factor,
     upsample,
 )
+from napari_polarseg.engine.superpixels import region_count, superpixels
 
 
 def _image(shape=(96, 104), seed=0):
@@ -25,7 +26,8 @@ def _image(shape=(96, 104), seed=0):
 
 
 def test_names_shapes_and_dtype():
-    params = PixelFeatureParams(scales=(1.0, 4.0, 16.0), groups=GROUPS)
+    groups = tuple(g for g in GROUPS if g != "regions")
+    params = PixelFeatureParams(scales=(1.0, 4.0, 16.0), groups=groups)
     f = pixel_features(*_image(), params)
     assert f.planes.dtype == np.float32
     assert f.planes.shape == (len(f.names), 96, 104)
@@ -40,6 +42,31 @@ def test_names_shapes_and_dtype():
     where = np.zeros((96, 104), bool)
     where[5, 7] = where[50, 3] = True
     np.testing.assert_array_equal(f.pixels(where), f.data[where])
+
+
+def test_region_features_are_superpixel_means_of_the_fine_scales():
+    i, d, p = _image()
+    i = i * np.where(np.arange(104) < 52, 1.0, 3.0)[None, :]  # an intensity edge
+    params = PixelFeatureParams(scales=(2.0, 8.0), groups=("polarisation", "regions"))
+    f = pixel_features(i, d, p, params)
+    region_names = [n for n in f.names if n.startswith("region:")]
+    fine = [n for n in f.names if n.endswith("@2") and not n.startswith("region:")]
+    assert region_names == [f"region:{n}" for n in fine]
+    regions = superpixels(i, params.regions_of(i.shape))
+    assert regions.max() + 1 == region_count(i.shape, params.regions_of(i.shape))
+    # the regions follow the edge at column 52: nearly every pixel is in a region that
+    # lies mostly on its side (a seed placed on the edge itself may spill a little)
+    n = regions.max() + 1
+    left_share = np.bincount(regions[:, :52].ravel(), minlength=n) / np.bincount(
+        regions.ravel(), minlength=n
+    )
+    side = np.where(np.arange(104) < 52, 1.0, 0.0)[None, :] * np.ones((96, 1))
+    majority = np.where(left_share >= 0.5, 1.0, 0.0)[regions]
+    assert np.mean(majority == side) > 0.98
+    k, src = f.names.index("region:dolp@2"), f.names.index("dolp@2")
+    for r in np.unique(regions)[:20]:
+        inside = regions == r
+        np.testing.assert_allclose(f.planes[k][inside], f.planes[src][inside].mean(), rtol=1e-4)
 
 
 def test_stokes_dolp_is_unbiased_where_mean_dop_is_not():

@@ -26,6 +26,10 @@ scale σ (pixels):
 - ``filters``: the ilastik / APOC filter set on log Î and on ρ — difference of
   Gaussians (G_σ − G_1.6σ), gradient magnitude, Laplacian, the two eigenvalues of the
   structure tensor and of the Hessian;
+- ``regions``: the mean of every other feature of σ ≤ 4 over the pixel's superpixel
+  (:mod:`.superpixels`: edge-following regions of ``region_area`` px), named
+  ``"region:<feature>@<σ>"`` — what the whole patch of surface looks like, not only the
+  pixel's neighbourhood, so one material's shades share a description;
 - ``invariant``: features that do not change with the shading level — DoLP_σ / G_σ ρ
   (polarisation coherence), spread of ρ / G_σ ρ, the slope and correlation of ρ
   against log Î in the window (within one material the two vary together with the
@@ -51,9 +55,17 @@ from scipy import ndimage
 
 from .errors import PolarsegError
 from .fresnel import zenith_from_diffuse_dop
+from .superpixels import region_means, superpixels
 
 #: Feature groups (module docstring), in the order their features appear.
-GROUPS = ("intensity", "polarisation", "zenith", "filters", "invariant")
+GROUPS = ("intensity", "polarisation", "zenith", "filters", "invariant", "regions")
+#: Automatic superpixel area: the image's pixels / this, within the two bounds below
+#: (a 1224 × 1024 frame: ~420 px regions; a 120 × 130 scene: 64 px).
+PIXELS_PER_REGION_SEED = 3000
+MIN_REGION_AREA = 64
+MAX_REGION_AREA = 1024
+#: Scales (σ ≤ this, pixels) whose features the ``regions`` group averages.
+REGION_MAX_SIGMA = 4.0
 #: Below this σ (pixels) a map is filtered at full resolution.
 PYRAMID_MIN_SIGMA = 4.0
 #: Floor added to ρ and DoLP before a ratio (ρ of a pixel is rarely exactly 0).
@@ -71,14 +83,22 @@ class PixelFeatureParams:
     scales : tuple of float
         Gaussian σ of every scale, pixels (> 0).
     groups : tuple of str
-        Feature groups from :data:`GROUPS`.
+        Feature groups from :data:`GROUPS`. The default is the set that measured best
+        on the rendered scenes and the hand-labelled real frames together
+        (``benchmarks/evaluate.py``); ``filters`` helped a real frame and hurt the
+        rendered scenes, ``zenith`` is redundant for trees.
     refractive_index : float
         n of the diffuse Fresnel model (eq. 3.13) for the zenith feature θ.
+    region_area : int
+        Mean superpixel area of the ``regions`` group, pixels; 0 = one region per
+        :data:`PIXELS_PER_REGION_SEED`-th of the image, within
+        [:data:`MIN_REGION_AREA`, :data:`MAX_REGION_AREA`].
     """
 
     scales: tuple[float, ...] = (1.0, 2.0, 4.0, 8.0, 16.0)
-    groups: tuple[str, ...] = ("intensity", "polarisation")
+    groups: tuple[str, ...] = ("intensity", "polarisation", "invariant", "regions")
     refractive_index: float = 1.45
+    region_area: int = 0
 
     def __post_init__(self) -> None:
         scales = tuple(float(s) for s in self.scales)
@@ -95,6 +115,16 @@ class PixelFeatureParams:
         object.__setattr__(self, "scales", scales)
         object.__setattr__(self, "groups", groups)
         object.__setattr__(self, "refractive_index", float(self.refractive_index))
+        if int(self.region_area) < 0 or (0 < int(self.region_area) < 4):
+            raise PolarsegError(f"region_area must be 0 (auto) or >= 4, got {self.region_area}")
+        object.__setattr__(self, "region_area", int(self.region_area))
+
+    def regions_of(self, shape: tuple[int, int]) -> int:
+        """Superpixel area (pixels) used on an image of ``shape``."""
+        if self.region_area:
+            return self.region_area
+        auto = shape[0] * shape[1] // PIXELS_PER_REGION_SEED
+        return int(min(max(auto, MIN_REGION_AREA), MAX_REGION_AREA))
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready form (lists for tuples)."""
@@ -104,7 +134,7 @@ class PixelFeatureParams:
     @classmethod
     def from_dict(cls, values: dict[str, Any]) -> PixelFeatureParams:
         """Inverse of :meth:`to_dict`; unknown keys raise :class:`PolarsegError`."""
-        known = {"scales", "groups", "refractive_index"}
+        known = {"scales", "groups", "refractive_index", "region_area"}
         extra = sorted(set(values) - known)
         if extra:
             raise PolarsegError(f"unknown pixel feature parameters: {', '.join(extra)}")
@@ -113,6 +143,7 @@ class PixelFeatureParams:
                 scales=tuple(values.get("scales", cls.scales)),
                 groups=tuple(values.get("groups", cls.groups)),
                 refractive_index=float(values.get("refractive_index", cls.refractive_index)),
+                region_area=int(values.get("region_area", cls.region_area)),
             )
         except (TypeError, ValueError) as exc:
             raise PolarsegError(f"bad pixel feature parameters ({exc})") from None
@@ -125,7 +156,9 @@ class FeatureStack:
     Attributes
     ----------
     planes : ndarray (F, H, W) float32
-        One image per feature (the layout the filters write).
+        One image per feature (the layout the filters write; interleaving them into
+        (H, W, F) would copy the whole stack once more, which at 200 features of a
+        camera frame costs more than the chunked copies :meth:`rows` makes).
     names : tuple of str
         ``names[f]`` describes ``planes[f]``.
     params : PixelFeatureParams
@@ -152,6 +185,10 @@ class FeatureStack:
     def pixels(self, where: np.ndarray) -> np.ndarray:
         """(n, F) C-contiguous float32 rows of the pixels where ``where`` (H, W) is True."""
         return np.ascontiguousarray(self.planes[:, where].T)
+
+    def take(self, index: np.ndarray) -> np.ndarray:
+        """(n, F) C-contiguous float32 rows of the pixels at flat (row-major) ``index``."""
+        return np.ascontiguousarray(self.planes.reshape(self.n_features, -1)[:, index].T)
 
     def rows(self, start: int, stop: int) -> np.ndarray:
         """(n, F) C-contiguous float32 rows of image rows ``start:stop``, row-major."""
@@ -275,6 +312,7 @@ GROUP_MOMENTS = {
     "zenith": ("s0", "s1", "s2"),
     "filters": ("logi", "dop"),
     "invariant": ("s0", "s1", "s2", "dop", "dop2", "logi", "logi2", "logi_dop"),
+    "regions": (),
 }
 
 
@@ -399,6 +437,13 @@ def pixel_features(
         for name, v in _level_features(levels[f], sigma, f, params).items():
             names.append(f"{prefix}{name}@{sigma:g}")
             planes.append(upsample(v.astype(np.float32, copy=False), f, i.shape))
+    local_names = [n for n in names if float(n.rsplit("@", 1)[1]) <= REGION_MAX_SIGMA]
+    if "regions" in params.groups and local_names:
+        regions = superpixels(i, params.regions_of(i.shape))
+        local = [k for k, n in enumerate(names) if float(n.rsplit("@", 1)[1]) <= REGION_MAX_SIGMA]
+        means = region_means(np.stack([planes[k] for k in local]), regions)
+        names += [f"{prefix}region:{names[k][len(prefix) :]}" for k in local]
+        planes += list(means[:, regions])
     return FeatureStack(np.stack(planes), tuple(names), params)
 
 
