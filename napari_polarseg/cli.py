@@ -88,6 +88,7 @@ could not be written, 130 interrupted.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 import time
 import warnings
@@ -582,6 +583,13 @@ def build_parser() -> argparse.ArgumentParser:
         default="all",
         help="what the change test compares: intensity and polarisation, or only one "
         "(polarisation: when the lighting changes between days) [all]",
+    )
+    ts.add_argument(
+        "--classifier",
+        metavar="FILE",
+        help="label every day with this saved pixel classifier (.polarseg-clf): "
+        "labels_DD.tif and change_DD.tif (pixels whose class changed) come from it; the "
+        "change scores and distances stay those of the change test",
     )
     _add_input_options(ts, "day")
     _add_param_options(ts, preset="recommended")
@@ -1357,6 +1365,31 @@ def _cmd_batch(args: argparse.Namespace) -> int:
     return 0 if result.ok else 3
 
 
+def _classify_days(
+    result: Any,
+    stacks: list[np.ndarray],
+    days: list[pio.StackData],
+    masks: list[PixelMask],
+    params: SegmentParams,
+    path: str,
+) -> Any:
+    """The time series with every day labelled by the saved pixel classifier at ``path``
+    (the same classes every day, so a label means the same material on every day)."""
+    from .classifier_file import load_pixel_classifier
+    from .engine.pixel_segmentation import PixelSegmenter
+
+    classifier = load_pixel_classifier(path)
+    labels = np.stack(
+        [
+            PixelSegmenter(Pipeline(stack, day.angles_rad, params, mask=mask))
+            .segment(classifier=classifier, reconstruction=False)
+            .result.labels.astype(np.int32)
+            for stack, day, mask in zip(stacks, days, masks, strict=True)
+        ]
+    )
+    return dataclasses.replace(result, labels=labels, changes=labels[1:] != labels[:-1])
+
+
 def _cmd_timeseries(args: argparse.Namespace) -> int:
     from .batch import expand_inputs
     from .engine.timeseries import segment_timeseries
@@ -1400,7 +1433,11 @@ def _cmd_timeseries(args: argparse.Namespace) -> int:
         masks=masks,
         progress=_progress(args.verbose),
     )
+    if args.classifier:
+        result = _classify_days(result, stacks, days, masks, params, args.classifier)
     summary = result.summary()
+    if args.classifier:
+        summary["labels_from"] = "classifier"
     summary["io_seconds"] = {"read": round(read_seconds, 6)}
     aris = [
         None if d.ground_truth is None else adjusted_rand_index(d.ground_truth, labels)

@@ -386,3 +386,38 @@ def test_polarisation_statistics_share_one_standardisation_over_the_days():
     np.testing.assert_allclose(per_day, polstats.standardise(raw[0]))
     result = segment_timeseries([sc.stack, day2], [sc.angles, sc.angles], params)
     assert result.labels.shape == (2, 64, 72)
+
+
+def test_cli_timeseries_with_a_saved_classifier(tmp_path, capsys) -> None:
+    """--classifier labels every day with the same classes: the grown bruise shows."""
+    angles, stacks, truths = render_fruit_days((64, 72), seed=1, grow_px=(0.0, 8.0))
+    inputs = []
+    for day, (stack, truth) in enumerate(zip(stacks, truths, strict=True), start=1):
+        path = tmp_path / f"day{day}.npz"
+        np.savez(path, stack=stack, angles=np.rad2deg(angles), labels=truth)
+        inputs.append(str(path))
+    strokes = tmp_path / "strokes.npy"
+    from napari_polarseg.engine.synthetic import scribble_strokes
+
+    np.save(strokes, scribble_strokes(truths[0], per_material=8, length=10))
+    clf = tmp_path / "fruit.polarseg-clf"
+    argv = ["segment", inputs[0], "--out", str(tmp_path / "seg"), "--window", "8"]
+    assert cli.main([*argv, "--scribbles", str(strokes), "--save-classifier", str(clf)]) == 0
+    out = tmp_path / "series"
+    code = cli.main(
+        ["timeseries", *inputs, "--out", str(out), "--window", "8", "--classifier", str(clf)]
+    )
+    assert code == 0, capsys.readouterr().err
+    l1, l2 = tifffile.imread(out / "labels_01.tif"), tifffile.imread(out / "labels_02.tif")
+    change = tifffile.imread(out / "change_01.tif")
+    np.testing.assert_array_equal(change, (l1 != l2).astype(np.uint8))
+    # the same stack and classifier as `segment`: day 1 equals its labels
+    np.testing.assert_array_equal(l1, tifffile.imread(tmp_path / "seg" / "labels.tif"))
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["labels_from"] == "classifier"
+    bad = tmp_path / "bad.polarseg-clf"
+    bad.write_bytes(b"PK\x03\x04 not a classifier")
+    code = cli.main(
+        ["timeseries", *inputs, "--out", str(tmp_path / "s2"), "--classifier", str(bad)]
+    )
+    assert code == 2 and "bad.polarseg-clf" in capsys.readouterr().err
