@@ -5,6 +5,10 @@ Stages (thesis section 4.5): :func:`polarisation_image` → :func:`zenith_from_d
 :func:`affinity_matrix` → :func:`recursive_ncut` → :func:`upsample_block_labels`, and
 :func:`reconstruct_intensity`. :class:`Pipeline` chains them with a per-stage cache.
 Angles are radians throughout the engine.
+
+Beside the cut: :func:`pixel_features` (multi-scale per-pixel features) →
+:func:`train_pixel_classifier` on scribbles → :func:`predict_pixels`, chained on a
+pipeline's polarisation image by :class:`PixelSegmenter`.
 """
 
 from .errors import Cancelled, PolarsegError
@@ -39,6 +43,15 @@ from .mosaic import demosaic, demosaic_interpolated, demosaic_superpixel, subtra
 from .ncut import CutTree, best_split, bipartition, fiedler_vector, recursive_ncut
 from .params import SegmentParams
 from .pipeline import STAGES, Pipeline, SegmentationResult, intensity_baseline, segment
+from .pixel_classifier import (
+    ClassifierParams,
+    PixelClassifier,
+    PixelPrediction,
+    predict_pixels,
+    train_pixel_classifier,
+)
+from .pixel_features import FeatureStack, PixelFeatureParams, pixel_features
+from .pixel_segmentation import PixelSegmentation, PixelSegmenter
 from .polarimage import (
     PixelMask,
     PolarisationImage,
@@ -48,14 +61,22 @@ from .polarimage import (
     validity_mask,
 )
 from .registration import register_stack
+from .superpixels import region_means, superpixels
 from .sweep import SweepCell, SweepResult  # the function: engine.sweep.sweep
 
 __all__ = [
     "STAGES",
     "Cancelled",
+    "ClassifierParams",
     "CutTree",
+    "FeatureStack",
     "PCAResult",
+    "PixelClassifier",
+    "PixelFeatureParams",
     "PixelMask",
+    "PixelPrediction",
+    "PixelSegmentation",
+    "PixelSegmenter",
     "Pipeline",
     "PolarisationImage",
     "PolarsegError",
@@ -90,15 +111,20 @@ __all__ = [
     "n_coefficients",
     "pca_features",
     "pixel_block_index",
+    "pixel_features",
     "polarisation_image",
+    "predict_pixels",
     "real_sph_harm",
     "register_stack",
     "reconstruct_intensity",
+    "region_means",
     "recursive_ncut",
     "segment",
     "specular_dop",
     "specular_dop_fresnel",
     "subtract_dark",
+    "superpixels",
+    "train_pixel_classifier",
     "upsample_block_labels",
     "validity_mask",
     "whiten",
