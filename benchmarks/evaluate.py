@@ -12,9 +12,22 @@ lists (:data:`OPTIONS`):
   median distance, min 4 blocks) and change one thing: the feature kind (thesis,
   energy, ridge coefficients, polarisation statistics, zonal + statistics), the spatial
   term, k-way spectral clustering;
-- ``scribbles``: the scribble mode (a classifier on the block features, w 8) trained on
-  a fixed small set of strokes (``synthetic.scribble_strokes``: 6 strokes of 16 px per
-  material, 1-2 % of the pixels);
+- ``block scribbles``: the older scribble mode (a logistic regression on the block
+  features, w 8) trained on a fixed small set of strokes (``synthetic.scribble_strokes``:
+  6 strokes of 16 px per material, 1-2 % of the pixels);
+- ``plain baseline``: a random forest on 20 Gaussian-smoothed polarisation features
+  (``baselines.plain_baseline``) trained on the same strokes — the floor every method
+  is read against;
+- ``pixel classifier``: the product's scribble classifier (``engine.pixel_classifier``
+  with its default features and parameters) on the same strokes;
+- then, per scene, the pixel classifier against its target (0.8) and the plain
+  baseline, beside a bound: the best classifier we train on the richest pixel features
+  with the *truth* of the other seeds (``truth_bound``; ``--no-bound`` skips it);
+- the real frames with hand-drawn truth (``napari_polarseg/sample_data/truth``, frames
+  in ``../shared/data/polanalyser``): intensity k-means, the thesis defaults and
+  ``RECOMMENDED`` cut into as many segments as there are classes, the plain baseline and
+  the pixel classifier on the truth file's strokes, and the in-sample bound (trained on
+  the frame's own truth); ARI over the labelled pixels, degenerate results marked;
 - with ``--sweep``: the best cell of a parameter grid per scene (chosen on the same
   scene, so an optimistic upper bound, not a fair score), and the cells with the best
   worst case over all scenes and seeds (how ``RECOMMENDED`` was chosen);
@@ -22,8 +35,8 @@ lists (:data:`OPTIONS`):
 
 Usage::
 
-    .venv/bin/python benchmarks/evaluate.py            # table, ~1 minute
-    .venv/bin/python benchmarks/evaluate.py --readme   # and rewrite README's table
+    .venv/bin/python benchmarks/evaluate.py            # tables, ~6 minutes
+    .venv/bin/python benchmarks/evaluate.py --readme   # and rewrite README's tables
     .venv/bin/python benchmarks/evaluate.py --limits   # the limits analysis, ~1 minute
     .venv/bin/python benchmarks/evaluate.py --sweep    # plus the grid search, ~5 minutes
 """
@@ -36,11 +49,16 @@ import time
 from pathlib import Path
 
 import numpy as np
+from baselines import intensity_kmeans, plain_baseline
 from sklearn.metrics import adjusted_rand_score
 
 from napari_polarseg.engine import Pipeline, SegmentParams, intensity_baseline
 from napari_polarseg.engine.params import RECOMMENDED
+from napari_polarseg.engine.pixel_classifier import ClassifierParams, make_model
+from napari_polarseg.engine.pixel_features import GROUPS, PixelFeatureParams, pixel_features
+from napari_polarseg.engine.pixel_segmentation import PixelSegmenter
 from napari_polarseg.engine.synthetic import SCENES, make_scene, scribble_strokes
+from napari_polarseg.truth import read_truth_file, truth_files
 
 README = Path(__file__).resolve().parents[1] / "README.md"
 BEGIN, END = "<!-- evaluate.py table: begin -->", "<!-- evaluate.py table: end -->"
@@ -58,8 +76,20 @@ OPTIONS: dict[str, SegmentParams | None] = {
     "spatial term": RECOMMENDED.replace(spatial_radius=1.5),
     "k-way": RECOMMENDED.replace(clustering="kway"),
     "k-way, stats": RECOMMENDED.replace(features="polstats", clustering="kway"),
-    "scribbles": None,
+    "block scribbles": None,
+    "plain baseline": None,
+    "pixel classifier": None,
 }
+#: Columns trained on the fixed strokes (the others are unsupervised).
+SUPERVISED = ("block scribbles", "plain baseline", "pixel classifier")
+#: Richest features for the bound (every group, ilastik-like scales).
+BOUND_FEATURES = PixelFeatureParams(scales=(1.0, 2.0, 4.0, 8.0, 16.0), groups=GROUPS)
+#: Pixels sampled from the truth that trains the bound's classifier.
+BOUND_PIXELS = 20_000
+#: The real frames: ../shared/data/polanalyser beside the repository.
+REAL_DIR = Path(__file__).resolve().parents[2] / "shared" / "data" / "polanalyser"
+#: A result is degenerate when one segment holds this share of the pixels.
+DEGENERATE_SHARE = 0.95
 #: Block side of the scribble mode (more, smaller blocks: more training examples).
 SCRIBBLE_WINDOW = 8
 
@@ -100,9 +130,13 @@ def evaluate(name: str, seed: int, sweep: bool) -> dict:
         if params is not None:
             pipe.params = params.replace(n_segments=k)
             row[column] = ari(truth, pipe.run(reconstruction=False).labels)
+    strokes = scribble_strokes(truth, seed=0)
     pipe.params = RECOMMENDED.replace(window=SCRIBBLE_WINDOW)
-    labels, _ = pipe.scribble_result(scribble_strokes(truth, seed=0))
-    row["scribbles"] = ari(truth, labels)
+    labels, _ = pipe.scribble_result(strokes)
+    row["block scribbles"] = ari(truth, labels)
+    pol = pipe.get("polarisation")
+    row["plain baseline"] = ari(truth, plain_baseline(pol.intensity, pol.dop, pol.phase, strokes))
+    row["pixel classifier"] = ari(truth, PixelSegmenter(pipe).segment(strokes).result.labels)
     if sweep:
         row["grid"] = {}
         for values in itertools.product(*GRID.values()):
@@ -113,6 +147,125 @@ def evaluate(name: str, seed: int, sweep: bool) -> dict:
         row["best of grid"] = row["grid"][best]
         row["best params"] = dict(zip(GRID, best, strict=True))
     return row
+
+
+def truth_bound(train: list[tuple], test: tuple) -> float:
+    """ARI on ``test`` of the best classifier we train on the richest pixel features
+    (:data:`BOUND_FEATURES`, a random forest of 200 trees) with the *truth* of the
+    ``train`` scenes: what the features can tell apart with all the labels there are.
+    Each item is (intensity, dop, phase, truth, weight mask or None)."""
+    rng = np.random.default_rng(0)
+    xs, ys = [], []
+    for i, d, p, t, where in train:
+        f = pixel_features(i, d, p, BOUND_FEATURES)
+        pick = np.flatnonzero(where.ravel() if where is not None else np.ones(t.size, bool))
+        pick = rng.choice(pick, min(BOUND_PIXELS, pick.size), replace=False)
+        xs.append(f.take(pick))
+        ys.append(t.ravel()[pick])
+    model = make_model(ClassifierParams(n_estimators=200, balance_classes=True))
+    model.fit(np.concatenate(xs), np.concatenate(ys))
+    i, d, p, t, where = test
+    f = pixel_features(i, d, p, BOUND_FEATURES)
+    pred = np.concatenate(
+        [model.predict(f.rows(r, min(r + 128, t.shape[0]))) for r in range(0, t.shape[0], 128)]
+    ).reshape(t.shape)
+    return ari_where(t, pred, where)
+
+
+def ari_where(truth: np.ndarray, labels: np.ndarray, where: np.ndarray | None) -> float:
+    """ARI over the pixels ``where`` (all when None)."""
+    if where is None:
+        return ari(truth, labels)
+    return float(adjusted_rand_score(truth[where], labels[where]))
+
+
+def largest_share(labels: np.ndarray) -> float:
+    """Share of the pixels in the largest segment."""
+    return float(np.bincount(np.asarray(labels).ravel()).max() / labels.size)
+
+
+#: Columns of the real-frame table.
+REAL_COLUMNS = (
+    "intensity k-means",
+    "thesis defaults",
+    "recommended",
+    "plain baseline",
+    "pixel classifier",
+    "bound: all truth",
+)
+
+
+def evaluate_real(folder: Path) -> list[dict]:
+    """Every real frame with hand-drawn truth: ARI over the labelled pixels.
+
+    The supervised columns train on the truth file's fixed strokes; the unsupervised
+    ones cut into as many segments as the truth has classes. ``bound: all truth`` trains
+    on the frame's whole truth (sampled) and is scored on the same frame: an in-sample
+    upper bound of the features, not a fair score. A degenerate result (one segment with
+    ≥ 95 % of the pixels) is recorded in ``degenerate``.
+    """
+    from napari_polarseg import io as pio
+
+    rows = []
+    for path in truth_files():
+        truth_file = read_truth_file(path)
+        frame = folder / truth_file.frame
+        if not frame.is_file():
+            print(f"real frame {frame} not found: skipped")
+            continue
+        data = pio.read_stack(frame, mosaic=list(truth_file.mosaic))
+        truth, strokes = truth_file.truth, truth_file.strokes
+        where = truth > 0
+        k = len(truth_file.classes)
+        row: dict = {"scene": truth_file.frame, "k": k, "degenerate": []}
+        pipe = Pipeline(data.stack, data.angles_rad, SegmentParams(n_segments=k))
+        pol = pipe.get("polarisation")
+        row["intensity k-means"] = ari_where(truth, intensity_kmeans(pol.intensity, k), where)
+        for column, params in (("thesis defaults", SegmentParams()), ("recommended", RECOMMENDED)):
+            t0 = time.perf_counter()
+            pipe.params = params.replace(n_segments=k)
+            labels = pipe.run(reconstruction=False).labels
+            row[column] = ari_where(truth, labels, where)
+            row[f"{column} seconds"] = time.perf_counter() - t0
+            if largest_share(labels) >= DEGENERATE_SHARE:
+                row["degenerate"].append(column)
+        row["plain baseline"] = ari_where(
+            truth, plain_baseline(pol.intensity, pol.dop, pol.phase, strokes), where
+        )
+        t0 = time.perf_counter()
+        out = PixelSegmenter(pipe).segment(strokes, reconstruction=False)
+        row["pixel classifier seconds"] = time.perf_counter() - t0
+        row["pixel classifier"] = ari_where(truth, out.result.labels, where)
+        item = (pol.intensity, pol.dop, pol.phase, truth, where)
+        row["bound: all truth"] = truth_bound([item], item)
+        rows.append(row)
+    return rows
+
+
+def real_table(rows: list[dict]) -> str:
+    """Markdown table of :func:`evaluate_real` (a degenerate cell is marked ‡)."""
+    lines = [
+        "| frame | classes | " + " | ".join(REAL_COLUMNS) + " |",
+        "|---|---:|" + "---:|" * len(REAL_COLUMNS),
+    ]
+    for r in rows:
+        cells = [f"{r[c]:.3f}" + (" ‡" if c in r["degenerate"] else "") for c in REAL_COLUMNS]
+        lines.append(f"| {r['scene']} | {r['k']} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def synthetic_bounds(seeds: list[int]) -> dict[str, float]:
+    """Mean over seeds of :func:`truth_bound` trained on the *other* seeds' truth."""
+    out = {}
+    for name in SCENES:
+        scenes = {}
+        for seed in seeds:
+            stack, angles, truth = load(name, seed)
+            pol = Pipeline(stack, angles, SegmentParams()).get("polarisation")
+            scenes[seed] = (pol.intensity, pol.dop, pol.phase, truth, None)
+        values = [truth_bound([scenes[o] for o in seeds if o != s], scenes[s]) for s in seeds]
+        out[name] = float(np.mean(values))
+    return out
 
 
 def markdown_table(rows: list[dict], cols: list[str]) -> str:
@@ -142,7 +295,7 @@ def write_readme(table: str, command: str) -> None:
     README.write_text(head + block + tail, encoding="utf-8")
 
 
-def main(argv: list[str] | None = None) -> None:
+def main(argv: list[str] | None = None) -> None:  # noqa: PLR0915 - a report script
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--sweep", action="store_true", help="also search the grid")
     parser.add_argument("--seeds", default="0,1,2", help="scene seeds (0 = bundled sample)")
@@ -151,6 +304,12 @@ def main(argv: list[str] | None = None) -> None:
     )
     parser.add_argument(
         "--limits", action="store_true", help="only the limits analysis (limits.py), no table"
+    )
+    parser.add_argument(
+        "--no-bound", action="store_true", help="skip the truth-trained bounds (~1 minute)"
+    )
+    parser.add_argument(
+        "--real-dir", type=Path, default=REAL_DIR, help=f"the real frames [{REAL_DIR}]"
     )
     args = parser.parse_args(argv)
     if args.limits:
@@ -181,13 +340,71 @@ def main(argv: list[str] | None = None) -> None:
             }
             cell = dict(zip(GRID, c, strict=True))
             print(f"  worst {worst[c]:.3f}  mean per scene {per_scene}  {cell}")
+    means = {
+        n: {c: float(np.mean([r[c] for r in rows if r["scene"] == n])) for c in cols}
+        for n in SCENES
+    }
+    bounds = None if args.no_bound else synthetic_bounds(seeds)
+    report = floor_report(means, bounds)
+    print("\n".join(report))
+    real = evaluate_real(args.real_dir) if args.real_dir.is_dir() else []
+    if real:
+        print("\nreal frames (ARI over the hand-labelled pixels; ‡ = degenerate):\n")
+        print(real_table(real))
+        for r in real:
+            print(real_report(r))
+    else:
+        print(f"\nno real frames in {args.real_dir}: the real-frame table is skipped")
     print(f"\n{time.perf_counter() - t0:.1f} s")
     if args.readme:
         cmd = "python benchmarks/evaluate.py --readme"
         if args.seeds != "0,1,2":
             cmd += f" --seeds {args.seeds}"
-        write_readme(markdown_table(rows, list(OPTIONS)), cmd)
+        block = markdown_table(rows, list(OPTIONS)) + "\n\n" + "\n".join(report)
+        if real:
+            block += "\n\nReal frames, ARI over the hand-labelled pixels (‡ = degenerate):\n\n"
+            block += real_table(real) + "\n\n" + "\n".join(real_report(r) for r in real)
+        write_readme(block, cmd)
         print(f"README.md table rewritten ({README})")
+
+
+#: Targets of issue 12 (scribbles) and 13 (unsupervised default).
+TARGET = {"pixel classifier": 0.8}
+
+
+def floor_report(means: dict, bounds: dict | None) -> list[str]:
+    """One line per scene: the pixel classifier against its target, the plain baseline
+    (the floor) and, when measured, the truth-trained bound."""
+    lines = []
+    for name, m in means.items():
+        pc, plain = m["pixel classifier"], m["plain baseline"]
+        target = TARGET["pixel classifier"]
+        verdict = "met" if pc >= target else f"MISSED by {target - pc:.3f}"
+        floor = "above" if pc > plain else "NOT above"
+        bound = (
+            ""
+            if bounds is None
+            else (f"; bound (richest features, truth of the other seeds) {bounds[name]:.3f}")
+        )
+        lines.append(
+            f"- {name}: pixel classifier {pc:.3f}, target {target} {verdict}; "
+            f"{floor} the plain baseline {plain:.3f}{bound}"
+        )
+    return lines
+
+
+def real_report(r: dict) -> str:
+    """The real frame's pixel classifier against its target and floor."""
+    pc, km = r["pixel classifier"], r["intensity k-means"]
+    target = TARGET["pixel classifier"]
+    verdict = "met" if pc >= target else f"MISSED by {target - pc:.3f}"
+    floor = "above" if pc > km else "NOT above"
+    deg = ", ".join(r["degenerate"]) or "none"
+    return (
+        f"- {r['scene']}: pixel classifier {pc:.3f} ({r['pixel classifier seconds']:.1f} s), "
+        f"target {target} {verdict}; {floor} intensity k-means {km:.3f}; plain baseline "
+        f"{r['plain baseline']:.3f}; degenerate: {deg}"
+    )
 
 
 if __name__ == "__main__":
