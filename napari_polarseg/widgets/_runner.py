@@ -64,6 +64,10 @@ Job = Callable[..., Generator[Any, None, Any]]
 #: sooner and show their stages only in the widget: the spinner repaints the window ~25
 #: times a second, which on a software-rendered canvas (Mesa llvmpipe under Xvfb) took
 #: half of a 2-core machine and made the engine's stages up to twice as slow (issue 5).
+#: Live reruns (a changed value, a painted stroke) never appear there, however long they
+#: last: a retraining of the pixel classifier after a stroke took 6.4 s to the segments
+#: with the dock shown after 1 s and 2.9 s without it (medians of 6 strokes each,
+#: interleaved, on the 720 x 660 reference stack of benchmarks/bench_gui.py, issue 12).
 ACTIVITY_DELAY = 1.0
 
 #: Least seconds between two reports (status line, progress bars) of a running job; a
@@ -481,7 +485,8 @@ class WorkerSlot:
         and with (total, total) when it has returned.
     activity_delay : float
         Seconds before a still-running job is shown in napari's activity dock
-        (:data:`ACTIVITY_DELAY`); 0 shows every run there at once.
+        (:data:`ACTIVITY_DELAY`); 0 shows every run there at once. A ``live`` job
+        (:meth:`submit`) is never shown there.
     report_interval : float
         Least seconds between two stage reports (:data:`REPORT_INTERVAL`).
     """
@@ -532,12 +537,13 @@ class WorkerSlot:
         its next yield). ``on_partial(run_id, value)`` receives the value of every
         :class:`Partial` it yields. Compare ``run_id`` with :attr:`run_id` to drop
         results of superseded runs. The run is reported at once ("running…", progress 0)
-        unless it is ``live`` (a rerun after a parameter change): that one reports only
-        when still running :data:`REPORT_INTERVAL` later. A ``cancellable`` job is called
-        as ``job(*args, cancel=stop)``: ``stop()`` is True once a newer request or
-        :meth:`cancel` has asked the run to stop (the job may then raise
-        :class:`~napari_polarseg.engine.errors.Cancelled`, which ends the run as if it
-        had been stopped between stages).
+        unless it is ``live`` (a rerun after a parameter change or a stroke): that one
+        reports only when still running :data:`REPORT_INTERVAL` later, and only to the
+        widget (never in napari's activity dock, see :data:`ACTIVITY_DELAY`). A
+        ``cancellable`` job is called as ``job(*args, cancel=stop)``: ``stop()`` is True
+        once a newer request or :meth:`cancel` has asked the run to stop (the job may then
+        raise :class:`~napari_polarseg.engine.errors.Cancelled`, which ends the run as if
+        it had been stopped between stages).
         """
 
         request = _Request(job, args, total, on_result, on_partial, live, cancellable)
@@ -690,7 +696,9 @@ class WorkerSlot:
         else:
             last[1] = True  # the first report: one interval after the start
             QTimer.singleShot(round(self.report_interval * 1000), report)
-        if self.activity_delay <= 0:
+        if live:
+            pass  # the widget's own progress bar and status line only
+        elif self.activity_delay <= 0:
             show_activity()
         else:
             QTimer.singleShot(round(self.activity_delay * 1000), show_activity)

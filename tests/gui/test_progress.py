@@ -107,6 +107,11 @@ def test_activity_dock_only_for_runs_longer_than_the_delay(qtbot, monkeypatch):
     slot.wait(30)
     assert results == ["quick", "slow"] and slot.activity is None
 
+    # a live rerun (a changed value, a painted stroke) never appears there
+    slot.submit(slow, (), 2, lambda run_id, value: results.append(value), live=True)
+    slot.wait(30)
+    assert results == ["quick", "slow", "slow"] and len(created) == 1
+
 
 def test_result_then_idle_work_that_the_next_request_stops(qtbot):
     seen, idle_steps = [], []
