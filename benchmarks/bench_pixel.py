@@ -26,6 +26,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from bench_speed import median_time
 from scipy import ndimage
 
 from napari_polarseg.engine import polarisation_image
@@ -40,15 +41,6 @@ from napari_polarseg.engine.synthetic import make_scene, scribble_strokes
 REPO = Path(__file__).resolve().parents[1]
 REAL = REPO.parent / "shared" / "data" / "polanalyser" / "fruits_IMX250MZR.png"
 TARGETS = {"features + prediction": 1.0, "retraining": 0.5, "camera frame end to end": 5.0}
-
-
-def median(fn, repeats: int) -> tuple[float, object]:
-    times, out = [], None
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        out = fn()
-        times.append(time.perf_counter() - t0)
-    return float(np.median(times)), out
 
 
 def verdict(name: str, seconds: float) -> str:
@@ -83,10 +75,10 @@ def main(argv: list[str] | None = None) -> int:
         f = pixel_features(pol.intensity, pol.dop, pol.phase)
         return predict_pixels(clf, f, guide=guide)
 
-    t_feat, _ = median(lambda: pixel_features(pol.intensity, pol.dop, pol.phase), args.repeats)
-    t_pred, _ = median(lambda: predict_pixels(clf, feats, guide=guide), args.repeats)
-    t_both, _ = median(features_and_prediction, args.repeats)
-    t_train, trained = median(
+    t_feat, _ = median_time(lambda: pixel_features(pol.intensity, pol.dop, pol.phase), args.repeats)
+    t_pred, _ = median_time(lambda: predict_pixels(clf, feats, guide=guide), args.repeats)
+    t_both, _ = median_time(features_and_prediction, args.repeats)
+    t_train, trained = median_time(
         lambda: train_pixel_classifier(feats, strokes, ClassifierParams()), args.repeats
     )
     print(
@@ -133,7 +125,7 @@ def main(argv: list[str] | None = None) -> int:
             t0 = time.perf_counter()
             subprocess.run(cmd, check=True, capture_output=True)
             times.append(time.perf_counter() - t0)
-        t_cam = float(np.median(times))
+        t_cam = float(np.median_time(times))
         import json
 
         summary = json.loads((tmp / "o" / "summary.json").read_text())

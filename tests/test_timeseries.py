@@ -311,13 +311,19 @@ def test_bad_time_series_input() -> None:
         change_map(np.zeros((2, 2)), np.zeros((3, 2)))
 
 
-def test_cli_timeseries_writes_labels_change_and_score_maps(tmp_path, capsys) -> None:
+def _fruit_day_files(tmp_path):
+    """Two days of the growing-bruise fruit as .npz files: (paths, truths)."""
     angles, stacks, truths = render_fruit_days((64, 72), seed=1, grow_px=(0.0, 8.0))
     inputs = []
     for day, (stack, truth) in enumerate(zip(stacks, truths, strict=True), start=1):
         path = tmp_path / f"day{day}.npz"
         np.savez(path, stack=stack, angles=np.rad2deg(angles), labels=truth)
         inputs.append(str(path))
+    return inputs, truths
+
+
+def test_cli_timeseries_writes_labels_change_and_score_maps(tmp_path, capsys) -> None:
+    inputs, truths = _fruit_day_files(tmp_path)
     out = tmp_path / "series"
     code = cli.main(["timeseries", *inputs, "--out", str(out), "--window", "8", "--segments", "2"])
     assert code == 0, capsys.readouterr().err
@@ -389,13 +395,8 @@ def test_polarisation_statistics_share_one_standardisation_over_the_days():
 
 
 def test_cli_timeseries_with_a_saved_classifier(tmp_path, capsys) -> None:
-    """--classifier labels every day with the same classes: the grown bruise shows."""
-    angles, stacks, truths = render_fruit_days((64, 72), seed=1, grow_px=(0.0, 8.0))
-    inputs = []
-    for day, (stack, truth) in enumerate(zip(stacks, truths, strict=True), start=1):
-        path = tmp_path / f"day{day}.npz"
-        np.savez(path, stack=stack, angles=np.rad2deg(angles), labels=truth)
-        inputs.append(str(path))
+    """--classifier labels every day with the same classes."""
+    inputs, truths = _fruit_day_files(tmp_path)
     strokes = tmp_path / "strokes.npy"
     from napari_polarseg.engine.synthetic import scribble_strokes
 

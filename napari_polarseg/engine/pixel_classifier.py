@@ -187,10 +187,13 @@ class PixelPrediction:
     classes: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
 
 
-def check_scribbles(scribbles: Any, shape: tuple[int, int]) -> np.ndarray:
-    """Validate a scribble image of ``shape``: integers >= 0 (0 = unlabelled) → int64."""
+def check_scribbles(scribbles: Any, shape: tuple[int, int] | None = None) -> np.ndarray:
+    """Validate a scribble image (of ``shape`` when given): one 2-D image of integers
+    >= 0 (0 = unlabelled) → int64. Raises :class:`PolarsegError` naming the problem."""
     s = np.asarray(scribbles)
-    if s.shape != tuple(shape):
+    if s.ndim != 2:
+        raise PolarsegError(f"scribbles must be one 2-D labels image, got shape {s.shape}")
+    if shape is not None and s.shape != tuple(shape):
         raise PolarsegError(f"the scribbles are {s.shape} but the image is {tuple(shape)}")
     if s.dtype.kind == "f":
         if not np.all(np.isfinite(s)) or np.any(s != np.round(s)):

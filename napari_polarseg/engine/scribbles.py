@@ -15,25 +15,11 @@ import numpy as np
 
 from .errors import PolarsegError
 from .harmonics import pixel_block_index
+from .pixel_classifier import check_scribbles
 
 #: A block is a training example of class c when at least this share of its scribbled
 #: pixels are c.
 MAJORITY = 0.5
-
-
-def _check_scribbles(scribbles: np.ndarray) -> np.ndarray:
-    s = np.asarray(scribbles)
-    if s.ndim != 2:
-        raise PolarsegError(f"scribbles must be one 2-D labels image, got shape {s.shape}")
-    if s.dtype.kind == "f":
-        if not np.all(np.isfinite(s)) or np.any(s != np.round(s)):
-            raise PolarsegError("scribbles must hold integer labels")
-    elif s.dtype.kind not in "biu":
-        raise PolarsegError(f"scribbles must hold integer labels, got dtype {s.dtype}")
-    s = s.astype(np.int64)
-    if np.any(s < 0):
-        raise PolarsegError("scribble labels must be >= 0 (0 = unlabelled)")
-    return s
 
 
 def training_blocks(
@@ -65,7 +51,7 @@ def training_blocks(
     classes : ndarray (K,) of int
         The scribble values that have at least one training block, ascending.
     """
-    s = _check_scribbles(scribbles)
+    s = check_scribbles(scribbles)
     r, c = (int(v) for v in grid)
     if (s.shape[0] // window, s.shape[1] // window) != (r, c):
         raise PolarsegError(
