@@ -425,26 +425,48 @@ def pixel_features(
     params = params or PixelFeatureParams()
     i, d, p = _check_maps(intensity, dop, phase)
     prefix = f"{channel}:" if channel else ""
+    names = feature_names(params)
+    # one allocation for the whole stack, each feature written into it as it is made
+    # (fresh pages are costly on small VMs: a list of planes + np.stack touched twice)
+    out = np.empty((len(names),) + i.shape, dtype=np.float32)
     levels = {1: _moments(i, d, p, params.groups)}
-    names: list[str] = []
-    planes: list[np.ndarray] = []
+    k = 0
     for sigma in params.scales:
         f = pyramid_factor(sigma)
         if f not in levels:
             # coarsen from the finest level already built that divides f
-            base = max(k for k in levels if f % k == 0)
-            levels[f] = {k: _block_mean(v, f // base) for k, v in levels[base].items()}
-        for name, v in _level_features(levels[f], sigma, f, params).items():
-            names.append(f"{prefix}{name}@{sigma:g}")
-            planes.append(upsample(v.astype(np.float32, copy=False), f, i.shape))
-    local_names = [n for n in names if float(n.rsplit("@", 1)[1]) <= REGION_MAX_SIGMA]
-    if "regions" in params.groups and local_names:
+            base = max(q for q in levels if f % q == 0)
+            levels[f] = {q: _block_mean(v, f // base) for q, v in levels[base].items()}
+        for v in _level_features(levels[f], sigma, f, params).values():
+            out[k] = upsample(v.astype(np.float32, copy=False), f, i.shape)
+            k += 1
+    local = [q for q in range(k) if _scale_of(names[q]) <= REGION_MAX_SIGMA]
+    if "regions" in params.groups and local:
         regions = superpixels(i, params.regions_of(i.shape))
-        local = [k for k, n in enumerate(names) if float(n.rsplit("@", 1)[1]) <= REGION_MAX_SIGMA]
-        means = region_means(np.stack([planes[k] for k in local]), regions)
-        names += [f"{prefix}region:{names[k][len(prefix) :]}" for k in local]
-        planes += list(means[:, regions])
-    return FeatureStack(np.stack(planes), tuple(names), params)
+        means = region_means([out[q] for q in local], regions)
+        for m in means:
+            np.take(m, regions, out=out[k])
+            k += 1
+    return FeatureStack(out, tuple(f"{prefix}{n}" for n in names), params)
+
+
+def _scale_of(name: str) -> float:
+    return float(name.rsplit("@", 1)[1])
+
+
+def feature_names(params: PixelFeatureParams) -> tuple[str, ...]:
+    """Names of the features :func:`pixel_features` computes for ``params`` (no prefix),
+    in order (found by running the groups on a tiny image)."""
+    tiny = np.ones((8, 8), dtype=np.float32)
+    m = _moments(tiny, 0.1 * tiny, 0 * tiny, params.groups)
+    names = [
+        f"{name}@{sigma:g}"
+        for sigma in params.scales
+        for name in _level_features(m, sigma, 1, params)
+    ]
+    if "regions" in params.groups:
+        names += [f"region:{n}" for n in names if _scale_of(n) <= REGION_MAX_SIGMA]
+    return tuple(names)
 
 
 def multichannel_features(

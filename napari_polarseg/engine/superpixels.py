@@ -13,6 +13,7 @@ edges. It is used instead of SLIC because it is several times faster on a camera
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
 from scipy import ndimage
@@ -50,16 +51,19 @@ def superpixels(
     log_i = np.log(np.maximum(np.where(np.isfinite(i), i, 0), 1e-6))
     edges = ndimage.gaussian_gradient_magnitude(log_i, EDGE_SIGMA)
     n = max(1, int(round(i.size / region_area)))
+    # (tried: the watershed on a 2x coarser grid, 4x faster, cost 0.01 ARI on the real
+    # fruits frame; kept at full resolution)
     labels = watershed(edges, markers=n, compactness=compactness)
-    return (labels - labels.min()).astype(np.int32)
+    labels = (labels - labels.min()).astype(np.int32)
+    return np.ascontiguousarray(labels)
 
 
-def region_means(maps: np.ndarray, regions: np.ndarray) -> np.ndarray:
-    """Mean of every map (F, H, W) over each region: (F, n) float32."""
+def region_means(maps: Sequence[np.ndarray], regions: np.ndarray) -> np.ndarray:
+    """Mean of every map (each H × W) over each region: (F, n) float32."""
     flat = regions.ravel()
     n = int(flat.max()) + 1
     counts = np.maximum(np.bincount(flat, minlength=n), 1)
-    out = np.empty((maps.shape[0], n), dtype=np.float32)
+    out = np.empty((len(maps), n), dtype=np.float32)
     for k, m in enumerate(maps):
         out[k] = np.bincount(flat, weights=m.ravel(), minlength=n) / counts
     return out
