@@ -268,3 +268,172 @@ def test_prefetch_solves_what_the_next_split_needs():
         ncut._segment_vectors = original
     assert calls == []  # the 4th cut only compared the prefetched candidates
     np.testing.assert_array_equal(four, CutTree(W).labels(4))
+
+
+# -- bounded work, isolated blocks, Cancel (issue 13) ----------------------------------------
+
+
+def chain_of_groups(n_groups=200, size=5, eps=1e-2, seed=0):
+    """A graph that has fallen apart into groups: strong ties inside each group of
+    ``size`` nodes, the groups joined in a chain by one weak link each (~eps).
+
+    The smallest eigenvalues of its Laplacian lie close together (those of a long chain,
+    1e-6–1e-4) and the Jacobi preconditioner cannot separate them: at 200 groups the
+    uncapped eigensolvers made 19,477 products (14 s) for the first cut alone, at 600
+    groups 117,382 (6 minutes).
+    """
+    rng = np.random.default_rng(seed)
+    W = scipy.linalg.block_diag(*(0.5 + 0.5 * rng.random((size, size)) for _ in range(n_groups)))
+    ends = np.arange(size - 1, (n_groups - 1) * size, size)
+    W[ends, ends + 1] = eps * (0.5 + rng.random(ends.size))
+    W = np.maximum(W, W.T)
+    np.fill_diagonal(W, 1.0)
+    return W
+
+
+def test_cut_on_a_fallen_apart_graph_stops_at_its_product_cap():
+    from napari_polarseg.engine import ncut
+
+    size, cap = 5, 300
+    W = chain_of_groups(size=size)
+    assert W.shape[0] > ncut.DENSE_EIGH_MAX  # the iterative path
+    tree = CutTree(W, max_products=cap)
+    labels = tree.labels(2)
+    limits = tree.cut_limits(2)
+    assert limits["eigensolver_capped"] == 1 and limits["isolated_skipped"] == 0
+    assert limits["max_products"] == cap
+    assert tree.products == limits["products"] <= cap  # one solve, within its cap
+    # the cut still goes along the chain: whole groups on either side, at a weak link
+    groups = labels.reshape(-1, size)
+    assert (groups == groups[:, :1]).all() and 0 < labels.sum() < labels.size
+    assert tree.ncut_values[0] < 1e-4
+    # twice the products: still not converged (the uncapped solve needs ~20,000)
+    twice = CutTree(W, max_products=2 * cap)
+    twice.labels(2)
+    assert twice.cut_limits()["eigensolver_capped"] == 1
+    assert twice.products <= 2 * cap
+
+
+def test_cut_limits_count_each_solve_and_the_default_cap_leaves_normal_cuts_alone():
+    W, truth = planted((300, 250, 150, 100), p_in=0.6, p_out=0.1, noise=0.3, seed=6)
+    tree = CutTree(W)
+    assert adjusted_rand_score(truth, tree.labels(4)) == 1.0
+    limits = tree.cut_limits(4)
+    assert limits["eigensolver_capped"] == 0 and limits["isolated_skipped"] == 0
+    assert 0 < limits["products"] == tree.products
+    assert tree.cut_limits(1)["products"] == 0  # nothing was solved for one segment
+    assert tree.cut_limits(2)["products"] <= limits["products"]
+    with pytest.raises(ValueError, match="max_products"):
+        CutTree(W, max_products=5)
+
+
+def isolated_graph(n=700, isolated=(42, 500), seed=0):
+    """``fallen_apart`` with some nodes cut loose (less than 1e-9 of their degree leaves
+    them): below what an iterative solver resolves."""
+    W, _ = fallen_apart(n=n, seed=seed)
+    for i, scale in zip(isolated, (1e-10, 1e-12), strict=False):
+        W[i, :] *= scale
+        W[:, i] *= scale
+        W[i, i] = 1.0
+    return W
+
+
+def test_isolated_blocks_are_peeled_off_without_an_eigensolve():
+    from napari_polarseg.engine import ncut
+
+    W = isolated_graph()
+    tree = CutTree(W)
+    three = tree.labels(3)
+    limits = tree.cut_limits(3)
+    assert limits["isolated_skipped"] == 2 and limits["products"] == 0
+    # the most isolated node first (its singleton Ncut is the lowest), then the other
+    assert np.bincount(tree.labels(2)).min() == 1 and tree.labels(2)[500] != tree.labels(2)[0]
+    assert three[42] != three[500] and np.bincount(three).min() == 1
+    assert tree.ncut_values[0] <= tree.ncut_values[1] < ncut.ISOLATED_NCUT
+    # eigh on the whole problem finds the same cuts
+    assert adjusted_rand_score(straightforward_tree(W, 3), three) == 1.0
+    # with a minimum segment size above 1 no single block can be split off: solved
+    bigger = CutTree(W, min_size=2)
+    bigger.labels(2)
+    assert bigger.cut_limits()["isolated_skipped"] == 0 and bigger.products > 0
+
+
+def test_sparse_graph_that_fell_apart_is_solved_by_the_block_solver():
+    """A kNN graph of 12-dimensional features at the thesis scale (s = 1): the most
+    isolated node keeps all but 1e-5 of its degree. Lanczos alone made 161,000 products
+    (4 minutes) at 8,000 nodes; the preconditioned block solver needs a few dozen."""
+    from napari_polarseg.engine import features as feat
+    from napari_polarseg.engine import ncut
+
+    x = np.random.default_rng(0).standard_normal((3000, 12))
+    W = feat.knn_affinity(x, 1.0)
+    d = np.asarray(W.sum(axis=1)).ravel()
+    share = 1.0 - W.diagonal() / d
+    assert ncut.ISOLATED_NCUT < share.min() < ncut.FALLEN_APART
+    tree = CutTree(W)
+    labels = tree.labels(2)
+    limits = tree.cut_limits(2)
+    assert limits["eigensolver_capped"] == 0 and limits["products"] < 200
+    # the cut is as good as peeling off the most isolated node (the Ncut of the split
+    # search is summed over all nodes: 1e-5 relative round-off at these values)
+    i = int(np.argmin(share))
+    single = share[i] + share[i] * d[i] / (d.sum() - d[i])
+    assert tree.ncut_values[0] <= single * (1 + 1e-4)
+    assert np.bincount(labels).min() >= 1
+
+
+def test_cancel_stops_a_running_cut_within_a_few_products():
+    """Cancel set from another thread while the eigensolver runs on a graph whose
+    uncapped first cut takes minutes (117,000 products)."""
+    import threading
+    import time
+
+    from napari_polarseg.engine import Cancelled
+
+    tree = CutTree(chain_of_groups(n_groups=600), max_products=10_000)  # ~30 s uncancelled
+    stop = threading.Event()
+    at_stop: dict[str, float] = {}
+
+    def press_cancel() -> None:
+        while tree.products < 40:  # the solve is under way
+            time.sleep(0.005)
+        at_stop["products"] = tree.products
+        at_stop["time"] = time.perf_counter()
+        stop.set()
+
+    presser = threading.Thread(target=press_cancel)
+    presser.start()
+    with pytest.raises(Cancelled, match="normalized cut"):
+        tree.labels(2, cancel=stop.is_set)
+    elapsed = time.perf_counter() - at_stop["time"]
+    presser.join()
+    after = tree.cut_limits()["products"] - at_stop["products"]
+    assert 0 <= after <= 8  # at most the iteration under way when Cancel came (4 + 4)
+    assert elapsed < 1.0
+    # the tree stays usable: nothing half-made was kept
+    assert tree.ncut_values == [] and tree.labels(1).max() == 0
+
+
+def test_pipeline_hands_its_cancel_to_the_cut_and_stays_consistent():
+    from napari_polarseg.engine import Cancelled, Pipeline, SegmentParams
+
+    with np.load("napari_polarseg/sample_data/camouflage.npz") as f:
+        stack, angles = f["stack"], np.deg2rad(f["angles"])
+    params = SegmentParams(window=5, degree=4, n_segments=3)  # 624 blocks: iterative
+    pipe = Pipeline(stack, angles, params)
+    pipe.get("cut")
+    calls = []
+
+    def cancel() -> bool:
+        calls.append(1)
+        return True
+
+    with pytest.raises(Cancelled, match="normalized cut"):
+        for _ in pipe.run_iter(reconstruction=False, cancel=cancel):
+            pass
+    assert calls and not pipe.is_fresh("labels") and pipe.is_fresh("cut")
+    result = pipe.run(reconstruction=False)
+    fresh = Pipeline(stack, angles, params).run(reconstruction=False)
+    np.testing.assert_array_equal(result.labels, fresh.labels)
+    assert result.cut_limits == fresh.cut_limits
+    assert result.summary()["cut_limits"]["eigensolver_capped"] == 0

@@ -13,4 +13,5 @@ class PolarsegError(ValueError):
 
 
 class Cancelled(Exception):
-    """A pipeline run was cancelled between stages (not an error of the input)."""
+    """A run was cancelled, between stages or inside a normalized cut (not an error of the
+    input)."""

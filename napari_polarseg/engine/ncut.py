@@ -42,9 +42,43 @@ Eigensolvers
 - Sparse W (k nearest neighbours, spatial neighbourhoods): Lanczos (``eigsh``, two
   eigenpairs of D^−½ W D^−½, tolerance EIG_TOL / 10). Products are cheap there and
   LOBPCG's per-iteration overhead dominates (4 s against 0.5 s on a 19,584-block
-  camera frame). pyamg is not used: Lanczos already takes well under a second.
+  camera frame). pyamg is not used: Lanczos already takes well under a second. Except
+  on a graph that has *fallen apart* (a node keeps more than 1 − :data:`FALLEN_APART`
+  of its degree to itself, as with the thesis scale s = 1): there Lanczos must resolve
+  eigenvalues of D^−½ W D^−½ within 1e-5 of 1 and took 161,000 products (4 minutes) on
+  a 8,000-block kNN graph of 12-dimensional features, 268,000 on the 12,444 blocks of
+  the polanalyser camera frame, where the block LOBPCG with its Jacobi preconditioner
+  needs about 10: such graphs are solved by the block LOBPCG first.
 - Each falls back on the other, and finally on a dense solve (up to
-  :data:`DENSE_FALLBACK_MAX` nodes).
+  :data:`DENSE_FALLBACK_MAX` nodes) when neither gave any vector.
+
+Bounded work, isolated blocks, Cancel
+-------------------------------------
+- Every eigensolve of a segment may make at most ``max_products`` products with the
+  affinity (:data:`MAX_CUT_PRODUCTS` by default; a product is one vector, so a block
+  LOBPCG iteration with four active vectors makes four), all solvers of the solve
+  together; Lanczos, when it goes first, may take :data:`LANCZOS_SHARE` of them. When
+  the budget is spent, the cut is made along the best vector the block LOBPCG has (its
+  lowest Ritz vector) and :meth:`CutTree.cut_limits` counts the solve as capped. On the
+  inputs measured the cap never bites (largest solves: Lanczos 811 products on the
+  polanalyser carps frame with the recommended preset, 1,496 before on the fruits
+  frame with the thesis preset, which now takes the block LOBPCG; block LOBPCG ≤ 130);
+  at a sparse product's ~1 ms on 12,000 blocks a capped solve takes ~2–3 s, at a dense
+  one's 5–9 ms on 4,752–6,000 blocks 10–18 s.
+- Isolated blocks: a block of a segment that keeps all but less than
+  :data:`ISOLATED_NCUT` of its degree to itself has a singleton cut below what an
+  iterative solver resolves (its residual tolerance is :data:`EIG_TOL`): many
+  eigenvalues lie below the tolerance, and the solver may return any mixture of their
+  vectors. Above :data:`DENSE_EIGH_MAX` nodes such a segment is not solved at all: its
+  candidate split peels off its most isolated block (the exact minimum of the singleton
+  Ncut values, what ``eigh`` finds on such graphs), counted as ``isolated_skipped``.
+  Not with ``min_size`` > 1, where a single block cannot be split off; the capped
+  solve then decides. Small graphs keep the exact ``eigh`` (on the bundled scenes at
+  the thesis scale it sometimes prefers a few-block segment to the most isolated block).
+- Cancel: ``labels(k, cancel=...)`` and ``prefetch(cancel=...)`` call ``cancel()``
+  before every product and raise :class:`~napari_polarseg.engine.errors.Cancelled`
+  when it returns True (a product takes milliseconds, so a cut stops within a few);
+  the tree stays consistent (the interrupted solve is simply not kept).
 - A :class:`CutTree` can be warm-started from the eigenvectors of an earlier tree on
   the same blocks (the pipeline does this when the affinity changed but not the block
   grid, e.g. its scale or the refractive index): each segment's solve also starts from
@@ -63,7 +97,6 @@ solves the next split's candidates ahead (the plugin does it in idle time).
 
 from __future__ import annotations
 
-import warnings
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 
@@ -71,9 +104,9 @@ import numpy as np
 import scipy.linalg
 import scipy.sparse as sps
 from scipy.linalg.blas import get_blas_funcs
-from scipy.sparse.linalg import ArpackNoConvergence, LinearOperator, eigsh, lobpcg
+from scipy.sparse.linalg import ArpackNoConvergence, LinearOperator, eigsh
 
-from .errors import PolarsegError
+from .errors import Cancelled, PolarsegError
 
 #: Graphs up to this many nodes use a dense eigensolver; larger ones are iterative.
 DENSE_EIGH_MAX = 300
@@ -81,6 +114,24 @@ DENSE_EIGH_MAX = 300
 EIG_TOL = 1e-6
 #: Iteration cap of LOBPCG before falling back to Lanczos.
 LOBPCG_MAXITER = 400
+#: Default cap on the products with the affinity one segment's eigensolve may make, all
+#: solvers together (module docstring: "Bounded work"); the largest solve measured on
+#: normal inputs made 811.
+MAX_CUT_PRODUCTS = 2_000
+#: Share of the products Lanczos may take when it goes first (sparse graphs that have
+#: not fallen apart); the rest is kept for the block LOBPCG.
+LANCZOS_SHARE = 0.75
+#: A sparse graph has fallen apart when one of its nodes sends less than this share of
+#: its degree to other nodes (1 − W_ii / d_i, its singleton cut over its degree): then
+#: the block LOBPCG, whose Jacobi preconditioner is what copes with such nodes, goes
+#: before Lanczos. The polanalyser frames give 0.83–0.96 with the recommended preset
+#: and 2e-14–3e-4 with the thesis preset.
+FALLEN_APART = 1e-3
+#: A node is isolated when less than this share of its degree leaves it: its singleton
+#: cut is below the resolution of the iterative eigensolvers (:data:`EIG_TOL`).
+ISOLATED_NCUT = EIG_TOL
+#: Smallest ``max_products`` accepted (the block solver's first step needs a few).
+MIN_CUT_PRODUCTS = 20
 #: Vectors iterated along with the Fiedler vector by the dense LOBPCG (see module doc).
 #: Products for the cuts of the reference image's interactive changes (k = 3, the 4th
 #: cut, s = 2, n = 1.6, and the same with the recommended preset), summed: 1 guard at
@@ -294,6 +345,77 @@ def _orthonormalize(V: np.ndarray, basis: np.ndarray | None) -> np.ndarray:
     return V
 
 
+class _OutOfProducts(Exception):
+    """A solver asked for more products than its budget has left."""
+
+
+class _Budget:
+    """The products with the affinity one eigensolve may still make; checks Cancel.
+
+    Every solver charges its products here before making them (:meth:`take`, one per
+    vector), which is also where ``cancel()`` is called.
+
+    Parameters
+    ----------
+    limit : int
+        Products the whole solve may make.
+    cancel : callable() -> bool, optional
+        Returning True raises :class:`~napari_polarseg.engine.errors.Cancelled`.
+    """
+
+    def __init__(self, limit: int, cancel: Callable[[], bool] | None = None) -> None:
+        self.limit = int(limit)
+        self.cancel = cancel
+        self.used = 0
+        #: a solver was refused products: the solve ended on a best-so-far vector
+        self.capped = False
+
+    def take(self, columns: int, stop: int | None = None) -> bool:
+        """Charge ``columns`` products if they fit below ``stop`` (default: the limit).
+
+        Returns False, and marks the solve as capped when ``stop`` is the limit, if they
+        do not fit.
+        """
+        if self.cancel is not None and self.cancel():
+            raise Cancelled("the normalized cut was cancelled")
+        end = self.limit if stop is None else min(stop, self.limit)
+        if self.used + columns > end:
+            self.capped = self.capped or end == self.limit
+            return False
+        self.used += columns
+        return True
+
+    def operator(
+        self, n: int, product: Callable[[np.ndarray], np.ndarray], stop: int | None = None
+    ) -> LinearOperator:
+        """``product`` (x ↦ A x on (n,) vectors) as an operator that charges each call;
+        past the budget (or ``stop``) it raises :class:`_OutOfProducts`."""
+
+        def matvec(x: np.ndarray) -> np.ndarray:
+            if not self.take(1, stop):
+                raise _OutOfProducts
+            return product(np.ravel(x))
+
+        return LinearOperator((n, n), matvec=matvec, dtype=float)
+
+
+_BLAS_LIBRARIES: list | None = None
+
+
+def _blas_libraries() -> list:
+    """threadpoolctl's controllers of the loaded BLAS libraries ([] without it)."""
+    global _BLAS_LIBRARIES
+    if _BLAS_LIBRARIES is None:
+        try:
+            from threadpoolctl import ThreadpoolController
+
+            found = ThreadpoolController().lib_controllers
+            _BLAS_LIBRARIES = [lib for lib in found if lib.user_api == "blas"]
+        except Exception:  # pragma: no cover - scikit-learn brings threadpoolctl
+            _BLAS_LIBRARIES = []
+    return _BLAS_LIBRARIES
+
+
 def _lobpcg(
     apply: Callable[[np.ndarray], np.ndarray],
     precond: np.ndarray,
@@ -303,7 +425,53 @@ def _lobpcg(
     tol: float,
     guard_tol: float,
     maxiter: int,
-) -> tuple[np.ndarray, np.ndarray, float]:
+    budget: _Budget | None = None,
+) -> tuple[np.ndarray, np.ndarray, float, bool]:
+    """:func:`_lobpcg_steps` with its tall-and-skinny algebra on one BLAS thread.
+
+    Each iteration makes a dozen products of n × (≤ 13) blocks (Gram matrices, Ritz
+    combinations, projections). OpenBLAS splits them between its threads, which on
+    the reference 2-core machine under load made them 25–45 times slower (12 ms
+    against 0.5 ms for a 12,000 × 12 Gram matrix; 36 ms an iteration on a 12,000-node
+    sparse graph, where 400 iterations took 14 s). ``apply`` (the products with the
+    affinity, memory-bound: they gain from the threads) runs with the caller's threads.
+    """
+    libs = _blas_libraries()
+    saved = [lib.num_threads for lib in libs]
+    if all(count == 1 for count in saved):
+        return _lobpcg_steps(apply, precond, u, X0, size, tol, guard_tol, maxiter, budget)
+
+    def threads(counts: list[int]) -> None:
+        for lib, count in zip(libs, counts, strict=True):
+            lib.set_num_threads(count)
+
+    single = [1] * len(libs)
+
+    def products(X: np.ndarray) -> np.ndarray:
+        threads(saved)
+        try:
+            return apply(X)
+        finally:
+            threads(single)
+
+    threads(single)
+    try:
+        return _lobpcg_steps(products, precond, u, X0, size, tol, guard_tol, maxiter, budget)
+    finally:
+        threads(saved)
+
+
+def _lobpcg_steps(
+    apply: Callable[[np.ndarray], np.ndarray],
+    precond: np.ndarray,
+    u: np.ndarray,
+    X0: np.ndarray,
+    size: int,
+    tol: float,
+    guard_tol: float,
+    maxiter: int,
+    budget: _Budget | None = None,
+) -> tuple[np.ndarray, np.ndarray, float, bool]:
     """Smallest eigenpairs of a symmetric operator orthogonal to a unit vector u.
 
     Block LOBPCG (Knyazev 2001) in the orthonormal-basis form of Hetmaniuk & Lehoucq
@@ -331,9 +499,16 @@ def _lobpcg(
         Block size b: the vector sought and b − 1 guards.
     tol, guard_tol : float
         Residual tolerances ‖A x − λ x‖ of the first vector and of the others.
+    maxiter : int
+        Iteration cap.
+    budget : _Budget, optional
+        Products the solve may make (each column given to ``apply`` is one); when the
+        next iteration's products do not fit, the solve stops where it is.
 
-    Returns (eigenvalues (b,), vectors (n, b) ascending, residual of the first); raises
-    ArpackNoConvergence after ``maxiter`` iterations.
+    Returns (eigenvalues (b,), vectors (n, b) ascending, residual of the first, whether
+    every vector converged). Not converged: the current Ritz vectors, after ``maxiter``
+    iterations, when the budget is spent, or when the residuals lie in the basis already.
+    Raises :class:`_OutOfProducts` if the budget cannot pay for the first product.
     """
     n, b = X0.shape[0], size
     rng = np.random.default_rng(0)
@@ -341,21 +516,26 @@ def _lobpcg(
     while X.shape[1] < b:
         extra = rng.standard_normal((n, b - X.shape[1]))
         X = np.hstack([X, _orthonormalize(extra, np.hstack([u, X]))])
+    if budget is not None and not budget.take(X.shape[1]):
+        raise _OutOfProducts
     AX = apply(X)
     lam, C = np.linalg.eigh(_sym(X.T @ AX))
     X, AX, lam = X @ C[:, :b], AX @ C[:, :b], lam[:b]
     P = AP = None
     tols = np.full(b, guard_tol)
     tols[0] = tol
+    resid = np.full(b, np.inf)
     for _ in range(maxiter):
         R = AX - X * lam
         resid = _column_norms(R)
         active = resid > tols
         if not active.any():
-            return lam, X, float(resid[0])
+            return lam, X, float(resid[0]), True
         ub = np.hstack([u, X] if P is None else [u, X, P])
         Wk = _orthonormalize(precond[:, None] * R[:, active], ub)
         if Wk.shape[1] == 0:  # residuals inside the basis: nothing new to add
+            break
+        if budget is not None and not budget.take(Wk.shape[1]):
             break
         AB = np.hstack([AX, apply(Wk)] if P is None else [AX, AP, apply(Wk)])
         B = np.hstack([ub[:, 1:], Wk])
@@ -367,7 +547,7 @@ def _lobpcg(
         Z[:b] = 0.0
         Z = _orthonormalize(Z, Cx)
         P, AP = (B @ Z, AB @ Z) if Z.shape[1] else (None, None)
-    raise ArpackNoConvergence("LOBPCG did not converge", lam, X)
+    return lam, X, float(resid[0]), False
 
 
 def _sym(H: np.ndarray) -> np.ndarray:
@@ -394,11 +574,13 @@ def _start_candidates(
     return X
 
 
-def _segment_vectors(seg: _Segment, starts: list[np.ndarray]) -> np.ndarray:
+def _segment_vectors(seg: _Segment, starts: list[np.ndarray], budget: _Budget) -> np.ndarray:
     """Generalized eigenvectors y (m, b) of a large dense segment: Fiedler, then guards.
 
-    Block LOBPCG first (module docstring); then Lanczos and a dense solve for the Fiedler
-    vector alone. Raises PolarsegError if all fail.
+    Block LOBPCG first (module docstring); if it stalls with products left, Lanczos for
+    the Fiedler vector alone, with what is left of ``budget``. When the budget is spent
+    the block's best vectors are returned (``budget.capped`` tells); a dense solve only
+    when no solver gave any vector. Raises PolarsegError if that fails too.
     """
     m = seg.idx.size
     d = seg.d
@@ -410,8 +592,9 @@ def _segment_vectors(seg: _Segment, starts: list[np.ndarray]) -> np.ndarray:
 
     precond = 1.0 / np.maximum(1.0 - seg.diag / d, 1e-8)
     size = min(1 + GUARD_VECTORS, m - 1)
+    best = None
     try:
-        _, Z, _ = _lobpcg(
+        _, Z, _, converged = _lobpcg(
             laplacian,
             precond,
             u,
@@ -420,18 +603,21 @@ def _segment_vectors(seg: _Segment, starts: list[np.ndarray]) -> np.ndarray:
             EIG_TOL,
             GUARD_TOL,
             LOBPCG_MAXITER,
+            budget,
         )
-        return Z * d_is[:, None]
-    except (ArpackNoConvergence, np.linalg.LinAlgError):
+        best = Z * d_is[:, None]
+        if converged or budget.capped:
+            return best
+    except (_OutOfProducts, np.linalg.LinAlgError):
         pass
     start = next((s for s in starts if s is not None), None)
-    op = LinearOperator(
-        (m, m), matvec=lambda x: d_is * seg.product((d_is * np.ravel(x))[:, None])[:, 0]
-    )
+    op = budget.operator(m, lambda x: d_is * seg.product((d_is * x)[:, None])[:, 0])
     try:
         vals, vecs = eigsh(op, k=2, which="LA", v0=_start_vector(m, d, start), tol=1e-8)
         z = vecs[:, np.argsort(vals)[0]]
-    except (ArpackNoConvergence, np.linalg.LinAlgError, ValueError):
+    except (_OutOfProducts, ArpackNoConvergence, np.linalg.LinAlgError, ValueError):
+        if best is not None:
+            return best
         z = _dense_fiedler(seg.W if seg.whole else _subgraph(seg.W, seg.idx), d)
     return (z / np.sqrt(d))[:, None]
 
@@ -448,17 +634,6 @@ def _scaled_product(Wop, d_is: np.ndarray) -> Callable[[np.ndarray], np.ndarray]
     return apply
 
 
-def _laplacian_operator(Wop, d_is: np.ndarray) -> LinearOperator:
-    """N = I − D^−½ W D^−½ as an operator on vectors and blocks of vectors."""
-    n = Wop.shape[0]
-    product = _scaled_product(Wop, d_is)
-
-    def apply(x: np.ndarray) -> np.ndarray:
-        return np.asarray(x) - product(x)
-
-    return LinearOperator((n, n), matvec=apply, matmat=apply, dtype=float)
-
-
 def _start_vector(n: int, d: np.ndarray, start: np.ndarray | None) -> np.ndarray:
     """Starting z = D^½ y for the iterative solvers: ``start`` (a y vector) or random."""
     rng = np.random.default_rng(0)
@@ -470,44 +645,92 @@ def _start_vector(n: int, d: np.ndarray, start: np.ndarray | None) -> np.ndarray
     return x
 
 
-def _lobpcg_fiedler(Wop, W, d: np.ndarray, start: np.ndarray | None) -> np.ndarray:
-    """Smallest eigenvector z of N orthogonal to u = D^½ 1 by scipy's LOBPCG (sparse W)."""
+def _block_fiedler(
+    Wop, W, d: np.ndarray, start: np.ndarray | None, budget: _Budget
+) -> tuple[np.ndarray, bool]:
+    """Smallest eigenvector z of N orthogonal to u = D^½ 1 by the block LOBPCG (any W).
+
+    The solver of the dense segments (:func:`_lobpcg`, Jacobi preconditioner, guard
+    vectors) on ``Wop``'s products. Returns (z, converged); not converged: the best
+    vector when the budget was spent or the solver stalled.
+    """
     n = W.shape[0]
     d_is = 1.0 / np.sqrt(d)
     u = np.sqrt(d)[:, None] / np.sqrt(d.sum())
-    diag = np.maximum(1.0 - _diagonal(W) / d, 1e-8)
-
-    def jacobi(x: np.ndarray) -> np.ndarray:
-        x = np.asarray(x)
-        return x / (diag if x.ndim == 1 else diag[:, None])
-
-    precond = LinearOperator((n, n), matvec=jacobi, matmat=jacobi, dtype=float)
-    op = _laplacian_operator(Wop, d_is)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        vals, vecs = lobpcg(
-            op,
-            _start_vector(n, d, start)[:, None],
-            M=precond,
-            Y=u,
-            tol=EIG_TOL,
-            maxiter=LOBPCG_MAXITER,
-            largest=False,
-        )
-    z = vecs[:, 0]
-    resid = np.linalg.norm(op @ z - vals[0] * z)
-    if not np.isfinite(resid) or resid > 10 * EIG_TOL * np.linalg.norm(z):
-        raise ArpackNoConvergence("LOBPCG did not converge", vals, vecs)
-    return z
+    product = _scaled_product(Wop, d_is)
+    precond = 1.0 / np.maximum(1.0 - _diagonal(W) / d, 1e-8)
+    size = min(1 + GUARD_VECTORS, n - 1)
+    _, Z, _, converged = _lobpcg(
+        lambda X: X - product(X),
+        precond,
+        u,
+        _start_candidates(d, precond, [start], size),
+        size,
+        EIG_TOL,
+        GUARD_TOL,
+        LOBPCG_MAXITER,
+        budget,
+    )
+    return Z[:, 0], converged
 
 
-def _lanczos_fiedler(Wop, d: np.ndarray, start: np.ndarray | None, tol: float) -> np.ndarray:
-    """Second eigenvector z of D^−½ W D^−½ by Lanczos; raises ArpackNoConvergence."""
+def _lanczos_fiedler(
+    Wop,
+    d: np.ndarray,
+    start: np.ndarray | None,
+    tol: float,
+    budget: _Budget,
+    stop: int | None = None,
+) -> np.ndarray:
+    """Second eigenvector z of D^−½ W D^−½ by Lanczos, its products charged to ``budget``
+    (up to ``stop`` of them); raises ArpackNoConvergence or :class:`_OutOfProducts`."""
     n = Wop.shape[0]
     product = _scaled_product(Wop, 1.0 / np.sqrt(d))
-    op = LinearOperator((n, n), matvec=lambda x: product(np.ravel(x)), dtype=float)
+    op = budget.operator(n, product, stop)
     vals, vecs = eigsh(op, k=2, which="LA", v0=_start_vector(n, d, start), tol=tol)
     return vecs[:, np.argsort(vals)[0]]
+
+
+def _sparse_fiedler(W, d: np.ndarray, start: np.ndarray | None, budget: _Budget) -> np.ndarray:
+    """Smallest eigenvector z of N orthogonal to u for a graph solved iteratively as a
+    whole (sparse W, or a dense one given to :func:`fiedler_vector` directly).
+
+    Lanczos first, with :data:`LANCZOS_SHARE` of the budget, then the block LOBPCG;
+    the block LOBPCG first on a graph that has fallen apart (:data:`FALLEN_APART`).
+    The best vector of the block solver when the budget is spent; a dense solve when no
+    solver gave any vector.
+    """
+    Wop = _operator_matrix(W)
+    fallen = float(np.min(1.0 - _diagonal(W) / d)) < FALLEN_APART
+    best = None
+
+    def block() -> np.ndarray | None:
+        nonlocal best
+        try:
+            z, converged = _block_fiedler(Wop, W, d, start, budget)
+        except (_OutOfProducts, np.linalg.LinAlgError):
+            return None
+        best = z
+        return z if converged or budget.capped else None
+
+    def lanczos() -> np.ndarray | None:
+        stop = None if fallen else budget.used + int(LANCZOS_SHARE * budget.limit)
+        try:
+            return _lanczos_fiedler(Wop, d, start, EIG_TOL / 10, budget, stop)
+        except (_OutOfProducts, ArpackNoConvergence, np.linalg.LinAlgError, ValueError):
+            # a graph that has fallen apart (many near-isolated nodes) has a highly
+            # degenerate spectrum where an iterative solver can stall
+            return None
+
+    for solve in (block, lanczos) if fallen else (lanczos, block):
+        z = solve()
+        if z is not None:
+            return z
+        if budget.capped:
+            break
+    if best is not None:
+        return best
+    return _dense_fiedler(W, d)
 
 
 def _dense_fiedler(W, d: np.ndarray) -> np.ndarray:
@@ -534,7 +757,20 @@ def _fix_sign(y: np.ndarray) -> np.ndarray:
     return y * np.where(pivots >= 0, 1.0, -1.0)
 
 
-def fiedler_vector(W, start: np.ndarray | None = None) -> np.ndarray:
+def _check_products(max_products: int) -> int:
+    if not isinstance(max_products, (int, np.integer)) or max_products < MIN_CUT_PRODUCTS:
+        raise PolarsegError(
+            f"max_products must be an integer >= {MIN_CUT_PRODUCTS}, got {max_products!r}"
+        )
+    return int(max_products)
+
+
+def fiedler_vector(
+    W,
+    start: np.ndarray | None = None,
+    max_products: int = MAX_CUT_PRODUCTS,
+    cancel: Callable[[], bool] | None = None,
+) -> np.ndarray:
     """Second-smallest generalized eigenvector y of (D − W) y = λ D y (thesis eq. 4.32).
 
     Sign fixed so that the entry of largest magnitude is positive. Solvers: module
@@ -548,29 +784,24 @@ def fiedler_vector(W, start: np.ndarray | None = None) -> np.ndarray:
     start : ndarray (n,), optional
         Starting guess (a y vector, e.g. from an earlier affinity) for the iterative
         solvers.
+    max_products : int
+        Most products with W the iterative solvers may make (module docstring, "Bounded
+        work"); past it the best vector found is returned.
+    cancel : callable() -> bool, optional
+        Called before every product; True raises
+        :class:`~napari_polarseg.engine.errors.Cancelled`.
     """
+    budget = _Budget(_check_products(max_products), cancel)
+    return _fiedler(W, start, budget)
+
+
+def _fiedler(W, start: np.ndarray | None, budget: _Budget) -> np.ndarray:
     n = W.shape[0]
     if n > DENSE_EIGH_MAX and not sps.issparse(W):
         seg = _DenseGraph(W).segment(np.arange(n))
-        return _fix_sign(_segment_vectors(seg, [start])[:, 0])
+        return _fix_sign(_segment_vectors(seg, [start], budget)[:, 0])
     d = _degrees(W)
-    z = None
-    if n > DENSE_EIGH_MAX:
-        Wop = _operator_matrix(W)
-        solvers = (
-            lambda: _lanczos_fiedler(Wop, d, start, EIG_TOL / 10),
-            lambda: _lobpcg_fiedler(Wop, W, d, start),
-        )
-        for solve in solvers:
-            try:
-                z = solve()
-                break
-            except (ArpackNoConvergence, np.linalg.LinAlgError, ValueError):
-                # a graph that has fallen apart (many near-isolated nodes) has a highly
-                # degenerate spectrum where an iterative solver can stall
-                continue
-    if z is None:
-        z = _dense_fiedler(W, d)
+    z = _sparse_fiedler(W, d, start, budget) if n > DENSE_EIGH_MAX else _dense_fiedler(W, d)
     return _fix_sign(z / np.sqrt(d))
 
 
@@ -678,19 +909,41 @@ def _lower_prefix_sums(
 
 
 def _bipartition(
-    W, min_size: int = 1, start: np.ndarray | None = None
+    W, min_size: int = 1, start: np.ndarray | None = None, budget: _Budget | None = None
 ) -> tuple[np.ndarray | None, float, np.ndarray | None]:
     if W.shape[0] < max(2, 2 * min_size):
         return None, np.inf, None
-    y = fiedler_vector(W, start)
+    y = _fiedler(W, start, budget or _Budget(MAX_CUT_PRODUCTS))
     mask, value = best_split(W, y, min_size)
     return mask, value, y
 
 
-def bipartition(W, min_size: int = 1) -> tuple[np.ndarray | None, float]:
-    """Best two-way normalized cut of a graph: (mask of one side, Ncut value)."""
-    mask, value, _ = _bipartition(W, min_size)
+def bipartition(
+    W, min_size: int = 1, max_products: int = MAX_CUT_PRODUCTS
+) -> tuple[np.ndarray | None, float]:
+    """Best two-way normalized cut of a graph: (mask of one side, Ncut value).
+
+    ``max_products`` caps the eigensolver's products (:func:`fiedler_vector`).
+    """
+    mask, value, _ = _bipartition(W, min_size, None, _Budget(_check_products(max_products)))
     return mask, value
+
+
+def isolated_split(d: np.ndarray, diag: np.ndarray) -> tuple[np.ndarray, float] | None:
+    """The split that peels off a graph's most isolated node, if it is isolated.
+
+    A node is isolated when less than :data:`ISOLATED_NCUT` of its degree ``d`` leaves it
+    (``diag`` holds the self loops W_ii). Returns (mask of that node alone, the Ncut value
+    of the split, eq. 4.29), or None when no node is isolated.
+    """
+    cut = np.maximum(np.asarray(d, dtype=float) - diag, 0.0)
+    share = cut / d
+    i = int(np.argmin(share))
+    if not share[i] < ISOLATED_NCUT or d.size < 2:
+        return None
+    mask = np.zeros(d.size, dtype=bool)
+    mask[i] = True
+    return mask, float(cut[i] / d[i] + cut[i] / (d.sum() - d[i]))
 
 
 @dataclass
@@ -704,6 +957,12 @@ class CutTree:
     A large dense W is kept once (plus one float32 copy for the products) for the whole
     tree; each segment's eigensolve starts from its parent's eigenvectors restricted to
     it (module docstring).
+
+    Each eigensolve makes at most ``max_products`` products with W (module docstring,
+    "Bounded work"); a segment above :data:`DENSE_EIGH_MAX` nodes with an isolated block
+    is not solved but peels that block off (:func:`isolated_split`, when ``min_size`` is
+    1). :meth:`cut_limits` says how often either happened. ``labels`` and ``prefetch``
+    take a ``cancel`` callable, called before every product.
     """
 
     W: np.ndarray | sps.spmatrix
@@ -728,14 +987,24 @@ class CutTree:
     _warm_index: list[tuple[np.ndarray, np.ndarray]] | None = field(
         default=None, init=False, repr=False
     )
+    #: products an eigensolve may make (module docstring, "Bounded work")
+    max_products: int = MAX_CUT_PRODUCTS
+    _counts: dict[str, int] = field(default_factory=dict, init=False, repr=False)
+    #: the counts when each entry of _history was made
+    _count_history: list[dict[str, int]] = field(default_factory=list, init=False, repr=False)
+    _solving: _Budget | None = field(default=None, init=False, repr=False)
+    _cancel: Callable[[], bool] | None = field(default=None, init=False, repr=False)
 
     def __post_init__(self) -> None:
         n = self.W.shape[0]
         if self.W.shape != (n, n):
             raise PolarsegError(f"affinity must be square, got shape {self.W.shape}")
+        self.max_products = _check_products(self.max_products)
         self._segments = [np.arange(n)]
         self._ids = [self._new_id()]
         self._history = [np.zeros(n, dtype=np.int32)]
+        self._counts = {"eigensolver_capped": 0, "isolated_skipped": 0, "products": 0}
+        self._count_history = [dict(self._counts)]
 
     def _new_id(self) -> int:
         self._next_id += 1
@@ -745,6 +1014,47 @@ class CutTree:
     def ncut_values(self) -> list[float]:
         """Ncut value of each split made so far, in order."""
         return list(self._ncut_values)
+
+    @property
+    def products(self) -> int:
+        """Products with W the eigensolvers made so far (the running solve's included)."""
+        solving = self._solving
+        return self._counts["products"] + (0 if solving is None else solving.used)
+
+    def cut_limits(self, k: int | None = None) -> dict[str, int]:
+        """How often the work limits acted, up to the labels of ``k`` segments.
+
+        ``eigensolver_capped``: eigensolves that spent ``max_products`` and cut along their
+        best vector; ``isolated_skipped``: segments not solved because they peel off an
+        isolated block; ``products``: products with W made; ``max_products``: the cap.
+        Counted over the solves made until ``labels(k)`` was available (by default, all
+        so far, prefetched ones included).
+        """
+        counts = self._counts
+        if k is not None and 1 <= k <= len(self._count_history):
+            counts = self._count_history[k - 1]
+        return {**counts, "max_products": self.max_products}
+
+    def _solve(self, work: Callable[[_Budget], tuple]) -> tuple:
+        """``work(budget)`` with a fresh budget, its products and cap counted."""
+        budget = _Budget(self.max_products, self._cancel)
+        self._solving = budget
+        try:
+            return work(budget)
+        finally:
+            self._solving = None
+            self._counts["products"] += budget.used
+            self._counts["eigensolver_capped"] += int(budget.capped)
+
+    def _peel(self, d: np.ndarray, diag: np.ndarray) -> tuple | None:
+        """The candidate of a large segment with an isolated block (module docstring)."""
+        if self.min_size > 1:
+            return None
+        split = isolated_split(d, diag)
+        if split is None:
+            return None
+        self._counts["isolated_skipped"] += 1
+        return (*split, None)
 
     def _dense_graph(self) -> _DenseGraph | None:
         """The shared dense graph, for a dense W above DENSE_EIGH_MAX nodes."""
@@ -762,19 +1072,34 @@ class CutTree:
                     result: tuple = (None, np.inf, None)
                 else:
                     seg = graph.segment(idx)
-                    starts = [self._warm_start(idx), self._starts.get(sid)]
-                    block = _fix_sign(_segment_vectors(seg, starts))
-                    self._blocks[sid] = block
-                    self._vectors[idx.tobytes()] = block
-                    result = (*_segment_split(seg, block[:, 0], self.min_size), block[:, 0])
+                    peeled = self._peel(seg.d, seg.diag)
+                    if peeled is not None:
+                        result = peeled
+                    else:
+                        starts = [self._warm_start(idx), self._starts.get(sid)]
+                        block = _fix_sign(
+                            self._solve(lambda budget: _segment_vectors(seg, starts, budget))
+                        )
+                        self._blocks[sid] = block
+                        self._vectors[idx.tobytes()] = block
+                        split = _segment_split(seg, block[:, 0], self.min_size)
+                        result = (*split, block[:, 0])
             else:
                 sub = self.W if idx.size == self.W.shape[0] else _subgraph(self.W, idx)
                 if not sps.issparse(sub):
                     sub = np.asarray(sub, dtype=float)  # small: solved and split in float64
-                warm = None if self.warm is None else self.warm.get(idx.tobytes())
-                result = _bipartition(sub, self.min_size, warm)
-                if result[2] is not None:
-                    self._vectors[idx.tobytes()] = result[2]
+                peeled = None
+                if idx.size > DENSE_EIGH_MAX and idx.size >= max(2, 2 * self.min_size):
+                    peeled = self._peel(_degrees(sub), _diagonal(sub))
+                if peeled is not None:
+                    result = peeled
+                else:
+                    warm = None if self.warm is None else self.warm.get(idx.tobytes())
+                    result = self._solve(
+                        lambda budget: _bipartition(sub, self.min_size, warm, budget)
+                    )
+                    if result[2] is not None:
+                        self._vectors[idx.tobytes()] = result[2]
             self._starts.pop(sid, None)
             self._candidates[sid] = result
         return self._candidates[sid]
@@ -842,10 +1167,11 @@ class CutTree:
         for lab, seg in enumerate(self._segments):
             labels[seg] = lab
         self._history.append(_first_appearance_order(labels))
+        self._count_history.append(dict(self._counts))
         self._ncut_values.append(best_val)
         return True
 
-    def prefetch(self) -> Iterator[int]:
+    def prefetch(self, cancel: Callable[[], bool] | None = None) -> Iterator[int]:
         """Solve the candidate split of every current segment not solved yet.
 
         What the next split (``labels(k + 1)`` after ``labels(k)`` reached the tree's
@@ -853,20 +1179,34 @@ class CutTree:
         candidates: an idle-time precomputation (the plugin runs it after showing a
         result). Yields the position of each segment solved, so that a caller can stop
         between two solves; the results are exactly those ``labels`` would compute.
+        ``cancel`` is called before every product of a solve (True raises
+        :class:`~napari_polarseg.engine.errors.Cancelled`; that solve is not kept).
         """
         if self._exhausted:
             return
         for pos in range(len(self._segments)):
             if self._ids[pos] not in self._candidates:
-                self._candidate(pos)
+                self._cancel = cancel
+                try:
+                    self._candidate(pos)
+                finally:
+                    self._cancel = None
                 yield pos
 
-    def labels(self, k: int) -> np.ndarray:
-        """Node labels 0..k'−1 for k' = min(k, reachable) segments."""
+    def labels(self, k: int, cancel: Callable[[], bool] | None = None) -> np.ndarray:
+        """Node labels 0..k'−1 for k' = min(k, reachable) segments.
+
+        ``cancel`` is called before every product of the eigensolvers; True raises
+        :class:`~napari_polarseg.engine.errors.Cancelled` (the splits made so far stay).
+        """
         if k < 1:
             raise PolarsegError(f"number of segments must be >= 1, got {k}")
-        while len(self._history) < k and not self._exhausted:
-            self._split_once()
+        self._cancel = cancel
+        try:
+            while len(self._history) < k and not self._exhausted:
+                self._split_once()
+        finally:
+            self._cancel = None
         return self._history[min(k, len(self._history)) - 1].copy()
 
 
@@ -881,7 +1221,12 @@ def _first_appearance_order(labels: np.ndarray) -> np.ndarray:
 
 
 def recursive_ncut(
-    W, n_segments: int, min_size: int = 1, threshold: float | None = None
+    W,
+    n_segments: int,
+    min_size: int = 1,
+    threshold: float | None = None,
+    max_products: int = MAX_CUT_PRODUCTS,
 ) -> np.ndarray:
     """Labels of the graph's nodes after recursive two-way normalized cuts."""
-    return CutTree(W, min_size=min_size, threshold=threshold).labels(n_segments)
+    tree = CutTree(W, min_size=min_size, threshold=threshold, max_products=max_products)
+    return tree.labels(n_segments)

@@ -30,6 +30,7 @@ from scipy import ndimage
 
 from . import features as feat
 from . import fresnel, harmonics, ncut, polarimage, polstats, spectral
+from .degenerate import DegenerateCheck, degenerate_result
 from .errors import Cancelled, PolarsegError
 from .params import SegmentParams
 
@@ -164,7 +165,10 @@ class SegmentationResult:
     holds the pixel counts per exclusion reason
     (:meth:`~napari_polarseg.engine.polarimage.PixelMask.counts`);
     ``duplicate_angle_frames`` lists the frames taken at a repeated polariser angle
-    (modulo π), which were averaged before the fit.
+    (modulo π), which were averaged before the fit. ``cut_limits`` holds the cut's
+    work counts (:meth:`~napari_polarseg.engine.ncut.CutTree.cut_limits`: eigensolves
+    capped, segments with an isolated block not solved, products); empty when labels
+    came from elsewhere (scribbles).
     """
 
     params: SegmentParams
@@ -188,6 +192,7 @@ class SegmentationResult:
     valid: np.ndarray | None = None
     mask_counts: dict[str, Any] = field(default_factory=dict)
     duplicate_angle_frames: list[list[int]] = field(default_factory=list)
+    cut_limits: dict[str, int] = field(default_factory=dict)
 
     @property
     def n_segments(self) -> int:
@@ -206,8 +211,22 @@ class SegmentationResult:
             return float(np.mean(self.reconstruction_error[self.valid]))
         return float(np.mean(self.reconstruction_error))
 
+    def degenerate(self) -> DegenerateCheck:
+        """Whether (nearly) every pixel is in one segment
+        (:func:`~napari_polarseg.engine.degenerate.degenerate_result`, minimum segment size
+        ``min_segment_blocks`` · w² pixels)."""
+        p = self.params
+        return degenerate_result(
+            self.labels, p.min_segment_blocks * p.window**2, requested=p.n_segments
+        )
+
     def summary(self) -> dict[str, Any]:
-        """JSON-ready figures of the run (stage seconds, segments, variance, error)."""
+        """JSON-ready figures of the run (stage seconds, segments, variance, error).
+
+        ``degenerate`` (with ``largest_segment_share`` and ``degenerate_reason``): see
+        :meth:`degenerate`; ``cut_limits``: see the class docstring.
+        """
+        check = self.degenerate()
         return {
             "stage_seconds": {k: round(v, 6) for k, v in self.timings.items()},
             # stages this run computed (the others came from the cache) and their time
@@ -215,6 +234,9 @@ class SegmentationResult:
             "total_seconds": round(sum(self.timings[s] for s in self.recomputed), 6),
             "n_segments": self.n_segments,
             "segment_pixels": np.bincount(self.labels.ravel()).tolist(),
+            "degenerate": check.degenerate,
+            "largest_segment_share": round(check.largest_share, 6),
+            "degenerate_reason": check.reason,
             "n_blocks": int(self.block_labels.size),
             "block_grid": list(self.block_labels.shape),
             "n_components": int(self.features.shape[1]),
@@ -226,6 +248,7 @@ class SegmentationResult:
             "fit": self.params.fit,
             "mask": dict(self.mask_counts),
             "averaged_duplicate_angles": [list(g) for g in self.duplicate_angle_frames],
+            "cut_limits": dict(self.cut_limits),
         }
 
 
@@ -336,6 +359,8 @@ class Pipeline:
     #: [pca key, dense squared distances D, their median or None] (see _dense_affinity)
     _distances: list | None = field(default=None, init=False, repr=False)
     _matrices: MatrixPool = field(default_factory=lambda: MatrixPool(), init=False, repr=False)
+    #: the ``cancel`` of the running run_iter / prefetch, handed to the cut
+    _cancel: Callable[[], bool] | None = field(default=None, init=False, repr=False)
 
     def __post_init__(self) -> None:
         raw = self.stack
@@ -480,13 +505,15 @@ class Pipeline:
             coef = self.get("harmonics")
             valid = self.block_valid().reshape(coef.shape[:2])
             block = np.zeros(coef.shape[:2], dtype=np.int32)
-            block[valid] = tree.labels(p.n_segments)
+            block[valid] = tree.labels(p.n_segments, cancel=self._cancel)
+            limits = tree.cut_limits(p.n_segments)
             if not valid.all():
                 # masked-out blocks take the label of the nearest block that was segmented
                 _, (ri, ci) = ndimage.distance_transform_edt(~valid, return_indices=True)
                 block = block[ri, ci]
             shape = self.stack.shape[1:]
-            return block, harmonics.upsample_block_labels(block, shape, p.window), tree.ncut_values
+            labels = harmonics.upsample_block_labels(block, shape, p.window)
+            return block, labels, tree.ncut_values, limits
         if stage == "reconstruction":
             pol, nrm = self.get("polarisation"), self.get("normals")
             rec = harmonics.reconstruct_intensity(
@@ -588,15 +615,24 @@ class Pipeline:
         return self._seconds.get(stage, 0.0)
 
     # -- running ----------------------------------------------------------------------
-    def run_iter(self, reconstruction: bool = True) -> Iterator[tuple[str, int, int]]:
+    def run_iter(
+        self, reconstruction: bool = True, cancel: Callable[[], bool] | None = None
+    ) -> Iterator[tuple[str, int, int]]:
         """Run stage by stage, yielding ``(stage, index, total)`` after each.
 
         Stopping the iteration between yields cancels the run; cached stages stay valid.
+        ``cancel`` also stops the labels stage's normalized cut from within: it is called
+        before every product of its eigensolvers, and True raises :class:`Cancelled`
+        (the splits made so far stay cached in the cut tree).
         """
         names = STAGES if reconstruction else STAGES[:-1]
         self._recomputed = []
         for i, name in enumerate(names):
-            self.get(name)
+            self._cancel = cancel
+            try:
+                self.get(name)
+            finally:
+                self._cancel = None
             yield name, i + 1, len(names)
 
     def run(
@@ -614,17 +650,18 @@ class Pipeline:
         progress : callable(stage, index, total), optional
             Called after each stage.
         cancel : callable() -> bool, optional
-            Checked between stages; returning True raises :class:`Cancelled`.
+            Checked between stages, and by the normalized cut before every product of
+            its eigensolvers; returning True raises :class:`Cancelled`.
         """
         params = self.params
-        for name, i, n in self.run_iter(reconstruction):
+        for name, i, n in self.run_iter(reconstruction, cancel):
             if progress is not None:
                 progress(name, i, n)
             if cancel is not None and cancel() and i < n:
                 raise Cancelled(f"cancelled after stage {name!r}")
         return self.result(reconstruction, params)
 
-    def prefetch(self) -> Iterator[int]:
+    def prefetch(self, cancel: Callable[[], bool] | None = None) -> Iterator[int]:
         """Precompute, in idle time, what one more segment would need.
 
         With recursive cuts whose labels are fresh for the current parameters and whose
@@ -633,14 +670,15 @@ class Pipeline:
         ``n_segments`` to k + 1 then costs only the split (milliseconds instead of one
         or two eigensolves). Then keeps a touched buffer for the next dense affinity
         (:meth:`MatrixPool.reserve`; yields −1). Does nothing otherwise. Stopping the
-        iteration between yields is safe.
+        iteration between yields is safe; ``cancel`` (called before every product of an
+        eigensolve, True raises :class:`Cancelled`) stops it inside a solve.
         """
         p = self.params
         if p.clustering != "recursive" or not self.is_fresh("labels"):
             return
         tree = self._cache["cut"][1]
         if isinstance(tree, ncut.CutTree) and len(tree.ncut_values) + 1 <= p.n_segments:
-            yield from tree.prefetch()
+            yield from tree.prefetch(cancel)
         W = self._cache["affinity"][1]
         if isinstance(W, np.ndarray) and self._matrices.owns(W):
             # memory for the next affinity (a change of the scale, n or w): touched now
@@ -654,7 +692,7 @@ class Pipeline:
         """Assemble the result from the cache (runs stale stages if needed)."""
         if params is not None and params != self.params:
             raise PolarsegError("parameters changed while the pipeline was running")
-        block, labels, ncut_values = self.get("labels")
+        block, labels, ncut_values, limits = self.get("labels")
         names = STAGES if reconstruction else STAGES[:-1]
         return self.assemble_result(
             block,
@@ -663,6 +701,7 @@ class Pipeline:
             reconstruction,
             timings={s: self._seconds.get(s, 0.0) for s in names},
             recomputed=[s for s in names if s in self._recomputed],
+            cut_limits=limits,
         )
 
     def assemble_result(
@@ -673,6 +712,7 @@ class Pipeline:
         reconstruction: bool,
         timings: dict[str, float],
         recomputed: list[str],
+        cut_limits: dict[str, int] | None = None,
     ) -> SegmentationResult:
         """A :class:`SegmentationResult` of the cached stages and the given labels.
 
@@ -704,6 +744,7 @@ class Pipeline:
             valid=~pol.invalid,
             mask_counts=self.mask.counts(),
             duplicate_angle_frames=polarimage.duplicate_angle_frames(self.angles),
+            cut_limits=dict(cut_limits or {}),
         )
 
     def scribble_segmentation(

@@ -16,20 +16,44 @@ The eigenvectors are computed once for a few more than the k asked for
 k-means. Segments smaller than the minimum size are merged into the segment whose
 k-means centre is nearest; the labels are numbered in order of first appearance, as the
 recursive cut's are.
+
+The eigensolve's work is bounded as the recursive cut's is (:mod:`.ncut`, "Bounded
+work"): Lanczos may make :data:`~napari_polarseg.engine.ncut.LANCZOS_SHARE` of
+``max_products`` products with the affinity, then the block LOBPCG (Jacobi
+preconditioner, which copes with a graph that has fallen apart) the rest, after which
+its best vectors are used and the decomposition is counted as capped
+(:meth:`SpectralClustering.cut_limits`). The largest decomposition measured on normal
+inputs made 650 products (polanalyser carps frame, recommended preset, k = 6). ``cancel``
+(called before every product) stops it with
+:class:`~napari_polarseg.engine.errors.Cancelled`.
 """
 
 from __future__ import annotations
 
 import warnings
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.linalg
 import scipy.sparse as sps
-from scipy.sparse.linalg import ArpackNoConvergence, LinearOperator, eigsh
+from scipy.sparse.linalg import ArpackNoConvergence, eigsh
 
 from .errors import PolarsegError
-from .ncut import _degrees, _first_appearance_order
+from .ncut import (
+    EIG_TOL,
+    LANCZOS_SHARE,
+    LOBPCG_MAXITER,
+    MAX_CUT_PRODUCTS,
+    _Budget,
+    _check_products,
+    _degrees,
+    _diagonal,
+    _first_appearance_order,
+    _lobpcg,
+    _OutOfProducts,
+    _start_candidates,
+)
 
 #: Graphs up to this many nodes are decomposed densely.
 DENSE_MAX = 1_500
@@ -40,15 +64,28 @@ KMEANS_INIT = 10
 KMEANS_SEED = 0
 
 
-def normalized_eigenvectors(W, k: int) -> np.ndarray:
+def normalized_eigenvectors(
+    W,
+    k: int,
+    max_products: int = MAX_CUT_PRODUCTS,
+    cancel: Callable[[], bool] | None = None,
+) -> np.ndarray:
     """The k largest eigenvectors of D^−½ W D^−½ as columns (n, k), largest first.
 
-    Dense ``eigh`` up to :data:`DENSE_MAX` nodes, Lanczos (``eigsh``) on a product
-    operator above (W is never normalised in memory), dense again if Lanczos fails.
+    Dense ``eigh`` up to :data:`DENSE_MAX` nodes; above, Lanczos (``eigsh``) on a product
+    operator (W is never normalised in memory), then the block LOBPCG if Lanczos has not
+    converged within its share of ``max_products`` products (module docstring); dense
+    again if both fail outright. ``cancel`` is called before every product (True raises
+    :class:`~napari_polarseg.engine.errors.Cancelled`).
     """
+    return _eigenvectors(W, k, _Budget(_check_products(max_products), cancel))
+
+
+def _eigenvectors(W, k: int, budget: _Budget) -> np.ndarray:
     n = W.shape[0]
     k = int(min(k, n))
-    d_is = 1.0 / np.sqrt(_degrees(W))  # checks for isolated nodes
+    d = _degrees(W)  # checks for isolated nodes
+    d_is = 1.0 / np.sqrt(d)
     if n > DENSE_MAX and k < n - 1:
         Wm = W.tocsr() if sps.issparse(W) else np.asarray(W, dtype=np.float64)
 
@@ -57,15 +94,34 @@ def normalized_eigenvectors(W, k: int) -> np.ndarray:
             scale = d_is if x.ndim == 1 else d_is[:, None]
             return scale * (Wm @ (scale * x))
 
-        op = LinearOperator((n, n), matvec=product, matmat=product, dtype=float)
+        op = budget.operator(n, product, int(LANCZOS_SHARE * budget.limit))
         v0 = np.sqrt(1.0 / d_is)  # the known top eigenvector D^½ 1 is a good start
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
                 vals, vecs = eigsh(op, k=k, which="LA", v0=v0, tol=1e-8)
             return vecs[:, np.argsort(vals)[::-1]]
-        except ArpackNoConvergence:
-            pass  # a graph fallen apart into isolated blocks: dense is robust there
+        except (ArpackNoConvergence, _OutOfProducts):
+            pass  # a graph fallen apart into isolated blocks: the block solver copes
+        # the k − 1 smallest eigenvectors of N = I − D^−½ W D^−½ orthogonal to its
+        # known smallest one, u = D^½ 1 (the largest of D^−½ W D^−½)
+        u = np.sqrt(d)[:, None] / np.sqrt(d.sum())
+        precond = 1.0 / np.maximum(1.0 - _diagonal(W) / d, 1e-8)
+        try:
+            _, Z, _, _ = _lobpcg(
+                lambda X: X - product(X),
+                precond,
+                u,
+                _start_candidates(d, precond, [], k - 1),
+                k - 1,
+                EIG_TOL,
+                EIG_TOL,
+                LOBPCG_MAXITER,
+                budget,
+            )
+            return np.hstack([u, Z])
+        except (_OutOfProducts, np.linalg.LinAlgError):
+            pass
     dense = W.toarray() if sps.issparse(W) else np.asarray(W, dtype=np.float64)
     vals, vecs = scipy.linalg.eigh(dense * d_is[:, None] * d_is[None, :])
     return vecs[:, ::-1][:, :k]
@@ -104,6 +160,9 @@ class SpectralClustering:
     _vectors: np.ndarray | None = field(default=None, init=False)
     _labels: dict[int, np.ndarray] = field(default_factory=dict, init=False)
     _ncut: list[float] = field(default_factory=list, init=False)
+    #: products one eigendecomposition may make (module docstring)
+    max_products: int = MAX_CUT_PRODUCTS
+    _counts: dict[str, int] = field(default_factory=dict, init=False, repr=False)
 
     def __post_init__(self) -> None:
         n = self.W.shape[0]
@@ -111,24 +170,45 @@ class SpectralClustering:
             raise PolarsegError(f"affinity must be square, got shape {self.W.shape}")
         if n < 1:
             raise PolarsegError("affinity has no nodes")
+        self.max_products = _check_products(self.max_products)
+        self._counts = {"eigensolver_capped": 0, "isolated_skipped": 0, "products": 0}
+
+    def cut_limits(self, k: int | None = None) -> dict[str, int]:
+        """How often the work limit acted, as :meth:`.ncut.CutTree.cut_limits` says it:
+        ``eigensolver_capped`` (decompositions that spent ``max_products``),
+        ``isolated_skipped`` (always 0 here), ``products``, ``max_products``; over the
+        decompositions made so far (``k`` is accepted for the same interface)."""
+        return {**self._counts, "max_products": self.max_products}
 
     @property
     def ncut_values(self) -> list[float]:
         """Two-way Ncut of each segment of the last partition returned."""
         return list(self._ncut)
 
-    def embedding(self, k: int) -> np.ndarray:
-        """Row-normalised first k eigenvectors (n, k): the points k-means clusters."""
+    def embedding(self, k: int, cancel: Callable[[], bool] | None = None) -> np.ndarray:
+        """Row-normalised first k eigenvectors (n, k): the points k-means clusters.
+
+        ``cancel`` is called before every product of a decomposition (True raises
+        :class:`~napari_polarseg.engine.errors.Cancelled`).
+        """
         n = self.W.shape[0]
         k = min(k, n)
         if self._vectors is None or self._vectors.shape[1] < k:
-            self._vectors = normalized_eigenvectors(self.W, min(n, k + EXTRA_VECTORS))
+            budget = _Budget(self.max_products, cancel)
+            try:
+                self._vectors = _eigenvectors(self.W, min(n, k + EXTRA_VECTORS), budget)
+            finally:
+                self._counts["products"] += budget.used
+                self._counts["eigensolver_capped"] += int(budget.capped)
         z = self._vectors[:, :k]
         norm = np.linalg.norm(z, axis=1, keepdims=True)
         return z / np.where(norm > 0, norm, 1.0)
 
-    def labels(self, k: int) -> np.ndarray:
-        """Node labels 0..k'−1 (k' <= k after merging segments below the minimum size)."""
+    def labels(self, k: int, cancel: Callable[[], bool] | None = None) -> np.ndarray:
+        """Node labels 0..k'−1 (k' <= k after merging segments below the minimum size).
+
+        ``cancel``: see :meth:`embedding`.
+        """
         from sklearn.cluster import KMeans
 
         if k < 1:
@@ -139,7 +219,7 @@ class SpectralClustering:
             if k == 1:
                 lab = np.zeros(n, dtype=np.int32)
             else:
-                x = self.embedding(k)
+                x = self.embedding(k, cancel)
                 km = KMeans(k, n_init=KMEANS_INIT, random_state=KMEANS_SEED).fit(x)
                 lab = self._merge_small(km.labels_, x, km.cluster_centers_)
             self._labels[k] = _first_appearance_order(lab)
