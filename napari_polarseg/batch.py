@@ -94,6 +94,7 @@ COLUMNS = (
     "n_segments",
     "segment_pixels",
     "largest_segment_share",
+    "degenerate",
     "n_blocks",
     "n_components",
     "explained_variance",
@@ -287,6 +288,9 @@ def _stats(summary: dict[str, Any]) -> dict[str, Any]:
         "n_segments": summary.get("n_segments"),
         "segment_pixels": pixels,
         "largest_segment_share": round(max(pixels) / total, 6) if total else None,
+        # one segment holds (nearly) everything (SegmentationResult.degenerate)
+        "degenerate": summary.get("degenerate"),
+        "degenerate_reason": summary.get("degenerate_reason"),
         "n_blocks": summary.get("n_blocks"),
         "n_components": summary.get("n_components"),
         "explained_variance": summary.get("explained_variance"),
@@ -355,7 +359,9 @@ def run_scene(job: dict[str, Any]) -> dict[str, Any]:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             args = cli.build_parser().parse_args(argv)
-            with contextlib.redirect_stdout(printed):
+            # what segment prints on either stream (e.g. its warning of a degenerate
+            # result) goes into the row's log; the batch reports per scene itself
+            with contextlib.redirect_stdout(printed), contextlib.redirect_stderr(printed):
                 args.func(args)
         missing = [f for f in contract_files() if not (tmp / f).is_file()]
         if missing:

@@ -735,6 +735,24 @@ def _summary(run: Run, read_seconds: float) -> dict[str, Any]:
     }
 
 
+def degenerate_warning(run: Run) -> str | None:
+    """The one-line warning of a degenerate result (``SegmentationResult.degenerate``:
+    one segment holds >= 95 % of the pixels, or every other is below the minimum size),
+    with what to try; None when the result is not degenerate."""
+    check = run.result.degenerate()
+    if not check.degenerate:
+        return None
+    if "classifier" in run.seconds:  # labels from a pixel classifier, not the cut
+        advice = "paint strokes on every material (--scribbles) or retrain the classifier"
+    else:
+        tries = ["fewer or more segments (--segments)", "a larger window (--window)"]
+        recommended = PRESETS["recommended"].replace(n_segments=run.params.n_segments)
+        if run.params != recommended:
+            tries.insert(0, "--preset recommended")
+        advice = f"try {', '.join(tries)}, or scribbles (--scribbles)"
+    return f"{PROG}: warning: degenerate result: {check.reason}; {advice}"
+
+
 def _report(out: Path, run: Run, written: list[str]) -> None:
     result = run.result
     err = result.mean_reconstruction_error
@@ -744,6 +762,21 @@ def _report(out: Path, run: Run, written: list[str]) -> None:
         f"{PROG}: {result.n_segments} segments over {h} x {w} pixels, "
         f"mean reconstruction error {err_text}"
     )
+    warning = degenerate_warning(run)
+    if warning is not None:
+        sys.stdout.flush()  # keep the order of the two streams on a terminal
+        print(warning, file=sys.stderr, flush=True)
+    limits = result.cut_limits
+    done = []
+    if limits.get("eigensolver_capped"):
+        done.append(
+            f"stopped {limits['eigensolver_capped']} eigensolve(s) at their cap of "
+            f"{limits.get('max_products')} products"
+        )
+    if limits.get("isolated_skipped"):
+        done.append(f"peeled {limits['isolated_skipped']} isolated block(s) off unsolved")
+    if done:
+        print(f"{PROG}: the cut {' and '.join(done)} (cut_limits in summary.json)")
     if run.shifts is not None:
         biggest = float(np.max(np.hypot(run.shifts[:, 0], run.shifts[:, 1])))
         print(
@@ -1339,6 +1372,14 @@ def _cmd_batch(args: argparse.Namespace) -> int:
         else:
             text = f"{status}: {row.get('error')}"
         print(f"{PROG}: [{index}/{total}] {row['scene']}: {text}", file=sys.stderr, flush=True)
+        if status == "done" and row.get("degenerate"):
+            print(
+                f"{PROG}: warning: {row['scene']}: degenerate result: "
+                f"{row.get('degenerate_reason')}; try --preset recommended, fewer or more "
+                "segments (--segments), a larger window (--window), or scribbles (--scribbles)",
+                file=sys.stderr,
+                flush=True,
+            )
         if args.verbose and row.get("log"):
             print(row["log"].rstrip(), file=sys.stderr, flush=True)
 
