@@ -112,6 +112,7 @@ def segment_job(
     region: np.ndarray | None = None,
     mask_key: str | None = None,
     prefetch: bool = False,
+    cancel: Callable[[], bool] | None = None,
 ) -> Generator[Any, None, Any]:
     """Worker job: run the stale stages of the layer's cached pipeline, then assemble.
 
@@ -127,13 +128,18 @@ def segment_job(
     :class:`~napari_polarseg.widgets._runner.Result` and the job goes on in idle time
     with :meth:`Pipeline.prefetch <napari_polarseg.engine.Pipeline.prefetch>` (the
     eigensolves one more segment needs), stopping at the next request.
+
+    ``cancel`` (the runner's stop request) is handed to the normalized cut, which checks
+    it before every product of its eigensolvers and raises
+    :class:`~napari_polarseg.engine.errors.Cancelled`: Cancel or a newer request stops a
+    long cut (or a prefetch) at once instead of at the end of the stage.
     """
     pipe = store.obtain(key, data, angles_rad, params, region=region, mask_key=mask_key)
     total = len(STAGES)
     if pipe.is_fresh("reconstruction"):
-        yield from pipe.run_iter(reconstruction=True)
+        yield from pipe.run_iter(reconstruction=True, cancel=cancel)
     else:
-        for stage, index, _ in pipe.run_iter(reconstruction=False):
+        for stage, index, _ in pipe.run_iter(reconstruction=False, cancel=cancel):
             yield stage, index, total
         yield Partial(pipe.result(reconstruction=False, params=params))
         pipe.get("reconstruction")
@@ -141,7 +147,7 @@ def segment_job(
     result = pipe.result(reconstruction=True, params=params)
     if prefetch:
         yield Result(result)
-        for _ in pipe.prefetch():
+        for _ in pipe.prefetch(cancel):
             yield "prefetch", total, total
     return result
 
@@ -274,6 +280,18 @@ def export_job(
         return write_result_folder(folder, **kwargs)
     except OutputError as exc:
         raise PolarsegError(str(exc)) from None
+
+
+def degenerate_text(summary: dict[str, Any]) -> str:
+    """The status line's warning of a degenerate result, from ``result.summary()``
+    (``"degenerate"``: one segment holds >= 95 % of the pixels, or every other is below
+    the minimum size), with what to try; "" when the result is not degenerate."""
+    if not summary.get("degenerate"):
+        return ""
+    return (
+        f"degenerate: {summary.get('degenerate_reason')} (try the recommended preset, "
+        "fewer or more segments, a larger window, or scribbles)"
+    )
 
 
 def mask_text(counts: dict[str, Any]) -> str:
@@ -1231,7 +1249,8 @@ class SegmentWidget(StackWidget):
             args = (self.store, key, layer.data, angles_rad, params, strokes, classifier)
             args += (region, mask_key)
             job, total = classifier_job, len(CLASSIFIER_STAGES)
-        cancellable = job is classifier_job  # a new stroke stops the prediction at once
+        # a new stroke or request stops the prediction, or the cut's eigensolver, at once
+        cancellable = True
         self._submit(job, args, total, on_result, on_partial, self._live_run, cancellable)
 
     def _show(
@@ -1308,6 +1327,9 @@ class SegmentWidget(StackWidget):
             parts = classifier_parts(out, confidence, inputs.get("classifier"))
         else:
             parts = [f"{summary['n_segments']} segments"]
+            warning = degenerate_text(summary)
+            if warning:
+                parts.append(warning)
         if partial:
             self._set_status(" · ".join([*parts, f"{seconds:.2f} s", "computing the error map…"]))
             return
