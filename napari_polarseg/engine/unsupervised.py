@@ -1,0 +1,594 @@
+"""Unsupervised segmentation on a graph of superpixels.
+
+The thesis pipeline cuts a graph of square w × w blocks, which straddle the material
+boundaries and, at the thesis scale, falls apart into single blocks on real frames
+(issue 13). Here the nodes are superpixels that follow the edges of the polarisation
+image, each described by a few statistics of its pixels, and the clustering works on
+those few hundred to few thousand nodes:
+
+1. **Superpixels** (:func:`polarisation_superpixels`): a compact watershed (as
+   :func:`.superpixels.superpixels`) over the sum of the gradient magnitudes of the
+   smoothed log Î and of the smoothed normalised Stokes components s1 = S1/S0,
+   s2 = S2/S0 (so a region border sits on an intensity *or* a polarisation edge).
+2. **Node features** (:func:`node_features`), from region sums (``np.bincount``) of
+   per-pixel products, each named once in :data:`NODE_FEATURES`: the region's mean
+   log Î, its spread, mean ρ and its spread, the region's DoLP
+   |(ΣS1, ΣS2)| / ΣS0, the AoLP coherence |mean e^{2iφ}|, DoLP / mean ρ and, as the
+   physical material cue (thesis section 6.2), the slope and correlation of ρ against
+   log Î inside the region: within one material the shading and ρ both follow the
+   zenith, their relation depends on n and the depolarisation, not on the tilt.
+   Optionally the per-pixel feature stack of :mod:`.pixel_features` averaged per region.
+   The features are standardised (weighted by region area) and reduced by PCA to the
+   components that explain ``variance`` of the total (:func:`.features.pca_features`).
+3. **Clustering** (``UnsupervisedParams.clustering``): a Gaussian mixture (scikit-learn
+   ``GaussianMixture``, full covariances, seeded) or k-means on the node features, with an
+   optional smoothing of the posteriors over the region adjacency (a few iterations of
+   P ← (1 − λ) P + λ A P, A the row-normalised shared-border lengths), or the thesis's
+   Mahalanobis affinity exp(−D / s) (:func:`.features.whiten`, s = ``scale`` × the
+   median D over the graph's edges) restricted to neighbouring regions, cut by recursive
+   normalized cuts (:func:`.ncut.recursive_ncut`) or k-way spectral clustering
+   (:class:`.spectral.SpectralClustering`).
+
+Every pixel takes its region's label. Deterministic: every random step is seeded.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import numpy as np
+import scipy.sparse as sps
+from scipy import ndimage
+
+from .degenerate import degenerate_result
+from .errors import PolarsegError
+from .features import pca_features, whiten
+
+#: Projections of the standardised node features (:func:`maf_features`, PCA).
+PROJECTIONS = ("pca", "maf")
+#: Clustering methods (module docstring, step 3).
+CLUSTERINGS = ("gmm", "kmeans", "ncut", "kway")
+#: Per-region features of :func:`node_features`, in order.
+NODE_FEATURES = (
+    "log_intensity",  # mean of log Î over the region
+    "intensity_spread",  # standard deviation of log Î over the region
+    "dop",  # mean ρ
+    "dop_spread",  # standard deviation of ρ
+    "dolp",  # |(ΣS1, ΣS2)| / ΣS0: DoLP of the region's summed Stokes vector
+    "aolp_coherence",  # |mean e^{2iφ}|
+    "dolp_over_dop",  # DoLP / mean ρ: polarisation coherence, shading-free
+    "dop_vs_log_intensity_slope",  # least-squares slope of ρ against log Î
+    "dop_vs_log_intensity_corr",  # correlation of ρ and log Î
+)
+#: The physical material cue (module docstring): the ρ–shading relation.
+MATERIAL_CUE = ("dop_vs_log_intensity_slope", "dop_vs_log_intensity_corr")
+#: Automatic superpixel area: the image's pixels / this, within the bounds below.
+REGIONS_PER_IMAGE = 3000
+MIN_REGION_AREA = 32
+MAX_REGION_AREA = 1024
+#: σ (pixels) of the smoothing before the edge maps of the superpixels are taken.
+EDGE_SIGMA = 1.5
+#: Watershed compactness of the superpixels.
+COMPACTNESS = 1e-3
+#: Passes of :func:`refine_boundaries` (each moves a border by at most one pixel).
+REFINE_PASSES = 2
+#: Floor of Î before its logarithm, and of ρ before a ratio.
+EPS_INTENSITY = 1e-6
+EPS_DOP = 1e-4
+
+
+@dataclass(frozen=True)
+class UnsupervisedParams:
+    """Parameters of :func:`segment_unsupervised`.
+
+    Attributes
+    ----------
+    region_area : int
+        Mean superpixel area, pixels; 0 = the image's pixels / :data:`REGIONS_PER_IMAGE`,
+        within [:data:`MIN_REGION_AREA`, :data:`MAX_REGION_AREA`].
+    boundary : {"polarisation", "intensity"}
+        Edges the superpixels follow: log Î and the normalised Stokes components, or
+        log Î alone (:func:`.superpixels.superpixels`).
+    polarisation_edge_weight : float
+        Weight of the Stokes edge map against the log Î one (``boundary="polarisation"``).
+    features : tuple of str
+        Node features, names from :data:`NODE_FEATURES`.
+    pixel_scales : tuple of float
+        σ (pixels) of the :mod:`.pixel_features` stack averaged per region and added to
+        the node features; () = none.
+    pixel_groups : tuple of str
+        Groups of that stack (:data:`.pixel_features.GROUPS`, without ``regions``).
+    variance : float
+        Share of the variance the PCA of the standardised node features keeps, (0, 1].
+    clustering : {"gmm", "kmeans", "ncut", "kway"}
+        Module docstring, step 3.
+    smoothing : float
+        λ of the posterior smoothing over the region adjacency, [0, 1) (gmm, kmeans).
+    smoothing_iterations : int
+        Iterations of that smoothing.
+    scale : float
+        s of the affinity exp(−D / s) in units of the median D over the graph's edges
+        (ncut, kway).
+    refine_boundaries : bool
+        Relabel the pixels on segment borders (:func:`refine_boundaries`): a watershed
+        border on a straight edge is a pixel off on one side.
+    seed : int
+        Seed of every random step (k-means and mixture initialisations).
+    """
+
+    region_area: int = 0
+    boundary: str = "polarisation"
+    polarisation_edge_weight: float = 1.0
+    features: tuple[str, ...] = ("log_intensity", "dop", "dolp")
+    pixel_scales: tuple[float, ...] = ()
+    pixel_groups: tuple[str, ...] = ("intensity", "polarisation", "invariant")
+    variance: float = 0.95
+    projection: str = "pca"
+    components: int = 4
+    clustering: str = "gmm"
+    smoothing: float = 0.5
+    smoothing_iterations: int = 5
+    scale: float = 1.0
+    refine_boundaries: bool = True
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if int(self.region_area) < 0 or 0 < int(self.region_area) < 4:
+            raise PolarsegError(f"region_area must be 0 (auto) or >= 4, got {self.region_area}")
+        if self.boundary not in ("polarisation", "intensity"):
+            raise PolarsegError(
+                f"boundary must be 'polarisation' or 'intensity', got {self.boundary!r}"
+            )
+        if not (
+            math.isfinite(self.polarisation_edge_weight) and self.polarisation_edge_weight >= 0
+        ):
+            raise PolarsegError(
+                f"polarisation_edge_weight must be >= 0, got {self.polarisation_edge_weight}"
+            )
+        features = tuple(str(f) for f in self.features)
+        unknown = [f for f in features if f not in NODE_FEATURES]
+        if unknown or (not features and not self.pixel_scales):
+            raise PolarsegError(
+                f"features must be some of {', '.join(NODE_FEATURES)}; got {self.features!r}"
+            )
+        scales = tuple(float(s) for s in self.pixel_scales)
+        if not all(math.isfinite(s) and s > 0 for s in scales):
+            raise PolarsegError(f"pixel_scales must be positive, got {self.pixel_scales!r}")
+        if not (0 < self.variance <= 1):
+            raise PolarsegError(f"variance must be in (0, 1], got {self.variance}")
+        if self.projection not in PROJECTIONS:
+            raise PolarsegError(
+                f"projection must be one of {', '.join(PROJECTIONS)}, got {self.projection!r}"
+            )
+        if int(self.components) < 1:
+            raise PolarsegError(f"components must be >= 1, got {self.components}")
+        if self.clustering not in CLUSTERINGS:
+            raise PolarsegError(
+                f"clustering must be one of {', '.join(CLUSTERINGS)}, got {self.clustering!r}"
+            )
+        if not (0 <= self.smoothing < 1):
+            raise PolarsegError(f"smoothing must be in [0, 1), got {self.smoothing}")
+        if int(self.smoothing_iterations) < 0:
+            raise PolarsegError(
+                f"smoothing_iterations must be >= 0, got {self.smoothing_iterations}"
+            )
+        if not (math.isfinite(self.scale) and self.scale > 0):
+            raise PolarsegError(f"scale must be positive, got {self.scale}")
+        object.__setattr__(self, "features", features)
+        groups = tuple(str(g) for g in self.pixel_groups)
+        allowed = ("intensity", "polarisation", "zenith", "filters", "invariant")
+        if scales and (not groups or any(g not in allowed for g in groups)):
+            raise PolarsegError(
+                f"pixel_groups must be some of {', '.join(allowed)}; got {self.pixel_groups!r}"
+            )
+        object.__setattr__(self, "pixel_groups", groups)
+        object.__setattr__(self, "pixel_scales", scales)
+        object.__setattr__(self, "region_area", int(self.region_area))
+        object.__setattr__(self, "smoothing_iterations", int(self.smoothing_iterations))
+        object.__setattr__(self, "seed", int(self.seed))
+
+    def area_of(self, shape: tuple[int, int]) -> int:
+        """Superpixel area (pixels) used on an image of ``shape``."""
+        if self.region_area:
+            return self.region_area
+        auto = shape[0] * shape[1] // REGIONS_PER_IMAGE
+        return int(min(max(auto, MIN_REGION_AREA), MAX_REGION_AREA))
+
+    def replace(self, **changes: Any) -> UnsupervisedParams:
+        """A copy with some attributes changed (validated again)."""
+        return UnsupervisedParams(**{**asdict(self), **changes})
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready form (lists for tuples)."""
+        return {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(self).items()}
+
+
+@dataclass(frozen=True)
+class UnsupervisedResult:
+    """What :func:`segment_unsupervised` returns.
+
+    Attributes
+    ----------
+    labels : ndarray (H, W) int32
+        Segment of every pixel (its superpixel's), 0 … k' − 1 in order of first
+        appearance (row-major).
+    node_labels : ndarray (n,) int32
+        Segment of every superpixel.
+    regions : ndarray (H, W) int32
+        Superpixel of every pixel, 0 … n − 1.
+    node_features : ndarray (n, c) float64
+        The PCA components the clustering saw.
+    feature_names : tuple of str
+        Names of the node features before the PCA.
+    seconds : float
+        Wall time of the whole segmentation.
+    degenerate : bool
+        One segment holds ≥ 95 % of the pixels (:func:`.degenerate.degenerate_result`).
+    params : UnsupervisedParams
+    """
+
+    labels: np.ndarray
+    node_labels: np.ndarray
+    regions: np.ndarray
+    node_features: np.ndarray
+    feature_names: tuple[str, ...]
+    seconds: float
+    degenerate: bool
+    params: UnsupervisedParams
+
+
+def _check_maps(intensity: Any, dop: Any, phase: Any) -> tuple[np.ndarray, ...]:
+    maps = [np.asarray(a, dtype=np.float32) for a in (intensity, dop, phase)]
+    if maps[0].ndim != 2 or any(m.shape != maps[0].shape for m in maps):
+        shapes = ", ".join(str(m.shape) for m in maps)
+        raise PolarsegError(f"intensity, dop and phase must be 2-D of one shape, got {shapes}")
+    if min(maps[0].shape) < 2:
+        raise PolarsegError(f"image too small to segment: {maps[0].shape}")
+    return tuple(np.where(np.isfinite(m), m, 0).astype(np.float32) for m in maps)
+
+
+def polarisation_superpixels(
+    intensity: np.ndarray,
+    dop: np.ndarray,
+    phase: np.ndarray,
+    region_area: int,
+    polarisation_edge_weight: float = 1.0,
+) -> np.ndarray:
+    """Superpixels (H, W) int32, 0 … n − 1, following intensity and polarisation edges.
+
+    A compact watershed from a grid of ``H·W / region_area`` seeds over
+    |∇(G * log Î)| / σ_log + w · |∇(G * (s1, s2))| / σ_s, where s1 = ρ cos 2φ and
+    s2 = ρ sin 2φ are the Stokes components normalised by S0, G a Gaussian of
+    :data:`EDGE_SIGMA` px, each gradient divided by its median over the image (so the
+    two edge maps weigh alike whatever the units) and w = ``polarisation_edge_weight``.
+    """
+    from skimage.segmentation import watershed
+
+    log_i = np.log(np.maximum(intensity, EPS_INTENSITY))
+    edges = ndimage.gaussian_gradient_magnitude(log_i, EDGE_SIGMA)
+    edges /= max(float(np.median(edges)), 1e-12)
+    if polarisation_edge_weight > 0:
+        pol = np.hypot(
+            ndimage.gaussian_gradient_magnitude(dop * np.cos(2 * phase), EDGE_SIGMA),
+            ndimage.gaussian_gradient_magnitude(dop * np.sin(2 * phase), EDGE_SIGMA),
+        )
+        edges += polarisation_edge_weight * pol / max(float(np.median(pol)), 1e-12)
+    n = max(2, int(round(intensity.size / region_area)))
+    labels = watershed(edges, markers=n, compactness=COMPACTNESS)
+    return _relabel(labels)
+
+
+def _relabel(labels: np.ndarray) -> np.ndarray:
+    """Labels renumbered 0 … n − 1 (ascending, no gaps)."""
+    _, inverse = np.unique(labels.ravel(), return_inverse=True)
+    return inverse.reshape(labels.shape).astype(np.int32)
+
+
+def region_adjacency(regions: np.ndarray) -> sps.csr_matrix:
+    """Shared border length (4-neighbour pixel pairs) between every two regions, (n, n)."""
+    n = int(regions.max()) + 1
+    pairs = []
+    for a, b in ((regions[:, :-1], regions[:, 1:]), (regions[:-1], regions[1:])):
+        differ = a != b
+        pairs.append((a[differ], b[differ]))
+    rows = np.concatenate([p[0] for p in pairs])
+    cols = np.concatenate([p[1] for p in pairs])
+    m = sps.coo_matrix((np.ones(rows.size), (rows, cols)), shape=(n, n)).tocsr()
+    return (m + m.T).tocsr()
+
+
+def _region_sums(flat: np.ndarray, n: int, maps: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    return {k: np.bincount(flat, weights=v.ravel(), minlength=n) for k, v in maps.items()}
+
+
+def node_features(
+    intensity: np.ndarray,
+    dop: np.ndarray,
+    phase: np.ndarray,
+    regions: np.ndarray,
+    names: tuple[str, ...] = NODE_FEATURES,
+) -> np.ndarray:
+    """Per-region features (n, len(names)) float64, each of :data:`NODE_FEATURES`.
+
+    Computed from region sums of Î, S1, S2, log Î, (log Î)², ρ, ρ², ρ log Î, cos 2φ and
+    sin 2φ (one ``np.bincount`` each); variances and covariances are differences of
+    means of log Î centred on its median.
+    """
+    flat = regions.ravel()
+    n = int(flat.max()) + 1
+    count = np.maximum(np.bincount(flat, minlength=n), 1).astype(float)
+    log_i = np.log(np.maximum(intensity, EPS_INTENSITY)).astype(np.float64)
+    log_i -= np.median(log_i)
+    d = dop.astype(np.float64)
+    c, s = np.cos(2 * phase.astype(np.float64)), np.sin(2 * phase.astype(np.float64))
+    sums = _region_sums(
+        flat,
+        n,
+        {
+            "s0": intensity.astype(np.float64),
+            "s1": intensity * d * c,
+            "s2": intensity * d * s,
+            "l": log_i,
+            "ll": log_i * log_i,
+            "d": d,
+            "dd": d * d,
+            "ld": log_i * d,
+            "c": c,
+            "s": s,
+        },
+    )
+    m = {k: v / count for k, v in sums.items()}
+    var_l = np.maximum(m["ll"] - m["l"] ** 2, 0)
+    var_d = np.maximum(m["dd"] - m["d"] ** 2, 0)
+    cov = m["ld"] - m["l"] * m["d"]
+    dolp = np.hypot(sums["s1"], sums["s2"]) / np.maximum(sums["s0"], EPS_INTENSITY)
+    make = {
+        "log_intensity": lambda: m["l"],
+        "intensity_spread": lambda: np.sqrt(var_l),
+        "dop": lambda: m["d"],
+        "dop_spread": lambda: np.sqrt(var_d),
+        "dolp": lambda: dolp,
+        "aolp_coherence": lambda: np.hypot(m["c"], m["s"]),
+        "dolp_over_dop": lambda: dolp / (m["d"] + EPS_DOP),
+        "dop_vs_log_intensity_slope": lambda: cov / (var_l + 1e-6),
+        "dop_vs_log_intensity_corr": lambda: cov / np.sqrt(var_l * var_d + 1e-12),
+    }
+    return np.stack([make[k]() for k in names], axis=1)
+
+
+def _standardise(x: np.ndarray, weight: np.ndarray) -> np.ndarray:
+    """Columns centred and scaled to unit spread (weighted by ``weight``)."""
+    w = weight / weight.sum()
+    mean = w @ x
+    std = np.sqrt(w @ (x - mean) ** 2)
+    return (x - mean) / np.where(std > 1e-12, std, 1.0)
+
+
+def maf_features(
+    x: np.ndarray,
+    adjacency: sps.csr_matrix,
+    weight: np.ndarray,
+    variance: float = 0.95,
+    components: int = 4,
+) -> np.ndarray:
+    """Maximum autocorrelation factors (Switzer & Green 1984) of node features (n, c).
+
+    After a PCA keeping ``variance`` (dropping the directions without variance), the
+    directions v that minimise vᵀ C_d v / vᵀ C v, C the covariance of the nodes and C_d
+    the covariance of the differences between neighbouring nodes (weighted by their
+    shared border): the combinations of features that vary least between neighbours
+    for their total spread — what is coherent over whole surfaces (material) rather
+    than noise. The first ``components`` factors, each with unit variance.
+    """
+    z = pca_features(x, variance).features
+    z = z / np.maximum(z.std(axis=0), 1e-12)
+    coo = sps.triu(adjacency, 1).tocoo()
+    diff = z[coo.row] - z[coo.col]
+    cd = (diff * coo.data[:, None]).T @ diff / max(float(coo.data.sum()), 1e-12)
+    c = np.cov(z, rowvar=False, aweights=weight).reshape(z.shape[1], z.shape[1])
+    import scipy.linalg
+
+    vals, vecs = scipy.linalg.eigh(cd, c + 1e-9 * np.eye(c.shape[0]))
+    f = (z - z.mean(axis=0)) @ vecs[:, : min(components, z.shape[1])]
+    return f / np.maximum(f.std(axis=0), 1e-12)
+
+
+def _smooth_posteriors(
+    post: np.ndarray, adjacency: sps.csr_matrix, strength: float, iterations: int
+) -> np.ndarray:
+    """P ← (1 − λ) P + λ A P, A the row-normalised border lengths, ``iterations`` times."""
+    if strength <= 0 or iterations <= 0:
+        return post
+    deg = np.asarray(adjacency.sum(axis=1)).ravel()
+    a = sps.diags(1.0 / np.where(deg > 0, deg, 1.0)) @ adjacency
+    for _ in range(iterations):
+        post = (1 - strength) * post + strength * (a @ post)
+    return post
+
+
+def _cluster_mixture(
+    z: np.ndarray, k: int, weight: np.ndarray, adjacency: sps.csr_matrix, p: UnsupervisedParams
+) -> np.ndarray:
+    """Node labels of a Gaussian mixture or k-means, posteriors smoothed over adjacency."""
+    if p.clustering == "gmm":
+        from sklearn.mixture import GaussianMixture
+
+        gm = GaussianMixture(
+            k, covariance_type="full", n_init=3, random_state=p.seed, reg_covar=1e-4
+        ).fit(z)
+        post = gm.predict_proba(z)
+    else:
+        from sklearn.cluster import KMeans
+
+        km = KMeans(k, n_init=10, random_state=p.seed).fit(z, sample_weight=weight)
+        d = ((z[:, None, :] - km.cluster_centers_[None]) ** 2).sum(-1)
+        post = np.exp(-(d - d.min(axis=1, keepdims=True)) / 2)
+        post /= post.sum(axis=1, keepdims=True)
+    post = _smooth_posteriors(post, adjacency, p.smoothing, p.smoothing_iterations)
+    return np.argmax(post, axis=1)
+
+
+def _cluster_graph(
+    z: np.ndarray, k: int, adjacency: sps.csr_matrix, p: UnsupervisedParams
+) -> np.ndarray:
+    """Node labels of a normalized cut of the Mahalanobis affinity on neighbouring regions."""
+    from .ncut import recursive_ncut
+    from .spectral import SpectralClustering
+
+    n = z.shape[0]
+    w = whiten(z)
+    coo = sps.triu(adjacency, 1).tocoo()
+    i, j = coo.row, coo.col
+    dist = ((w[i] - w[j]) ** 2).sum(axis=1)
+    med = float(np.median(dist)) if dist.size else 1.0
+    vals = np.exp(-dist / (p.scale * (med if med > 0 else 1.0)))
+    off = sps.coo_matrix((vals, (i, j)), shape=(n, n)).tocsr()
+    W = (off + off.T + sps.identity(n, format="csr")).tocsr()
+    if p.clustering == "ncut":
+        return recursive_ncut(W, k)
+    return SpectralClustering(W).labels(k)
+
+
+def refine_boundaries(
+    labels: np.ndarray, intensity: np.ndarray, dop: np.ndarray, n_labels: int
+) -> np.ndarray:
+    """Pixels on a segment border moved to the neighbouring segment they resemble most.
+
+    For every pixel with a different label in its 3 × 3 neighbourhood: the label, among
+    those of the neighbourhood, whose segment mean of (log Î, ρ) is nearest in units of
+    the pooled within-segment spread of each. One pass (each moves a border by at most
+    a pixel), vectorised over the border.
+    """
+    log_i = np.log(np.maximum(intensity, EPS_INTENSITY)).astype(np.float64)
+    maps = np.stack([log_i, dop.astype(np.float64)])
+    flat = labels.ravel()
+    count = np.maximum(np.bincount(flat, minlength=n_labels), 1)
+    means = np.stack([np.bincount(flat, m.ravel(), n_labels) / count for m in maps])
+    resid = maps - means[:, labels]
+    spread = np.sqrt((resid.reshape(2, -1) ** 2).mean(axis=1)) + 1e-12
+    near = np.zeros((n_labels,) + labels.shape, dtype=bool)
+    for c in range(n_labels):
+        near[c] = ndimage.maximum_filter(labels == c, size=3)
+    border = near.sum(axis=0) > 1
+    if not border.any():
+        return labels
+    x = maps[:, border] / spread[:, None]  # (2, b)
+    mu = means / spread[:, None]  # (2, k)
+    d = ((x[:, :, None] - mu[:, None, :]) ** 2).sum(axis=0)  # (b, k)
+    d[~near[:, border].T] = np.inf
+    out = labels.copy()
+    out[border] = np.argmin(d, axis=1)
+    return out
+
+
+def _first_appearance(labels: np.ndarray, node_labels: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Segments renumbered in order of first appearance in ``labels`` (row-major)."""
+    flat = labels.ravel()
+    _, first = np.unique(flat, return_index=True)
+    values = flat[np.sort(first)]
+    order = np.zeros(int(max(flat.max(), node_labels.max())) + 1, dtype=np.int32)
+    order[values] = np.arange(values.size, dtype=np.int32)
+    return order[labels], order[node_labels]
+
+
+def segment_unsupervised(
+    intensity: np.ndarray,
+    dop: np.ndarray,
+    phase: np.ndarray,
+    n_segments: int,
+    params: UnsupervisedParams | None = None,
+) -> UnsupervisedResult:
+    """Segment a polarisation image into materials without training (module docstring).
+
+    Parameters
+    ----------
+    intensity, dop, phase : array (H, W)
+        Î (units of the input), ρ in [0, 1], φ radians (thesis eq. 3.14).
+    n_segments : int
+        Number of segments k (≥ 1).
+    params : UnsupervisedParams, optional
+        Superpixels, node features and clustering (default ``UnsupervisedParams()``).
+
+    Returns
+    -------
+    UnsupervisedResult
+        Pixel labels (each pixel its superpixel's), node labels, the superpixels.
+
+    Raises
+    ------
+    PolarsegError
+        Maps of different shapes or not 2-D, k < 1, or fewer superpixels than k.
+    """
+    t0 = time.perf_counter()
+    p = params or UnsupervisedParams()
+    i, d, ph = _check_maps(intensity, dop, phase)
+    try:
+        k = int(n_segments)
+    except (TypeError, ValueError):
+        raise PolarsegError(f"n_segments must be an integer >= 1, got {n_segments!r}") from None
+    if k < 1 or k != n_segments:
+        raise PolarsegError(f"n_segments must be an integer >= 1, got {n_segments!r}")
+    area = p.area_of(i.shape)
+    if p.boundary == "polarisation":
+        regions = polarisation_superpixels(i, d, ph, area, p.polarisation_edge_weight)
+    else:
+        from .superpixels import superpixels
+
+        regions = _relabel(superpixels(i, area))
+    n = int(regions.max()) + 1
+    if n < k:
+        raise PolarsegError(
+            f"only {n} superpixels for {k} segments: lower region_area (now {area} px)"
+        )
+    names = list(p.features)
+    cols = [node_features(i, d, ph, regions, p.features)] if p.features else []
+    if p.pixel_scales:
+        from .pixel_features import PixelFeatureParams, pixel_features
+        from .superpixels import region_means
+
+        stack = pixel_features(
+            i,
+            d,
+            ph,
+            PixelFeatureParams(scales=p.pixel_scales, groups=p.pixel_groups),
+        )
+        cols.append(region_means(stack.planes, regions).T.astype(np.float64))
+        names += [f"pixel:{nm}" for nm in stack.names]
+    x = np.concatenate(cols, axis=1)
+    x = np.where(np.isfinite(x), x, 0.0)
+    weight = np.bincount(regions.ravel(), minlength=n).astype(float)
+    adjacency = region_adjacency(regions)
+    if k == 1:
+        node_labels = np.zeros(n, dtype=np.int32)
+        z = np.zeros((n, 0))
+    else:
+        xs = _standardise(x, weight)
+        if p.projection == "maf":
+            z = maf_features(xs, adjacency, weight, p.variance, p.components)
+        else:
+            z = pca_features(xs, p.variance).features
+        if p.clustering in ("gmm", "kmeans"):
+            node_labels = _cluster_mixture(z, k, weight, adjacency, p)
+        else:
+            node_labels = _cluster_graph(z, k, adjacency, p)
+    node_labels = np.asarray(node_labels, dtype=np.int32)
+    labels = node_labels[regions]
+    if p.refine_boundaries and k > 1:
+        for _ in range(REFINE_PASSES):
+            labels = refine_boundaries(labels, i, d, int(node_labels.max()) + 1)
+        labels = labels.astype(np.int32)
+    labels, node_labels = _first_appearance(labels, node_labels)
+    check = degenerate_result(labels, requested=k)
+    return UnsupervisedResult(
+        labels=labels,
+        node_labels=node_labels,
+        regions=regions,
+        node_features=z,
+        feature_names=tuple(names),
+        seconds=time.perf_counter() - t0,
+        degenerate=bool(check.degenerate),
+        params=p,
+    )
