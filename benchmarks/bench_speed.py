@@ -26,10 +26,26 @@ Baselines
   "precomputed")`` on the same affinity as the engine's normalized cut: time and
   agreement (adjusted Rand index, ARI) with it.
 
+Bounded cuts (issue 13)
+-----------------------
+- The thesis preset (w = 10, L = 12, s = 1, 3 segments) on the real 1224 × 1024 frames
+  of ``../shared/data/polanalyser`` (IMX250MZR mosaics, layout 90,45,135,0; 12,444 blocks,
+  sparse kNN graph), the whole pipeline in a fresh process as ``polarseg segment`` runs
+  it; target 15 s each. Their graphs have fallen apart: before the work limits, the cut
+  of the camera and carps frames took 455 and 737 s. Skipped with a message when the
+  folder is absent.
+- A constructed fallen-apart frame: the synthetic 1224 × 1024 camera frame with
+  :data:`PLANTED_BLOCKS` blocks replaced by unique noise (isolated blocks, Ncut values
+  near 0), same preset and target.
+- A constructed fallen-apart affinity: 2,400 groups of 5 strongly tied nodes joined in a
+  chain by weak links (12,000 nodes, sparse), whose smallest eigenvalues lie close
+  together; the cut of 3 segments with the default product cap; target 15 s.
+
 Usage::
 
     .venv/bin/python benchmarks/bench_speed.py              # the table, ~5-8 minutes
     .venv/bin/python benchmarks/bench_speed.py --repeats 5
+    .venv/bin/python benchmarks/bench_speed.py --bounded    # only the bounded-cut rows
 
 Not part of the test suite; ``tests/test_speed_equivalence.py`` imports the
 straightforward baseline from here to check that the fast path gives the same labels.
@@ -60,6 +76,14 @@ REF_ANGLES = tuple(range(0, 181, 10))
 CAM_SHAPE = (1024, 1224)
 CAM_ANGLES = (0, 45, 90, 135)
 SCENE = "leaves"
+#: The real polarisation-camera frames beside the repository (``../shared``).
+SHARED_FRAMES = Path(__file__).resolve().parents[2] / "shared" / "data" / "polanalyser"
+FRAME_NAMES = ("fruits", "camera", "carps", "polarizer")
+FRAME_MOSAIC = (90, 45, 135, 0)
+#: Blocks of the synthetic camera frame replaced by unique noise (isolated blocks).
+PLANTED_BLOCKS = 12
+#: The thesis preset's whole run on a 1224 × 1024 frame may take this long (issue 13).
+BOUNDED_TARGET = 15.0
 
 # -- the straightforward baseline (thesis-era implementation) ------------------------------
 
@@ -350,10 +374,135 @@ def load(path: Path) -> tuple[np.ndarray, np.ndarray]:
 # -- child processes (one per memory measurement) --------------------------------------------
 
 
+def planted_isolated(
+    stack: np.ndarray, window: int = 10, n: int = PLANTED_BLOCKS, seed: int = 0
+) -> np.ndarray:
+    """``stack`` with ``n`` w × w blocks (seeded) replaced by unique uniform noise: their
+    polarisation fits nothing else, so at the thesis scale they are isolated blocks of
+    the affinity (less than 1e-6 of their degree leaves them) and the cut's Ncut values
+    are ~0."""
+    rng = np.random.default_rng(seed)
+    out = stack.copy()
+    rows, cols = stack.shape[1] // window, stack.shape[2] // window
+    top = float(np.iinfo(out.dtype).max) if out.dtype.kind in "ui" else float(out.max())
+    for b in rng.choice(rows * cols, size=n, replace=False):
+        r, c = divmod(int(b), cols)
+        patch = rng.uniform(0.05, 0.9, size=(stack.shape[0], window, window)) * top
+        out[:, r * window : (r + 1) * window, c * window : (c + 1) * window] = patch
+    return out
+
+
+def chain_of_groups(n_groups: int = 2_400, size: int = 5, eps: float = 1e-2, seed: int = 0):
+    """A fallen-apart sparse affinity: groups of ``size`` strongly tied nodes, joined in
+    a chain by one weak link (~``eps``) each; the smallest Laplacian eigenvalues are a
+    long chain's, close together, and the Jacobi preconditioner cannot separate them."""
+    import scipy.sparse as sps
+
+    rng = np.random.default_rng(seed)
+    blocks = [0.5 + 0.5 * rng.random((size, size)) for _ in range(n_groups)]
+    W = sps.block_diag(blocks, format="csr")
+    ends = np.arange(size - 1, (n_groups - 1) * size, size)
+    weak = eps * (0.5 + rng.random(ends.size))
+    link = sps.csr_matrix((weak, (ends, ends + 1)), shape=W.shape)
+    W = W.maximum(W.T) + link + link.T
+    W.setdiag(1.0)
+    return W.tocsr()
+
+
+def thesis_frame_child(task: str, path: Path) -> dict:
+    """The thesis preset's whole run on a 1224 × 1024 frame (a real mosaic PNG, or the
+    synthetic camera frame with planted isolated blocks)."""
+    from napari_polarseg import io as pio
+    from napari_polarseg.engine import Pipeline, SegmentParams
+
+    if task == "thesis-frame":
+        data = pio.read_stack(str(path), mosaic=np.array(FRAME_MOSAIC))
+        stack, angles = data.stack, data.angles_rad
+    else:
+        stack, angles = load(path)
+        stack = planted_isolated(stack)
+    t0 = time.perf_counter()
+    res = Pipeline(stack, angles, SegmentParams(n_segments=3)).run()
+    seconds = time.perf_counter() - t0
+    check = res.degenerate()
+    return {
+        "seconds": seconds,
+        "peak_mb": peak_rss_mb(),
+        "n_blocks": int(res.block_labels.size),
+        "stage_seconds": res.timings,
+        "cut_limits": res.cut_limits,
+        "ncut_values": [float(v) for v in res.ncut_values],
+        "largest_share": check.largest_share,
+        "degenerate": check.degenerate,
+    }
+
+
+def bounded_rows(cache: Path) -> tuple[list[Row], list[str]]:
+    """The rows of issue 13's bounded cuts (module docstring) and their details
+    (``cache``: the folder of the rendered inputs, :func:`build_inputs`)."""
+    from napari_polarseg.engine import ncut
+
+    rows: list[Row] = []
+    notes: list[str] = []
+
+    def add(label: str, out: dict) -> None:
+        limits = out["cut_limits"]
+        rows.append(
+            Row(
+                label,
+                out["seconds"],
+                out["peak_mb"],
+                target=BOUNDED_TARGET,
+                note=(
+                    f"labels {out['stage_seconds']['labels']:.2f} s, "
+                    f"{limits['products']} products, capped {limits['eigensolver_capped']}, "
+                    f"isolated {limits['isolated_skipped']}"
+                ),
+            )
+        )
+        ncuts = ", ".join(f"{v:.2g}" for v in out["ncut_values"])
+        notes.append(
+            f"  {label}: Ncut values {ncuts}; largest segment "
+            f"{100 * out['largest_share']:.2f} % (degenerate: {out['degenerate']}); stages "
+            + ", ".join(f"{k} {v:.2f}" for k, v in out["stage_seconds"].items())
+        )
+
+    frames = [SHARED_FRAMES / f"{name}_IMX250MZR.png" for name in FRAME_NAMES]
+    if not SHARED_FRAMES.is_dir():
+        notes.append(f"  real frames skipped: {SHARED_FRAMES} is absent")
+    for path in (f for f in frames if f.is_file()):
+        out = run_child("thesis-frame", path)
+        add(f"thesis preset, real {path.stem} 1224x1024 ({out['n_blocks']} blocks)", out)
+    out = run_child("thesis-planted", build_inputs(cache)["cam"])
+    add(f"thesis preset, synthetic frame + {PLANTED_BLOCKS} isolated blocks", out)
+
+    W = chain_of_groups()
+    t0 = time.perf_counter()
+    tree = ncut.CutTree(W)
+    tree.labels(3)
+    seconds = time.perf_counter() - t0
+    limits = tree.cut_limits()
+    rows.append(
+        Row(
+            f"Ncut k=3, chain-of-groups affinity ({W.shape[0]} nodes, sparse)",
+            seconds,
+            target=BOUNDED_TARGET,
+            note=(
+                f"{limits['products']} products, capped {limits['eigensolver_capped']}, "
+                f"cap {limits['max_products']} per solve"
+            ),
+        )
+    )
+    notes.append(f"  chain-of-groups Ncut values {', '.join(f'{v:.2g}' for v in tree.ncut_values)}")
+    return rows, notes
+
+
 def child(task: str, path: Path) -> dict:
     """Run one task in this (fresh) process; report seconds and peak RSS."""
     from napari_polarseg.engine import Pipeline, SegmentParams
 
+    if task in ("thesis-frame", "thesis-planted"):
+        return thesis_frame_child(task, path)
     stack, angles = load(path)
     params = {
         "cold": SegmentParams(window=10, degree=12, n_segments=3),
@@ -394,11 +543,23 @@ def main(argv: list[str] | None = None) -> int:
         help="folder for the rendered inputs [%(default)s]",
     )
     parser.add_argument("--subset", type=int, default=240, help="blocks timed for loops [240]")
+    parser.add_argument(
+        "--bounded", action="store_true", help="only the bounded-cut rows of issue 13"
+    )
     parser.add_argument("--child", help=argparse.SUPPRESS)
     parser.add_argument("--input", type=Path, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.child:
         print(json.dumps(child(args.child, args.input)))
+        return 0
+    if args.bounded:
+        t_start = time.perf_counter()
+        rows, notes = bounded_rows(args.cache)
+        print(f"napari-polarseg bounded cuts — {os.cpu_count()} CPUs, load {_load()}")
+        print_table(rows)
+        print("details:")
+        print("\n".join(notes))
+        print(f"total benchmark time {time.perf_counter() - t_start:.0f} s")
         return 0
 
     from napari_polarseg.engine import Pipeline, SegmentParams, harmonics, ncut
@@ -625,12 +786,17 @@ def main(argv: list[str] | None = None) -> int:
             15.0,
         ),
     ]
+    bounded, bounded_notes = bounded_rows(args.cache)
+    rows += bounded
     print(
         f"napari-polarseg speed benchmark — {platform.processor() or platform.machine()}, "
         f"{os.cpu_count()} CPUs, numpy {np.__version__}, scipy {scipy.__version__}; "
-        f"median of {reps} (fresh-process rows: 1 run); ratio = baseline s / ours"
+        f"median of {reps} (fresh-process rows: 1 run); ratio = baseline s / ours; "
+        f"load {_load()}"
     )
     print_table(rows)
+    print("bounded cuts (issue 13):")
+    print("\n".join(bounded_notes))
     for name, stages in (("in-process", res.timings), ("fresh process", cold["stage_seconds"])):
         print(
             f"cold-run stage seconds ({name}): "
@@ -646,6 +812,14 @@ def main(argv: list[str] | None = None) -> int:
     )
     print(f"total benchmark time {time.perf_counter() - t_start:.0f} s")
     return 0
+
+
+def _load() -> str:
+    """The host's load averages (other processes slow every row down)."""
+    try:
+        return "/".join(f"{v:.1f}" for v in os.getloadavg()) + " (1/5/15 min)"
+    except OSError:  # pragma: no cover - not on Linux
+        return "n/a"
 
 
 def _skimage_ncut(W, thresh: float) -> np.ndarray:

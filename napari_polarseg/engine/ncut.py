@@ -63,8 +63,11 @@ Bounded work, isolated blocks, Cancel
   inputs measured the cap never bites (largest solves: Lanczos 811 products on the
   polanalyser carps frame with the recommended preset, 1,496 before on the fruits
   frame with the thesis preset, which now takes the block LOBPCG; block LOBPCG ≤ 130);
-  at a sparse product's ~1 ms on 12,000 blocks a capped solve takes ~2–3 s, at a dense
-  one's 5–9 ms on 4,752–6,000 blocks 10–18 s.
+  the time bound is the cap times a product's cost, measured on the busy 2-core host
+  (load 3–6): ~0.9 ms on a 12,000-node sparse graph (a chain-of-groups affinity: 3
+  solves, 5,681 products, 5 s; 130,298 products and 80 s without the cap), 5–7 ms on
+  a 3,000–6,000-node dense one (one capped solve 10–14 s; the first cut of a
+  3,000-node chain of groups made 117,000 products in 6 minutes without the cap).
 - Isolated blocks: a block of a segment that keeps all but less than
   :data:`ISOLATED_NCUT` of its degree to itself has a singleton cut below what an
   iterative solver resolves (its residual tolerance is :data:`EIG_TOL`): many
