@@ -64,6 +64,9 @@ VARIANTS: dict[str, UnsupervisedParams] = {
     "default-no-refine": D.replace(refine_boundaries=False),
     "default-intensity-edges": D.replace(boundary="intensity"),
     "default+cue": D.replace(features=D.features + MATERIAL_CUE),
+    "default-tied-covariance": D.replace(covariance="tied"),
+    "default-diag-covariance": D.replace(covariance="diag"),
+    "default-no-smoothing": D.replace(smoothing=0.0),
     "node7-gmm": D.replace(features=F7, pixel_scales=(), clustering="gmm", smoothing=0.0),
     "node7-kmeans": D.replace(features=F7, pixel_scales=(), clustering="kmeans", smoothing=0.0),
     "node7-ncut": D.replace(features=F7, pixel_scales=(), clustering="ncut"),
@@ -190,7 +193,8 @@ def table(rows: dict[str, dict], columns: list[str]) -> str:
     ]
     for name, r in rows.items():
         cells = " | ".join(cell(r, c) for c in columns)
-        lines.append(f"| {name} | {cells} | {r['seconds']:.2f} |")
+        seconds = f"{r['seconds']:.2f}" if r["seconds"] > 0 else "–"
+        lines.append(f"| {name} | {cells} | {seconds} |")
     return "\n".join(lines)
 
 

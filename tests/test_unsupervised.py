@@ -134,6 +134,7 @@ def test_bad_inputs_raise_one_line(args, message):
         {"projection": "ica"},
         {"components": 0},
         {"clustering": "dbscan"},
+        {"covariance": "banded"},
         {"smoothing": 1.0},
         {"smoothing_iterations": -1},
         {"scale": 0.0},

@@ -105,6 +105,8 @@ class UnsupervisedParams:
         Share of the variance the PCA of the standardised node features keeps, (0, 1].
     clustering : {"gmm", "kmeans", "ncut", "kway"}
         Module docstring, step 3.
+    covariance : {"full", "tied", "diag", "spherical"}
+        Covariance type of the Gaussian mixture (scikit-learn ``covariance_type``).
     smoothing : float
         λ of the posterior smoothing over the region adjacency, [0, 1) (gmm, kmeans).
     smoothing_iterations : int
@@ -129,6 +131,7 @@ class UnsupervisedParams:
     projection: str = "pca"
     components: int = 4
     clustering: str = "gmm"
+    covariance: str = "full"
     smoothing: float = 0.5
     smoothing_iterations: int = 5
     scale: float = 1.0
@@ -168,6 +171,10 @@ class UnsupervisedParams:
         if self.clustering not in CLUSTERINGS:
             raise PolarsegError(
                 f"clustering must be one of {', '.join(CLUSTERINGS)}, got {self.clustering!r}"
+            )
+        if self.covariance not in ("full", "tied", "diag", "spherical"):
+            raise PolarsegError(
+                f"covariance must be full, tied, diag or spherical, got {self.covariance!r}"
             )
         if not (0 <= self.smoothing < 1):
             raise PolarsegError(f"smoothing must be in [0, 1), got {self.smoothing}")
@@ -417,7 +424,7 @@ def _cluster_mixture(
         from sklearn.mixture import GaussianMixture
 
         gm = GaussianMixture(
-            k, covariance_type="full", n_init=3, random_state=p.seed, reg_covar=1e-4
+            k, covariance_type=p.covariance, n_init=3, random_state=p.seed, reg_covar=1e-4
         ).fit(z)
         post = gm.predict_proba(z)
     else:
@@ -571,7 +578,12 @@ def segment_unsupervised(
         else:
             z = pca_features(xs, p.variance).features
         if p.clustering in ("gmm", "kmeans"):
-            node_labels = _cluster_mixture(z, k, weight, adjacency, p)
+            from threadpoolctl import threadpool_limits
+
+            # a few thousand nodes in a few dimensions: threaded BLAS on tiny matrices
+            # only spins (18 ms per 3 × 3 triangular solve on a loaded 2-core machine)
+            with threadpool_limits(1):
+                node_labels = _cluster_mixture(z, k, weight, adjacency, p)
         else:
             node_labels = _cluster_graph(z, k, adjacency, p)
     node_labels = np.asarray(node_labels, dtype=np.int32)
