@@ -122,10 +122,11 @@ class PixelSegmenter:
         fparams = classifier.feature_params if classifier is not None else feature_params
         feats = self.features(fparams)
         seconds["features"] = time.perf_counter() - t0
-        t0 = time.perf_counter()
+        seconds["train"] = 0.0  # an applied classifier is not retrained
         if classifier is None:
+            t0 = time.perf_counter()
             classifier = self.train(scribbles, feats.params, params)
-        seconds["train"] = time.perf_counter() - t0
+            seconds["train"] = time.perf_counter() - t0
         t0 = time.perf_counter()
         guide = self.guide() if classifier.params.smoothing > 0 else None
         prediction = predict_pixels(classifier, feats, guide=guide, cancel=cancel)
