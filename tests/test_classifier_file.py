@@ -316,6 +316,7 @@ def test_hist_gradient_boosting_round_trip(tmp_path: Path, kind: str, params: di
         "extra-trees-bootstrap",
     ],
 )
+@pytest.mark.filterwarnings("ignore:Some inputs do not have OOB scores")
 def test_more_settings_round_trip(tmp_path: Path, model: Any) -> None:
     model = _fit(model, kind="int32", n=200)
     path = tmp_path / f"v{SUFFIX}"
@@ -654,7 +655,7 @@ def test_bad_digests_in_manifest_are_refused(tmp_path: Path) -> None:
 @pytest.mark.parametrize(
     "make",
     [
-        lambda x, y: SVC(probability=True).fit(x, y),
+        lambda x, y: SVC().fit(x, y),
         lambda x, y: make_pipeline(
             FunctionTransformer(np.log1p), RandomForestClassifier(n_estimators=2)
         ).fit(np.abs(x), y),
