@@ -125,7 +125,7 @@ def main(argv: list[str] | None = None) -> int:
             t0 = time.perf_counter()
             subprocess.run(cmd, check=True, capture_output=True)
             times.append(time.perf_counter() - t0)
-        t_cam = float(np.median_time(times))
+        t_cam = float(np.median(times))
         import json
 
         summary = json.loads((tmp / "o" / "summary.json").read_text())
