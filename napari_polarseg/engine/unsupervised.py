@@ -57,6 +57,8 @@ from scipy import ndimage
 from .degenerate import degenerate_result
 from .errors import PolarsegError
 from .features import pca_features, whiten
+from .pixel_features import EPS_DOP, EPS_INTENSITY
+from .superpixels import COMPACTNESS
 
 #: Projections of the standardised node features (:func:`maf_features`, PCA).
 PROJECTIONS = ("pca", "maf")
@@ -82,13 +84,8 @@ MIN_REGION_AREA = 32
 MAX_REGION_AREA = 1024
 #: σ (pixels) of the smoothing before the edge maps of the superpixels are taken.
 EDGE_SIGMA = 1.5
-#: Watershed compactness of the superpixels.
-COMPACTNESS = 1e-3
 #: Passes of :func:`refine_boundaries` (each moves a border by at most one pixel).
 REFINE_PASSES = 2
-#: Floor of Î before its logarithm, and of ρ before a ratio.
-EPS_INTENSITY = 1e-6
-EPS_DOP = 1e-4
 
 
 @dataclass(frozen=True)
