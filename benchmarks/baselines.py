@@ -11,6 +11,9 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from pathlib import Path
+
 import numpy as np
 from scipy import ndimage
 from sklearn.cluster import KMeans
@@ -61,3 +64,18 @@ def intensity_kmeans(intensity: np.ndarray, k: int) -> np.ndarray:
     x = (x - x.mean(axis=0)) / (x.std(axis=0) + EPS)
     km = KMeans(k, n_init=10, random_state=0).fit(x[:: max(1, x.shape[0] // 200_000)])
     return km.predict(x).reshape(intensity.shape)
+
+
+def real_frames(folder: Path) -> Iterator[tuple]:
+    """(truth file, stack data) of every bundled hand-labelled real frame in ``folder``
+    (read with the truth file's mosaic layout); a missing frame is reported and skipped."""
+    from napari_polarseg import io as pio
+    from napari_polarseg.truth import read_truth_file, truth_files
+
+    for path in truth_files():
+        truth_file = read_truth_file(path)
+        frame = Path(folder) / truth_file.frame
+        if not frame.is_file():
+            print(f"real frame {frame} not found: skipped")
+            continue
+        yield truth_file, pio.read_stack(frame, mosaic=list(truth_file.mosaic))

@@ -49,7 +49,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from baselines import intensity_kmeans, plain_baseline
+from baselines import intensity_kmeans, plain_baseline, real_frames
 from sklearn.metrics import adjusted_rand_score
 
 from napari_polarseg.engine import Pipeline, SegmentParams, intensity_baseline
@@ -58,7 +58,6 @@ from napari_polarseg.engine.pixel_classifier import ClassifierParams, make_model
 from napari_polarseg.engine.pixel_features import GROUPS, PixelFeatureParams, pixel_features
 from napari_polarseg.engine.pixel_segmentation import PixelSegmenter
 from napari_polarseg.engine.synthetic import SCENES, make_scene, scribble_strokes
-from napari_polarseg.truth import read_truth_file, truth_files
 
 README = Path(__file__).resolve().parents[1] / "README.md"
 BEGIN, END = "<!-- evaluate.py table: begin -->", "<!-- evaluate.py table: end -->"
@@ -204,16 +203,8 @@ def evaluate_real(folder: Path) -> list[dict]:
     upper bound of the features, not a fair score. A degenerate result (one segment with
     ≥ 95 % of the pixels) is recorded in ``degenerate``.
     """
-    from napari_polarseg import io as pio
-
     rows = []
-    for path in truth_files():
-        truth_file = read_truth_file(path)
-        frame = folder / truth_file.frame
-        if not frame.is_file():
-            print(f"real frame {frame} not found: skipped")
-            continue
-        data = pio.read_stack(frame, mosaic=list(truth_file.mosaic))
+    for truth_file, data in real_frames(folder):
         truth, strokes = truth_file.truth, truth_file.strokes
         where = truth > 0
         k = len(truth_file.classes)

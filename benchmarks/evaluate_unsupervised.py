@@ -26,7 +26,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from baselines import intensity_kmeans
+from baselines import intensity_kmeans, real_frames
 from evaluate import DEGENERATE_SHARE, REAL_DIR, ari, ari_where, largest_share, load
 
 from napari_polarseg.engine import Pipeline, SegmentParams
@@ -37,7 +37,6 @@ from napari_polarseg.engine.unsupervised import (
     UnsupervisedParams,
     segment_unsupervised,
 )
-from napari_polarseg.truth import read_truth_file, truth_files
 
 #: Today's best unsupervised option per synthetic scene (issue 13): the floor.
 SYNTHETIC_FLOOR = {"leaves": 0.19, "camouflage": 0.36, "fruit": 0.24}
@@ -112,16 +111,8 @@ def synthetic_inputs(seeds: list[int]) -> list[tuple]:
 
 def real_inputs(folder: Path) -> list[tuple]:
     """(frame, pipeline, polarisation image, truth, k) of every hand-labelled real frame."""
-    from napari_polarseg import io as pio
-
     out = []
-    for path in truth_files():
-        tf = read_truth_file(path)
-        frame = folder / tf.frame
-        if not frame.is_file():
-            print(f"real frame {frame} not found: skipped")
-            continue
-        data = pio.read_stack(frame, mosaic=list(tf.mosaic))
+    for tf, data in real_frames(folder):
         k = len(tf.classes)
         pipe = Pipeline(data.stack, data.angles_rad, SegmentParams(n_segments=k))
         out.append((tf.frame, pipe, pipe.get("polarisation"), tf.truth, k))

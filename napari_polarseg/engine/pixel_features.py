@@ -55,7 +55,7 @@ from scipy import ndimage
 
 from .errors import PolarsegError
 from .fresnel import zenith_from_diffuse_dop
-from .superpixels import region_means, superpixels
+from .superpixels import auto_region_area, region_means, superpixels
 
 #: Feature groups (module docstring), in the order their features appear.
 GROUPS = ("intensity", "polarisation", "zenith", "filters", "invariant", "regions")
@@ -123,8 +123,7 @@ class PixelFeatureParams:
         """Superpixel area (pixels) used on an image of ``shape``."""
         if self.region_area:
             return self.region_area
-        auto = shape[0] * shape[1] // PIXELS_PER_REGION_SEED
-        return int(min(max(auto, MIN_REGION_AREA), MAX_REGION_AREA))
+        return auto_region_area(shape, PIXELS_PER_REGION_SEED, MIN_REGION_AREA, MAX_REGION_AREA)
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready form (lists for tuples)."""

@@ -69,6 +69,12 @@ def region_means(maps: Sequence[np.ndarray], regions: np.ndarray) -> np.ndarray:
     return out
 
 
+def auto_region_area(shape: tuple[int, int], regions: int, smallest: int, largest: int) -> int:
+    """Superpixel area (pixels) that cuts an image of ``shape`` into about ``regions``
+    regions, kept within [``smallest``, ``largest``]."""
+    return int(min(max(shape[0] * shape[1] // regions, smallest), largest))
+
+
 def region_count(shape: tuple[int, int], region_area: int = REGION_AREA) -> int:
     """Number of seeds :func:`superpixels` places on an image of ``shape``."""
     return max(1, int(round(math.prod(shape) / region_area)))

@@ -58,7 +58,7 @@ from .degenerate import degenerate_result
 from .errors import PolarsegError
 from .features import pca_features, whiten
 from .pixel_features import EPS_DOP, EPS_INTENSITY
-from .superpixels import COMPACTNESS
+from .superpixels import COMPACTNESS, auto_region_area
 
 #: Projections of the standardised node features (:func:`maf_features`, PCA).
 PROJECTIONS = ("pca", "maf")
@@ -210,8 +210,7 @@ class UnsupervisedParams:
         """Superpixel area (pixels) used on an image of ``shape``."""
         if self.region_area:
             return self.region_area
-        auto = shape[0] * shape[1] // REGIONS_PER_IMAGE
-        return int(min(max(auto, MIN_REGION_AREA), MAX_REGION_AREA))
+        return auto_region_area(shape, REGIONS_PER_IMAGE, MIN_REGION_AREA, MAX_REGION_AREA)
 
     def replace(self, **changes: Any) -> UnsupervisedParams:
         """A copy with some attributes changed (validated again)."""
