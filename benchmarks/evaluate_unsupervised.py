@@ -60,6 +60,13 @@ S5 = (1.0, 2.0, 4.0, 8.0, 16.0)
 #: Variant name -> parameters.
 VARIANTS: dict[str, UnsupervisedParams] = {
     "default": D,
+    "default-no-clip": D.replace(clip=0.0),
+    "default+log-intensity": D.replace(features=("log_intensity",) + D.features),
+    "default-gmm": D.replace(clustering="gmm"),
+    "default-full-edge-weight": D.replace(polarisation_edge_weight=1.0),
+    "previous-default-gmm3": D.replace(
+        features=F3, clustering="gmm", smoothing=0.5, polarisation_edge_weight=1.0, clip=0.0
+    ),
     "default-no-refine": D.replace(refine_boundaries=False),
     "default-intensity-edges": D.replace(boundary="intensity"),
     "default+cue": D.replace(features=D.features + MATERIAL_CUE),

@@ -106,6 +106,7 @@ from .engine.evaluation import adjusted_rand_index, evaluate
 from .engine.limits import check_pipeline_memory, memory_limit
 from .engine.mosaic import DEMOSAIC_METHODS
 from .engine.params import (
+    AUTO,
     CLUSTERING_METHODS,
     COEFFICIENT_METHODS,
     FEATURE_KINDS,
@@ -284,10 +285,23 @@ def _param_options() -> dict[str, tuple[str, dict[str, Any]]]:
     return options
 
 
-PRESETS = {"thesis": SegmentParams(), "recommended": RECOMMENDED}
+PRESETS = {"auto": AUTO, "thesis": SegmentParams(), "recommended": RECOMMENDED}
+#: What each preset is, for --help.
+PRESET_HELP = (
+    "auto: superpixels clustered by their polarisation, the best unsupervised method "
+    "measured on rendered and real frames; thesis: the thesis pipeline as published; "
+    "recommended: the thesis pipeline with the block parameters that score best on the "
+    "synthetic scenes (README, 'Segmentation quality')"
+)
+#: Presets of the commands whose own analysis cuts the block graph (sweep, timeseries).
+BLOCK_PRESETS = ("thesis", "recommended")
 
 
-def _add_param_options(parser: argparse.ArgumentParser, preset: str = "thesis") -> None:
+def _add_param_options(
+    parser: argparse.ArgumentParser,
+    preset: str = "auto",
+    presets: tuple[str, ...] = tuple(PRESETS),
+) -> None:
     defaults = SegmentParams()
     group = parser.add_argument_group(
         "segmentation parameters",
@@ -295,10 +309,11 @@ def _add_param_options(parser: argparse.ArgumentParser, preset: str = "thesis") 
     )
     group.add_argument(
         "--preset",
-        choices=sorted(PRESETS),
+        choices=presets,
         default=preset,
-        help="starting parameters: the thesis defaults, or those that score best on the "
-        f"synthetic scenes (README, 'Segmentation quality') [{preset}]",
+        help=f"starting parameters ({PRESET_HELP}) [{preset}]"
+        if "auto" in presets
+        else f"starting parameters ({PRESET_HELP.split('; ', 1)[1]}) [{preset}]",
     )
     group.add_argument(
         "--params",
@@ -483,7 +498,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--sample", metavar="FILE.npz", help="use this .npz (stack, angles, labels) instead"
     )
     _add_plots_option(demo)
-    _add_param_options(demo, preset="recommended")
+    _add_param_options(demo)
     demo.set_defaults(func=_cmd_demo, overview=True)
     _add_sweep_parser(sub)
 
@@ -592,7 +607,7 @@ def build_parser() -> argparse.ArgumentParser:
         "change scores and distances stay those of the change test",
     )
     _add_input_options(ts, "day")
-    _add_param_options(ts, preset="recommended")
+    _add_param_options(ts, preset="recommended", presets=BLOCK_PRESETS)
     ts.set_defaults(func=_cmd_timeseries)
     return parser
 
@@ -604,7 +619,7 @@ def _params_from_args(
     args: argparse.Namespace, base: dict[str, Any] | None = None
 ) -> SegmentParams:
     """SegmentParams from ``base``, then ``--params``, then explicit flags (validated)."""
-    values: dict[str, Any] = PRESETS[getattr(args, "preset", "thesis")].to_dict()
+    values: dict[str, Any] = PRESETS[getattr(args, "preset", "auto")].to_dict()
     values.update(base or {})
     source = "parameters"
     if args.params:
@@ -1128,7 +1143,7 @@ def _add_sweep_parser(sub: Any) -> None:
     )
     _add_input_options(sw, "stack")
     _add_plots_option(sw)
-    _add_param_options(sw, preset="recommended")
+    _add_param_options(sw, preset="recommended", presets=BLOCK_PRESETS)
     sw.set_defaults(func=_cmd_sweep)
 
 

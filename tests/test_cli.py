@@ -23,7 +23,9 @@ from napari_polarseg.engine.mosaic import mosaic_superpixel
 
 ANGLES = np.arange(0.0, 180.0, 30.0)  # 6 frames
 H, W = 57, 63  # not multiples of the window
-FAST = ["--window", "10", "--degree", "4", "--segments", "2"]
+# the thesis pipeline (the default preset "auto" is tested in test_auto_preset.py): the
+# scene's two materials differ in how Î follows the tilt, not in ρ
+FAST = ["--preset", "thesis", "--window", "10", "--degree", "4", "--segments", "2"]
 CONTRACT = {
     "labels.tif",
     "intensity.tif",
@@ -302,7 +304,11 @@ def test_demo_writes_outputs_overview_and_rand_index(tmp_path, capsys, toy_sampl
 def test_demo_with_sample_file_and_default_out(tmp_path, capsys, toy_samples, monkeypatch):
     monkeypatch.chdir(tmp_path)
     code, stdout, err = run(
-        capsys, "demo", "--sample", toy_samples / "toy.npz", "--degree", "4", "--segments", "3"
+        capsys,
+        "demo",
+        "--sample",
+        toy_samples / "toy.npz",
+        *("--preset", "thesis", "--degree", "4", "--segments", "3"),
     )
     assert code == 0, err
     out = tmp_path / "polarseg-demo"

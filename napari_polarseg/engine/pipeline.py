@@ -29,7 +29,7 @@ import numpy as np
 from scipy import ndimage
 
 from . import features as feat
-from . import fresnel, harmonics, ncut, polarimage, polstats, spectral
+from . import fresnel, harmonics, ncut, polarimage, polstats, spectral, unsupervised
 from .degenerate import DegenerateCheck, degenerate_result
 from .errors import Cancelled, PolarsegError
 from .params import SegmentParams
@@ -122,7 +122,7 @@ def _own_key(stage: str, p: SegmentParams) -> tuple:
             return (p.min_segment_blocks, "kway")
         return (p.min_segment_blocks, p.ncut_threshold)
     if stage == "labels":
-        return (p.n_segments,)
+        return (p.n_segments, p.clustering == "superpixels")
     if stage == "reconstruction":
         return (p.window, p.degree, p.ridge)
     return ()
@@ -397,8 +397,17 @@ class Pipeline:
         entry = self._cache.get(stage)
         return entry is not None and entry[0] == self.key(stage)
 
+    def stages(self, reconstruction: bool = True) -> list[str]:
+        """Stages a run computes, in order: every stage of :data:`STAGES` but the
+        reconstruction when not asked for, and no affinity and cut when the labels come
+        from the superpixel clustering (``clustering="superpixels"``)."""
+        names = list(STAGES if reconstruction else STAGES[:-1])
+        if self._p().clustering == "superpixels":
+            names = [s for s in names if s not in ("affinity", "cut")]
+        return names
+
     def stale_stages(self, reconstruction: bool = True) -> list[str]:
-        names = STAGES if reconstruction else STAGES[:-1]
+        names = self.stages(reconstruction)
         return [s for s in names if not self.is_fresh(s)]
 
     def block_valid(self) -> np.ndarray:
@@ -501,6 +510,8 @@ class Pipeline:
                 W, min_size=p.min_segment_blocks, threshold=p.ncut_threshold, warm=warm
             )
         if stage == "labels":
+            if p.clustering == "superpixels":
+                return self._superpixel_labels(p)
             tree = self.get("cut")
             coef = self.get("harmonics")
             valid = self.block_valid().reshape(coef.shape[:2])
@@ -527,6 +538,21 @@ class Pipeline:
             )
             return Reconstruction(rec, np.abs(rec - pol.intensity))
         raise KeyError(stage)
+
+    def _superpixel_labels(self, p: SegmentParams) -> tuple:
+        """Labels stage of ``clustering="superpixels"``: (block, labels, [], None).
+
+        The pixel labels of :func:`.unsupervised.segment_unsupervised` (measured
+        defaults) on the polarisation image; block labels are the label at each block's
+        top-left pixel. No graph is cut, so there are no Ncut values and no cut limits.
+        """
+        pol = self.get("polarisation")
+        if self._cancel is not None and self._cancel():
+            raise Cancelled("cancelled before the superpixel clustering")
+        seg = unsupervised.segment_unsupervised(pol.intensity, pol.dop, pol.phase, p.n_segments)
+        grid = harmonics.block_grid(pol.intensity.shape, p.window)
+        block = seg.labels[: grid[0] * p.window : p.window, : grid[1] * p.window : p.window]
+        return np.ascontiguousarray(block, dtype=np.int32), seg.labels.astype(np.int64), [], None
 
     def _dense_affinity(self, features: np.ndarray, p: SegmentParams) -> np.ndarray:
         """exp(−D / s) of the dense graph (thesis section 4.5), D kept between runs.
@@ -625,7 +651,7 @@ class Pipeline:
         before every product of its eigensolvers, and True raises :class:`Cancelled`
         (the splits made so far stay cached in the cut tree).
         """
-        names = STAGES if reconstruction else STAGES[:-1]
+        names = self.stages(reconstruction)
         self._recomputed = []
         for i, name in enumerate(names):
             self._cancel = cancel
@@ -693,7 +719,7 @@ class Pipeline:
         if params is not None and params != self.params:
             raise PolarsegError("parameters changed while the pipeline was running")
         block, labels, ncut_values, limits = self.get("labels")
-        names = STAGES if reconstruction else STAGES[:-1]
+        names = self.stages(reconstruction)
         return self.assemble_result(
             block,
             labels,

@@ -728,6 +728,11 @@ def segment_timeseries(
     params = SegmentParams() if params is None else params
     if not isinstance(params, SegmentParams):
         raise PolarsegError("params must be a SegmentParams")
+    if params.clustering == "superpixels":
+        raise PolarsegError(
+            "the time series cuts one block graph of all days; clustering must be "
+            "recursive or kway, not superpixels"
+        )
     if method not in METHODS:
         raise PolarsegError(f"method must be one of {', '.join(METHODS)}; got {method!r}")
     if change_from not in CHANGE_SOURCES:
@@ -835,7 +840,7 @@ def segment_timeseries(
     done("affinity", t0)
 
     t0 = time.perf_counter()
-    if getattr(params, "clustering", "recursive") == "kway":
+    if params.clustering == "kway":
         from .spectral import SpectralClustering
 
         tree: Any = SpectralClustering(W, min_size=min_size)

@@ -31,16 +31,22 @@ those few hundred to few thousand nodes:
 
 Every pixel takes its region's label; then the pixels on a segment border move to the
 neighbouring segment whose mean (log Î, ρ) they resemble most (:func:`refine_boundaries`,
-two one-pixel passes: a watershed border on a straight edge sits a pixel off).
+:data:`REFINE_PASSES` one-pixel passes: a watershed border on a straight edge can sit
+a few pixels off).
 Deterministic: every random step is seeded.
 
 Defaults (``UnsupervisedParams()``), measured with ``benchmarks/evaluate_unsupervised.py``
-on the rendered scenes and the hand-labelled real frames together: region mean log Î,
-mean ρ and region DoLP, PCA 95 %, a 3-restart full-covariance Gaussian mixture, posterior
-smoothing λ = 0.5 over 5 iterations. Richer node features (the multi-scale pixel
-stack) separate the camouflage scene far better but lose the real camera frame; the
+on the rendered scenes and the hand-labelled real frames together: superpixels on log Î
+edges plus half-weighted Stokes edges, node features mean ρ and spread of ρ (a material
+that depolarises more, or is rougher, polarises less and less evenly at every tilt),
+features winsorised at ± 2 standard deviations, k-means (10 restarts,
+area-weighted) and posterior smoothing λ = 0.3 over 5 iterations.
+Adding mean log Î separates the real fruits frame better but merges the camouflage net
+with the foliage, whose shading it follows; a Gaussian mixture on the same features
+sometimes fits one tiny component (a degenerate result); the multi-scale pixel stack
+separates the camouflage scene better but splits the real camera's mat by shading; the
 ρ–shading cue and the graph cuts on neighbouring regions measured worse (the cuts peel
-off single regions); the benchmark prints every variant.
+off single regions). The benchmark prints every variant.
 """
 
 from __future__ import annotations
@@ -85,7 +91,7 @@ MAX_REGION_AREA = 1024
 #: σ (pixels) of the smoothing before the edge maps of the superpixels are taken.
 EDGE_SIGMA = 1.5
 #: Passes of :func:`refine_boundaries` (each moves a border by at most one pixel).
-REFINE_PASSES = 2
+REFINE_PASSES = 4
 
 
 @dataclass(frozen=True)
@@ -126,25 +132,30 @@ class UnsupervisedParams:
     refine_boundaries : bool
         Relabel the pixels on segment borders (:func:`refine_boundaries`): a watershed
         border on a straight edge is a pixel off on one side.
+    clip : float
+        Winsorise the standardised node features at ± ``clip`` standard deviations
+        before the projection (0 = not at all): a superpixel straddling two materials
+        has a large spread of ρ and would otherwise pull a cluster of its own.
     seed : int
         Seed of every random step (k-means and mixture initialisations).
     """
 
     region_area: int = 0
     boundary: str = "polarisation"
-    polarisation_edge_weight: float = 1.0
-    features: tuple[str, ...] = ("log_intensity", "dop", "dolp")
+    polarisation_edge_weight: float = 0.5
+    features: tuple[str, ...] = ("dop", "dop_spread")
     pixel_scales: tuple[float, ...] = ()
     pixel_groups: tuple[str, ...] = ("intensity", "polarisation", "invariant")
     variance: float = 0.95
     projection: str = "pca"
     components: int = 4
-    clustering: str = "gmm"
+    clustering: str = "kmeans"
     covariance: str = "full"
-    smoothing: float = 0.5
+    smoothing: float = 0.3
     smoothing_iterations: int = 5
     scale: float = 1.0
     refine_boundaries: bool = True
+    clip: float = 2.0
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -193,6 +204,8 @@ class UnsupervisedParams:
             )
         if not (math.isfinite(self.scale) and self.scale > 0):
             raise PolarsegError(f"scale must be positive, got {self.scale}")
+        if not (math.isfinite(self.clip) and self.clip >= 0):
+            raise PolarsegError(f"clip must be >= 0, got {self.clip}")
         object.__setattr__(self, "features", features)
         groups = tuple(str(g) for g in self.pixel_groups)
         allowed = ("intensity", "polarisation", "zenith", "filters", "invariant")
@@ -581,6 +594,8 @@ def segment_unsupervised(
         z = np.zeros((n, 0))
     else:
         xs = _standardise(x, weight)
+        if p.clip > 0:
+            xs = np.clip(xs, -p.clip, p.clip)
         if p.projection == "maf":
             z = maf_features(xs, adjacency, weight, p.variance, p.components)
         else:

@@ -38,7 +38,7 @@ from napari.utils.notifications import show_error
 
 from .. import batch as batch_engine
 from ..engine import PolarsegError, SegmentParams
-from ..engine.params import RECOMMENDED
+from ..engine.params import AUTO, RECOMMENDED
 from ..engine.timeseries import (
     DEFAULT_FALSE_ALARM,
     METHODS,
@@ -54,7 +54,7 @@ if TYPE_CHECKING:
     from napari.layers import Layer
 
 #: Where the batch parameters come from.
-PARAM_SOURCES = ("Segment by material widget", "recommended", "thesis", "JSON file")
+PARAM_SOURCES = ("Segment by material widget", "auto", "recommended", "thesis", "JSON file")
 #: False-alarm rates (per change block and pair of days) the time-series widget offers.
 FALSE_ALARM_CHOICES = (1e-2, 1e-3, 1e-4, 1e-6)
 #: Columns of the summary table in the widget.
@@ -107,6 +107,8 @@ def params_from(viewer: napari.viewer.Viewer, source: str, path: Any = None) -> 
     ``"Segment by material widget"``: the values of the first such widget docked in
     ``viewer``; a preset; or a SegmentParams JSON file at ``path``.
     """
+    if source == "auto":
+        return AUTO
     if source == "recommended":
         return RECOMMENDED
     if source == "thesis":

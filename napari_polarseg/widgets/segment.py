@@ -16,6 +16,7 @@ from qtpy.QtCore import QTimer
 
 from ..engine import STAGES, Pipeline, PolarsegError, SegmentationResult, SegmentParams
 from ..engine.params import (
+    AUTO,
     CLUSTERING_METHODS,
     COEFFICIENT_METHODS,
     FEATURE_KINDS,
@@ -51,13 +52,21 @@ if TYPE_CHECKING:
 LIVE_DELAY_MS = 150
 
 #: Starting points offered by the "preset" menu.
-PRESETS: dict[str, SegmentParams] = {"thesis": SegmentParams(), "recommended": RECOMMENDED}
+PRESETS: dict[str, SegmentParams] = {
+    "auto": AUTO,
+    "thesis": SegmentParams(),
+    "recommended": RECOMMENDED,
+}
 
 #: Text shown for each sinusoid-fit method of the "fit" menu.
 FIT_NAMES = {"lsq": "least squares", "robust": "robust"}
 
 #: Text shown for each clustering method of the "clustering" menu.
-CLUSTERING_NAMES = {"recursive": "recursive two-way", "kway": "k-way spectral"}
+CLUSTERING_NAMES = {
+    "recursive": "recursive two-way",
+    "kway": "k-way spectral",
+    "superpixels": "superpixels (unsupervised)",
+}
 
 #: Text of the "mask" menu entry that segments every pixel.
 NO_MASK = "none"
@@ -369,7 +378,7 @@ class SegmentWidget(StackWidget):
 
     def __init__(self, viewer: napari.viewer.Viewer) -> None:
         super().__init__(viewer)
-        d = PRESETS["thesis"]
+        d = PRESETS["auto"]
         self._base = d  # values of the fields without a control
         self.store = PipelineStore()
         #: Per stack key: (result, inputs) behind the stack's ``segments`` layer.
@@ -399,9 +408,11 @@ class SegmentWidget(StackWidget):
         self.preset = ComboBox(
             label="preset",
             choices=list(PRESETS),
-            value="thesis",
-            tooltip="Start from the thesis values or from the values that score best on "
-            "the bundled synthetic scenes (README, 'Segmentation quality')",
+            value="auto",
+            tooltip="auto: superpixels clustered by their polarisation (the best "
+            "unsupervised method measured on rendered and real frames); thesis: the "
+            "published pipeline; recommended: its block parameters that score best on "
+            "the synthetic scenes (README, 'Segmentation quality')",
         )
         self.load_button = PushButton(
             text="Load parameters…",

@@ -1,0 +1,108 @@
+"""The default preset ``auto`` (issue 13 item 4): superpixel clustering in the pipeline.
+
+``auto`` is the recommended block parameters with ``clustering="superpixels"``: the
+labels come from :func:`~napari_polarseg.engine.unsupervised.segment_unsupervised`, no
+affinity or cut is computed, and the contract files are written as for every preset.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import tifffile
+from sklearn.metrics import adjusted_rand_score
+from test_unsupervised import planted
+
+from napari_polarseg import cli
+from napari_polarseg import io as pio
+from napari_polarseg.engine import Pipeline, PolarsegError, SegmentParams
+from napari_polarseg.engine.params import AUTO, RECOMMENDED
+from napari_polarseg.engine.timeseries import segment_timeseries
+
+ANGLES = np.deg2rad([0.0, 45.0, 90.0, 135.0])
+
+
+def planted_stack(k: int = 3, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """Angle stack (4, H, W) of :func:`planted`'s materials, I(θ) = Î/2 (1 + ρ cos(2θ − 2φ)),
+    scaled to 12-bit counts, and the truth (H, W)."""
+    intensity, dop, phase, truth = planted(k, seed=seed)
+    stack = 0.5 * intensity * (1 + dop * np.cos(2 * ANGLES[:, None, None] - 2 * phase))
+    return np.round(stack * 2000).astype(np.uint16), truth
+
+
+def test_auto_is_the_recommended_blocks_with_superpixel_labels():
+    assert AUTO.clustering == "superpixels"
+    assert AUTO.replace(clustering=RECOMMENDED.clustering) == RECOMMENDED
+    assert cli.PRESETS["auto"] == AUTO
+
+
+@pytest.mark.parametrize("k", [2, 3])
+def test_pipeline_default_recovers_planted_materials_exactly(k):
+    stack, truth = planted_stack(k)
+    pipe = Pipeline(stack, ANGLES, AUTO.replace(n_segments=k))
+    result = pipe.run()
+    assert adjusted_rand_score(truth.ravel(), result.labels.ravel()) == pytest.approx(1.0)
+    assert result.labels.shape == truth.shape
+    # no block graph is built or cut; the thesis maps and the error map still are
+    assert pipe.calls["affinity"] == 0 and pipe.calls["cut"] == 0
+    assert pipe.calls["harmonics"] == 1 and pipe.calls["reconstruction"] == 1
+    assert pipe.stages() == [
+        "polarisation",
+        "normals",
+        "harmonics",
+        "pca",
+        "labels",
+        "reconstruction",
+    ]
+    summary = result.summary()
+    assert summary["degenerate"] is False
+    assert result.ncut_values == []
+    # the block labels are the pixel labels at each block's top-left pixel
+    w = AUTO.window
+    np.testing.assert_array_equal(
+        result.block_labels, result.labels[::w, ::w][: result.block_labels.shape[0]]
+    )
+
+
+def test_changing_the_clustering_switches_between_cut_and_superpixels():
+    stack, truth = planted_stack(3)
+    pipe = Pipeline(stack, ANGLES, AUTO)
+    first = pipe.run(reconstruction=False).labels
+    pipe.update(clustering="recursive")
+    pipe.run(reconstruction=False)
+    assert pipe.calls["cut"] == 1 and pipe.calls["labels"] == 2
+    pipe.update(clustering="superpixels")
+    again = pipe.run(reconstruction=False).labels
+    assert pipe.calls["harmonics"] == 1  # the block stages are shared
+    np.testing.assert_array_equal(first, again)
+
+
+def test_segment_and_demo_default_to_auto(tmp_path, capsys):
+    stack, truth = planted_stack(3)
+    path = tmp_path / "planted.tif"
+    pio.write_stack_tiff(path, stack, np.rad2deg(ANGLES))
+    out = tmp_path / "out"
+    assert cli.main(["segment", str(path), "--segments", "3", "--out", str(out)]) == 0
+    params = json.loads((out / "params.json").read_text())["params"]
+    assert params["clustering"] == "superpixels"
+    labels = tifffile.imread(out / "labels.tif")
+    assert adjusted_rand_score(truth.ravel(), labels.ravel()) == pytest.approx(1.0)
+    # --preset thesis keeps the faithful pipeline
+    out2 = tmp_path / "thesis"
+    argv = ["segment", str(path), "--out", str(out2)]
+    assert cli.main(argv + ["--preset", "thesis"]) == 0
+    assert json.loads((out2 / "params.json").read_text())["params"]["clustering"] == "recursive"
+    parser = cli.build_parser()
+    assert parser.parse_args(["demo"]).preset == "auto"
+    assert parser.parse_args(["segment", "x.tif", "--out", "o"]).preset == "auto"
+
+
+def test_block_graph_commands_do_not_offer_auto():
+    parser = cli.build_parser()
+    with pytest.raises(cli.UsageError, match="invalid choice: 'auto'"):
+        parser.parse_args(["sweep", "x.tif", "--preset", "auto"])
+    stack, _ = planted_stack(2)
+    with pytest.raises(PolarsegError, match="clustering must be recursive or kway"):
+        segment_timeseries([stack, stack], ANGLES, SegmentParams(clustering="superpixels"))
