@@ -465,7 +465,11 @@ def _read_picture(path: Path, limit: int = 0) -> np.ndarray:
     try:
         return np.asarray(skio.imread(path))
     except Exception as exc:
-        raise _error(path, f"cannot read the image ({_first_line(exc)})") from exc
+        reason = _first_line(exc)
+        if "could not find a backend" in reason.lower():  # imageio's text repeats the path
+            kind = path.suffix.lstrip(".").upper() or "image"
+            reason = f"its content is not a {kind} image that any reader recognises"
+        raise _error(path, f"cannot read the image ({reason})") from exc
 
 
 def _colour_last(data: np.ndarray, axes: str) -> tuple[np.ndarray, bool]:

@@ -637,3 +637,15 @@ def test_angles_from_tiff_metadata_reach_the_cli(tmp_path, capsys):
     params = json.loads((out / "params.json").read_text())
     assert params["angles_deg"] == ANGLES.tolist()
     assert params["angles_from"] == "tiff"
+
+
+def test_a_text_file_named_png_is_refused_in_one_clean_line(tmp_path):
+    path = tmp_path / "notes_045.png"
+    path.write_text("hello\n")
+    with pytest.raises(PolarsegError) as caught:
+        pio.read_frame(path)
+    message = str(caught.value)
+    assert message == (
+        f"{path}: cannot read the image (its content is not a PNG image that any reader recognises)"
+    )
+    assert "`" not in message and message.count(str(path)) == 1
