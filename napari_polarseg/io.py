@@ -650,20 +650,24 @@ def _read_array_stack(path: Path, opts: _Options) -> StackData:
     if header is not None:
         _check_read_size(path, header[0], header[1], opts.limit)
     try:
-        loaded = np.load(path, allow_pickle=False)
-        if isinstance(loaded, np.ndarray):
-            data = loaded
-        else:
-            with loaded:
-                names = loaded.files
-                if "stack" not in names:
-                    found = ", ".join(names) or "none"
-                    raise _error(path, f"no array named 'stack' in the .npz file (found: {found})")
-                data = loaded["stack"]
-                angles = loaded["angles"] if "angles" in names else None
-                ground_truth = loaded["labels"] if "labels" in names else None
-                if "params" in names:
-                    info["params"] = json.loads(str(loaded["params"]))
+        # our own handle: np.load leaks the one it opens when a damaged .npz is refused
+        with open(path, "rb") as handle:
+            loaded = np.load(handle, allow_pickle=False)
+            if isinstance(loaded, np.ndarray):
+                data = loaded
+            else:
+                with loaded:
+                    names = loaded.files
+                    if "stack" not in names:
+                        found = ", ".join(names) or "none"
+                        raise _error(
+                            path, f"no array named 'stack' in the .npz file (found: {found})"
+                        )
+                    data = loaded["stack"]
+                    angles = loaded["angles"] if "angles" in names else None
+                    ground_truth = loaded["labels"] if "labels" in names else None
+                    if "params" in names:
+                        info["params"] = json.loads(str(loaded["params"]))
     except PolarsegError:
         raise
     except Exception as exc:
