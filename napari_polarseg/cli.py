@@ -1282,6 +1282,7 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
         raise PolarsegError(f"no cell of the sweep could run: {failed[0].error}")
     best_cell = result.best_cell()  # raises if no cell reached two segments
     best = best_cell.params(result.base)
+    status.show(f"writing the sweep to {args.out}")
     heatmap = figures.png_bytes(figures.sweep_heatmap_figure(result))
     summary = {
         "polarseg_version": __version__,
