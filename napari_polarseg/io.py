@@ -7,11 +7,13 @@ Angles are **degrees** in files and on the command line (the engine takes radian
 Inputs :func:`read_stack` understands
 --------------------------------------
 - **Multi-page TIFF** ``.tif``/``.tiff``, one page per polariser angle. The angles come
-  from the ``angles_deg`` argument or else from the file's ImageDescription: either
-  tifffile's shaped JSON metadata (as :func:`write_stack_tiff` writes it,
-  ``tifffile.imwrite(path, stack, metadata={"angles": [...]})``) or a plain JSON object
-  with an ``"angles"`` key, or else from ImageJ slice labels that end in the angle
-  (``pol_045`` → 45, the file-name rule below).
+  from the ``angles_deg`` argument or else from the file's metadata
+  (:mod:`napari_polarseg.tiff_angles`): any JSON ImageDescription of any page with an
+  ``"angles"`` key — tifffile's shaped metadata (as :func:`write_stack_tiff` writes it,
+  ``tifffile.imwrite(path, stack, metadata={"angles": [...]})``) or a plain JSON
+  description (``description=json.dumps({"angles": [...]})``) — else the ImageJ slice
+  labels, else the OME channel names, each frame's angle being the last number of its
+  label (``pol_045`` → 45, ``0°`` → 0).
 - **NumPy** ``.npz`` with arrays ``stack`` (N, H, W) and ``angles`` (degrees), optionally
   ``labels`` (H, W ground truth) and ``params`` (a JSON string of segmentation
   parameters); loaded with ``allow_pickle=False``. A plain ``.npy`` stack needs the angles.
@@ -93,6 +95,7 @@ from .engine.mosaic import (
 )
 from .engine.params import SegmentParams
 from .engine.polarimage import auto_saturation_level, distinct_angle_count
+from .tiff_angles import FROM_JSON, tiff_angles
 
 PathLike = str | os.PathLike
 
@@ -390,23 +393,13 @@ def _tifffile_messages() -> Iterator[list[str]]:
         logger.propagate = propagate
 
 
-def _json_description(tif: tifffile.TiffFile) -> dict[str, Any]:
-    shaped = tif.shaped_metadata
-    if shaped:
-        return dict(shaped[0])
-    description = tif.pages[0].description if len(tif.pages) else ""
-    if description.lstrip().startswith("{"):
-        with contextlib.suppress(ValueError):
-            data = json.loads(description)
-            if isinstance(data, dict):
-                return data
-    with contextlib.suppress(Exception):
-        labels = (tif.imagej_metadata or {}).get("Labels")
-        if labels:
-            angles = [angle_from_name(str(label)) for label in labels]
-            if all(a is not None for a in angles):
-                return {"angles": angles, "angles_from_labels": True}
-    return {}
+def _angle_metadata(tif: tifffile.TiffFile, series: Any) -> dict[str, Any]:
+    """``{"angles": ..., "angles_from": ...}`` from the file's metadata, or ``{}``."""
+    frames = [n for n, ax in zip(series.shape, series.axes, strict=False) if ax not in "YXS"]
+    found = tiff_angles(tif, int(np.prod(frames)) if frames else 1)
+    if found is None:
+        return {}
+    return {"angles": found[0], "angles_from": found[1]}
 
 
 def _read_tiff(path: Path, limit: int = 0) -> tuple[np.ndarray, str, dict[str, Any]]:
@@ -423,7 +416,7 @@ def _read_tiff(path: Path, limit: int = 0) -> tuple[np.ndarray, str, dict[str, A
                     bits = int(series.keyframe.bitspersample)
                 data = series.asarray()
                 axes = series.axes
-                meta = _json_description(tif)
+                meta = _angle_metadata(tif, series)
         except PolarsegError:
             raise
         except Exception as exc:
@@ -472,7 +465,11 @@ def _read_picture(path: Path, limit: int = 0) -> np.ndarray:
     try:
         return np.asarray(skio.imread(path))
     except Exception as exc:
-        raise _error(path, f"cannot read the image ({_first_line(exc)})") from exc
+        reason = _first_line(exc)
+        if "could not find a backend" in reason.lower():  # imageio's text repeats the path
+            kind = path.suffix.lstrip(".").upper() or "image"
+            reason = f"its content is not a {kind} image that any reader recognises"
+        raise _error(path, f"cannot read the image ({reason})") from exc
 
 
 def _colour_last(data: np.ndarray, axes: str) -> tuple[np.ndarray, bool]:
@@ -620,8 +617,8 @@ def _read_tiff_stack(path: Path, opts: _Options) -> StackData:
     info = {"format": "tiff", **{k: v for k, v in meta.items() if k != "description"}}
     info["saturation_level"] = level
     angles = _metadata_angles(path, meta["description"])
-    if meta["description"].get("angles_from_labels"):
-        info["angles_from"] = "imagej labels"
+    if meta["description"].get("angles_from") not in (None, FROM_JSON):
+        info["angles_from"] = meta["description"]["angles_from"]
     return StackData(stack, angles, os.fspath(path), info, saturated=saturated)
 
 
@@ -653,20 +650,24 @@ def _read_array_stack(path: Path, opts: _Options) -> StackData:
     if header is not None:
         _check_read_size(path, header[0], header[1], opts.limit)
     try:
-        loaded = np.load(path, allow_pickle=False)
-        if isinstance(loaded, np.ndarray):
-            data = loaded
-        else:
-            with loaded:
-                names = loaded.files
-                if "stack" not in names:
-                    found = ", ".join(names) or "none"
-                    raise _error(path, f"no array named 'stack' in the .npz file (found: {found})")
-                data = loaded["stack"]
-                angles = loaded["angles"] if "angles" in names else None
-                ground_truth = loaded["labels"] if "labels" in names else None
-                if "params" in names:
-                    info["params"] = json.loads(str(loaded["params"]))
+        # our own handle: np.load leaks the one it opens when a damaged .npz is refused
+        with open(path, "rb") as handle:
+            loaded = np.load(handle, allow_pickle=False)
+            if isinstance(loaded, np.ndarray):
+                data = loaded
+            else:
+                with loaded:
+                    names = loaded.files
+                    if "stack" not in names:
+                        found = ", ".join(names) or "none"
+                        raise _error(
+                            path, f"no array named 'stack' in the .npz file (found: {found})"
+                        )
+                    data = loaded["stack"]
+                    angles = loaded["angles"] if "angles" in names else None
+                    ground_truth = loaded["labels"] if "labels" in names else None
+                    if "params" in names:
+                        info["params"] = json.loads(str(loaded["params"]))
     except PolarsegError:
         raise
     except Exception as exc:

@@ -5,4 +5,10 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
-exec .venv/bin/polarseg demo "$@"
+.venv/bin/polarseg demo "$@"
+# The command lives in the project's virtual environment, not on PATH:
+cat <<'EOF'
+demo: `polarseg` is installed in .venv/ (not on your PATH). Call it as
+demo:   .venv/bin/polarseg segment --help
+demo: or first `source .venv/bin/activate`, then `polarseg ...` and `napari` (Plugins menu).
+EOF

@@ -23,7 +23,9 @@ import numpy as np
 from PIL import Image
 
 ROOT = Path(__file__).resolve().parents[1]
-SOURCE_DIR = Path("/work/shared/data/polanalyser")
+#: The real frames beside the repository: ../shared/data/polanalyser (README, "Optional real
+#: data", says where they come from).
+SOURCE_DIR = ROOT / ".." / "shared" / "data" / "polanalyser"
 SOURCE_NAME = "fruits_IMX250MZR.png"
 SOURCE_SHA256 = "8e9c22aa2ab0c4b48374a3fa27330fc4800daeb178e3a4bfd513d7e0f5d4fa49"
 OUT = ROOT / "napari_polarseg" / "sample_data" / "fruits_IMX250MZR_crop.png"
@@ -63,9 +65,21 @@ def licence_notice(sources_md: str) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--source", type=Path, default=SOURCE_DIR, help="polanalyser data folder")
+    parser.add_argument(
+        "--source",
+        type=Path,
+        default=SOURCE_DIR,
+        help="polanalyser data folder [../shared/data/polanalyser beside the repository]",
+    )
     args = parser.parse_args(argv)
     src = args.source / SOURCE_NAME
+    if not src.is_file():
+        print(
+            f"error: {SOURCE_NAME} not found in {args.source} (the real frames go in "
+            "../shared/data/polanalyser beside the repository; see the README)",
+            file=sys.stderr,
+        )
+        return 1
     digest = hashlib.sha256(src.read_bytes()).hexdigest()
     if digest != SOURCE_SHA256:
         print(f"error: {src} has SHA-256 {digest}, expected {SOURCE_SHA256}", file=sys.stderr)

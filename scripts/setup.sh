@@ -37,6 +37,9 @@ fi
 # Reinstall only when the project definition changed since the last install.
 stamp=.venv/.polarseg-installed
 if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
-  .venv/bin/python -m pip install -q -e '.[all,test]'
+  # setuptools says on every editable install that folders named like the package could
+  # shadow it ("Editable installation. Please be careful ..."): information, not a problem
+  # of this project, so that one message (as it starts) is not shown.
+  PYTHONWARNINGS="ignore:Editable installation" .venv/bin/python -m pip install -q -e '.[all,test]'
   touch "$stamp"
 fi

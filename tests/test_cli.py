@@ -207,7 +207,8 @@ def test_segment_folder_with_registration(tmp_path, capsys):
     frames = tmp_path / "frames"
     frames.mkdir()
     for k, angle in enumerate(ANGLES):
-        skio.imsave(frames / f"nir_{int(angle)}_aligned.png", np.round(stack[k]).astype(np.uint16))
+        frame = np.round(stack[k]).astype(np.uint16)  # values ~60..200 of 65535, as a camera's
+        skio.imsave(frames / f"nir_{int(angle)}_aligned.png", frame, check_contrast=False)
     out = tmp_path / "out"
     code, _, err = run(capsys, "segment", frames, "--out", out, "--register", *FAST)
     assert code == 0, err
@@ -337,6 +338,16 @@ def test_demo_on_the_bundled_leaves_scene(tmp_path, capsys):
     ari = json.loads((out / "summary.json").read_text())["adjusted_rand_index"]
     assert ari == pytest.approx(adjusted_rand_score(truth.ravel(), labels.ravel()))
     assert f"adjusted Rand index against the ground truth: {ari:.3f}" in stdout
+    # 0 and 180 degrees in the bundled scene: recorded, not announced on the first run
+    assert "share a polariser angle" not in stdout and err == ""
+    params = json.loads((out / "params.json").read_text())
+    assert [d["frames"] for d in params["duplicate_angles"]] == [[0, 6]]
+    # the same file given as the user's own sample is announced
+    code, stdout, err = run(
+        capsys, "demo", "--out", out, "--degree", "4", "--sample", cli.SAMPLE_DIR / "leaves.npz"
+    )
+    assert code == 0, err
+    assert "polarseg: frames 0, 6 share a polariser angle (modulo 180 degrees)" in stdout
 
 
 # -- bad input ----------------------------------------------------------------------------

@@ -565,3 +565,87 @@ def test_mosaic_reader_options(tmp_path):
         pio.read_stack(path, mosaic=layout, saturation="max")
     with pytest.raises(PolarsegError, match="a mosaic layout needs a single raw frame"):
         pio.read_stack([path, path], mosaic=layout)
+
+
+# -- angles in TIFF metadata (napari_polarseg.tiff_angles) ---------------------------------
+
+
+def test_tiff_plain_json_description_beside_tifffiles_shaped_one(tmp_path):
+    """tifffile writes its own shaped description after the user's: both are read."""
+    stack, _ = uint16_stack()
+    path = tmp_path / "described.tif"
+    tifffile.imwrite(path, stack, description=json.dumps({"angles": ANGLES.tolist()}))
+    with tifffile.TiffFile(path) as tif:  # the case of the issue: the shaped one has no angles
+        assert "angles" not in tif.shaped_metadata[0]
+    data = pio.read_stack(path)
+    np.testing.assert_array_equal(data.angles_deg, ANGLES)
+    np.testing.assert_array_equal(data.stack, stack)
+    assert data.metadata["angles_from"] == "tiff"
+
+
+def test_tiff_json_angles_on_a_later_page(tmp_path):
+    stack, _ = uint16_stack()
+    path = tmp_path / "later.tif"
+    with tifffile.TiffWriter(path) as tif:
+        for k, frame in enumerate(stack):
+            text = json.dumps({"angles": ANGLES.tolist()}) if k == 2 else f"frame {k}"
+            tif.write(frame, description=text, metadata=None, contiguous=False)
+    data = pio.read_stack(path)
+    np.testing.assert_array_equal(data.angles_deg, ANGLES)
+    np.testing.assert_array_equal(data.stack, stack)
+
+
+def test_imagej_hyperstack_angle_labels(tmp_path):
+    stack = render(angles=np.array([0.0, 45.0, 90.0, 135.0]))[0].astype(np.float32)
+    labels = ["0°", "45°", "pol 90 deg", "img_135.tif"]
+    path = tmp_path / "imagej.tif"
+    tifffile.imwrite(path, stack, imagej=True, metadata={"axes": "CYX", "Labels": labels})
+    data = pio.read_stack(path)
+    assert data.angles_deg.tolist() == [0.0, 45.0, 90.0, 135.0]
+    assert data.metadata["angles_from"] == "imagej labels"
+    np.testing.assert_allclose(data.stack, stack)
+
+
+def test_ome_tiff_channel_names_carry_the_angles(tmp_path):
+    stack = render(angles=np.array([0.0, 45.0, 90.0, 135.0]))[0].astype(np.float32)
+    path = tmp_path / "stack.ome.tif"
+    names = ["0°", "45", "90 deg", "135"]
+    tifffile.imwrite(path, stack, ome=True, metadata={"axes": "CYX", "Channel": {"Name": names}})
+    data = pio.read_stack(path)
+    assert data.angles_deg.tolist() == [0.0, 45.0, 90.0, 135.0]
+    assert data.metadata["angles_from"] == "ome channel names"
+    np.testing.assert_allclose(data.stack, stack)
+
+
+def test_labels_without_a_number_on_every_frame_are_not_angles(tmp_path):
+    stack = render(angles=np.array([0.0, 45.0, 90.0, 135.0]))[0].astype(np.float32)
+    path = tmp_path / "unlabelled.ome.tif"
+    names = ["red", "45", "90", "135"]
+    tifffile.imwrite(path, stack, ome=True, metadata={"axes": "CYX", "Channel": {"Name": names}})
+    with pytest.raises(PolarsegError, match=r"unlabelled\.ome\.tif: no polariser angles"):
+        pio.read_stack(path)
+
+
+def test_angles_from_tiff_metadata_reach_the_cli(tmp_path, capsys):
+    from napari_polarseg.cli import main
+
+    stack, _ = uint16_stack(h=40, w=48)
+    path = tmp_path / "described.tif"
+    tifffile.imwrite(path, stack, description=json.dumps({"angles": ANGLES.tolist()}))
+    out = tmp_path / "out"
+    assert main(["segment", str(path), "--out", str(out), "--segments", "2", "--window", "4"]) == 0
+    params = json.loads((out / "params.json").read_text())
+    assert params["angles_deg"] == ANGLES.tolist()
+    assert params["angles_from"] == "tiff"
+
+
+def test_a_text_file_named_png_is_refused_in_one_clean_line(tmp_path):
+    path = tmp_path / "notes_045.png"
+    path.write_text("hello\n")
+    with pytest.raises(PolarsegError) as caught:
+        pio.read_frame(path)
+    message = str(caught.value)
+    assert message == (
+        f"{path}: cannot read the image (its content is not a PNG image that any reader recognises)"
+    )
+    assert "`" not in message and message.count(str(path)) == 1

@@ -66,8 +66,8 @@ REAL_MEDIAN_RHO = {
 
 needs_real_data = pytest.mark.skipif(
     not REAL_DIR.is_dir(),
-    reason=f"real polarisation-camera frames not found in {REAL_DIR} (copy /work/shared "
-    "beside the repository as ../shared)",
+    reason="real polarisation-camera frames not found in ../shared/data/polanalyser "
+    "(beside the repository; README, 'Optional real data')",
 )
 
 

@@ -31,8 +31,8 @@ REAL_DIR = (REPO / ".." / "shared" / "data" / "polanalyser").resolve()
 
 needs_real_data = pytest.mark.skipif(
     not REAL_DIR.is_dir(),
-    reason=f"real polarisation-camera frames not found in {REAL_DIR} (copy /work/shared "
-    "beside the repository as ../shared)",
+    reason="real polarisation-camera frames not found in ../shared/data/polanalyser "
+    "(beside the repository; README, 'Optional real data')",
 )
 
 #: Pixels per class as measured when the polygons and strokes were drawn (regression check).

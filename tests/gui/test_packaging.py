@@ -89,6 +89,14 @@ def test_wheel_contains_manifest_and_sample_data(tmp_path):
     entry_points = next(n for n in names if n.endswith(".dist-info/entry_points.txt"))
     text = zipfile.ZipFile(wheel).read(entry_points).decode()
     assert "[napari.manifest]" in text and "napari-polarseg = napari_polarseg:napari.yaml" in text
+    # the licence as an SPDX expression (no deprecated table form) and its files
+    metadata = next(n for n in names if n.endswith(".dist-info/METADATA"))
+    headers = zipfile.ZipFile(wheel).read(metadata).decode().split("\n\n", 1)[0].splitlines()
+    assert "License-Expression: BSD-3-Clause" in headers
+    assert not any(h.startswith("License: ") for h in headers)
+    assert any(n.endswith(".dist-info/licenses/LICENSE") for n in names)
+    assert "License-File: LICENSE" in headers
+    assert "is deprecated" not in done.stdout + done.stderr  # setuptools' licence warning
 
 
 def test_import_does_not_load_napari_or_qt():
