@@ -169,7 +169,7 @@ def segment_colours_for(truth: np.ndarray, labels: np.ndarray) -> tuple[np.ndarr
     return true_index, colour
 
 
-def render_overview(
+def overview_figure(
     first_frame: np.ndarray,
     result: SegmentationResult,
     *,
@@ -177,10 +177,12 @@ def render_overview(
     composite: np.ndarray | None = None,
     dolp_max: float | None = None,
 ) -> np.ndarray:
-    """Draw input, Î, ρ, φ, the HSV composite, segments (and truth) and reconstruction error.
+    """The figure of ``overview.png``: one panel per map, side by side.
 
-    Uses matplotlib's object-oriented API on an Agg canvas (no pyplot, so no global
-    backend is switched and no window opens; safe in a worker thread).
+    Input, Î, ρ, φ, the AoLP/DoLP HSV composite, the segments, the ground truth (when
+    given) and the reconstruction error. Uses matplotlib's object-oriented API on an Agg
+    canvas (no pyplot, so no global backend is switched and no window opens; safe in a
+    worker thread); :func:`render_overview` draws it into pixels.
 
     Parameters
     ----------
@@ -200,8 +202,9 @@ def render_overview(
 
     Returns
     -------
-    ndarray (rows, columns, 4) uint8
-        The RGBA figure, ready for :func:`napari_polarseg.io.write_png`.
+    matplotlib.figure.Figure
+        On an Agg canvas, laid out; ``fig.axes[:n]`` are the n panels in order, their
+        colour bars follow.
     """
     from matplotlib import colormaps
     from matplotlib.backends.backend_agg import FigureCanvasAgg
@@ -210,6 +213,7 @@ def render_overview(
     from matplotlib.figure import Figure
 
     from .engine.evaluation import adjusted_rand_index
+
     if composite is None:
         if dolp_max is None:
             dolp_max = auto_dolp_max(result.dop)
@@ -254,7 +258,7 @@ def render_overview(
     h, w = result.labels.shape
     panel_w = 3.2
     fig = Figure(figsize=(panel_w * len(panels), panel_w * h / w + 0.8), dpi=100)
-    canvas = FigureCanvasAgg(fig)
+    FigureCanvasAgg(fig)
     axes = fig.subplots(1, len(panels))
     for ax, (title, image, cmap, vmin, vmax) in zip(axes, panels, strict=True):
         ax.set_title(title, fontsize=10)
@@ -282,8 +286,27 @@ def render_overview(
             else:
                 bar.set_ticks(np.linspace(0, k - 1, 5).round())
     fig.tight_layout()
-    canvas.draw()
-    return np.asarray(canvas.buffer_rgba()).copy()
+    return fig
+
+
+def render_overview(
+    first_frame: np.ndarray,
+    result: SegmentationResult,
+    *,
+    truth: np.ndarray | None = None,
+    composite: np.ndarray | None = None,
+    dolp_max: float | None = None,
+) -> np.ndarray:
+    """Draw :func:`overview_figure` (same arguments) into pixels.
+
+    Returns
+    -------
+    ndarray (rows, columns, 4) uint8
+        The RGBA figure, ready for :func:`napari_polarseg.io.write_png`.
+    """
+    fig = overview_figure(first_frame, result, truth=truth, composite=composite, dolp_max=dolp_max)
+    fig.canvas.draw()
+    return np.asarray(fig.canvas.buffer_rgba()).copy()
 
 
 def run_info(

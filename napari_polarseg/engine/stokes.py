@@ -45,9 +45,7 @@ STOKES_CONVENTION: dict[str, Any] = {
 }
 
 
-def stokes_components(
-    intensity: np.ndarray, dop: np.ndarray, phase: np.ndarray
-) -> np.ndarray:
+def stokes_components(intensity: np.ndarray, dop: np.ndarray, phase: np.ndarray) -> np.ndarray:
     """S0, S1, S2 of the polarisation image: S0 = 2Î, S1 = S0 ρ cos 2φ, S2 = S0 ρ sin 2φ.
 
     Parameters
