@@ -6,9 +6,9 @@ and the angle stack it came from, the files of the ``segment`` contract (the tab
 ``mask.tif``, ``segments.csv``, ``params.json`` (its ``"params"`` entry is what ``polarseg
 segment --params`` and the plugin's *Load parameters…* read), ``summary.json``, and on
 request ``overview.png``, ``plots/*.png``, ``probabilities.tif`` (scribble classifier) and
-``evaluation.json`` (ground truth), and the polarisation views ``stokes.tif`` (S0, S1, S2)
-and ``aolp_dolp.png`` (the AoLP/DoLP HSV composite). The command line and the *Segment by material*
-widget's *Export results…* both write through it.
+``evaluation.json`` (ground truth), and the polarisation views ``stokes.tif`` (S0, S1,
+S2) and ``aolp_dolp.png`` (the AoLP/DoLP HSV composite). The command line and the
+*Segment by material* widget's *Export results…* both write through it.
 
 Everything (statistics, figures, JSON) is computed before the first file is written, and
 every file is written to a temporary name and renamed (:func:`napari_polarseg.io.atomic_output`),
@@ -23,7 +23,7 @@ import os
 import time
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -39,6 +39,9 @@ from .engine.views import CompositeParams, aolp_dolp_composite, auto_dolp_max
 #: The polarisation views every result folder holds beside the contract files.
 STOKES_FILE = "stokes.tif"
 COMPOSITE_FILE = "aolp_dolp.png"
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 #: Output images: file name -> (result attribute, TIFF metadata).
 FLOAT_OUTPUTS = {
@@ -176,7 +179,7 @@ def overview_figure(
     truth: np.ndarray | None = None,
     composite: np.ndarray | None = None,
     dolp_max: float | None = None,
-) -> np.ndarray:
+) -> Figure:
     """The figure of ``overview.png``: one panel per map, side by side.
 
     Input, Î, ρ, φ, the AoLP/DoLP HSV composite, the segments, the ground truth (when
