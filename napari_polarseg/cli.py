@@ -52,14 +52,23 @@ frame, in frame order); the engine gets radians. ``segment`` writes into DIR:
 ``evaluation.json``         with ``--ground-truth``: adjusted Rand index, IoU per true
                             segment and its mean, block accuracy (worst, optimistic);
                             the figures are also added to ``summary.json``
+``stokes.tif``              linear Stokes components S0, S1, S2 (float32, 3 × H × W):
+                            S0 = 2 Î, S1 = S0 ρ cos 2φ, S2 = S0 ρ sin 2φ, angles from
+                            the column axis towards the row axis (JSON ImageDescription)
+``aolp_dolp.png``           AoLP/DoLP HSV composite (RGB): hue = φ over [0°, 180°),
+                            saturation = ρ / ρ_max (ρ_max: the 99th percentile of ρ
+                            rounded up to 0.05, in ``params.json``), value = Î / its
+                            99th percentile
 =========================== ==========================================================
 
 All images are H × W of the angle stack the engine sees: the input's size, except with
 ``--mosaic``, where a raw H × W camera frame becomes a stack of H/2 × W/2 frames and so do
 the outputs (full size with ``--demosaic interpolated``). ``demo`` (and ``segment
---overview``) also writes ``overview.png``; ``--plots`` the analyst's plots as PNGs into
-``DIR/plots/`` (:func:`napari_polarseg.figures.save_plots`). The folder is written by
-:func:`napari_polarseg.export.write_result_folder`, as the plugin's *Export results…* does.
+--overview``) also writes ``overview.png`` (with the ground truth beside the segments
+and the adjusted Rand index in their title when the truth is known); ``--plots`` the
+analyst's plots as PNGs into ``DIR/plots/`` (:func:`napari_polarseg.figures.save_plots`).
+The folder is written by :func:`napari_polarseg.export.write_result_folder`, as the
+plugin's *Export results…* does.
 
 ``sweep`` segments one stack for every w, L (and n) of a grid with one cached pipeline
 (:mod:`napari_polarseg.engine.sweep`) and writes ``sweep.csv`` (one row per cell: the
@@ -1023,6 +1032,7 @@ def _job(
         shifts=run.shifts,
         info=info,
         summary=summary,
+        truth=truth if truth is not None else data.ground_truth,
     )
     status.clear()
     _report(out, run, written, note_repeated)

@@ -6,8 +6,9 @@ and the angle stack it came from, the files of the ``segment`` contract (the tab
 ``mask.tif``, ``segments.csv``, ``params.json`` (its ``"params"`` entry is what ``polarseg
 segment --params`` and the plugin's *Load parameters…* read), ``summary.json``, and on
 request ``overview.png``, ``plots/*.png``, ``probabilities.tif`` (scribble classifier) and
-``evaluation.json`` (ground truth). The command line and the *Segment by material*
-widget's *Export results…* both write through it.
+``evaluation.json`` (ground truth), and the polarisation views ``stokes.tif`` (S0, S1,
+S2) and ``aolp_dolp.png`` (the AoLP/DoLP HSV composite). The command line and the
+*Segment by material* widget's *Export results…* both write through it.
 
 Everything (statistics, figures, JSON) is computed before the first file is written, and
 every file is written to a temporary name and renamed (:func:`napari_polarseg.io.atomic_output`),
@@ -17,11 +18,12 @@ written raises :class:`OutputError` naming it. No napari, no Qt: usable from scr
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import time
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -31,6 +33,15 @@ from .engine.errors import PolarsegError
 from .engine.evaluation import STATISTICS_COLUMNS, segment_statistics
 from .engine.pipeline import SegmentationResult, valid_blocks
 from .engine.polarimage import PixelMask, duplicate_angle_frames
+from .engine.stokes import STOKES_CONVENTION, stokes_components
+from .engine.views import CompositeParams, aolp_dolp_composite, auto_dolp_max
+
+#: The polarisation views every result folder holds beside the contract files.
+STOKES_FILE = "stokes.tif"
+COMPOSITE_FILE = "aolp_dolp.png"
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 #: Output images: file name -> (result attribute, TIFF metadata).
 FLOAT_OUTPUTS = {
@@ -136,11 +147,45 @@ def write_segments_csv(path: str | os.PathLike[str], rows: list[dict[str, Any]])
         tmp.write_text("\n".join(lines) + "\n", encoding="utf-8")
 
 
-def render_overview(first_frame: np.ndarray, result: SegmentationResult) -> np.ndarray:
-    """Draw input, Î, ρ, φ, segments and reconstruction error side by side.
+def segment_colours_for(truth: np.ndarray, labels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Colour indices of the true materials and of the segments, matched by overlap.
 
-    Uses matplotlib's object-oriented API on an Agg canvas (no pyplot, so no global
-    backend is switched and no window opens; safe in a worker thread).
+    The true labels are numbered 0, 1, … in increasing order; each segment gets the index
+    of the true material it is matched to (the largest total overlap, a linear
+    assignment on the contingency table), so a material and its segment share a colour.
+    Unmatched segments get the indices after the true materials'. Returns ``(truth
+    index (H, W), segment index by label value (n_labels,))``.
+    """
+    from scipy.optimize import linear_sum_assignment
+
+    true_values, true_index = np.unique(np.asarray(truth), return_inverse=True)
+    true_index = true_index.reshape(np.shape(truth))
+    n_labels = int(np.max(labels, initial=0)) + 1
+    table = np.zeros((true_values.size, n_labels))
+    np.add.at(table, (true_index.ravel(), np.asarray(labels).ravel()), 1.0)
+    rows, cols = linear_sum_assignment(table, maximize=True)
+    colour = np.full(n_labels, -1)
+    colour[cols] = rows
+    spare = iter(range(true_values.size, true_values.size + n_labels))
+    for j in np.flatnonzero(colour < 0):
+        colour[j] = next(spare)
+    return true_index, colour
+
+
+def overview_figure(
+    first_frame: np.ndarray,
+    result: SegmentationResult,
+    *,
+    truth: np.ndarray | None = None,
+    composite: np.ndarray | None = None,
+    dolp_max: float | None = None,
+) -> Figure:
+    """The figure of ``overview.png``: one panel per map, side by side.
+
+    Input, Î, ρ, φ, the AoLP/DoLP HSV composite, the segments, the ground truth (when
+    given) and the reconstruction error. Uses matplotlib's object-oriented API on an Agg
+    canvas (no pyplot, so no global backend is switched and no window opens; safe in a
+    worker thread); :func:`render_overview` draws it into pixels.
 
     Parameters
     ----------
@@ -148,18 +193,54 @@ def render_overview(first_frame: np.ndarray, result: SegmentationResult) -> np.n
         First frame of the angle stack.
     result : SegmentationResult
         The pipeline's result.
+    truth : array (H, W) of int, optional
+        The true materials: drawn beside the segments, in the colours of the segments
+        they are matched to, and the segments' title gives the adjusted Rand index.
+    composite : array (H, W, 3) uint8, optional
+        The AoLP/DoLP HSV composite (:func:`napari_polarseg.engine.views.aolp_dolp_composite`);
+        computed with ρ_max = ``dolp_max`` (default
+        :func:`~napari_polarseg.engine.views.auto_dolp_max`) when not given.
+    dolp_max : float, optional
+        The composite's ρ_max, for its title.
 
     Returns
     -------
-    ndarray (rows, columns, 4) uint8
-        The RGBA figure, ready for :func:`napari_polarseg.io.write_png`.
+    matplotlib.figure.Figure
+        On an Agg canvas, laid out; ``fig.axes[:n]`` are the n panels in order, their
+        colour bars follow.
     """
     from matplotlib import colormaps
     from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.colors import ListedColormap
+    from matplotlib.cm import ScalarMappable
+    from matplotlib.colors import ListedColormap, Normalize
     from matplotlib.figure import Figure
 
+    from .engine.evaluation import adjusted_rand_index
+
+    if composite is None:
+        if dolp_max is None:
+            dolp_max = auto_dolp_max(result.dop)
+        composite = aolp_dolp_composite(
+            result.intensity, result.dop, result.phase, CompositeParams(dolp_max=dolp_max)
+        )
+    hsv_title = "AoLP hue, DoLP saturation"
+    if dolp_max is not None:
+        hsv_title += f"\n(full at ρ = {dolp_max:g})"
+    labels = np.asarray(result.labels)
     k = max(result.n_segments, 1)
+    seg_title = f"segments ({result.n_segments})"
+    # colour-bar ticks of the label panels: positions (colour indices) and their labels
+    ticks = {"segments": (np.arange(k), [str(v) for v in range(k)])}
+    truth_panel = None
+    if truth is not None:
+        true_index, colour = segment_colours_for(truth, labels)
+        true_values = np.unique(np.asarray(truth))
+        labels = colour[labels]
+        k = max(k, true_values.size, int(colour.max(initial=0)) + 1)
+        ticks["segments"] = (colour, [str(v) for v in range(colour.size)])
+        ticks["truth"] = (np.arange(true_values.size), [str(v) for v in true_values])
+        seg_title += f", ARI {adjusted_rand_index(truth, result.labels):.3f}"
+        truth_panel = (f"ground truth ({true_values.size})", true_index, "truth", -0.5, k - 0.5)
     base = "tab10" if k <= 10 else "tab20"
     seg_cmap = ListedColormap(colormaps[base](np.arange(k) % colormaps[base].N))
     error = result.reconstruction_error
@@ -171,26 +252,64 @@ def render_overview(first_frame: np.ndarray, result: SegmentationResult) -> np.n
         ("Î mean intensity", result.intensity, "gray", None, None),
         ("ρ degree of polarisation", result.dop, "viridis", 0.0, None),
         ("φ phase (rad)", result.phase, "twilight", 0.0, np.pi),
-        (f"segments ({result.n_segments})", result.labels, seg_cmap, -0.5, k - 0.5),
-        ("reconstruction error", error, "magma", 0.0, err_max or None),
+        (hsv_title, composite, "rgb", None, None),
+        (seg_title, labels, "segments", -0.5, k - 0.5),
     ]
+    if truth_panel is not None:
+        panels.append(truth_panel)
+    panels.append(("reconstruction error", error, "magma", 0.0, err_max or None))
     h, w = result.labels.shape
     panel_w = 3.2
     fig = Figure(figsize=(panel_w * len(panels), panel_w * h / w + 0.8), dpi=100)
-    canvas = FigureCanvasAgg(fig)
+    FigureCanvasAgg(fig)
     axes = fig.subplots(1, len(panels))
     for ax, (title, image, cmap, vmin, vmax) in zip(axes, panels, strict=True):
-        shown = ax.imshow(
-            np.asarray(image, dtype=float), cmap=cmap, vmin=vmin, vmax=vmax, interpolation="nearest"
-        )
         ax.set_title(title, fontsize=10)
         ax.set_axis_off()
+        if cmap == "rgb":
+            ax.imshow(image, interpolation="nearest")
+            hue = ScalarMappable(Normalize(0.0, 180.0), colormaps["hsv"])
+            bar = fig.colorbar(hue, ax=ax, fraction=0.046, pad=0.02)
+            bar.set_ticks([0, 45, 90, 135, 180])
+            bar.set_label("AoLP (°)", fontsize=8)
+            continue
+        is_labels = cmap in ticks
+        shown = ax.imshow(
+            np.asarray(image, dtype=float),
+            cmap=seg_cmap if is_labels else cmap,
+            vmin=vmin,
+            vmax=vmax,
+            interpolation="nearest",
+        )
         bar = fig.colorbar(shown, ax=ax, fraction=0.046, pad=0.02)
-        if cmap is seg_cmap:
-            bar.set_ticks(np.arange(k) if k <= 12 else np.linspace(0, k - 1, 5).round())
+        if is_labels:
+            where, names = ticks[cmap]
+            if len(names) <= 12:
+                bar.set_ticks(np.asarray(where, dtype=float), labels=names)
+            else:
+                bar.set_ticks(np.linspace(0, k - 1, 5).round())
     fig.tight_layout()
-    canvas.draw()
-    return np.asarray(canvas.buffer_rgba()).copy()
+    return fig
+
+
+def render_overview(
+    first_frame: np.ndarray,
+    result: SegmentationResult,
+    *,
+    truth: np.ndarray | None = None,
+    composite: np.ndarray | None = None,
+    dolp_max: float | None = None,
+) -> np.ndarray:
+    """Draw :func:`overview_figure` (same arguments) into pixels.
+
+    Returns
+    -------
+    ndarray (rows, columns, 4) uint8
+        The RGBA figure, ready for :func:`napari_polarseg.io.write_png`.
+    """
+    fig = overview_figure(first_frame, result, truth=truth, composite=composite, dolp_max=dolp_max)
+    fig.canvas.draw()
+    return np.asarray(fig.canvas.buffer_rgba()).copy()
 
 
 def run_info(
@@ -295,8 +414,14 @@ def write_outputs(
     uncertainty: np.ndarray | None = None,
     evaluation: dict[str, Any] | None = None,
     plots: dict[str, bytes] | None = None,
+    stokes: np.ndarray | None = None,
+    composite: np.ndarray | None = None,
 ) -> list[str]:
     """Write already computed outputs into ``out`` (created), each file atomically.
+
+    ``stokes`` (3, H, W) goes to :data:`STOKES_FILE` (float32; its planes and sign
+    convention in the JSON ImageDescription, :data:`.engine.stokes.STOKES_CONVENTION`),
+    ``composite`` (H, W, 3) uint8 to :data:`COMPOSITE_FILE`.
 
     Returns the files written, relative to ``out`` (``plots/<name>.png`` for plots), in
     the order written. Records the writing time in ``summary["io_seconds"]["write"]``.
@@ -322,6 +447,14 @@ def write_outputs(
         name = str(out / "mask.tif")
         pio.write_tiff(out / "mask.tif", used_pixels(result), MASK_META)
         written.append("mask.tif")
+        if stokes is not None:
+            name = str(out / STOKES_FILE)
+            pio.write_tiff(out / STOKES_FILE, np.asarray(stokes, np.float32), STOKES_CONVENTION)
+            written.append(STOKES_FILE)
+        if composite is not None:
+            name = str(out / COMPOSITE_FILE)
+            pio.write_png(out / COMPOSITE_FILE, composite)
+            written.append(COMPOSITE_FILE)
         if segments is not None:
             name = str(out / "segments.csv")
             write_segments_csv(out / "segments.csv", segments)
@@ -384,6 +517,9 @@ def write_result_folder(
     shifts: np.ndarray | None = None,
     info: dict[str, Any] | None = None,
     summary: dict[str, Any] | None = None,
+    truth: np.ndarray | None = None,
+    views: bool = True,
+    composite_params: CompositeParams | None = None,
 ) -> list[str]:
     """Write a segmentation's results into the folder ``out``, as ``polarseg segment``.
 
@@ -420,6 +556,17 @@ def write_result_folder(
     info, summary : dict, optional
         Items added to (or replacing those of) ``params.json`` (:func:`run_info`) and
         ``summary.json`` (``result.summary()``, ``io_seconds``, ``output_shape``).
+    truth : array (H, W) of int, optional
+        The true materials, when known: ``overview.png`` draws them beside the segments
+        and gives the adjusted Rand index in the segments' title.
+    views : bool
+        Also write the Stokes components S0, S1, S2 (``stokes.tif``,
+        :func:`~napari_polarseg.engine.stokes.stokes_components`) and the AoLP/DoLP HSV
+        composite (``aolp_dolp.png``, :func:`~napari_polarseg.engine.views.aolp_dolp_composite`).
+    composite_params : CompositeParams, optional
+        Settings of the composite (default: ρ_max from
+        :func:`~napari_polarseg.engine.views.auto_dolp_max`, value from Î); recorded in
+        ``params.json`` under ``"aolp_dolp"``.
 
     Returns
     -------
@@ -450,6 +597,11 @@ def write_result_folder(
                 f"the probabilities {probabilities.shape} do not match the result's "
                 f"{shape[0]} x {shape[1]} pixels"
             )
+    if truth is not None and np.shape(truth) != shape:
+        raise PolarsegError(
+            f"the ground truth {np.shape(truth)} does not match the result's "
+            f"{shape[0]} x {shape[1]} pixels"
+        )
     if uncertainty is not None and np.shape(uncertainty) != shape:
         raise PolarsegError(
             f"the uncertainty {np.shape(uncertainty)} does not match the result's "
@@ -471,7 +623,25 @@ def write_result_folder(
     if evaluation is not None:
         summary_json.update(evaluation_summary(evaluation))
     rows = segment_rows(result)
-    picture = render_overview(stack[0], result) if overview else None
+    composite = stokes = None
+    if views or overview:
+        if composite_params is None:
+            composite_params = CompositeParams(dolp_max=auto_dolp_max(result.dop))
+        composite = aolp_dolp_composite(
+            result.intensity, result.dop, result.phase, composite_params
+        )
+        params_json["aolp_dolp"] = dataclasses.asdict(composite_params)
+    if views:
+        stokes = stokes_components(result.intensity, result.dop, result.phase)
+    picture = None
+    if overview:
+        picture = render_overview(
+            stack[0],
+            result,
+            truth=truth,
+            composite=composite,
+            dolp_max=composite_params.dolp_max,
+        )
     pngs = None
     if plots:
         from . import figures
@@ -488,4 +658,6 @@ def write_result_folder(
         uncertainty=uncertainty,
         evaluation=evaluation,
         plots=pngs,
+        stokes=stokes,
+        composite=composite if views else None,
     )

@@ -38,6 +38,9 @@ CONTRACT = {
     "segments.csv",
     "params.json",
     "summary.json",
+    # the polarisation views (issue 14): Stokes components and the HSV composite
+    "stokes.tif",
+    "aolp_dolp.png",
 }
 FLOAT_MAPS = [
     "intensity.tif",
@@ -252,8 +255,11 @@ def test_console_script_in_a_subprocess(tmp_path, scene_tif):
     script = Path(sys.executable).with_name("polarseg")
     assert script.exists(), "the polarseg console script is not installed in this environment"
     out = tmp_path / "out"
+    # the package under test, also when the script was installed from another checkout
+    package_root = str(Path(napari_polarseg.__file__).resolve().parents[1])
+    env = {**os.environ, "PYTHONPATH": package_root}
     done = subprocess.run(
-        [script, "segment", path, "--out", out, *FAST], capture_output=True, text=True
+        [script, "segment", path, "--out", out, *FAST], capture_output=True, text=True, env=env
     )
     assert done.returncode == 0, done.stderr
     assert done.stderr == ""

@@ -66,6 +66,12 @@ ROLES: dict[str, LayerStyle] = {
     "uncertainty": LayerStyle(
         "uncertainty", colormap="inferno", limits=(0.0, 1.0), extra={"visible": False}
     ),
+    # the AoLP/DoLP HSV composite (engine.views): an RGB uint8 image
+    "hsv": LayerStyle("AoLP/DoLP HSV", limits=(0.0, 255.0), extra={"rgb": True}),
+    # linear Stokes components (engine.stokes), input units
+    "s0": LayerStyle("S0 Stokes", colormap="gray", extra={"visible": False}),
+    "s1": LayerStyle("S1 Stokes", colormap="bwr", extra={"visible": False}),
+    "s2": LayerStyle("S2 Stokes", colormap="bwr", extra={"visible": False}),
 }
 
 
@@ -112,7 +118,8 @@ def contrast_for(role: str, data: np.ndarray) -> tuple[float, float]:
 
 def _image_style(role: str, data: np.ndarray) -> dict[str, Any]:
     style = ROLES[role]
-    return {"colormap": style.colormap, "contrast_limits": contrast_for(role, data), **style.extra}
+    colormap = {} if style.colormap is None else {"colormap": style.colormap}
+    return {**colormap, "contrast_limits": contrast_for(role, data), **style.extra}
 
 
 def show_output(

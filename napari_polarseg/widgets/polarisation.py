@@ -1,4 +1,4 @@
-"""The "Polarisation image" widget: Î, ρ, φ and zenith θ of an angle stack."""
+"""The "Polarisation image" widget: Î, ρ, φ, zenith θ, the HSV view and Stokes of a stack."""
 
 from __future__ import annotations
 
@@ -14,14 +14,24 @@ from ..engine import (
     zenith_from_dop,
 )
 from ..engine.params import MODELS, SPECULAR_BRANCHES
+from ..engine.stokes import stokes_components
+from ..engine.views import CompositeParams, aolp_dolp_composite, auto_dolp_max
 from ._base import StackWidget
-from ._layers import show_output, source_key
+from ._layers import find_output, show_output, source_key
 
 if TYPE_CHECKING:
     import napari
 
 #: Output roles of this widget, in the order their layers are added.
 OUTPUTS = ("intensity", "dop", "phase", "zenith")
+#: The polarisation views added after them: Stokes S0, S1, S2 (hidden) and the HSV composite.
+VIEW_OUTPUTS = ("s0", "s1", "s2", "hsv")
+
+
+def composite_for(intensity: np.ndarray, dop: np.ndarray, phase: np.ndarray, dolp_max: float):
+    """The HSV composite with ρ_max = ``dolp_max``, or automatic (0): (RGB, ρ_max used)."""
+    rho_max = auto_dolp_max(dop) if dolp_max <= 0 else float(dolp_max)
+    return aolp_dolp_composite(intensity, dop, phase, CompositeParams(dolp_max=rho_max)), rho_max
 
 
 def polarisation_job(
@@ -31,12 +41,16 @@ def polarisation_job(
     pol = polarisation_image(np.asarray(data), angles_rad)
     yield "polarisation", 1, 2
     est = zenith_from_dop(pol.dop, refractive_index, model, branch)
+    s0, s1, s2 = stokes_components(pol.intensity, pol.dop, pol.phase)
     yield "zenith", 2, 2
     return {
         "intensity": pol.intensity,
         "dop": pol.dop,
         "phase": pol.phase,
         "zenith": est.zenith,
+        "s0": s0,
+        "s1": s1,
+        "s2": s2,
         "n_clamped": est.n_clamped,
         "n_invalid": int(np.count_nonzero(pol.invalid)),
     }
@@ -47,8 +61,11 @@ class PolarisationWidget(StackWidget):
 
     Adds (or, on a rerun, updates in place) the layers ``Î intensity``,
     ``ρ degree of polarisation``, ``φ phase`` (radians, 0..π) and ``θ zenith`` (radians,
-    from ρ with the chosen Fresnel model and refractive index). The work runs in a napari
-    worker thread; the widget only calls the engine.
+    from ρ with the chosen Fresnel model and refractive index), then the Stokes components
+    ``S0/S1/S2 Stokes`` (hidden) and the RGB ``AoLP/DoLP HSV`` composite (hue = φ,
+    saturation = ρ / the *DoLP maximum*, value = Î). Changing the DoLP maximum redraws
+    only the composite. The work runs in a napari worker thread; the widget only calls
+    the engine.
 
     Parameters
     ----------
@@ -82,11 +99,42 @@ class PolarisationWidget(StackWidget):
             visible=False,
             tooltip="Specular ρ takes each value twice: zenith below or above Brewster's angle",
         )
+        self.dolp_max = FloatSpinBox(
+            label="DoLP maximum",
+            value=0.0,
+            min=0.0,
+            max=1.0,
+            step=0.01,
+            tooltip="ρ shown at full colour in the AoLP/DoLP HSV layer; auto (0): the 99th "
+            "percentile of ρ rounded up to 0.05. Redraws only that layer",
+        )
+        self.dolp_max.native.setSpecialValueText("auto")
+        #: Î, ρ, φ of the last result per stack layer (source key): the composite's input
+        self._views_input: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
         self.model.changed.connect(self._on_model_changed)
-        self._add_parameters([self.refractive_index, self.model, self.specular_branch])
+        self.dolp_max.changed.connect(self._on_dolp_max_changed)
+        self._add_parameters(
+            [self.refractive_index, self.model, self.specular_branch, self.dolp_max]
+        )
 
     def _on_model_changed(self, model: str) -> None:
         self.specular_branch.visible = model == "specular"
+
+    def show_composite(self, layer: Any) -> Any:
+        """Draw (or redraw) the HSV layer of ``layer`` from its last Î, ρ, φ; None if none."""
+        arrays = self._views_input.get(source_key(layer))
+        if arrays is None:
+            return None
+        rgb, rho_max = composite_for(*arrays, float(self.dolp_max.value))
+        return show_output(
+            self._viewer, "hsv", rgb, layer, {"polarseg_composite": {"dolp_max": rho_max}}
+        )
+
+    def _on_dolp_max_changed(self, _value: float) -> None:
+        layer = self.stack_layer.value
+        if layer is None or find_output(self._viewer, "hsv", layer) is None:
+            return
+        self.show_composite(layer)
 
     def snapshot(self) -> tuple[Any, ...]:
         """Everything a result depends on (results for another snapshot are dropped)."""
@@ -125,8 +173,12 @@ class PolarisationWidget(StackWidget):
                 "model": args[3],
                 "specular_branch": args[4],
             }
-            for role in OUTPUTS:
+            for role in OUTPUTS + VIEW_OUTPUTS[:-1]:
                 show_output(self._viewer, role, out[role], layer, {"polarseg_params": meta})
+            present = {source_key(x) for x in self._viewer.layers}
+            self._views_input = {k: v for k, v in self._views_input.items() if k in present}
+            self._views_input[source_key(layer)] = (out["intensity"], out["dop"], out["phase"])
+            self.show_composite(layer)
             extra = f", {out['n_clamped']} pixels above the diffuse ρ ceiling" * (
                 out["n_clamped"] > 0 and args[3] == "diffuse"
             )

@@ -19,7 +19,7 @@ pytestmark = pytest.mark.gui
 FAST = {"window": 10, "degree": 4, "n_segments": 3}
 #: What `polarseg segment --overview` writes.
 FOLDER = {"labels.tif", *FLOAT_OUTPUTS, "mask.tif", "segments.csv", "overview.png"}
-FOLDER |= {"params.json", "summary.json"}
+FOLDER |= {"params.json", "summary.json", "stokes.tif", "aolp_dolp.png"}
 
 
 def test_export_button_writes_the_folder_and_params_load_back(

@@ -189,7 +189,8 @@ def test_rerun_replaces_in_place_and_never_touches_user_layers(
     run_and_wait(qtbot, pol_widget)
     run_and_wait(qtbot, seg_widget)
     first = {layer.metadata[TAG]["role"]: layer for layer in own_layers(viewer, stack)}
-    assert set(first) == {"intensity", "dop", "phase", "zenith", "segments", "error"}
+    views = {"hsv", "s0", "s1", "s2"}  # the polarisation views (issue 14)
+    assert set(first) == {"intensity", "dop", "phase", "zenith", "segments", "error"} | views
     n_layers = len(viewer.layers)
     before = first["segments"].data.copy()
 
