@@ -48,7 +48,7 @@ import numpy as np
 from scipy import ndimage
 
 from .errors import PolarsegError
-from .mosaic import DEMOSAIC_METHODS, IMX250MZR_LAYOUT
+from .mosaic import DEMOSAIC_METHODS, IMX250MZR_LAYOUT, check_layout
 from .polarimage import PolarisationImage, polarisation_image
 
 #: Colours of the decoded stack, in order.
@@ -74,17 +74,6 @@ def check_bayer(bayer: str) -> str:
             f"the Bayer order must be one of {', '.join(BAYER_ORDERS)}; got {bayer!r}"
         )
     return order
-
-
-def check_layout(layout_deg) -> np.ndarray:
-    """The 2 × 2 polariser layout as 4 finite floats (degrees, row-major)."""
-    layout = np.asarray(layout_deg, dtype=float).ravel()
-    if layout.size != 4 or not np.all(np.isfinite(layout)):
-        raise PolarsegError(
-            "a 2 x 2 mosaic layout needs 4 finite angles in degrees (row-major), "
-            f"got {list(np.asarray(layout_deg).ravel())}"
-        )
-    return layout
 
 
 def check_colour_raw(raw: np.ndarray) -> tuple[int, int]:
