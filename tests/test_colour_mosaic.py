@@ -335,3 +335,30 @@ def test_colour_features_separate_materials_of_one_luminance():
     # a classifier trained without colour still applies to the colour segmenter
     again = PixelSegmenter(pipe, colour_stack=stack).segment(classifier=mono.classifier)
     np.testing.assert_array_equal(again.result.labels, mono.result.labels)
+
+
+def test_shift_frames_moves_every_colour_as_the_registration_moved_the_luminance():
+    from scipy import ndimage
+
+    from napari_polarseg.engine.registration import register_stack, shift_frames
+
+    texture = ndimage.gaussian_filter(np.random.default_rng(7).normal(0, 1, (48, 48)), 3)
+    s0 = np.stack([(150 + 800 * texture) * k for k in (1.0, 0.8, 0.6)])
+    colour, _ = demosaic_colour_interpolated(render(s0, np.full_like(s0, 0.1), 0.5 + 0 * s0))
+    moved = colour.copy()
+    moved[:, 2] = ndimage.shift(colour[:, 2], (0, 1.5, -2.0), order=3, mode="nearest")
+    registered, shifts = register_stack(luminance(moved))
+    assert np.allclose(shifts[2], (-1.5, 2.0), atol=0.1) and not np.any(shifts[[0, 1, 3]])
+    aligned = shift_frames(moved, shifts)
+    np.testing.assert_allclose(luminance(aligned), registered, atol=1e-9)
+    np.testing.assert_array_equal(aligned[:, [0, 1, 3]], moved[:, [0, 1, 3]])
+    with pytest.raises(PolarsegError, match="do not match"):
+        shift_frames(moved, shifts[:3])
+
+
+def test_a_raw_size_mask_reduces_to_the_colour_super_pixels(tmp_path):
+    keep = np.ones((16, 20), dtype=np.uint8)
+    keep[5, 6] = 0  # in period (1, 1)
+    skio.imsave(tmp_path / "m.png", keep, check_contrast=False)
+    mask = pio.read_mask(tmp_path / "m.png", (4, 5), raw_shape=(16, 20))
+    assert mask.shape == (4, 5) and mask.sum() == 19 and not mask[1, 1]
