@@ -182,17 +182,40 @@ def colour_mosaic(
     return blocks.transpose(4, 0, 2, 5, 1, 3).reshape(4 * h, 4 * w)
 
 
-def site_planes(shape: tuple[int, int], bayer_cell: int, polariser_cell: int) -> tuple:
-    """Row and column slices of the raw pixels of one Bayer cell and polariser cell."""
-    r0 = 2 * (bayer_cell // 2) + polariser_cell // 2
-    c0 = 2 * (bayer_cell % 2) + polariser_cell % 2
-    return (slice(r0, shape[0], 4), slice(c0, shape[1], 4))
+def site_origin(bayer_cell: int, polariser_cell: int) -> tuple[int, int]:
+    """Row and column, within the 4 × 4 period, of one Bayer cell's polariser cell."""
+    return 2 * (bayer_cell // 2) + polariser_cell // 2, 2 * (bayer_cell % 2) + polariser_cell % 2
 
 
-def tent_smooth(plane: np.ndarray) -> np.ndarray:
-    """Separable correlation with :data:`TENT4` along both axes (zero padding)."""
-    out = ndimage.correlate1d(plane, TENT4, axis=0, mode="constant", cval=0.0)
-    return ndimage.correlate1d(out, TENT4, axis=1, mode="constant", cval=0.0)
+def tent_spread(samples: np.ndarray, origin: tuple[int, int], shape: tuple[int, int]) -> np.ndarray:
+    """Σ of the tent-weighted samples of one period-4 lattice at every pixel of ``shape``.
+
+    ``samples[i, j]`` sits at pixel ``(origin[0] + 4i, origin[1] + 4j)``; the result is the
+    correlation of the zero-filled full-size plane with :data:`TENT4` ⊗ :data:`TENT4`
+    (zero padding), computed separably: along the rows on the lattice's columns only,
+    then along the columns.
+    """
+    h, w = shape
+    r0, c0 = origin
+    columns = np.zeros((h, samples.shape[1]))
+    columns[r0::4] = samples
+    columns = ndimage.correlate1d(columns, TENT4, axis=0, mode="constant", cval=0.0)
+    plane = np.zeros((h, w))
+    plane[:, c0::4] = columns
+    return ndimage.correlate1d(plane, TENT4, axis=1, mode="constant", cval=0.0)
+
+
+def tent_weight_sum(origin: tuple[int, int], shape: tuple[int, int]) -> np.ndarray:
+    """:func:`tent_spread` of an all-ones lattice (the normaliser; separable: an outer
+    product of the two 1-D sums)."""
+    h, w = shape
+    rows = np.zeros(h)
+    rows[origin[0] :: 4] = 1.0
+    cols = np.zeros(w)
+    cols[origin[1] :: 4] = 1.0
+    along = ndimage.correlate1d(rows, TENT4, mode="constant", cval=0.0)
+    across = ndimage.correlate1d(cols, TENT4, mode="constant", cval=0.0)
+    return np.outer(along, across)
 
 
 def demosaic_colour_interpolated(
@@ -227,15 +250,12 @@ def demosaic_colour_interpolated(
     out = np.empty((3, 4, h, w))
     for c, bs in enumerate(bayer_cells(bayer)):
         for k, p in enumerate(order):
-            values = np.zeros((h, w))
-            sites = np.zeros((h, w))
-            for b in bs:
-                where = site_planes((h, w), b, int(p))
-                values[where] = data[where]
-                sites[where] = 1.0
-            frame = tent_smooth(values) / tent_smooth(sites)
-            measured = sites > 0
-            frame[measured] = data[measured]
+            origins = [site_origin(b, int(p)) for b in bs]
+            num = sum(tent_spread(data[r0::4, c0::4], (r0, c0), (h, w)) for r0, c0 in origins)
+            den = sum(tent_weight_sum(o, (h, w)) for o in origins)
+            frame = num / den
+            for r0, c0 in origins:  # measured samples exactly as they were
+                frame[r0::4, c0::4] = data[r0::4, c0::4]
             out[c, k] = frame
     return out, layout[order]
 
@@ -283,11 +303,12 @@ def demosaic_colour_flags(
     out = np.zeros((3, 4, h, w), dtype=bool)
     for c, bs in enumerate(bayer_cells(bayer)):
         for k, p in enumerate(order):
-            plane = np.zeros((h, w))
-            for b in bs:
-                where = site_planes((h, w), b, int(p))
-                plane[where] = flags[where]
-            out[c, k] = tent_smooth(plane) > 0
+            origins = [site_origin(b, int(p)) for b in bs]
+            spread = sum(
+                tent_spread(flags[r0::4, c0::4].astype(float), (r0, c0), (h, w))
+                for r0, c0 in origins
+            )
+            out[c, k] = spread > 0
     return out
 
 
