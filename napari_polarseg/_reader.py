@@ -9,23 +9,27 @@ Handles (the reading itself is :func:`napari_polarseg.io.read_stack`):
 - a folder of at least three frames whose file names carry the angle (the last number in
   the name: ``leaf_030.png`` is 30 degrees);
 - a raw polarisation-camera frame (one 2-D grey PNG or TIFF) whose file name names a Sony
-  polarisation sensor (``IMX250MZR``, ``IMX253MZR``, ``IMX264MZR``, as in
-  ``fruits_IMX250MZR.png``): decoded as a 2 × 2 mosaic with the sensors' layout
-  90/45 over 135/0 at half resolution (:func:`napari_polarseg.io.read_stack` with
-  ``mosaic=DEFAULT_MOSAIC``). Other single images are left to napari's own readers, since
-  an ordinary photo cannot be told from a raw mosaic by its pixels.
+  polarisation sensor (:func:`napari_polarseg.io.sensor_from_name`): mono ``IMX250MZR``,
+  ``IMX253MZR``, ``IMX264MZR`` (as in ``fruits_IMX250MZR.png``), decoded as a 2 × 2
+  mosaic with the sensors' layout 90/45 over 135/0 at half resolution; colour
+  ``IMX250MYR``, ``IMX253MYR``, decoded as a colour-polarisation mosaic (the same layout
+  under an RGGB Bayer filter, 4 × 4 period) at a quarter of the resolution: the layer is
+  the luminance stack, and ``metadata["colour_stack"]`` holds the (R, G, B) × angle
+  stacks (:mod:`napari_polarseg.engine.colour_mosaic`). Other single images are left to
+  napari's own readers, since an ordinary photo cannot be told from a raw mosaic by its
+  pixels.
 
 The layer's ``metadata["angles_deg"]`` holds the angles in degrees, one per frame, which
-the plugin's widgets read. Anything else (single images, TIFFs without angles, ``.npz``
-without ``angles``, folders of other files) gets ``None`` from :func:`get_reader`, so
-napari can try its other readers. This module imports neither napari nor Qt.
+the plugin's widgets read; ``metadata["reader"]`` what the reading found (format, mosaic
+layout, ``bayer``, ``colours``, ``sensor``). Anything else (single images, TIFFs without
+angles, ``.npz`` without ``angles``, folders of other files) gets ``None`` from
+:func:`get_reader`, so napari can try its other readers. This module imports neither napari nor Qt.
 """
 
 from __future__ import annotations
 
 import json
 import os
-import re
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -34,10 +38,10 @@ import numpy as np
 import tifffile
 
 from .engine.polarimage import distinct_angle_count
-from .io import DEFAULT_MOSAIC, FRAME_SUFFIXES, angle_from_name, read_stack
+from .io import FRAME_SUFFIXES, SENSOR_NAMES, angle_from_name, read_stack, single_frame_file
 
-#: Sony polarisation sensors (2 × 2 super-pixels 90/45 over 135/0) named in raw files.
-MOSAIC_SENSOR_NAMES = re.compile(r"IMX2(50|53|64)M[ZY]R", re.IGNORECASE)
+#: Sony polarisation sensors named in raw files (mono ``…MZR``, colour ``…MYR``).
+MOSAIC_SENSOR_NAMES = SENSOR_NAMES
 
 LayerData = tuple[Any, dict[str, Any], str]
 ReaderFunction = Callable[[str | list[str]], list[LayerData]]
@@ -120,7 +124,11 @@ def get_reader(path: str | list[str]) -> ReaderFunction | None:
     if p.is_dir():
         return read_angle_stack if _folder_angles(p) is not None else None
     suffix = p.suffix.lower()
-    if suffix in (".png", ".tif", ".tiff") and MOSAIC_SENSOR_NAMES.search(p.stem):
+    if (
+        suffix in (".png", ".tif", ".tiff")
+        and MOSAIC_SENSOR_NAMES.search(p.stem)
+        and single_frame_file(p)
+    ):
         return read_mosaic_frame
     if suffix == ".npz":
         return read_angle_stack if _npz_has_stack(p) else None
@@ -136,6 +144,8 @@ def stack_layer_data(data: Any, name: str | None = None) -> LayerData:
     source = str(data.source)
     info = {k: v for k, v in data.metadata.items() if k != "warnings"}
     metadata = {"angles_deg": angles, "source": source, "reader": _plain(info)}
+    if data.colour_stack is not None:
+        metadata["colour_stack"] = data.colour_stack
     layer_name = name or Path(source).stem or Path(source).name
     return (data.stack, {"name": layer_name, "metadata": metadata, "colormap": "gray"}, "image")
 
@@ -154,11 +164,16 @@ def read_angle_stack(path: str | list[str]) -> list[LayerData]:
 
 def read_mosaic_frame(path: str | list[str]) -> list[LayerData]:
     """Read a raw polarisation-camera frame (sensor named in the file name) as one
-    4-angle image layer (super-pixel demosaicing, IMX250MZR layout 90/45 over 135/0)."""
+    4-angle image layer, with the sensor's defaults (super-pixel demosaicing, layout
+    90/45 over 135/0; RGGB colour filter for the colour sensors, whose layer is the
+    luminance stack with the colour stacks in ``metadata["colour_stack"]``)."""
     p = _single_path(path)
     if p is None:
         raise ValueError("napari-polarseg reads one raw frame at a time")
-    return [stack_layer_data(read_stack(p, mosaic=DEFAULT_MOSAIC))]
+    data = read_stack(p)
+    if data.metadata.get("format") != "mosaic":
+        raise ValueError(f"{p}: not a single raw polarisation-camera frame")
+    return [stack_layer_data(data)]
 
 
 def _plain(obj: Any) -> Any:

@@ -3,7 +3,7 @@
 ::
 
     polarseg segment INPUT [INPUT ...] --out DIR [--angles 0,30,60,...]
-                         [--mosaic 90,45,135,0 [--demosaic interpolated]]
+                         [--mosaic 90,45,135,0 [--bayer RGGB] [--demosaic interpolated]]
                          [--dark-frame FILE] [--offset V] [--saturation LEVEL]
                          [--dark-level LEVEL] [--mask FILE] [--register] [--fit robust]
                          [--window W] [--degree L] [--refractive-index N]
@@ -63,10 +63,14 @@ frame, in frame order); the engine gets radians. ``segment`` writes into DIR:
 
 All images are H × W of the angle stack the engine sees: the input's size, except with
 ``--mosaic``, where a raw H × W camera frame becomes a stack of H/2 × W/2 frames and so do
-the outputs (full size with ``--demosaic interpolated``). ``demo`` (and ``segment
---overview``) also writes ``overview.png`` (with the ground truth beside the segments
-and the adjusted Rand index in their title when the truth is known); ``--plots`` the
-analyst's plots as PNGs into ``DIR/plots/`` (:func:`napari_polarseg.figures.save_plots`).
+the outputs (full size with ``--demosaic interpolated``); with ``--bayer`` (a
+colour-polarisation frame, 4 × 4 period) H/4 × W/4, the luminance of the R, G, B stacks
+being segmented. A raw frame named after a Sony polarisation sensor (``…_IMX250MZR.png``,
+``…_IMX250MYR.png``, :func:`napari_polarseg.io.sensor_from_name`) needs neither: it is
+read with the sensor's layout (and RGGB order for the colour sensors). ``demo`` (and
+``segment --overview``) also writes ``overview.png`` (with the ground truth beside the
+segments and the adjusted Rand index in their title when the truth is known); ``--plots``
+the analyst's plots as PNGs into ``DIR/plots/`` (:func:`napari_polarseg.figures.save_plots`).
 The folder is written by :func:`napari_polarseg.export.write_result_folder`, as the
 plugin's *Export results…* does.
 
@@ -117,6 +121,7 @@ import numpy as np
 
 from . import __version__
 from . import io as pio
+from .engine.colour_mosaic import BAYER_ORDERS
 from .engine.errors import PolarsegError
 from .engine.evaluation import adjusted_rand_index, evaluate
 from .engine.limits import check_pipeline_memory, memory_limit
@@ -135,7 +140,7 @@ from .engine.params import (
 )
 from .engine.pipeline import STAGES, Pipeline, SegmentationResult
 from .engine.polarimage import PixelMask, validity_mask
-from .engine.registration import register_stack
+from .engine.registration import register_stack, shift_frames
 from .export import FLOAT_OUTPUTS as FLOAT_OUTPUTS  # the output contract (batch.py reads it)
 from .export import OutputError, classifier_summary, write_result_folder
 from .export import labels_image as _labels_image
@@ -366,10 +371,33 @@ def _add_input_options(parser: argparse.ArgumentParser, unit: str) -> None:
         "--mosaic", type=_angles_arg, metavar="A,B,C,D", help="every INPUT is a raw mosaic frame"
     )
     parser.add_argument("--demosaic", choices=DEMOSAIC_METHODS, default="superpixel")
+    _add_bayer_option(parser)
     parser.add_argument("--channel", type=int, metavar="C", help="colour channel to use")
     parser.add_argument("--register", action="store_true", help=f"align the frames of each {unit}")
     parser.add_argument(
         "--max-memory", type=_gib_arg, metavar="GIB", help=f"memory limit of one {unit}, GiB"
+    )
+
+
+def _bayer_arg(text: str) -> str:
+    order = text.strip().upper()
+    if order not in BAYER_ORDERS:
+        raise argparse.ArgumentTypeError(
+            f"a Bayer order is one of {', '.join(BAYER_ORDERS)}, got {text!r}"
+        )
+    return order
+
+
+def _add_bayer_option(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--bayer",
+        type=_bayer_arg,
+        metavar="ORDER",
+        help="with --mosaic: the raw frame is a colour-polarisation mosaic whose 2x2 "
+        "polariser super-pixels lie under this Bayer colour order, row-major "
+        f"({', '.join(BAYER_ORDERS)}; Sony IMX250MYR/IMX253MYR: RGGB). Outputs are then a "
+        "quarter of the raw frame's height and width (full size with --demosaic "
+        "interpolated); the luminance 0.299 R + 0.587 G + 0.114 B is segmented",
     )
 
 
@@ -418,8 +446,10 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="A,B,C,D",
         help="INPUT is one raw polarisation-camera frame; the 2x2 super-pixel angles in "
         "row-major order (Sony IMX250MZR: 90,45,135,0). Outputs are then half the raw "
-        "frame's height and width (full size with --demosaic interpolated)",
+        "frame's height and width (full size with --demosaic interpolated). A frame named "
+        "after a Sony sensor (..._IMX250MZR.png, ..._IMX250MYR.png) needs no --mosaic",
     )
+    _add_bayer_option(seg)
     seg.add_argument(
         "--demosaic",
         choices=DEMOSAIC_METHODS,
@@ -676,6 +706,7 @@ class Run:
     seconds: dict[str, float] = field(default_factory=dict)
     mask: PixelMask | None = None
     pipeline: Pipeline | None = None
+    colour_stack: np.ndarray | None = None
 
 
 def _progress(verbose: bool, status: StatusLine | None = None):
@@ -743,15 +774,19 @@ def _segment(
         mask = validity_mask(
             stack, saturation=data.metadata.get("saturation_level"), saturated=data.saturated
         )
+    colour_stack = data.colour_stack
     if register:
         status.show("registering the frames")
         t0 = time.perf_counter()
         stack, shifts = register_stack(stack)
         mask = mask.shifted(shifts)
+        if colour_stack is not None:
+            colour_stack = shift_frames(colour_stack, shifts)
         seconds["register"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     pipe = Pipeline(stack, data.angles_rad, params, mask=mask)
     run = Run(data, params, stack, None, shifts, seconds, mask, pipe)  # type: ignore[arg-type]
+    run.colour_stack = colour_stack
     if labels_by is None:
         status.stage(STAGES[0], 1, len(STAGES), "segmenting:")
         run.result = pipe.run(progress=_progress(verbose, status))
@@ -777,6 +812,8 @@ def _input_info(data: pio.StackData, args: argparse.Namespace) -> dict[str, Any]
         "raw_shape": meta.get("raw_shape"),
         "channel": getattr(args, "channel", None),
         "demosaic": meta.get("demosaic"),
+        "bayer": meta.get("bayer"),
+        "sensor": meta.get("sensor"),
         "dark_frame": _resolved(meta.get("dark_frame")),
         "offset": meta.get("offset"),
         "bits_per_sample": meta.get("bits_per_sample"),
@@ -953,7 +990,8 @@ class LabelSource:
         if self.classifier_file:
             classifier = load_pixel_classifier(self.classifier_file)
         try:
-            out = PixelSegmenter(run.pipeline).segment(self.scribbles, classifier)
+            segmenter = PixelSegmenter(run.pipeline, colour_stack=run.colour_stack)
+            out = segmenter.segment(self.scribbles, classifier)
         except PolarsegError as exc:
             where = self.scribbles_file or self.classifier_file
             raise PolarsegError(f"{where}: {exc}") from None
@@ -1060,10 +1098,19 @@ def _job(
     return run, summary
 
 
+def _check_demosaic_args(args: argparse.Namespace) -> None:
+    """--demosaic and --bayer apply to a raw frame: --mosaic, or a sensor-named file."""
+    named = len(args.input) == 1 and pio.sensor_from_name(args.input[0]) is not None
+    if args.mosaic is None and not named:
+        if args.demosaic != "superpixel":
+            raise PolarsegError("--demosaic applies to a raw mosaic frame: give --mosaic too")
+        if args.bayer is not None:
+            raise PolarsegError("--bayer applies to a raw mosaic frame: give --mosaic too")
+
+
 def _cmd_segment(args: argparse.Namespace) -> int:
     params = _params_from_args(args)
-    if args.mosaic is None and args.demosaic != "superpixel":
-        raise PolarsegError("--demosaic applies to a raw mosaic frame: give --mosaic too")
+    _check_demosaic_args(args)
     saturation = {"auto": "auto", "none": None}.get(args.saturation, args.saturation)
     _status(args).show(f"reading {Path(args.input[0]).name}")
     t0 = time.perf_counter()
@@ -1073,6 +1120,7 @@ def _cmd_segment(args: argparse.Namespace) -> int:
         mosaic=args.mosaic,
         channel=args.channel,
         demosaic=args.demosaic,
+        bayer=args.bayer,
         dark=args.dark_frame,
         offset=args.offset,
         saturation=saturation,
@@ -1260,6 +1308,7 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
         mosaic=args.mosaic,
         channel=args.channel,
         demosaic=args.demosaic,
+        bayer=args.bayer,
         max_bytes=_max_bytes(args),
     )
     read_seconds = time.perf_counter() - t0
@@ -1406,6 +1455,7 @@ BATCH_FORWARD = {
     "angles": "--angles",
     "mosaic": "--mosaic",
     "demosaic": "--demosaic",
+    "bayer": "--bayer",
     "channel": "--channel",
     "max_memory": "--max-memory",
     "classifier": "--classifier",
@@ -1519,7 +1569,9 @@ def _classify_days(
     classifier = load_pixel_classifier(path)
     labels = np.stack(
         [
-            PixelSegmenter(Pipeline(stack, day.angles_rad, params, mask=mask))
+            PixelSegmenter(
+                Pipeline(stack, day.angles_rad, params, mask=mask), colour_stack=day.colour_stack
+            )
             .segment(classifier=classifier, reconstruction=False)
             .result.labels.astype(np.int32)
             for stack, day, mask in zip(stacks, days, masks, strict=True)
@@ -1546,6 +1598,7 @@ def _cmd_timeseries(args: argparse.Namespace) -> int:
             mosaic=args.mosaic,
             channel=args.channel,
             demosaic=args.demosaic,
+            bayer=args.bayer,
             max_bytes=_max_bytes(args),
         )
         check_pipeline_memory(data.stack.shape, params, _max_bytes(args))
@@ -1556,6 +1609,8 @@ def _cmd_timeseries(args: argparse.Namespace) -> int:
         if args.register:
             stack, shifts = register_stack(stack)
             mask = mask.shifted(shifts)
+            if data.colour_stack is not None:
+                data.colour_stack = shift_frames(data.colour_stack, shifts)
         days.append(data)
         stacks.append(stack)
         masks.append(mask)

@@ -344,6 +344,8 @@ def run_info(
         "raw_shape": None,
         "channel": None,
         "demosaic": None,
+        "bayer": None,
+        "sensor": None,
         "dark_frame": None,
         "offset": None,
         "saturation_level": None if mask is None else mask.saturation_level,

@@ -30,6 +30,18 @@ Inputs :func:`read_stack` understands
   90, 45, 135, 0). It is split into four frames at **half resolution**
   (``demosaic="superpixel"``) or interpolated to **full resolution**
   (``demosaic="interpolated"``, bilinear), see :mod:`napari_polarseg.engine.mosaic`.
+- **A raw colour-polarisation frame** with ``mosaic`` and ``bayer`` set (the Bayer order
+  of the 2 × 2 polariser super-pixels, ``"RGGB"`` for the Sony IMX250MYR/IMX253MYR): a
+  4 × 4 period decoded to a (colour, angle) stack at a quarter of the resolution or, with
+  ``demosaic="interpolated"``, at full resolution
+  (:mod:`napari_polarseg.engine.colour_mosaic`). :attr:`StackData.stack` is then the
+  luminance stack (Rec. 601: 0.299 R + 0.587 G + 0.114 B), which is segmented, and
+  :attr:`StackData.colour_stack` the R, G, B stacks, which feed the pixel classifier.
+- **A file named after a Sony polarisation sensor** (:func:`sensor_from_name`): a single
+  frame whose name carries ``IMX250MZR``, ``IMX253MZR`` or ``IMX264MZR`` (mono) or
+  ``IMX250MYR`` or ``IMX253MYR`` (colour) is read as that sensor's raw frame without
+  ``mosaic``: layout 90, 45, 135, 0, and Bayer order RGGB for the colour sensors. A
+  ``mosaic`` or ``bayer`` given explicitly wins over the name.
 
 Colour frames (H, W, 3 or 4) become grey by the ITU-R BT.601 luma weights
 0.299 R + 0.587 G + 0.114 B (alpha ignored) unless ``channel`` picks one channel.
@@ -84,6 +96,15 @@ from typing import Any
 import numpy as np
 import tifffile
 
+from .engine.colour_mosaic import (
+    COLOURS,
+    IMX250MYR_BAYER,
+    IMX250MYR_LAYOUT,
+    check_bayer,
+    demosaic_colour,
+    demosaic_colour_flags,
+    luminance,
+)
 from .engine.errors import PolarsegError
 from .engine.limits import check_bytes, memory_limit
 from .engine.mosaic import (
@@ -109,6 +130,9 @@ MASK_SUFFIXES = (".png", ".tif", ".tiff", ".npy", ".npz")
 LUMA_BT601 = np.array([0.299, 0.587, 0.114])
 #: Default 2 x 2 super-pixel layout (degrees, row-major) of a polarisation camera.
 DEFAULT_MOSAIC = IMX250MZR_LAYOUT
+
+#: Sony polarisation sensors named in raw files: mono (``…MZR``) and colour (``…MYR``).
+SENSOR_NAMES = re.compile(r"IMX2(?:50|53|64)M[ZY]R", re.IGNORECASE)
 
 _NUMBER = re.compile(r"\d+(?:\.\d+)?")
 #: tifffile log messages that mean the file is cut short or damaged.
@@ -139,6 +163,9 @@ class StackData:
         Samples at or above the saturation level in the data as recorded (for a mosaic:
         the demosaiced samples that draw on a saturated raw pixel); None when no level
         applies (float data with ``saturation="auto"``, or ``saturation=None``).
+    colour_stack : ndarray (3, N, H, W) float64 or None
+        For a colour-polarisation mosaic: the R, G, B stacks (``stack`` is their
+        luminance); ``metadata["colours"]`` names them. None otherwise.
     """
 
     stack: np.ndarray
@@ -147,6 +174,7 @@ class StackData:
     metadata: dict[str, Any] = field(default_factory=dict)
     ground_truth: np.ndarray | None = None
     saturated: np.ndarray | None = None
+    colour_stack: np.ndarray | None = None
 
     @property
     def angles_rad(self) -> np.ndarray:
@@ -303,6 +331,62 @@ def angle_from_name(name: PathLike) -> float | None:
     """
     numbers = _NUMBER.findall(Path(name).stem)
     return float(numbers[-1]) if numbers else None
+
+
+@dataclass(frozen=True)
+class SensorDefaults:
+    """Decoding of a raw frame named after a polarisation sensor.
+
+    Attributes
+    ----------
+    sensor : str
+        The sensor's name as found in the file name, upper case (e.g. ``"IMX250MYR"``).
+    layout_deg : tuple of 4 floats
+        Its 2 × 2 polariser layout, degrees, row-major.
+    bayer : str or None
+        Its Bayer order (colour sensors), None for a mono sensor.
+    """
+
+    sensor: str
+    layout_deg: tuple[float, ...]
+    bayer: str | None
+
+
+def sensor_from_name(name: PathLike) -> SensorDefaults | None:
+    """The sensor defaults of a raw frame whose file name names a Sony polarisation sensor.
+
+    ``…IMX250MZR…``, ``…IMX253MZR…``, ``…IMX264MZR…`` (mono: layout 90, 45, 135, 0) and
+    ``…IMX250MYR…``, ``…IMX253MYR…`` (colour: the same layout under an RGGB Bayer filter);
+    case does not matter. None for any other name.
+
+    Examples
+    --------
+    >>> sensor_from_name("fruits_IMX250MYR.png").bayer
+    'RGGB'
+    >>> sensor_from_name("fruits_IMX250MZR.png").bayer is None
+    True
+    """
+    match = SENSOR_NAMES.search(Path(os.fspath(name)).name)
+    if match is None:
+        return None
+    sensor = match.group(0).upper()
+    if sensor.endswith("MYR"):
+        return SensorDefaults(sensor, tuple(IMX250MYR_LAYOUT), IMX250MYR_BAYER)
+    return SensorDefaults(sensor, tuple(IMX250MZR_LAYOUT), None)
+
+
+def single_frame_file(path: Path) -> bool:
+    """Whether ``path`` is one image file holding a single 2-D frame (never raises)."""
+    suffix = path.suffix.lower()
+    if not path.is_file() or suffix not in FRAME_SUFFIXES:
+        return False
+    if suffix not in (".tif", ".tiff"):
+        return True
+    try:
+        with tifffile.TiffFile(path) as tif:
+            return len(tif.pages) == 1
+    except Exception:
+        return False
 
 
 def _natural_key(name: str) -> list:
@@ -748,15 +832,19 @@ def _read_frame_files(
     return StackData(stack, angles, os.fspath(source), info, saturated=saturated)
 
 
-def _read_mosaic(path: Path, layout: Sequence[float], method: str, opts: _Options) -> StackData:
+def _read_mosaic(
+    path: Path, layout: Sequence[float], method: str, opts: _Options, bayer: str | None = None
+) -> StackData:
+    """A raw mono (``bayer`` None) or colour-polarisation frame, decoded."""
     if path.is_dir():
         raise _error(path, "a mosaic layout needs a single raw frame, not a folder")
     data, colour, bits = _load_frame(path, opts.limit)
     level = _saturation_level(opts.saturation, data.dtype, bits)
     raw, saturated_raw = _grey_frames(path, data, colour, opts.channel, False, level)
     if method == "interpolated":
+        planes = 10 if bayer is None else 20  # 12 colour planes, luminance, work space
         check_bytes(
-            raw.size * 8.0 * 10,
+            raw.size * 8.0 * planes,
             f"{os.fspath(path)}: interpolating a {_dims(raw.shape)} mosaic",
             opts.limit,
         )
@@ -765,21 +853,37 @@ def _read_mosaic(path: Path, layout: Sequence[float], method: str, opts: _Option
             raw = subtract_dark(raw, opts.dark, opts.offset)
         except PolarsegError as exc:
             raise _error(opts.dark_name or path, str(exc)) from None
+    colour_stack = None
     try:
-        stack, angles = demosaic(raw, layout, method)
-        saturated = None if saturated_raw is None else demosaic_flags(saturated_raw, layout, method)
+        if bayer is None:
+            stack, angles = demosaic(raw, layout, method)
+            saturated = (
+                None if saturated_raw is None else demosaic_flags(saturated_raw, layout, method)
+            )
+        else:
+            colour_stack, angles = demosaic_colour(raw, layout, bayer, method)
+            stack = luminance(colour_stack)
+            saturated = None
+            if saturated_raw is not None:
+                flags = demosaic_colour_flags(saturated_raw, layout, bayer, method)
+                saturated = flags.any(axis=0)
     except PolarsegError as exc:
         raise _error(path, str(exc)) from None
-    info = {
+    info: dict[str, Any] = {
         "format": "mosaic",
         "demosaic": method,
         "mosaic_layout_deg": [float(a) for a in np.asarray(layout, dtype=float).ravel()],
         "raw_shape": list(raw.shape),
         "saturation_level": level,
     }
+    if bayer is not None:
+        info["bayer"] = bayer
+        info["colours"] = list(COLOURS)
     if bits is not None:
         info["bits_per_sample"] = bits
-    return StackData(stack, angles, os.fspath(path), info, saturated=saturated)
+    return StackData(
+        stack, angles, os.fspath(path), info, saturated=saturated, colour_stack=colour_stack
+    )
 
 
 def _frame_label(k: int, angles: np.ndarray) -> str:
@@ -879,6 +983,7 @@ def read_stack(
     channel: int | None = None,
     *,
     demosaic: str = "superpixel",
+    bayer: str | None = None,
     dark: PathLike | np.ndarray | None = None,
     offset: float | None = None,
     saturation: float | str | None = "auto",
@@ -898,10 +1003,16 @@ def read_stack(
     mosaic : sequence of 4 floats, optional
         Read ``path`` as one raw polarisation-camera frame with this 2 × 2 super-pixel
         layout (degrees, row-major; :data:`DEFAULT_MOSAIC` for the Sony IMX250MZR).
+        Without it, a single frame named after a Sony sensor (:func:`sensor_from_name`)
+        takes the sensor's layout.
     channel : int, optional
         Colour channel to use for colour images (default: ITU-R BT.601 luma).
     demosaic : {"superpixel", "interpolated"}
         For a mosaic: half resolution, or full resolution by bilinear interpolation.
+    bayer : {"RGGB", "BGGR", "GRBG", "GBRG"}, optional
+        With ``mosaic``: the frame is a colour-polarisation mosaic whose 2 × 2 polariser
+        super-pixels lie under this Bayer order (row-major); default: the sensor's, for a
+        file named after a colour sensor (``…IMX250MYR…``), else a mono mosaic.
     dark : path or array (H, W), optional
         Dark frame subtracted from every frame (from the raw frame, for a mosaic) after
         saturation was detected; negative results become 0.
@@ -950,6 +1061,8 @@ def read_stack(
         raise PolarsegError(
             f"demosaic method must be one of {', '.join(DEMOSAIC_METHODS)}; got {demosaic!r}"
         )
+    if bayer is not None:
+        bayer = check_bayer(bayer)
     if isinstance(saturation, str) and saturation != "auto":
         raise PolarsegError(f"saturation must be a number, 'auto' or None; got {saturation!r}")
     if saturation is not None and not isinstance(saturation, str):
@@ -971,7 +1084,7 @@ def read_stack(
                 raise _error(f, "no such file")
             if f.is_dir():
                 raise _error(f, "a list of frames must name image files, not folders")
-        if mosaic is not None:
+        if mosaic is not None or bayer is not None:
             raise _error(p, "a mosaic layout needs a single raw frame, not a list of files")
         if angles_deg is not None and len(np.ravel(angles_deg)) != len(files):
             raise _error(p, f"{len(files)} files but {len(np.ravel(angles_deg))} angles")
@@ -979,10 +1092,18 @@ def read_stack(
     else:
         if not p.exists():
             raise _error(p, "no such file or folder")
-        if angles_deg is not None and mosaic is not None:
+        if angles_deg is not None and (mosaic is not None or bayer is not None):
             raise _error(p, "give either the polariser angles or a mosaic layout, not both")
+        sensor = sensor_from_name(p) if single_frame_file(p) else None
+        if sensor is not None and angles_deg is None:
+            mosaic = sensor.layout_deg if mosaic is None else mosaic
+            bayer = sensor.bayer if bayer is None else bayer
+        if bayer is not None and mosaic is None:
+            raise _error(p, "a Bayer order needs a mosaic layout (--mosaic)")
         if mosaic is not None:
-            data = _read_mosaic(p, mosaic, demosaic, opts)
+            data = _read_mosaic(p, mosaic, demosaic, opts, bayer)
+            if sensor is not None:
+                data.metadata["sensor"] = sensor.sensor
         elif p.is_dir():
             data = _read_frame_files(p, _folder_frames(p), angles_deg is not None, opts, "folder")
         else:
@@ -1026,10 +1147,11 @@ def read_mask(
         (the array ``mask`` or ``labels``, or its only array).
     shape : (H, W)
         Size of the frames the mask applies to.
-    raw_shape : (2H, 2W), optional
-        Size of the raw mosaic the frames come from by super-pixel demosaicing; a mask of
-        this size is reduced to the frames' size (a super-pixel is used only if all four
-        of its pixels are set).
+    raw_shape : (2H, 2W) or (4H, 4W), optional
+        Size of the raw mosaic the frames come from by super-pixel demosaicing (mono:
+        2 × 2, colour-polarisation: 4 × 4 pixels per output pixel); a mask of this size
+        is reduced to the frames' size (an output pixel is used only if all the raw
+        pixels it comes from are set).
 
     Returns
     -------
@@ -1088,8 +1210,9 @@ def read_mask(
     if keep.shape == (h, w):
         return keep
     if raw_shape is not None and keep.shape == tuple(int(v) for v in raw_shape):
-        if keep.shape == (2 * h, 2 * w):
-            return keep.reshape(h, 2, w, 2).all(axis=(1, 3))
+        f = keep.shape[0] // h
+        if f in (2, 4) and keep.shape == (f * h, f * w):
+            return keep.reshape(h, f, w, f).all(axis=(1, 3))
     raise _error(
         p,
         f"the mask is {keep.shape[0]} x {keep.shape[1]} pixels but the frames are {h} x {w}",

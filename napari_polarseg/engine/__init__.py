@@ -11,6 +11,7 @@ Beside the cut: :func:`pixel_features` (multi-scale per-pixel features) →
 pipeline's polarisation image by :class:`PixelSegmenter`.
 """
 
+from .colour_mosaic import demosaic_colour, luminance
 from .errors import Cancelled, PolarsegError
 from .features import PCAResult, affinity_matrix, mahalanobis_sq, pca_features, whiten
 from .fresnel import (
@@ -95,6 +96,7 @@ __all__ = [
     "brewster_angle",
     "check_pipeline_memory",
     "demosaic",
+    "demosaic_colour",
     "demosaic_interpolated",
     "demosaic_superpixel",
     "coefficient_index",
@@ -107,6 +109,7 @@ __all__ = [
     "fiedler_vector",
     "fresnel_reflectance",
     "intensity_baseline",
+    "luminance",
     "mahalanobis_sq",
     "n_coefficients",
     "pca_features",

@@ -33,7 +33,9 @@ DEMOSAIC_METHODS = ("superpixel", "interpolated")
 _BILINEAR = np.array([[1.0, 2.0, 1.0], [2.0, 4.0, 2.0], [1.0, 2.0, 1.0]]) / 4.0
 
 
-def _check_layout(layout_deg) -> np.ndarray:
+def check_layout(layout_deg) -> np.ndarray:
+    """The 2 × 2 polariser layout as 4 finite floats (degrees, row-major), or
+    :class:`PolarsegError`."""
     layout = np.asarray(layout_deg, dtype=float).ravel()
     if layout.size != 4 or not np.all(np.isfinite(layout)):
         raise PolarsegError(
@@ -99,7 +101,7 @@ def demosaic_superpixel(
     ([0.0, 45.0, 90.0, 135.0], [0, 45, 90, 135])
     """
     raw = np.asarray(raw)
-    layout = _check_layout(layout_deg)
+    layout = check_layout(layout_deg)
     h, w = _check_raw(raw)
     # (H/2, 2, W/2, 2) -> (2, 2, H/2, W/2) -> (4, H/2, W/2): sub-lattice (i, j) is raw[i::2, j::2]
     lattices = raw.reshape(h // 2, 2, w // 2, 2).transpose(1, 3, 0, 2).reshape(4, h // 2, w // 2)
@@ -128,10 +130,10 @@ def mosaic_superpixel(
         The raw mosaic frame.
     """
     stack = np.asarray(stack)
-    layout = _check_layout(layout_deg)
+    layout = check_layout(layout_deg)
     if stack.ndim != 3 or stack.shape[0] != 4:
         raise PolarsegError(f"a mosaic needs a stack of 4 frames, got shape {stack.shape}")
-    angles = np.sort(layout) if angles_deg is None else _check_layout(angles_deg)
+    angles = np.sort(layout) if angles_deg is None else check_layout(angles_deg)
     frame_of = []
     for a in layout:
         hits = np.flatnonzero(np.isclose(angles, a))
@@ -182,7 +184,7 @@ def demosaic_interpolated(
     ((4, 4, 4), True)
     """
     raw = np.asarray(raw)
-    layout = _check_layout(layout_deg)
+    layout = check_layout(layout_deg)
     h, w = _check_raw(raw)
     data = raw.astype(np.float64)
     order = np.argsort(layout, kind="stable")
@@ -218,7 +220,7 @@ def spread_flags_interpolated(flags: np.ndarray, layout_deg=IMX250MZR_LAYOUT) ->
         flagged raw pixel.
     """
     flags = np.asarray(flags, dtype=bool)
-    layout = _check_layout(layout_deg)
+    layout = check_layout(layout_deg)
     h, w = _check_raw(flags)
     out = np.zeros((4, h, w), dtype=bool)
     for k, cell in enumerate(np.argsort(layout, kind="stable")):

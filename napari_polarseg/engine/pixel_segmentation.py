@@ -7,6 +7,13 @@ classifier (:mod:`.pixel_classifier`) on scribbles or applies a trained one, and
 assembles a :class:`~.pipeline.SegmentationResult` whose labels are the classifier's —
 the thesis stages (harmonics, PCA, reconstruction) still give the maps and the error map
 of the segmentation contract; affinity and cut are not computed.
+
+For a colour-polarisation camera (:mod:`.colour_mosaic`) the pipeline runs on the
+luminance stack and the segmenter is also given the (colour, angle, H, W) stack: the
+features are then those of the luminance image (plain names, as for a mono camera)
+followed by those of every colour's own polarisation image (names prefixed ``"R:"``,
+``"G:"``, ``"B:"``; :func:`~.pixel_features.multichannel_features`), so the classifier
+can tell materials apart by the colour of their polarised reflection as well.
 """
 
 from __future__ import annotations
@@ -17,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from .colour_mosaic import COLOURS, colour_polarisation_images
 from .pipeline import Pipeline, SegmentationResult
 from .pixel_classifier import (
     ClassifierParams,
@@ -25,7 +33,13 @@ from .pixel_classifier import (
     predict_pixels,
     train_pixel_classifier,
 )
-from .pixel_features import EPS_INTENSITY, FeatureStack, PixelFeatureParams, pixel_features
+from .pixel_features import (
+    EPS_INTENSITY,
+    FeatureStack,
+    PixelFeatureParams,
+    multichannel_features,
+    pixel_features,
+)
 
 
 @dataclass(frozen=True)
@@ -60,18 +74,66 @@ class PixelSegmenter:
     pipeline : Pipeline
         Its ``polarisation`` stage gives Î, ρ, φ and the invalid pixels (which do not
         train the classifier).
+    colour_stack : array (C, N, H, W), optional
+        Per-colour stacks of a colour-polarisation camera whose luminance is the
+        pipeline's stack (same angles, size and alignment); their polarisation images
+        (fitted like the pipeline's, with its sample weights) add features.
+    colours : tuple of str
+        Names of the colours of ``colour_stack`` (feature-name prefixes).
     """
 
     pipeline: Pipeline
+    colour_stack: np.ndarray | None = None
+    colours: tuple[str, ...] = COLOURS
     _features: tuple[Any, FeatureStack] | None = field(default=None, init=False, repr=False)
+    _colour_images: tuple[int, list] | None = field(default=None, init=False, repr=False)
 
-    def features(self, params: PixelFeatureParams | None = None) -> FeatureStack:
-        """The feature stack for ``params`` (kept while the image and params stay)."""
+    def __post_init__(self) -> None:
+        if self.colour_stack is not None:
+            shape = np.shape(self.colour_stack)
+            if len(shape) != 4 or shape[1:] != self.pipeline.stack.shape:
+                raise ValueError(
+                    f"a colour stack {shape} does not match the pipeline's stack "
+                    f"{self.pipeline.stack.shape}"
+                )
+            if len(self.colours) != shape[0]:
+                raise ValueError(f"{shape[0]} colours but names {self.colours}")
+
+    def colour_images(self) -> list:
+        """Polarisation images of every colour (empty without a colour stack), fitted
+        like the pipeline's (its robust setting and sample weights) and kept."""
+        if self.colour_stack is None:
+            return []
+        pol = self.pipeline.get("polarisation")
+        if self._colour_images is None or self._colour_images[0] != id(pol):
+            mask = self.pipeline.mask
+            weights = mask.sample_weights if bool(np.any(mask.flags)) else None
+            images = colour_polarisation_images(
+                self.colour_stack,
+                self.pipeline.angles,
+                robust=self.pipeline.params.fit == "robust",
+                weights=weights,
+            )
+            self._colour_images = (id(pol), images)
+        return self._colour_images[1]
+
+    def features(
+        self, params: PixelFeatureParams | None = None, colour: bool = True
+    ) -> FeatureStack:
+        """The feature stack for ``params`` (kept while the image and params stay):
+        the luminance image's features and, with ``colour`` and a colour stack, every
+        colour's."""
         params = params or PixelFeatureParams()
         pol = self.pipeline.get("polarisation")
-        key = (id(pol), params)
+        colour = colour and self.colour_stack is not None
+        key = (id(pol), params, colour)
         if self._features is None or self._features[0] != key:
-            feats = pixel_features(pol.intensity, pol.dop, pol.phase, params)
+            if colour:
+                images = [(pol.intensity, pol.dop, pol.phase)]
+                images += [(c.intensity, c.dop, c.phase) for c in self.colour_images()]
+                feats = multichannel_features(images, params, channels=["", *self.colours])
+            else:
+                feats = pixel_features(pol.intensity, pol.dop, pol.phase, params)
             self._features = (key, feats)
         return self._features[1]
 
@@ -120,7 +182,10 @@ class PixelSegmenter:
         seconds: dict[str, float] = {}
         t0 = time.perf_counter()
         fparams = classifier.feature_params if classifier is not None else feature_params
-        feats = self.features(fparams)
+        colour = classifier is None or any(
+            name.split(":", 1)[0] in self.colours for name in classifier.feature_names
+        )
+        feats = self.features(fparams, colour)
         seconds["features"] = time.perf_counter() - t0
         seconds["train"] = 0.0  # an applied classifier is not retrained
         if classifier is None:

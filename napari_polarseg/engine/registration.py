@@ -159,3 +159,33 @@ def register_stack(
         else:
             registered[i] = frame
     return registered, shifts
+
+
+def shift_frames(stack: np.ndarray, shifts: np.ndarray) -> np.ndarray:
+    """Apply the per-frame shifts of :func:`register_stack` to another stack of the same
+    frames (e.g. each colour of a colour-polarisation stack, whose luminance was
+    registered): cubic splines, edge values repeated, as :func:`register_stack` does.
+
+    Parameters
+    ----------
+    stack : array (..., N, H, W)
+    shifts : array (N, 2)
+        Shift (rows, columns) in pixels of each frame.
+
+    Returns
+    -------
+    ndarray, float64, same shape as ``stack``
+    """
+    stack = np.asarray(stack, dtype=np.float64)
+    shifts = np.asarray(shifts, dtype=float)
+    if stack.ndim < 3 or shifts.shape != (stack.shape[-3], 2):
+        raise PolarsegError(
+            f"shifts {shifts.shape} do not match the frames of a stack of shape {stack.shape}"
+        )
+    out = stack.copy()
+    for i, d in enumerate(shifts):
+        if np.any(d):
+            frames = out[..., i, :, :].reshape(-1, *stack.shape[-2:])
+            moved = [ndimage.shift(f, d, order=3, mode="nearest") for f in frames]
+            out[..., i, :, :] = np.reshape(moved, out[..., i, :, :].shape)
+    return out

@@ -433,15 +433,16 @@ class PipelineStore:
         entry.pipeline.params = params
         return entry.pipeline
 
-    def segmenter(self, key: str) -> PixelSegmenter | None:
+    def segmenter(self, key: str, colour_stack: np.ndarray | None = None) -> PixelSegmenter | None:
         """The pixel segmenter beside ``key``'s pipeline (made at the first call; None
-        without a pipeline). A rebuilt pipeline gets a new one."""
+        without a pipeline). A rebuilt pipeline, or another ``colour_stack`` (the colour
+        stacks of a colour-polarisation frame, :class:`PixelSegmenter`), gets a new one."""
         with self._lock:
             entry = self._entries.get(key)
             if entry is None:
                 return None
-            if entry.segmenter is None:
-                entry.segmenter = PixelSegmenter(entry.pipeline)
+            if entry.segmenter is None or entry.segmenter.colour_stack is not colour_stack:
+                entry.segmenter = PixelSegmenter(entry.pipeline, colour_stack=colour_stack)
             return entry.segmenter
 
     def discard(self, keep: set[str]) -> None:

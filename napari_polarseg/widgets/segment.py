@@ -172,6 +172,16 @@ def float_box(decimals: int, **kwargs: Any) -> FloatSpinBox:
     return box
 
 
+def colour_stack_of(layer: Layer) -> np.ndarray | None:
+    """The (colour, angle, H, W) stacks a colour-polarisation layer carries in
+    ``metadata["colour_stack"]`` (the reader puts them there), if they fit its data."""
+    meta = layer.metadata if isinstance(layer.metadata, dict) else {}
+    colour = meta.get("colour_stack")
+    if not isinstance(colour, np.ndarray) or colour.ndim != 4:
+        return None
+    return colour if colour.shape[1:] == np.shape(layer.data) else None
+
+
 def classifier_job(
     store: PipelineStore,
     key: str,
@@ -182,15 +192,18 @@ def classifier_job(
     classifier: PixelClassifier | None,
     region: np.ndarray | None = None,
     mask_key: str | None = None,
+    colour_stack: np.ndarray | None = None,
     cancel: Callable[[], bool] | None = None,
 ) -> Generator[Any, None, ClassifierOutput]:
     """Worker job of the scribble mode: the cached pipeline's stages up to the block
     features, the stack's kept pixel features, then the pixel classifier trained on
     ``scribbles`` (or the loaded ``classifier`` applied) and the reconstruction
     (:func:`~napari_polarseg.widgets._runner.classifier_stages`). ``cancel`` stops the
-    prediction between chunks."""
+    prediction between chunks. ``colour_stack`` (C, N, H, W): the colour stacks of a
+    colour-polarisation frame whose luminance is ``data`` (the reader's
+    ``metadata["colour_stack"]``), whose polarisation images add features."""
     pipe = store.obtain(key, data, angles_rad, params, region=region, mask_key=mask_key)
-    segmenter = store.segmenter(key)
+    segmenter = store.segmenter(key, colour_stack)
     assert segmenter is not None
     return (
         yield from classifier_stages(
@@ -1259,7 +1272,7 @@ class SegmentWidget(StackWidget):
             classifier = None if loaded is None else loaded.classifier
             strokes = None if loaded is not None else scribbles
             args = (self.store, key, layer.data, angles_rad, params, strokes, classifier)
-            args += (region, mask_key)
+            args += (region, mask_key, colour_stack_of(layer))
             job, total = classifier_job, len(CLASSIFIER_STAGES)
         # a new stroke or request stops the prediction, or the cut's eigensolver, at once
         cancellable = True

@@ -186,3 +186,60 @@ def test_raw_polarisation_camera_frames_open_as_four_angle_stacks(tmp_path):
     assert get_reader(str(plain)) is None
     tifffile.imwrite(tmp_path / "frame_imx253mzr.tif", raw)
     assert get_reader(str(tmp_path / "frame_imx253mzr.tif")) is not None
+
+
+def _colour_scene(h: int = 32, w: int = 40) -> tuple[np.ndarray, np.ndarray]:
+    """Raw IMX250MYR-like frame (4h x 4w, uint16) of two halves with one luminance but
+    R polarised on the left and B on the right; and the truth (h x w)."""
+    from napari_polarseg.engine.colour_mosaic import LUMINANCE_WEIGHTS, colour_mosaic
+
+    truth = np.zeros((h, w), dtype=np.uint8)
+    truth[:, w // 2 :] = 1
+    rho = np.zeros((3, h, w))
+    rho[0][truth == 0] = 0.25
+    rho[2][truth == 1] = 0.25 * LUMINANCE_WEIGHTS[0] / LUMINANCE_WEIGHTS[2]
+    theta = np.deg2rad([0.0, 45.0, 90.0, 135.0])[None, :, None, None]
+    stack = 800.0 * (1 + rho[:, None] * np.cos(2 * theta - 1.4))
+    raw = colour_mosaic(stack) + np.random.default_rng(0).normal(0, 8.0, (4 * h, 4 * w))
+    return np.round(raw).astype(np.uint16), truth
+
+
+def test_a_colour_polarisation_frame_opens_as_colour_and_scribbles_use_every_colour(
+    tmp_path, make_napari_viewer, qtbot
+):
+    """``…_IMX250MYR.png`` opens as a colour-polarisation frame (RGGB, 90/45 over 135/0):
+    the luminance stack as the layer, the colour stacks beside it, which the scribble
+    mode's pixel classifier takes as features."""
+    from _gui_helpers import run_and_wait
+    from skimage import io as skio
+
+    from napari_polarseg.engine.colour_mosaic import demosaic_colour_superpixel, luminance
+    from napari_polarseg.widgets._layers import source_key
+
+    raw, truth = _colour_scene()
+    named = tmp_path / "bench_IMX250MYR.png"
+    skio.imsave(named, raw, check_contrast=False)
+    assert _reader.get_reader(str(named)) is _reader.read_mosaic_frame
+    viewer = make_napari_viewer()
+    (layer,) = viewer.open(str(named), plugin="napari-polarseg")
+    expected, angles = demosaic_colour_superpixel(raw)
+    assert layer.data.shape == (4, 32, 40)
+    np.testing.assert_allclose(layer.data, luminance(expected))
+    meta = layer.metadata
+    assert meta["angles_deg"] == angles.tolist()
+    assert meta["reader"]["bayer"] == "RGGB" and meta["reader"]["sensor"] == "IMX250MYR"
+    np.testing.assert_array_equal(meta["colour_stack"], expected)
+
+    _, widget = viewer.window.add_plugin_dock_widget("napari-polarseg", "Segment by material")
+    widget.set_params(window=4, degree=4)
+    scribbles = widget.new_scribbles_layer()
+    strokes = np.zeros(truth.shape, dtype=np.int32)
+    strokes[4:8, 3:15] = 1
+    strokes[24:28, 25:37] = 2
+    scribbles.data = strokes
+    run_and_wait(qtbot, widget)
+    features = widget.store.segmenter(source_key(layer), meta["colour_stack"]).cached_features
+    assert features is not None
+    assert {n.split(":")[0] for n in features.names} >= {"R", "G", "B"}
+    segments = np.asarray(widget.output("segments").data)
+    assert np.mean((segments == 2) == (truth == 1)) > 0.95
