@@ -63,13 +63,14 @@ VARIANTS: dict[str, UnsupervisedParams] = {
     "default-no-clip": D.replace(clip=0.0),
     "default+log-intensity": D.replace(features=("log_intensity",) + D.features),
     "default-gmm": D.replace(clustering="gmm"),
-    "default-full-edge-weight": D.replace(polarisation_edge_weight=1.0),
+    "default-half-edge-weight": D.replace(polarisation_edge_weight=0.5),
+    "default-no-cue": D.replace(features=("dop", "dop_spread")),
+    "default+cue-correlation": D.replace(features=D.features + MATERIAL_CUE[1:]),
     "previous-default-gmm3": D.replace(
         features=F3, clustering="gmm", smoothing=0.5, polarisation_edge_weight=1.0, clip=0.0
     ),
     "default-no-refine": D.replace(refine_boundaries=False),
     "default-intensity-edges": D.replace(boundary="intensity"),
-    "default+cue": D.replace(features=D.features + MATERIAL_CUE),
     "default-tied-covariance": D.replace(covariance="tied"),
     "default-diag-covariance": D.replace(covariance="diag"),
     "default-no-smoothing": D.replace(smoothing=0.0),
