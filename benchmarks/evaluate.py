@@ -53,7 +53,7 @@ from baselines import intensity_kmeans, plain_baseline, real_frames
 from sklearn.metrics import adjusted_rand_score
 
 from napari_polarseg.engine import Pipeline, SegmentParams, intensity_baseline
-from napari_polarseg.engine.params import RECOMMENDED
+from napari_polarseg.engine.params import AUTO, RECOMMENDED
 from napari_polarseg.engine.pixel_classifier import ClassifierParams, make_model
 from napari_polarseg.engine.pixel_features import GROUPS, PixelFeatureParams, pixel_features
 from napari_polarseg.engine.pixel_segmentation import PixelSegmenter
@@ -75,6 +75,7 @@ OPTIONS: dict[str, SegmentParams | None] = {
     "spatial term": RECOMMENDED.replace(spatial_radius=1.5),
     "k-way": RECOMMENDED.replace(clustering="kway"),
     "k-way, stats": RECOMMENDED.replace(features="polstats", clustering="kway"),
+    "auto (default)": AUTO,
     "block scribbles": None,
     "plain baseline": None,
     "pixel classifier": None,
@@ -188,6 +189,7 @@ REAL_COLUMNS = (
     "intensity k-means",
     "thesis defaults",
     "recommended",
+    "auto (default)",
     "plain baseline",
     "pixel classifier",
     "bound: all truth",
@@ -212,7 +214,12 @@ def evaluate_real(folder: Path) -> list[dict]:
         pipe = Pipeline(data.stack, data.angles_rad, SegmentParams(n_segments=k))
         pol = pipe.get("polarisation")
         row["intensity k-means"] = ari_where(truth, intensity_kmeans(pol.intensity, k), where)
-        for column, params in (("thesis defaults", SegmentParams()), ("recommended", RECOMMENDED)):
+        presets = (
+            ("thesis defaults", SegmentParams()),
+            ("recommended", RECOMMENDED),
+            ("auto (default)", AUTO),
+        )
+        for column, params in presets:
             t0 = time.perf_counter()
             pipe.params = params.replace(n_segments=k)
             labels = pipe.run(reconstruction=False).labels

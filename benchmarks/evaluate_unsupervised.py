@@ -26,12 +26,12 @@ import time
 from pathlib import Path
 
 import numpy as np
-from baselines import intensity_kmeans, real_frames
+from baselines import intensity_kmeans, plain_baseline, real_frames
 from evaluate import DEGENERATE_SHARE, REAL_DIR, ari, ari_where, largest_share, load
 
 from napari_polarseg.engine import Pipeline, SegmentParams
 from napari_polarseg.engine.params import RECOMMENDED
-from napari_polarseg.engine.synthetic import SCENES, make_scene
+from napari_polarseg.engine.synthetic import SCENES, make_scene, scribble_strokes
 from napari_polarseg.engine.unsupervised import (
     MATERIAL_CUE,
     UnsupervisedParams,
@@ -63,13 +63,14 @@ VARIANTS: dict[str, UnsupervisedParams] = {
     "default-no-clip": D.replace(clip=0.0),
     "default+log-intensity": D.replace(features=("log_intensity",) + D.features),
     "default-gmm": D.replace(clustering="gmm"),
-    "default-full-edge-weight": D.replace(polarisation_edge_weight=1.0),
+    "default-half-edge-weight": D.replace(polarisation_edge_weight=0.5),
+    "default-no-cue": D.replace(features=("dop", "dop_spread")),
+    "default+cue-correlation": D.replace(features=D.features + MATERIAL_CUE[1:]),
     "previous-default-gmm3": D.replace(
         features=F3, clustering="gmm", smoothing=0.5, polarisation_edge_weight=1.0, clip=0.0
     ),
     "default-no-refine": D.replace(refine_boundaries=False),
     "default-intensity-edges": D.replace(boundary="intensity"),
-    "default+cue": D.replace(features=D.features + MATERIAL_CUE),
     "default-tied-covariance": D.replace(covariance="tied"),
     "default-diag-covariance": D.replace(covariance="diag"),
     "default-no-smoothing": D.replace(smoothing=0.0),
@@ -117,12 +118,13 @@ def synthetic_inputs(seeds: list[int]) -> list[tuple]:
 
 
 def real_inputs(folder: Path) -> list[tuple]:
-    """(frame, pipeline, polarisation image, truth, k) of every hand-labelled real frame."""
+    """(frame, pipeline, polarisation image, truth, k, strokes) of every hand-labelled
+    real frame."""
     out = []
     for tf, data in real_frames(folder):
         k = len(tf.classes)
         pipe = Pipeline(data.stack, data.angles_rad, SegmentParams(n_segments=k))
-        out.append((tf.frame, pipe, pipe.get("polarisation"), tf.truth, k))
+        out.append((tf.frame, pipe, pipe.get("polarisation"), tf.truth, k, tf.strokes))
     return out
 
 
@@ -137,7 +139,7 @@ def score_variant(params: UnsupervisedParams, synthetic: list, real: list) -> di
             row["degenerate"].add(name)
     for name, values in per_scene.items():
         row[name] = float(np.mean(values))
-    for frame, _pipe, pol, truth, k in real:
+    for frame, _pipe, pol, truth, k, _strokes in real:
         r = segment_unsupervised(pol.intensity, pol.dop, pol.phase, k, params)
         row[frame] = ari_where(truth, r.labels, truth > 0)
         row["seconds"] = max(row["seconds"], r.seconds)
@@ -147,19 +149,29 @@ def score_variant(params: UnsupervisedParams, synthetic: list, real: list) -> di
 
 
 def baselines(synthetic: list, real: list, thesis_real: bool) -> dict[str, dict]:
-    """Rows of intensity k-means and the thesis pipeline's recommended preset."""
+    """Rows of intensity k-means, the plain pixel classifier (a random forest on
+    Gaussian-smoothed polarisation features, trained on the fixed strokes of
+    ``evaluate.py``: supervised, for scale) and the thesis pipeline's recommended preset."""
     km: dict = {"degenerate": set(), "seconds": 0.0}
+    plain: dict = {"degenerate": set(), "seconds": 0.0}
     rec: dict = {"degenerate": set(), "seconds": 0.0}
     per_km: dict[str, list[float]] = {}
+    per_plain: dict[str, list[float]] = {}
     per_rec: dict[str, list[float]] = {}
     for name, _seed, pol, truth, k, stack, angles in synthetic:
         per_km.setdefault(name, []).append(ari(truth, intensity_kmeans(pol.intensity, k)))
+        strokes = scribble_strokes(truth, seed=0)
+        labels = plain_baseline(pol.intensity, pol.dop, pol.phase, strokes)
+        per_plain.setdefault(name, []).append(ari(truth, labels))
         pipe = Pipeline(stack, angles, RECOMMENDED.replace(n_segments=k))
         per_rec.setdefault(name, []).append(ari(truth, pipe.run(reconstruction=False).labels))
     for name in per_km:
         km[name] = float(np.mean(per_km[name]))
+        plain[name] = float(np.mean(per_plain[name]))
         rec[name] = float(np.mean(per_rec[name]))
-    for frame, pipe, pol, truth, k in real:
+    for frame, pipe, pol, truth, k, strokes in real:
+        labels = plain_baseline(pol.intensity, pol.dop, pol.phase, strokes)
+        plain[frame] = ari_where(truth, labels, truth > 0)
         t0 = time.perf_counter()
         labels = intensity_kmeans(pol.intensity, k)
         km["seconds"] = max(km["seconds"], time.perf_counter() - t0)
@@ -174,7 +186,11 @@ def baselines(synthetic: list, real: list, thesis_real: bool) -> dict[str, dict]
             rec[frame] = ari_where(truth, labels, truth > 0)
             if largest_share(labels) >= DEGENERATE_SHARE:
                 rec["degenerate"].add(frame)
-    return {"intensity k-means": km, "thesis recommended": rec}
+    return {
+        "intensity k-means": km,
+        "plain baseline (supervised)": plain,
+        "thesis recommended": rec,
+    }
 
 
 def table(rows: dict[str, dict], columns: list[str]) -> str:
@@ -220,7 +236,7 @@ def speed(params: UnsupervisedParams, real: list) -> list[str]:
         f"- 720 x 660: {times[0]:.2f} s first call, {times[1]:.2f} s second "
         f"(target {SPEED_TARGET['720x660']} s)"
     ]
-    for frame, _pipe, p, _truth, k in real:
+    for frame, _pipe, p, _truth, k, _strokes in real:
         s = segment_unsupervised(p.intensity, p.dop, p.phase, k, params).seconds
         shape = "x".join(str(v) for v in p.intensity.shape)
         lines.append(f"- {frame} ({shape}): {s:.2f} s (target {SPEED_TARGET['1224x1024']} s)")

@@ -37,16 +37,18 @@ Deterministic: every random step is seeded.
 
 Defaults (``UnsupervisedParams()``), measured with ``benchmarks/evaluate_unsupervised.py``
 on the rendered scenes and the hand-labelled real frames together: superpixels on log Î
-edges plus half-weighted Stokes edges, node features mean ρ and spread of ρ (a material
-that depolarises more, or is rougher, polarises less and less evenly at every tilt),
-features winsorised at ± 2 standard deviations, k-means (10 restarts,
-area-weighted) and posterior smoothing λ = 0.3 over 5 iterations.
-Adding mean log Î separates the real fruits frame better but merges the camouflage net
-with the foliage, whose shading it follows; a Gaussian mixture on the same features
+and Stokes edges; node features mean ρ, spread of ρ (a material that depolarises more,
+or is rougher, polarises less and less evenly at every tilt) and the material cue's
+slope of ρ against log Î (how polarisation follows the shading, set by n and the
+depolarisation rather than the tilt); the standardised features winsorised at ± 2
+standard deviations (a superpixel straddling two materials has an outlying spread and
+slope); k-means (10 restarts, area-weighted); posterior smoothing λ = 0.3 over 5
+iterations. Adding mean log Î separates the real fruits frame better but merges the
+camouflage net with the foliage, whose shading it follows; the correlation of ρ and
+log Î (the other half of the cue) splits the real camera's mat; a Gaussian mixture
 sometimes fits one tiny component (a degenerate result); the multi-scale pixel stack
-separates the camouflage scene better but splits the real camera's mat by shading; the
-ρ–shading cue and the graph cuts on neighbouring regions measured worse (the cuts peel
-off single regions). The benchmark prints every variant.
+separates the camouflage scene better but splits the camera's mat by shading; the graph
+cuts on neighbouring regions peel off single regions. The benchmark prints every variant.
 """
 
 from __future__ import annotations
@@ -90,8 +92,9 @@ MIN_REGION_AREA = 32
 MAX_REGION_AREA = 1024
 #: σ (pixels) of the smoothing before the edge maps of the superpixels are taken.
 EDGE_SIGMA = 1.5
-#: Passes of :func:`refine_boundaries` (each moves a border by at most one pixel).
-REFINE_PASSES = 4
+#: Most passes of :func:`refine_boundaries` (each moves a border by at most one pixel;
+#: the passes stop when one moves nothing).
+REFINE_PASSES = 5
 
 
 @dataclass(frozen=True)
@@ -142,8 +145,8 @@ class UnsupervisedParams:
 
     region_area: int = 0
     boundary: str = "polarisation"
-    polarisation_edge_weight: float = 0.5
-    features: tuple[str, ...] = ("dop", "dop_spread")
+    polarisation_edge_weight: float = 1.0
+    features: tuple[str, ...] = ("dop", "dop_spread", "dop_vs_log_intensity_slope")
     pixel_scales: tuple[float, ...] = ()
     pixel_groups: tuple[str, ...] = ("intensity", "polarisation", "invariant")
     variance: float = 0.95
@@ -613,7 +616,10 @@ def segment_unsupervised(
     labels = node_labels[regions]
     if p.refine_boundaries and k > 1:
         for _ in range(REFINE_PASSES):
-            labels = refine_boundaries(labels, i, d, int(node_labels.max()) + 1)
+            moved = refine_boundaries(labels, i, d, int(node_labels.max()) + 1)
+            if np.array_equal(moved, labels):
+                break  # converged: no border pixel moved
+            labels = moved
         labels = labels.astype(np.int32)
     labels, node_labels = _first_appearance(labels, node_labels)
     check = degenerate_result(labels, requested=k)

@@ -67,11 +67,19 @@ def open_sample(viewer: Any) -> Callable[[str], Any]:
 
 
 @pytest.fixture
-def add_widget(viewer: Any) -> Callable[[str], Any]:
-    """Dock one of the plugin's widgets by its display name, as a user would."""
+def add_widget(viewer: Any) -> Callable[..., Any]:
+    """Dock one of the plugin's widgets by its display name, as a user would.
 
-    def _add(name: str) -> Any:
+    *Segment by material* is switched to the ``thesis`` preset unless ``preset`` says
+    otherwise (None keeps the widget's own default, ``auto``): most GUI tests compare the
+    widget with the thesis pipeline run by the engine; test_auto_default.py checks the
+    default a user gets.
+    """
+
+    def _add(name: str, preset: str | None = "thesis") -> Any:
         _, widget = viewer.window.add_plugin_dock_widget("napari-polarseg", name)
+        if name == "Segment by material" and preset is not None:
+            widget.preset.value = preset
         return widget
 
     return _add

@@ -80,7 +80,7 @@ def test_save_then_load_restores_every_control(viewer, add_widget, tmp_path):
 
 def test_loads_the_params_json_the_cli_writes(viewer, add_widget, tmp_path, capsys):
     out = tmp_path / "out"
-    argv = ["segment", str(SAMPLE_DIR / "leaves.npz"), "--out", str(out)]
+    argv = ["segment", str(SAMPLE_DIR / "leaves.npz"), "--out", str(out), "--preset", "thesis"]
     argv += ["--window", "12", "--degree", "4", "--features", "zonal", "--segments", "2"]
     assert cli.main(argv) == 0, capsys.readouterr().err
     written = json.loads((out / "params.json").read_text(encoding="utf-8"))

@@ -1,0 +1,24 @@
+"""The plugin's default (issue 13 item 4): *Segment by material* starts on preset auto."""
+
+from __future__ import annotations
+
+import numpy as np
+from _gui_helpers import engine_result, error_messages, run_and_wait
+
+from napari_polarseg.engine.params import AUTO
+
+
+def test_segment_widget_defaults_to_auto_and_matches_the_engine(
+    viewer, open_sample, add_widget, qtbot
+):
+    stack = open_sample("leaves")
+    widget = add_widget("Segment by material", preset=None)
+    assert widget.preset.value == "auto"
+    assert widget.params() == AUTO
+    assert widget.clustering.value == "superpixels"
+    run_and_wait(qtbot, widget)
+    assert error_messages() == []
+    ref = engine_result(stack, AUTO)
+    np.testing.assert_array_equal(widget.output("segments").data, ref.labels + 1)
+    # a degenerate result would say so in the status line; this one is not
+    assert "degenerate" not in widget.status.value
