@@ -20,7 +20,9 @@ from napari_polarseg import io as pio
 from napari_polarseg.engine.pipeline import STAGES
 from napari_polarseg.status_line import ERASE, StatusLine
 
-FAST = ["--window", "10", "--degree", "4", "--segments", "2"]
+# the thesis pipeline runs every stage of STAGES (preset auto skips affinity and cut);
+# the scene's two materials differ in how Î follows the tilt (test_cli.two_material_scene)
+FAST = ["--preset", "thesis", "--window", "10", "--degree", "4", "--segments", "2"]
 GRID = ["--windows", "7,10", "--degrees", "2,4", "--segments", "2"]
 
 
