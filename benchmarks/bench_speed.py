@@ -46,6 +46,7 @@ Usage::
     .venv/bin/python benchmarks/bench_speed.py              # the table, ~5-8 minutes
     .venv/bin/python benchmarks/bench_speed.py --repeats 5
     .venv/bin/python benchmarks/bench_speed.py --bounded    # only the bounded-cut rows
+    .venv/bin/python benchmarks/bench_speed.py --auto       # only the default preset's rows
 
 Not part of the test suite; ``tests/test_speed_equivalence.py`` imports the
 straightforward baseline from here to check that the fast path gives the same labels.
@@ -84,6 +85,8 @@ FRAME_MOSAIC = (90, 45, 135, 0)
 PLANTED_BLOCKS = 12
 #: The thesis preset's whole run on a 1224 × 1024 frame may take this long (issue 13).
 BOUNDED_TARGET = 15.0
+#: Seconds allowed for the default preset's whole cold run (issue 13), by frame size.
+AUTO_TARGET = {"720x660": 1.5, "1224x1024": 5.0}
 
 # -- the straightforward baseline (thesis-era implementation) ------------------------------
 
@@ -497,12 +500,62 @@ def bounded_rows(cache: Path) -> tuple[list[Row], list[str]]:
     return rows, notes
 
 
+def auto_child(task: str, path: Path) -> dict:
+    """The default preset's (``auto``) whole run, cold, in this fresh process: on the
+    720 × 660 reference, the synthetic 1224 × 1024 camera frame, or a real frame."""
+    from napari_polarseg import io as pio
+    from napari_polarseg.engine import Pipeline
+    from napari_polarseg.engine.params import AUTO
+
+    if task == "auto-frame":
+        data = pio.read_stack(str(path), mosaic=np.array(FRAME_MOSAIC))
+        stack, angles = data.stack, data.angles_rad
+    else:
+        stack, angles = load(path)
+    t0 = time.perf_counter()
+    res = Pipeline(stack, angles, AUTO.replace(n_segments=3)).run()
+    seconds = time.perf_counter() - t0
+    return {
+        "seconds": seconds,
+        "peak_mb": peak_rss_mb(),
+        "shape": list(res.labels.shape),
+        "stage_seconds": res.timings,
+        "degenerate": res.degenerate().degenerate,
+    }
+
+
+def auto_rows(cache: Path) -> tuple[list[Row], list[str]]:
+    """Rows of the default preset ``auto`` (issue 13): whole cold runs in fresh processes
+    (:data:`AUTO_TARGET`), and their stage seconds."""
+    rows: list[Row] = []
+    notes: list[str] = []
+    paths = build_inputs(cache)
+    runs = [("auto-ref", paths["ref"], "720x660"), ("auto-cam", paths["cam"], "1224x1024")]
+    runs += [
+        ("auto-frame", SHARED_FRAMES / f"{name}_IMX250MZR.png", "1224x1024")
+        for name in FRAME_NAMES[:2]
+        if (SHARED_FRAMES / f"{name}_IMX250MZR.png").is_file()
+    ]
+    for task, path, size in runs:
+        out = run_child(task, path)
+        where = "synthetic" if task != "auto-frame" else f"real {path.stem}"
+        label = f"auto preset (default), cold, {where} {'x'.join(map(str, out['shape']))}"
+        rows.append(Row(label, out["seconds"], out["peak_mb"], target=AUTO_TARGET[size]))
+        notes.append(
+            f"  {label}: degenerate {out['degenerate']}; stages "
+            + ", ".join(f"{k} {v:.2f}" for k, v in out["stage_seconds"].items())
+        )
+    return rows, notes
+
+
 def child(task: str, path: Path) -> dict:
     """Run one task in this (fresh) process; report seconds and peak RSS."""
     from napari_polarseg.engine import Pipeline, SegmentParams
 
     if task in ("thesis-frame", "thesis-planted"):
         return thesis_frame_child(task, path)
+    if task.startswith("auto-"):
+        return auto_child(task, path)
     stack, angles = load(path)
     params = {
         "cold": SegmentParams(window=10, degree=12, n_segments=3),
@@ -546,16 +599,20 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--bounded", action="store_true", help="only the bounded-cut rows of issue 13"
     )
+    parser.add_argument(
+        "--auto", action="store_true", help="only the rows of the default preset auto"
+    )
     parser.add_argument("--child", help=argparse.SUPPRESS)
     parser.add_argument("--input", type=Path, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.child:
         print(json.dumps(child(args.child, args.input)))
         return 0
-    if args.bounded:
+    if args.bounded or args.auto:
         t_start = time.perf_counter()
-        rows, notes = bounded_rows(args.cache)
-        print(f"napari-polarseg bounded cuts — {os.cpu_count()} CPUs, load {_load()}")
+        rows, notes = (auto_rows if args.auto else bounded_rows)(args.cache)
+        what = "default preset auto" if args.auto else "bounded cuts"
+        print(f"napari-polarseg {what} — {os.cpu_count()} CPUs, load {_load()}")
         print_table(rows)
         print("details:")
         print("\n".join(notes))
@@ -788,6 +845,8 @@ def main(argv: list[str] | None = None) -> int:
     ]
     bounded, bounded_notes = bounded_rows(args.cache)
     rows += bounded
+    auto, auto_notes = auto_rows(args.cache)
+    rows += auto
     print(
         f"napari-polarseg speed benchmark — {platform.processor() or platform.machine()}, "
         f"{os.cpu_count()} CPUs, numpy {np.__version__}, scipy {scipy.__version__}; "
@@ -797,6 +856,8 @@ def main(argv: list[str] | None = None) -> int:
     print_table(rows)
     print("bounded cuts (issue 13):")
     print("\n".join(bounded_notes))
+    print("default preset auto (issue 13):")
+    print("\n".join(auto_notes))
     for name, stages in (("in-process", res.timings), ("fresh process", cold["stage_seconds"])):
         print(
             f"cold-run stage seconds ({name}): "

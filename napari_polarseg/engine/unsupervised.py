@@ -484,35 +484,56 @@ def _cluster_graph(
 
 
 def refine_boundaries(
-    labels: np.ndarray, intensity: np.ndarray, dop: np.ndarray, n_labels: int
+    labels: np.ndarray,
+    intensity: np.ndarray,
+    dop: np.ndarray,
+    n_labels: int,
+    spread: np.ndarray | None = None,
 ) -> np.ndarray:
     """Pixels on a segment border moved to the neighbouring segment they resemble most.
 
     For every pixel with a different label in its 3 × 3 neighbourhood: the label, among
     those of the neighbourhood, whose segment mean of (log Î, ρ) is nearest in units of
-    the pooled within-segment spread of each. One pass (each moves a border by at most
-    a pixel), vectorised over the border.
+    ``spread``, the pooled within-segment spread of each (computed from ``labels`` when
+    not given). One pass (each moves a border by at most a pixel), vectorised over the
+    border pixels only.
     """
     log_i = np.log(np.maximum(intensity, EPS_INTENSITY)).astype(np.float64)
     maps = np.stack([log_i, dop.astype(np.float64)])
     flat = labels.ravel()
     count = np.maximum(np.bincount(flat, minlength=n_labels), 1)
     means = np.stack([np.bincount(flat, m.ravel(), n_labels) / count for m in maps])
-    resid = maps - means[:, labels]
-    spread = np.sqrt((resid.reshape(2, -1) ** 2).mean(axis=1)) + 1e-12
-    near = np.zeros((n_labels,) + labels.shape, dtype=bool)
-    for c in range(n_labels):
-        near[c] = ndimage.maximum_filter(labels == c, size=3)
-    border = near.sum(axis=0) > 1
+    if spread is None:
+        resid = maps - means[:, labels]
+        spread = np.sqrt((resid.reshape(2, -1) ** 2).mean(axis=1)) + 1e-12
+    # the labels of the 3 × 3 neighbourhood of every pixel (edge-padded), as 9 planes
+    pad = np.pad(labels, 1, mode="edge")
+    h, w = labels.shape
+    near = np.stack([pad[r : r + h, c : c + w] for r in range(3) for c in range(3)])
+    border = (near != labels).any(axis=0)
     if not border.any():
         return labels
+    cand = near[:, border]  # (9, b) candidate labels of each border pixel
     x = maps[:, border] / spread[:, None]  # (2, b)
     mu = means / spread[:, None]  # (2, k)
-    d = ((x[:, :, None] - mu[:, None, :]) ** 2).sum(axis=0)  # (b, k)
-    d[~near[:, border].T] = np.inf
+    d = ((x[:, None, :] - mu[:, cand]) ** 2).sum(axis=0)  # (9, b)
     out = labels.copy()
-    out[border] = np.argmin(d, axis=1)
+    out[border] = cand[np.argmin(d, axis=0), np.arange(cand.shape[1])]
     return out
+
+
+def within_spread(labels: np.ndarray, intensity: np.ndarray, dop: np.ndarray) -> np.ndarray:
+    """Pooled within-segment standard deviation of log Î and of ρ, (2,): the units of
+    :func:`refine_boundaries`."""
+    log_i = np.log(np.maximum(intensity, EPS_INTENSITY)).astype(np.float64)
+    flat = labels.ravel()
+    n = int(flat.max()) + 1
+    count = np.maximum(np.bincount(flat, minlength=n), 1)
+    out = []
+    for m in (log_i.ravel(), dop.astype(np.float64).ravel()):
+        mean = np.bincount(flat, m, n) / count
+        out.append(np.sqrt(np.mean((m - mean[flat]) ** 2)) + 1e-12)
+    return np.array(out)
 
 
 def _first_appearance(labels: np.ndarray, node_labels: np.ndarray) -> tuple[np.ndarray, ...]:
@@ -615,8 +636,9 @@ def segment_unsupervised(
     node_labels = np.asarray(node_labels, dtype=np.int32)
     labels = node_labels[regions]
     if p.refine_boundaries and k > 1:
+        spread = within_spread(labels, i, d)
         for _ in range(REFINE_PASSES):
-            moved = refine_boundaries(labels, i, d, int(node_labels.max()) + 1)
+            moved = refine_boundaries(labels, i, d, int(node_labels.max()) + 1, spread)
             if np.array_equal(moved, labels):
                 break  # converged: no border pixel moved
             labels = moved
