@@ -48,7 +48,7 @@ import numpy as np
 from scipy import ndimage
 
 from .errors import PolarsegError
-from .mosaic import DEMOSAIC_METHODS, IMX250MZR_LAYOUT, check_layout
+from .mosaic import DEMOSAIC_METHODS, IMX250MZR_LAYOUT, check_layout, check_raw
 from .polarimage import PolarisationImage, polarisation_image
 
 #: Colours of the decoded stack, in order.
@@ -78,21 +78,7 @@ def check_bayer(bayer: str) -> str:
 
 def check_colour_raw(raw: np.ndarray) -> tuple[int, int]:
     """Height and width of a raw colour-polarisation frame (2-D, both multiples of 4)."""
-    if raw.ndim != 2:
-        raise PolarsegError(
-            f"a raw mosaic frame must be 2-D (rows, columns), got shape {raw.shape}"
-        )
-    h, w = raw.shape
-    if h < 4 or w < 4 or h % 4 or w % 4:
-        raise PolarsegError(
-            "a colour-polarisation mosaic (4 x 4 period) needs a height and width that are "
-            f"multiples of 4, got {h} x {w} pixels"
-        )
-    if raw.dtype != np.bool_ and (
-        not np.issubdtype(raw.dtype, np.number) or np.issubdtype(raw.dtype, np.complexfloating)
-    ):
-        raise PolarsegError(f"a raw mosaic frame must hold real numbers, got dtype {raw.dtype}")
-    return h, w
+    return check_raw(raw, period=4)
 
 
 def bayer_cells(bayer: str) -> list[list[int]]:

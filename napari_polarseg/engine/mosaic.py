@@ -45,16 +45,23 @@ def check_layout(layout_deg) -> np.ndarray:
     return layout
 
 
-def _check_raw(raw: np.ndarray) -> tuple[int, int]:
+def check_raw(raw: np.ndarray, period: int = 2) -> tuple[int, int]:
+    """Height and width of a raw mosaic frame: 2-D, real numbers, both multiples of the
+    pattern's ``period`` (2: a polariser mosaic; 4: a colour-polarisation one)."""
     if raw.ndim != 2:
         raise PolarsegError(
             f"a raw mosaic frame must be 2-D (rows, columns), got shape {raw.shape}"
         )
     h, w = raw.shape
-    if h < 2 or w < 2 or h % 2 or w % 2:
-        raise PolarsegError(
-            f"a 2 x 2 polarisation mosaic needs an even height and width, got {h} x {w} pixels"
-        )
+    if h < period or w < period or h % period or w % period:
+        if period == 2:
+            what = "a 2 x 2 polarisation mosaic needs an even height and width"
+        else:
+            what = (
+                f"a colour-polarisation mosaic ({period} x {period} period) needs a height "
+                f"and width that are multiples of {period}"
+            )
+        raise PolarsegError(f"{what}, got {h} x {w} pixels")
     if raw.dtype != np.bool_ and (
         not np.issubdtype(raw.dtype, np.number) or np.issubdtype(raw.dtype, np.complexfloating)
     ):
@@ -102,7 +109,7 @@ def demosaic_superpixel(
     """
     raw = np.asarray(raw)
     layout = check_layout(layout_deg)
-    h, w = _check_raw(raw)
+    h, w = check_raw(raw)
     # (H/2, 2, W/2, 2) -> (2, 2, H/2, W/2) -> (4, H/2, W/2): sub-lattice (i, j) is raw[i::2, j::2]
     lattices = raw.reshape(h // 2, 2, w // 2, 2).transpose(1, 3, 0, 2).reshape(4, h // 2, w // 2)
     order = np.argsort(layout, kind="stable")
@@ -185,7 +192,7 @@ def demosaic_interpolated(
     """
     raw = np.asarray(raw)
     layout = check_layout(layout_deg)
-    h, w = _check_raw(raw)
+    h, w = check_raw(raw)
     data = raw.astype(np.float64)
     order = np.argsort(layout, kind="stable")
     out = np.empty((4, h, w))
@@ -221,7 +228,7 @@ def spread_flags_interpolated(flags: np.ndarray, layout_deg=IMX250MZR_LAYOUT) ->
     """
     flags = np.asarray(flags, dtype=bool)
     layout = check_layout(layout_deg)
-    h, w = _check_raw(flags)
+    h, w = check_raw(flags)
     out = np.zeros((4, h, w), dtype=bool)
     for k, cell in enumerate(np.argsort(layout, kind="stable")):
         di, dj = divmod(int(cell), 2)
