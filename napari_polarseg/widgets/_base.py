@@ -39,6 +39,8 @@ class StackWidget(Container):
 
     #: Text of the Run button.
     run_text = "Run"
+    #: Tooltip of the Run button: what a run computes and where it shows.
+    run_tooltip = "Run the computation on the chosen angle stack in the background"
     #: Description of the progress bar.
     progress_desc = "napari-polarseg"
 
@@ -56,8 +58,13 @@ class StackWidget(Container):
             tooltip="Polariser angle of each frame in degrees, comma-separated; "
             f"filled from the layer's metadata[{ANGLES_KEY!r}] when present",
         )
-        self.run_button = PushButton(text=self.run_text)
-        self.cancel_button = PushButton(text="Cancel", enabled=False)
+        self.run_button = PushButton(text=self.run_text, tooltip=self.run_tooltip)
+        self.cancel_button = PushButton(
+            text="Cancel",
+            enabled=False,
+            tooltip="Stop the running computation (within about a second); what was "
+            "shown before stays",
+        )
         #: stages of the current (or last) run done; long runs also show in napari's
         #: activity dock (see ``_runner.ACTIVITY_DELAY``)
         self.progress = ProgressBar(label="progress", value=0, min=0, max=1)

@@ -163,9 +163,17 @@ class BatchWidget(Container):
         )
         self.workers = SpinBox(label="workers", value=0, min=0, max=256, tooltip="0: auto")
         self.resume = CheckBox(text="skip complete scenes (resume)", value=True)
-        self.run_button = PushButton(text="Run batch")
-        self.cancel_button = PushButton(text="Cancel", enabled=False)
-        self.load_button = PushButton(text="Load summary")
+        self.run_button = PushButton(
+            text="Run batch",
+            tooltip="Segment every input of the folder or pattern into its own result "
+            "folder (as polarseg batch), in the background",
+        )
+        self.cancel_button = PushButton(
+            text="Cancel", enabled=False, tooltip="Stop after the scenes that are running"
+        )
+        self.load_button = PushButton(
+            text="Load summary", tooltip="Show the summary.csv of an earlier batch run"
+        )
         self.status = Label(value="")
         self.status.native.setWordWrap(True)
         self.table = Table(value=summary_table([]))
@@ -440,8 +448,14 @@ class TimeSeriesWidget(Container):
             choices=[(f"{p:g} per block", p) for p in FALSE_ALARM_CHOICES],
             value=DEFAULT_FALSE_ALARM,
         )
-        self.source = ComboBox(label="parameters", choices=list(PARAM_SOURCES[:3]))
-        self.run_button = PushButton(text="Run")
+        # the time series cuts one block graph of all days: no superpixel preset
+        self.source = ComboBox(
+            label="parameters",
+            choices=[s for s in PARAM_SOURCES if s not in ("auto", "JSON file")],
+        )
+        self.run_button = PushButton(
+            text="Run", tooltip="Segment the time series and test every block for change"
+        )
         self.status = Label(value="")
         self.status.native.setWordWrap(True)
         self.result: TimeSeriesResult | None = None

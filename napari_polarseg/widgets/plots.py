@@ -129,6 +129,7 @@ class PlotsWidget(StackWidget):
     """
 
     run_text = "Load segmentation"
+    run_tooltip = "Load the chosen stack's last segmentation and draw its plots"
     progress_desc = "Polarisation plots"
 
     def __init__(self, viewer: napari.viewer.Viewer) -> None:

@@ -74,6 +74,10 @@ class PolarisationWidget(StackWidget):
     """
 
     run_text = "Compute"
+    run_tooltip = (
+        "Fit the polarisation image (Î, ρ, φ) and the zenith θ of the chosen stack and "
+        "add them as layers, with the AoLP/DoLP view and the Stokes components"
+    )
     progress_desc = "Polarisation image"
 
     def __init__(self, viewer: napari.viewer.Viewer) -> None:

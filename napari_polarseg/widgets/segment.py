@@ -387,6 +387,10 @@ class SegmentWidget(StackWidget):
     """
 
     run_text = "Run"
+    run_tooltip = (
+        "Segment the chosen stack by material with the parameters below (or the "
+        "scribbles) and add the segments and the reconstruction-error map as layers"
+    )
     progress_desc = "Segment by material"
 
     def __init__(self, viewer: napari.viewer.Viewer) -> None:
