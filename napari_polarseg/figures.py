@@ -80,9 +80,13 @@ def scatter_figure(
     against: str = "dop",
     fig: Figure | None = None,
     theme: dict[str, str] = LIGHT,
+    first_label: int = 0,
 ) -> Figure:
     """Î against ρ (``against="dop"``), φ (``"phase"``, degrees) or both (``"both"``),
-    coloured by segment (thesis figure 4.1). One point collection per axes."""
+    coloured by segment (thesis figure 4.1). One point collection per axes.
+
+    The legend names segment label v as ``v + first_label``: 0 numbers them as
+    ``labels.tif`` does, 1 as the plugin's ``segments`` layer (where 0 is no label)."""
     from matplotlib import colormaps
 
     kinds = ["dop", "phase"] if against == "both" else [against]
@@ -99,7 +103,7 @@ def scatter_figure(
         x = data.dop if kind == "dop" else np.rad2deg(data.phase)
         ax.scatter(x, data.intensity, c=colours, s=2, linewidths=0, rasterized=True)
         for j, v in enumerate(values):  # legend entries only (no points)
-            ax.scatter([], [], color=cmap(j % cmap.N), s=12, label=f"segment {v}")
+            ax.scatter([], [], color=cmap(j % cmap.N), s=12, label=f"segment {v + first_label}")
         ax.set_xlabel("ρ degree of polarisation" if kind == "dop" else "φ phase (degrees)")
         ax.set_ylabel("Î intensity")
         ax.set_title(f"Î against {'ρ' if kind == 'dop' else 'φ'} ({len(data)} pixels)")

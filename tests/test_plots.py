@@ -121,6 +121,12 @@ def test_figures_hold_the_data(result):
     fig = figures.scatter_figure(data, "both")
     assert len(fig.axes) == 2
     assert all(len(ax.collections[0].get_offsets()) == 300 for ax in fig.axes)
+    values = np.unique(data.labels)
+    legend = [t.get_text() for t in fig.axes[0].get_legend().get_texts()]
+    assert legend == [f"segment {v}" for v in values]  # as labels.tif numbers them
+    fig = figures.scatter_figure(data, "dop", first_label=1)  # as the segments layer
+    legend = [t.get_text() for t in fig.axes[0].get_legend().get_texts()]
+    assert legend == [f"segment {v + 1}" for v in values]
     ev = plots.explained_variance(result)
     fig = figures.explained_variance_figure(ev, theme=figures.DARK)
     assert len(fig.axes[0].patches) == ev.ratio.size

@@ -327,7 +327,8 @@ class PlotsWidget(StackWidget):
             self._message("press 'Load segmentation' to plot the stack's last segmentation")
         elif kind in ("scatter_dop", "scatter_phase"):
             data = plots.scatter_data(result, MAX_POINTS)
-            figures.scatter_figure(data, kind.split("_")[1], fig=fig, theme=theme)
+            # numbered as the segments layer shows them (label + 1)
+            figures.scatter_figure(data, kind.split("_")[1], fig=fig, theme=theme, first_label=1)
         elif kind == "variance":
             figures.explained_variance_figure(plots.explained_variance(result), fig, theme)
         elif self.histograms is not None:
