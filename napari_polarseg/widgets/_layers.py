@@ -46,10 +46,16 @@ class LayerStyle:
 
 #: Output layers by role.
 ROLES: dict[str, LayerStyle] = {
-    "intensity": LayerStyle("Î intensity", colormap="gray", percentiles=(0.5, 99.5)),
+    # of the four maps only ρ starts visible: stacked, the top one hides the others, and
+    # ρ tells the materials apart best (the HSV view, when added, sits above it)
+    "intensity": LayerStyle(
+        "Î intensity", colormap="gray", percentiles=(0.5, 99.5), extra={"visible": False}
+    ),
     "dop": LayerStyle("ρ degree of polarisation", colormap="viridis"),
-    "phase": LayerStyle("φ phase", colormap="twilight", limits=(0.0, math.pi)),
-    "zenith": LayerStyle("θ zenith", colormap="magma"),
+    "phase": LayerStyle(
+        "φ phase", colormap="twilight", limits=(0.0, math.pi), extra={"visible": False}
+    ),
+    "zenith": LayerStyle("θ zenith", colormap="magma", extra={"visible": False}),
     "segments": LayerStyle("segments", layer_type="labels", extra={"opacity": 0.6}),
     "error": LayerStyle("reconstruction error", colormap="inferno", extra={"visible": False}),
     # 1 where a pixel was left out of the fit and the features (mask, saturated, black, …)
@@ -132,9 +138,10 @@ def show_output(
     """Add the ``role`` layer for ``source``, or replace the data of the existing one.
 
     The layer takes the scale and translation of the last two axes of ``source`` so it
-    overlays the stack. On a rerun only the data, the contrast limits (for images) and
-    the plugin's metadata change; the user's other settings (visibility, opacity,
-    colormap, name, position in the layer list) are kept.
+    overlays the stack; the layer selection stays as the user left it. On a rerun only
+    the data, the contrast limits (for images) and the plugin's metadata change; the
+    user's other settings (visibility, opacity, colormap, name, position in the layer
+    list) are kept.
     """
     style = ROLES[role]
     tag = {"role": role, "source": source_key(source)}
@@ -154,11 +161,21 @@ def show_output(
     if layer is not None:  # same tag but another type (should not happen): replace it
         viewer.layers.remove(layer)
     placement = {"scale": tuple(source.scale[-2:]), "translate": tuple(source.translate[-2:])}
+    # napari selects every layer it adds; the user's selection (e.g. the scribbles layer
+    # being painted) is kept instead
+    selection = viewer.layers.selection
+    selected, active = set(selection), selection.active
     if style.layer_type == "labels":
-        return viewer.add_labels(data, name=style.name, metadata=meta, **placement, **style.extra)
-    return viewer.add_image(
-        data, name=style.name, metadata=meta, **placement, **_image_style(role, data)
-    )
+        layer = viewer.add_labels(data, name=style.name, metadata=meta, **placement, **style.extra)
+    else:
+        layer = viewer.add_image(
+            data, name=style.name, metadata=meta, **placement, **_image_style(role, data)
+        )
+    selection.clear()
+    selection.update(selected)
+    if active is not None:
+        selection.active = active
+    return layer
 
 
 def remove_output(viewer: napari.Viewer, role: str, source: Layer) -> bool:

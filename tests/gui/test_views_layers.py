@@ -44,9 +44,9 @@ def test_hsv_and_stokes_layers_after_compute_and_the_dolp_maximum(
         layer = viewer.layers[f"S{k} Stokes"]
         assert not layer.visible and layer.metadata[TAG]["role"] == f"s{k}"
         np.testing.assert_allclose(layer.data, stokes[k], rtol=1e-12, atol=1e-9)
-    # the four maps are shown as before
-    for name in ("Î intensity", "ρ degree of polarisation", "φ phase", "θ zenith"):
-        assert viewer.layers[name].visible
+    # of the four maps only ρ starts visible (stacked, the top one would hide the others)
+    shown = {n: viewer.layers[n].visible for n in ("Î intensity", "φ phase", "θ zenith")}
+    assert viewer.layers["ρ degree of polarisation"].visible and not any(shown.values())
 
     # the DoLP maximum redraws only the composite, without a new computation
     def no_job(*args, **kwargs):
@@ -70,3 +70,14 @@ def test_hsv_and_stokes_layers_after_compute_and_the_dolp_maximum(
     assert sat(after).mean() > sat(before).mean()
     widget.dolp_max.value = 0.0  # back to auto: the first picture again
     np.testing.assert_array_equal(viewer.layers["AoLP/DoLP HSV"].data, before)
+
+
+def test_a_run_keeps_the_users_layer_selection(viewer, open_sample, add_widget, qtbot):
+    stack = open_sample("leaves")
+    mine = viewer.add_labels(np.zeros(stack.data.shape[1:], dtype=np.int32), name="mine")
+    viewer.layers.selection.active = mine
+    widget = add_widget("Segment by material")
+    run_and_wait(qtbot, widget)
+    assert widget.output("segments") is not None
+    assert viewer.layers.selection.active is mine
+    assert set(viewer.layers.selection) == {mine}
