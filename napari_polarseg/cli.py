@@ -127,13 +127,12 @@ from .engine.evaluation import adjusted_rand_index, evaluate
 from .engine.limits import check_pipeline_memory, memory_limit
 from .engine.mosaic import DEMOSAIC_METHODS
 from .engine.params import (
-    AUTO,
     CLUSTERING_METHODS,
     COEFFICIENT_METHODS,
     FEATURE_KINDS,
     FIT_METHODS,
     MODELS,
-    RECOMMENDED,
+    PRESETS,
     SCALE_MODES,
     SPECULAR_BRANCHES,
     SegmentParams,
@@ -307,7 +306,6 @@ def _param_options() -> dict[str, tuple[str, dict[str, Any]]]:
     return options
 
 
-PRESETS = {"auto": AUTO, "thesis": SegmentParams(), "recommended": RECOMMENDED}
 #: What each preset is, for --help.
 PRESET_HELP = (
     "auto: superpixels clustered by their polarisation, the best unsupervised method "

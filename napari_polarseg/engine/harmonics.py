@@ -486,6 +486,14 @@ def upsample_block_labels(
     return block_labels[rows[:, None], cols[None, :]]
 
 
+def top_left_block_labels(labels: np.ndarray, window: int) -> np.ndarray:
+    """Block labels (R, C) of pixel labels (H, W): the label at each whole w × w block's
+    top-left pixel (the block grid of :func:`block_grid`), for results whose labels are
+    found per pixel rather than per block."""
+    rows, cols = block_grid(labels.shape, window)
+    return np.ascontiguousarray(labels[: rows * window : window, : cols * window : window])
+
+
 def evaluate_expansion(
     degree: int, zenith: np.ndarray, azimuth: np.ndarray, coefficients: np.ndarray
 ) -> np.ndarray:

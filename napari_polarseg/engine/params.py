@@ -236,3 +236,10 @@ RECOMMENDED = SegmentParams(
 #: unsupervised method measured on the rendered scenes and the hand-labelled real frames
 #: together (``benchmarks/evaluate_unsupervised.py``).
 AUTO = RECOMMENDED.replace(clustering="superpixels")
+
+#: The named starting points of the CLI's ``--preset`` and the plugin's preset menu.
+PRESETS: dict[str, SegmentParams] = {
+    "auto": AUTO,
+    "thesis": SegmentParams(),
+    "recommended": RECOMMENDED,
+}

@@ -550,9 +550,8 @@ class Pipeline:
         if self._cancel is not None and self._cancel():
             raise Cancelled("cancelled before the superpixel clustering")
         seg = unsupervised.segment_unsupervised(pol.intensity, pol.dop, pol.phase, p.n_segments)
-        grid = harmonics.block_grid(pol.intensity.shape, p.window)
-        block = seg.labels[: grid[0] * p.window : p.window, : grid[1] * p.window : p.window]
-        return np.ascontiguousarray(block, dtype=np.int32), seg.labels.astype(np.int64), [], None
+        block = harmonics.top_left_block_labels(seg.labels, p.window).astype(np.int32)
+        return block, seg.labels.astype(np.int64), [], None
 
     def _dense_affinity(self, features: np.ndarray, p: SegmentParams) -> np.ndarray:
         """exp(−D / s) of the dense graph (thesis section 4.5), D kept between runs.

@@ -381,7 +381,9 @@ def _level_features(
     return out
 
 
-def _check_maps(intensity: Any, dop: Any, phase: Any) -> tuple[np.ndarray, ...]:
+def check_maps(intensity: Any, dop: Any, phase: Any) -> tuple[np.ndarray, ...]:
+    """Î, ρ, φ as float32 (H, W) of one shape, non-finite values set to 0 (raises
+    PolarsegError on other shapes)."""
     maps = [np.asarray(a, dtype=np.float32) for a in (intensity, dop, phase)]
     if maps[0].ndim != 2 or any(m.shape != maps[0].shape for m in maps):
         shapes = ", ".join(str(m.shape) for m in maps)
@@ -422,7 +424,7 @@ def pixel_features(
     (('dolp@1', 'dop@1'), 0.1)
     """
     params = params or PixelFeatureParams()
-    i, d, p = _check_maps(intensity, dop, phase)
+    i, d, p = check_maps(intensity, dop, phase)
     prefix = f"{channel}:" if channel else ""
     names = feature_names(params)
     # one allocation for the whole stack, each feature written into it as it is made

@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from .colour_mosaic import COLOURS, colour_polarisation_images
+from .harmonics import top_left_block_labels
 from .pipeline import Pipeline, SegmentationResult
 from .pixel_classifier import (
     ClassifierParams,
@@ -204,9 +205,7 @@ class PixelSegmenter:
     ) -> SegmentationResult:
         """A :class:`SegmentationResult` of the pipeline's maps and these pixel labels."""
         pipe = self.pipeline
-        window = pipe.params.window
-        grid = pipe.get("harmonics").shape[:2]
-        block = labels[: grid[0] * window : window, : grid[1] * window : window]
+        block = top_left_block_labels(labels, pipe.params.window)
         names = ["polarisation", "normals", "harmonics", "pca"]
         names += ["reconstruction"] if reconstruction else []
         for name in names:
@@ -214,7 +213,7 @@ class PixelSegmenter:
         timings = {s: pipe.stage_seconds(s) for s in names}
         timings["pixel_classifier"] = float(sum(seconds.values()))
         return pipe.assemble_result(
-            np.ascontiguousarray(block),
+            block,
             labels.astype(np.int64),
             [],
             reconstruction,

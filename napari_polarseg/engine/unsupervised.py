@@ -65,7 +65,7 @@ from scipy import ndimage
 from .degenerate import degenerate_result
 from .errors import PolarsegError
 from .features import pca_features, whiten
-from .pixel_features import EPS_DOP, EPS_INTENSITY
+from .pixel_features import EPS_DOP, EPS_INTENSITY, check_maps
 from .superpixels import COMPACTNESS, auto_region_area
 
 #: Projections of the standardised node features (:func:`maf_features`, PCA).
@@ -269,16 +269,6 @@ class UnsupervisedResult:
     seconds: float
     degenerate: bool
     params: UnsupervisedParams
-
-
-def _check_maps(intensity: Any, dop: Any, phase: Any) -> tuple[np.ndarray, ...]:
-    maps = [np.asarray(a, dtype=np.float32) for a in (intensity, dop, phase)]
-    if maps[0].ndim != 2 or any(m.shape != maps[0].shape for m in maps):
-        shapes = ", ".join(str(m.shape) for m in maps)
-        raise PolarsegError(f"intensity, dop and phase must be 2-D of one shape, got {shapes}")
-    if min(maps[0].shape) < 2:
-        raise PolarsegError(f"image too small to segment: {maps[0].shape}")
-    return tuple(np.where(np.isfinite(m), m, 0).astype(np.float32) for m in maps)
 
 
 def polarisation_superpixels(
@@ -576,7 +566,9 @@ def segment_unsupervised(
     """
     t0 = time.perf_counter()
     p = params or UnsupervisedParams()
-    i, d, ph = _check_maps(intensity, dop, phase)
+    i, d, ph = check_maps(intensity, dop, phase)
+    if min(i.shape) < 2:
+        raise PolarsegError(f"image too small to segment: {i.shape}")
     try:
         k = int(n_segments)
     except (TypeError, ValueError):

@@ -16,14 +16,13 @@ from qtpy.QtCore import QTimer
 
 from ..engine import STAGES, Pipeline, PolarsegError, SegmentationResult, SegmentParams
 from ..engine.params import (
-    AUTO,
     CLUSTERING_METHODS,
     COEFFICIENT_METHODS,
     FEATURE_KINDS,
     FIT_METHODS,
     MAX_DEGREE,
     MODELS,
-    RECOMMENDED,
+    PRESETS,
     SCALE_MODES,
     SPECULAR_BRANCHES,
 )
@@ -51,12 +50,6 @@ if TYPE_CHECKING:
 #: Milliseconds the live update waits after the last change before it reruns.
 LIVE_DELAY_MS = 150
 
-#: Starting points offered by the "preset" menu.
-PRESETS: dict[str, SegmentParams] = {
-    "auto": AUTO,
-    "thesis": SegmentParams(),
-    "recommended": RECOMMENDED,
-}
 
 #: Text shown for each sinusoid-fit method of the "fit" menu.
 FIT_NAMES = {"lsq": "least squares", "robust": "robust"}
