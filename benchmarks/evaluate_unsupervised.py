@@ -66,6 +66,8 @@ VARIANTS: dict[str, UnsupervisedParams] = {
     "default-half-edge-weight": D.replace(polarisation_edge_weight=0.5),
     "default-no-cue": D.replace(features=("dop", "dop_spread")),
     "default+cue-correlation": D.replace(features=D.features + MATERIAL_CUE[1:]),
+    "default+dop-given-intensity": D.replace(features=D.features + ("log_dop_given_intensity",)),
+    "dop-given-intensity,dop-spread": D.replace(features=("dop_spread", "log_dop_given_intensity")),
     "previous-default-gmm3": D.replace(
         features=F3, clustering="gmm", smoothing=0.5, polarisation_edge_weight=1.0, clip=0.0
     ),

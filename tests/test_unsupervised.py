@@ -11,6 +11,7 @@ from napari_polarseg.engine.unsupervised import (
     CLUSTERINGS,
     NODE_FEATURES,
     UnsupervisedParams,
+    dop_given_intensity,
     node_features,
     polarisation_superpixels,
     region_adjacency,
@@ -103,6 +104,22 @@ def test_region_dolp_of_constant_region():
     p = np.zeros((8, 8))
     x = node_features(i, d, p, np.zeros((8, 8), dtype=np.int32), ("dop", "dolp"))
     np.testing.assert_allclose(x[0], [0.2, 0.2], rtol=1e-6)
+
+
+def test_dop_given_intensity_is_zero_on_the_relation_and_flags_another_material():
+    """Regions on one cubic relation log ρ = f(log Î) have no residual; regions of a
+    material with ρ halved at the same shading lie at log ½ off it, if the relation is
+    fitted where the first material covers most of the image (by area)."""
+    rng = np.random.default_rng(0)
+    log_i = rng.uniform(-1.0, 1.0, 200)
+    f = -3.0 + 0.8 * log_i - 0.3 * log_i**2 + 0.1 * log_i**3
+    np.testing.assert_allclose(dop_given_intensity(log_i, np.exp(f), np.ones(200)), 0.0, atol=1e-3)
+    other = np.arange(200) < 10
+    dop = np.exp(f) * np.where(other, 0.5, 1.0)
+    area = np.where(other, 1.0, 50.0)
+    r = dop_given_intensity(log_i, dop, area)
+    np.testing.assert_allclose(r[other], np.log(0.5), atol=0.02)
+    np.testing.assert_allclose(r[~other], 0.0, atol=0.02)
 
 
 @pytest.mark.parametrize(

@@ -16,12 +16,15 @@ those few hundred to few thousand nodes:
    |(ΣS1, ΣS2)| / ΣS0, the AoLP coherence |mean e^{2iφ}|, DoLP / mean ρ and, as the
    physical material cue (thesis section 6.2), the slope and correlation of ρ against
    log Î inside the region: within one material the shading and ρ both follow the
-   zenith, their relation depends on n and the depolarisation, not on the tilt.
+   zenith, their relation depends on n and the depolarisation, not on the tilt; and
+   the same cue taken image-wide, log ρ̄ less a cubic in log Î fitted over all regions
+   (:func:`dop_given_intensity`).
    Optionally the per-pixel feature stack of :mod:`.pixel_features` averaged per region.
    The features are standardised (weighted by region area) and reduced by PCA to the
    components that explain ``variance`` of the total (:func:`.features.pca_features`).
 3. **Clustering** (``UnsupervisedParams.clustering``): a Gaussian mixture (scikit-learn
-   ``GaussianMixture``, full covariances, seeded) or k-means on the node features, with an
+   ``GaussianMixture``, full covariances, seeded) or k-means weighted by region area
+   (:func:`.kmeans.weighted_kmeans`) on the node features, with an
    optional smoothing of the posteriors over the region adjacency (a few iterations of
    P ← (1 − λ) P + λ A P, A the row-normalised shared-border lengths), or the thesis's
    Mahalanobis affinity exp(−D / s) (:func:`.features.whiten`, s = ``scale`` × the
@@ -65,6 +68,7 @@ from scipy import ndimage
 from .degenerate import degenerate_result
 from .errors import PolarsegError
 from .features import pca_features, whiten
+from .kmeans import squared_distances, weighted_kmeans
 from .pixel_features import EPS_DOP, EPS_INTENSITY, check_maps
 from .superpixels import COMPACTNESS, auto_region_area
 
@@ -83,6 +87,7 @@ NODE_FEATURES = (
     "dolp_over_dop",  # DoLP / mean ρ: polarisation coherence, shading-free
     "dop_vs_log_intensity_slope",  # least-squares slope of ρ against log Î
     "dop_vs_log_intensity_corr",  # correlation of ρ and log Î
+    "log_dop_given_intensity",  # log mean ρ less its image-wide fit on mean log Î
 )
 #: The physical material cue (module docstring): the ρ–shading relation.
 MATERIAL_CUE = ("dop_vs_log_intensity_slope", "dop_vs_log_intensity_corr")
@@ -95,6 +100,10 @@ EDGE_SIGMA = 1.5
 #: Most passes of :func:`refine_boundaries` (each moves a border by at most one pixel;
 #: the passes stop when one moves nothing).
 REFINE_PASSES = 5
+#: Seedings of the k-means (:func:`.kmeans.weighted_kmeans`; the lowest inertia wins).
+KMEANS_RESTARTS = 10
+#: Degree of the image-wide polynomial of :func:`dop_given_intensity`.
+RESIDUAL_DEGREE = 3
 
 
 @dataclass(frozen=True)
@@ -376,8 +385,25 @@ def node_features(
         "dolp_over_dop": lambda: dolp / (m["d"] + EPS_DOP),
         "dop_vs_log_intensity_slope": lambda: cov / (var_l + 1e-6),
         "dop_vs_log_intensity_corr": lambda: cov / np.sqrt(var_l * var_d + 1e-12),
+        "log_dop_given_intensity": lambda: dop_given_intensity(m["l"], m["d"], count),
     }
     return np.stack([make[k]() for k in names], axis=1)
+
+
+def dop_given_intensity(
+    log_intensity: np.ndarray, dop: np.ndarray, weight: np.ndarray, degree: int = RESIDUAL_DEGREE
+) -> np.ndarray:
+    """log ρ̄ − f(log Î), f the polynomial of ``degree`` fitted over all regions
+    (least squares weighted by ``weight``, the regions' areas): the material cue taken
+    image-wide. Where one material covers most of the image, f is its ρ–shading
+    relation, and a region of another material (other n, other depolarisation) lies off
+    it at whatever tilt; ρ̄ and log Î are the regions' means.
+    """
+    y = np.log(dop + EPS_DOP)
+    x = log_intensity - np.average(log_intensity, weights=weight)
+    scale = max(float(np.sqrt(np.average(x * x, weights=weight))), 1e-12)
+    coef = np.polynomial.polynomial.polyfit(x / scale, y, degree, w=np.sqrt(weight))
+    return y - np.polynomial.polynomial.polyval(x / scale, coef)
 
 
 def _standardise(x: np.ndarray, weight: np.ndarray) -> np.ndarray:
@@ -436,16 +462,18 @@ def _cluster_mixture(
     """Node labels of a Gaussian mixture or k-means, posteriors smoothed over adjacency."""
     if p.clustering == "gmm":
         from sklearn.mixture import GaussianMixture
+        from threadpoolctl import threadpool_limits
 
-        gm = GaussianMixture(
-            k, covariance_type=p.covariance, n_init=3, random_state=p.seed, reg_covar=1e-4
-        ).fit(z)
-        post = gm.predict_proba(z)
+        # a few thousand nodes in a few dimensions: threaded BLAS on tiny matrices
+        # only spins (18 ms per 3 × 3 triangular solve on a loaded 2-core machine)
+        with threadpool_limits(1):
+            gm = GaussianMixture(
+                k, covariance_type=p.covariance, n_init=3, random_state=p.seed, reg_covar=1e-4
+            ).fit(z)
+            post = gm.predict_proba(z)
     else:
-        from sklearn.cluster import KMeans
-
-        km = KMeans(k, n_init=10, random_state=p.seed).fit(z, sample_weight=weight)
-        d = ((z[:, None, :] - km.cluster_centers_[None]) ** 2).sum(-1)
+        fit = weighted_kmeans(z, k, weight, n_init=KMEANS_RESTARTS, seed=p.seed)
+        d = squared_distances(z, fit.centres)
         post = np.exp(-(d - d.min(axis=1, keepdims=True)) / 2)
         post /= post.sum(axis=1, keepdims=True)
     post = _smooth_posteriors(post, adjacency, p.smoothing, p.smoothing_iterations)
@@ -617,12 +645,7 @@ def segment_unsupervised(
         else:
             z = pca_features(xs, p.variance).features
         if p.clustering in ("gmm", "kmeans"):
-            from threadpoolctl import threadpool_limits
-
-            # a few thousand nodes in a few dimensions: threaded BLAS on tiny matrices
-            # only spins (18 ms per 3 × 3 triangular solve on a loaded 2-core machine)
-            with threadpool_limits(1):
-                node_labels = _cluster_mixture(z, k, weight, adjacency, p)
+            node_labels = _cluster_mixture(z, k, weight, adjacency, p)
         else:
             node_labels = _cluster_graph(z, k, adjacency, p)
     node_labels = np.asarray(node_labels, dtype=np.int32)
