@@ -60,6 +60,10 @@ S5 = (1.0, 2.0, 4.0, 8.0, 16.0)
 #: Variant name -> parameters.
 VARIANTS: dict[str, UnsupervisedParams] = {
     "default": D,
+    "default-no-diffusion (previous default)": D.replace(diffusion=0.0),
+    "default-diffusion-reach-5%": D.replace(diffusion_range=0.05),
+    "default-diffusion-reach-9%": D.replace(diffusion_range=0.09),
+    "default-diffusion-tau-1": D.replace(diffusion_tau=1.0),
     "default-no-clip": D.replace(clip=0.0),
     "default+log-intensity": D.replace(features=("log_intensity",) + D.features),
     "default-gmm": D.replace(clustering="gmm"),
