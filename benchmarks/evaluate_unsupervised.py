@@ -60,18 +60,18 @@ S5 = (1.0, 2.0, 4.0, 8.0, 16.0)
 #: Variant name -> parameters.
 VARIANTS: dict[str, UnsupervisedParams] = {
     "default": D,
-    "default-no-diffusion (previous default)": D.replace(diffusion=0.0),
+    "previous-default-no-diffusion": D.replace(diffusion=0.0, features=D.features[1:]),
     "default-diffusion-reach-5%": D.replace(diffusion_range=0.05),
     "default-diffusion-reach-9%": D.replace(diffusion_range=0.09),
     "default-diffusion-tau-1": D.replace(diffusion_tau=1.0),
     "default-no-clip": D.replace(clip=0.0),
-    "default+log-intensity": D.replace(features=("log_intensity",) + D.features),
+    "default-no-log-intensity": D.replace(features=D.features[1:]),
     "default-gmm": D.replace(clustering="gmm"),
     "default-half-edge-weight": D.replace(polarisation_edge_weight=0.5),
-    "default-no-cue": D.replace(features=("dop", "dop_spread")),
+    "default-no-cue": D.replace(features=("log_intensity", "dop", "dop_spread")),
     "default+cue-correlation": D.replace(features=D.features + MATERIAL_CUE[1:]),
     "default+dop-given-intensity": D.replace(features=D.features + ("log_dop_given_intensity",)),
-    "dop-given-intensity,dop-spread": D.replace(features=("dop_spread", "log_dop_given_intensity")),
+    "dop-given-intensity+dop-spread": D.replace(features=("dop_spread", "log_dop_given_intensity")),
     "previous-default-gmm3": D.replace(
         features=F3, clustering="gmm", smoothing=0.5, polarisation_edge_weight=1.0, clip=0.0
     ),

@@ -42,23 +42,23 @@ Deterministic: every random step is seeded.
 
 Defaults (``UnsupervisedParams()``), measured with ``benchmarks/evaluate_unsupervised.py``
 on the rendered scenes and the hand-labelled real frames together: superpixels on log Î
-and Stokes edges; node features mean ρ, spread of ρ (a material that depolarises more,
-or is rougher, polarises less and less evenly at every tilt) and the material cue's
-slope of ρ against log Î (how polarisation follows the shading, set by n and the
-depolarisation rather than the tilt); these features diffused over the region graph
-but not across its edges (:mod:`.region_diffusion`, λ = 0.5, reach 7 % of the image
-side, τ = 0.75 × the median border strength), so that each superpixel carries the
-features of the surface it lies on rather than of its own small patch of tilt; the
-standardised features winsorised at ± 2 standard deviations (a superpixel straddling
-two materials has an outlying spread and slope); k-means (10 restarts, area-weighted);
-posterior smoothing λ = 0.3 over 5 iterations. A reach of 5–9 % measures alike; without
-the diffusion, a real fruit falls apart by its shading into as many segments as it has
-tones of ρ. Adding mean log Î separates the real fruits frame better but merges the
-camouflage net with the foliage, whose shading it follows; the correlation of ρ and
-log Î (the other half of the cue) splits the real camera's mat; a Gaussian mixture
-sometimes fits one tiny component (a degenerate result); the multi-scale pixel stack
-separates the camouflage scene better but splits the camera's mat by shading; the graph
-cuts on neighbouring regions peel off single regions. The benchmark prints every variant.
+and Stokes edges; node features mean log Î, mean ρ, spread of ρ (a material that
+depolarises more, or is rougher, polarises less and less evenly at every tilt) and the
+material cue's slope of ρ against log Î (how polarisation follows the shading, set by n
+and the depolarisation rather than the tilt); standardised, winsorised at ± 2 standard
+deviations (a superpixel straddling two materials has an outlying spread and slope),
+then diffused over the region graph but not across its edges (:mod:`.region_diffusion`,
+λ = 0.5, reach 7 % of the image side, τ = 0.75 × the median border strength), so that
+each superpixel carries the features of the surface it lies on rather than of its own
+small patch of tilt; k-means (10 restarts, area-weighted); posterior smoothing λ = 0.3
+over 5 iterations. Without the diffusion a real fruit falls apart by its shading into
+as many segments as it has tones of ρ, and mean log Î merged the camouflage net with
+the foliage whose shading it follows; with it, both help. The correlation of ρ and
+log Î (the other half of the cue) and the AoLP coherence split the real camera's mat;
+the cue taken image-wide (:func:`dop_given_intensity`) helps some renders and hurts
+others; a Gaussian mixture sometimes fits one tiny component; the multi-scale pixel
+stack splits the camera's mat by shading; the graph cuts on neighbouring regions peel
+off single regions. The benchmark prints every variant.
 """
 
 from __future__ import annotations
@@ -173,7 +173,12 @@ class UnsupervisedParams:
     region_area: int = 0
     boundary: str = "polarisation"
     polarisation_edge_weight: float = 1.0
-    features: tuple[str, ...] = ("dop", "dop_spread", "dop_vs_log_intensity_slope")
+    features: tuple[str, ...] = (
+        "log_intensity",
+        "dop",
+        "dop_spread",
+        "dop_vs_log_intensity_slope",
+    )
     pixel_scales: tuple[float, ...] = ()
     pixel_groups: tuple[str, ...] = ("intensity", "polarisation", "invariant")
     variance: float = 0.95
