@@ -1,4 +1,5 @@
-"""What both widgets share: the angle-stack chooser, the angles field, Run/Cancel, status."""
+"""What the widgets share: docks that scroll, the angle-stack chooser, the angles field,
+Run/Cancel, status."""
 
 from __future__ import annotations
 
@@ -9,6 +10,7 @@ import numpy as np
 from magicgui.widgets import ComboBox, Container, Label, LineEdit, ProgressBar, PushButton
 from napari.layers import Image, Labels
 from napari.utils.notifications import show_error
+from qtpy.QtWidgets import QScrollArea, QWidget
 
 from ..engine import PolarsegError
 from ._layers import ANGLES_KEY, find_output, layer_tag, source_key
@@ -30,7 +32,52 @@ def is_angle_stack(layer: Layer) -> bool:
     )
 
 
-class StackWidget(Container):
+class ScrollingContainer(Container):
+    """A labelled vertical Container whose controls scroll when its dock is too short.
+
+    napari docks a magicgui widget's ``native`` (``add_dock_widget`` of napari 0.9 has no
+    scroll option), and magicgui's ``scrollable=True`` puts the widget holding the
+    controls' layout inside a ``QScrollArea``, its ``root_native_widget``. Here ``native``
+    is that scroll area, so napari docks the scroll area and the window's minimum height
+    no longer grows with the controls; :attr:`content` is the widget with the layout
+    (where a subclass adds plain Qt widgets such as a plot canvas).
+    """
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__(scrollable=True, **kwargs)
+        # the scroll area stretches the controls' widget to its height: a stretch below
+        # them keeps them packed at the top (napari adds one to a dock that does not scroll)
+        self.content.layout().addStretch(1)
+
+    @property
+    def native(self) -> QScrollArea:
+        """The scroll area around the controls: the widget napari docks."""
+        return self.root_native_widget
+
+    @property
+    def content(self) -> QWidget:
+        """The widget inside the scroll area that holds the controls' layout."""
+        return self.root_native_widget.widget()
+
+    def add_native(self, widget: QWidget, expand: bool = False) -> None:
+        """Add a plain Qt ``widget`` below the controls (add every magicgui widget first).
+
+        With ``expand`` it takes the height the controls leave (a plot canvas) in place of
+        the stretch that packs them at the top; widgets added after it follow it.
+        """
+        layout = self.content.layout()
+        last = layout.count() - 1
+        packed = last >= 0 and layout.itemAt(last).spacerItem() is not None
+        if packed and expand:
+            layout.takeAt(last)
+            layout.addWidget(widget, 1)  # the only stretch: the controls keep their height
+        elif packed:
+            layout.insertWidget(last, widget)
+        else:
+            layout.addWidget(widget)
+
+
+class StackWidget(ScrollingContainer):
     """Base of the plugin's widgets: stack layer, polariser angles, Run, Cancel, status.
 
     Subclasses add their parameter widgets with :meth:`_add_parameters`, implement

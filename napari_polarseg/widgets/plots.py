@@ -151,7 +151,7 @@ class PlotsWidget(StackWidget):
         self.figure = Figure(figsize=(4.0, 3.2), layout="constrained")
         self.canvas = FigureCanvasQTAgg(self.figure)
         self.canvas.setMinimumHeight(280)
-        self.native.layout().addWidget(self.canvas)
+        self.add_native(self.canvas, expand=True)
         self.plot.changed.connect(self.draw)
         self.components_button.changed.connect(self.add_component_maps)
         self.draw()

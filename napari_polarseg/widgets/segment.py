@@ -97,6 +97,9 @@ CONTROLLED = (
     "n_segments",
 )
 
+#: Parameter controls shown above the collapsed *advanced settings* section.
+FIRST_CONTROLS = ("n_segments",)
+
 #: Controls of the normalized cut only: disabled while scribbles replace the cut.
 CUT_ONLY = ("scale", "scale_mode", "clustering", "min_segment_blocks", "n_segments")
 
@@ -338,7 +341,10 @@ class SegmentWidget(StackWidget):
     Run and Cancel; a live-update toggle that reruns after every change, including every
     stroke painted into the chosen mask or scribbles layer; *Export results…*
     (:meth:`export_results`: the chosen stack's last result as the folder ``polarseg
-    segment --out`` writes).
+    segment --out`` writes). The stack, the angles, the preset, the number of segments,
+    the scribbles, live update, Run and Cancel show at first; the *advanced settings*
+    check box shows the rest (:attr:`advanced`, collapsed by default). The dock scrolls
+    (:class:`~napari_polarseg.widgets._base.ScrollingContainer`).
     Saturated samples (at the integer dtype's maximum) and black ones (at or below 0)
     are always left out of the fit and counted in the status line.
 
@@ -620,16 +626,36 @@ class SegmentWidget(StackWidget):
             "as polarseg segment --out writes them",
         )
         self.parameter_widgets = [getattr(self, name) for name in CONTROLLED]
+        # the few controls a user touches first stay in view; the rest (every parameter
+        # the preset sets, the mask, the files) sit in the collapsed "advanced" section
+        self.advanced = Container(
+            widgets=[
+                self.params_file,
+                *(getattr(self, name) for name in CONTROLLED if name not in FIRST_CONTROLS),
+                self.mask_layer,
+                self.classifier_file,
+            ],
+            labels=True,
+            label="",
+            visible=False,
+        )
+        self.advanced.margins = (0, 0, 0, 0)
+        self.show_advanced = CheckBox(
+            text="advanced settings",
+            value=False,
+            tooltip="Show every parameter of the pipeline (the preset sets them), the mask, "
+            "and the parameter and classifier files",
+        )
+        self.show_advanced.changed.connect(self._on_show_advanced)
         self._add_parameters(
             [
                 self.preset,
-                self.params_file,
-                *self.parameter_widgets,
-                self.mask_layer,
+                *(getattr(self, name) for name in FIRST_CONTROLS),
                 self.scribbles_layer,
                 self.new_scribbles_button,
-                self.classifier_file,
                 self.live,
+                self.show_advanced,
+                self.advanced,
             ]
         )
         self.insert(self.index(self.progress), self.export_button)  # after Run and Cancel
@@ -711,6 +737,9 @@ class SegmentWidget(StackWidget):
                 raise PolarsegError(
                     f"{name} {value} is outside the widget's range {control.min:g}..{control.max:g}"
                 )
+
+    def _on_show_advanced(self, shown: bool) -> None:
+        self.advanced.visible = bool(shown)
 
     def _on_preset_changed(self, name: str) -> None:
         self.set_params(PRESETS[name])
