@@ -10,6 +10,7 @@ import numpy as np
 from magicgui.widgets import ComboBox, Container, Label, LineEdit, ProgressBar, PushButton
 from napari.layers import Image, Labels
 from napari.utils.notifications import show_error
+from qtpy.QtCore import QEvent, QObject
 from qtpy.QtWidgets import QScrollArea, QWidget
 
 from ..engine import PolarsegError
@@ -32,6 +33,31 @@ def is_angle_stack(layer: Layer) -> bool:
     )
 
 
+class WidthFollower(QObject):
+    """Keeps a vertical scroll area at least as wide as the widget it scrolls.
+
+    magicgui sets the area's minimum width when a control is added, before it widens the
+    label column (and a section shown later widens the controls again): the area then
+    cut off the right edge of the controls. This follows every layout change instead.
+    """
+
+    def __init__(self, area: QScrollArea) -> None:
+        super().__init__(area)
+        self._area = area
+        area.widget().installEventFilter(self)
+
+    def eventFilter(self, watched: QObject, event: QEvent) -> bool:  # noqa: N802 (Qt)
+        if event.type() == QEvent.Type.LayoutRequest:
+            self.fit()
+        return False
+
+    def fit(self) -> None:
+        """Set the area's minimum width to its widget's plus the vertical scroll bar."""
+        bar = self._area.verticalScrollBar().sizeHint().width()
+        frame = 2 * self._area.frameWidth()
+        self._area.setMinimumWidth(self._area.widget().minimumSizeHint().width() + bar + frame)
+
+
 class ScrollingContainer(Container):
     """A labelled vertical Container whose controls scroll when its dock is too short.
 
@@ -48,6 +74,7 @@ class ScrollingContainer(Container):
         # the scroll area stretches the controls' widget to its height: a stretch below
         # them keeps them packed at the top (napari adds one to a dock that does not scroll)
         self.content.layout().addStretch(1)
+        self._width = WidthFollower(self.native)
 
     @property
     def native(self) -> QScrollArea:
