@@ -16,6 +16,9 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from napari.layers import Image, Labels
+from napari.utils.colormaps import CyclicLabelColormap
+
+from ..palette import segment_rgba
 
 if TYPE_CHECKING:
     import napari
@@ -44,6 +47,18 @@ class LayerStyle:
     extra: dict[str, Any] = field(default_factory=dict)
 
 
+#: ``LayerStyle.colormap`` of a Labels layer drawn with :func:`label_colormap`.
+SEGMENT_PALETTE = "segment palette"
+
+
+def label_colormap() -> CyclicLabelColormap:
+    """The labels colormap of segments and scribbles: label 0 transparent, labels 1, 2, …
+    the bright, pairwise distinct colours of :data:`napari_polarseg.palette.SEGMENT_COLOURS`
+    (cycled after the tenth)."""
+    colours = np.concatenate([np.zeros((1, 4)), segment_rgba()])
+    return CyclicLabelColormap(colors=colours, background_value=0)
+
+
 #: Output layers by role.
 ROLES: dict[str, LayerStyle] = {
     # of the four maps only ρ starts visible: stacked, the top one hides the others, and
@@ -56,7 +71,9 @@ ROLES: dict[str, LayerStyle] = {
         "φ phase", colormap="twilight", limits=(0.0, math.pi), extra={"visible": False}
     ),
     "zenith": LayerStyle("θ zenith", colormap="magma", extra={"visible": False}),
-    "segments": LayerStyle("segments", layer_type="labels", extra={"opacity": 0.6}),
+    "segments": LayerStyle(
+        "segments", layer_type="labels", colormap=SEGMENT_PALETTE, extra={"opacity": 0.6}
+    ),
     "error": LayerStyle("reconstruction error", colormap="inferno", extra={"visible": False}),
     # 1 where a pixel was left out of the fit and the features (mask, saturated, black, …)
     "masked": LayerStyle(
@@ -166,7 +183,10 @@ def show_output(
     selection = viewer.layers.selection
     selected, active = set(selection), selection.active
     if style.layer_type == "labels":
-        layer = viewer.add_labels(data, name=style.name, metadata=meta, **placement, **style.extra)
+        palette = {"colormap": label_colormap()} if style.colormap == SEGMENT_PALETTE else {}
+        layer = viewer.add_labels(
+            data, name=style.name, metadata=meta, **placement, **palette, **style.extra
+        )
     else:
         layer = viewer.add_image(
             data, name=style.name, metadata=meta, **placement, **_image_style(role, data)

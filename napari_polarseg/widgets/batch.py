@@ -45,7 +45,7 @@ from ..engine.timeseries import (
     segment_timeseries,
 )
 from ._base import ScrollingContainer, is_angle_stack
-from ._layers import ANGLES_KEY
+from ._layers import ANGLES_KEY, label_colormap
 from ._runner import WorkerSlot, parse_angles
 
 if TYPE_CHECKING:
@@ -379,7 +379,11 @@ def add_timeseries_layers(
         place = {"scale": tuple(source.scale[-2:]), "translate": tuple(source.translate[-2:])}
     layers = [
         viewer.add_labels(
-            np.asarray(labels, np.int32) + 1, name=f"{name} segments", opacity=0.6, **place
+            np.asarray(labels, np.int32) + 1,
+            name=f"{name} segments",
+            opacity=0.6,
+            colormap=label_colormap(),
+            **place,
         ),
         viewer.add_labels(np.asarray(changes, np.uint8), name=f"{name} change", **place),
     ]

@@ -28,7 +28,7 @@ from ..engine.params import (
 )
 from ..io import read_params_file
 from ._base import StackWidget
-from ._layers import find_output, remove_output, show_output, source_key
+from ._layers import find_output, label_colormap, remove_output, show_output, source_key
 from ._runner import (
     CLASSIFIER_STAGES,
     ClassifierOutput,
@@ -1094,6 +1094,7 @@ class SegmentWidget(StackWidget):
         layer = self._viewer.add_labels(
             np.zeros((h, w), dtype=np.int32),
             name=f"{stack.name} scribbles",
+            colormap=label_colormap(),  # the segments' colours: a stroke and its segment match
             scale=tuple(stack.scale[-2:]),
             translate=tuple(stack.translate[-2:]),
         )
