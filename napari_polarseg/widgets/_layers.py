@@ -103,6 +103,13 @@ def source_key(layer: Layer) -> str:
     return str(layer.unique_id)
 
 
+def output_name(role: str, source: Layer) -> str:
+    """Name of a new ``role`` layer computed from ``source``: the role's name and the
+    source layer's, e.g. ``"segments (leaves)"``, so outputs of several stacks tell
+    which stack they came from (napari would number them ``segments [1]``, …)."""
+    return f"{ROLES[role].name} ({source.name})"
+
+
 def layer_tag(layer: Layer) -> dict[str, Any] | None:
     """The plugin's tag of ``layer``, or None for a layer the plugin did not add."""
     tag = layer.metadata.get(TAG) if isinstance(layer.metadata, dict) else None
@@ -154,6 +161,7 @@ def show_output(
 ) -> Layer:
     """Add the ``role`` layer for ``source``, or replace the data of the existing one.
 
+    A new layer is named after its role and its source (:func:`output_name`).
     The layer takes the scale and translation of the last two axes of ``source`` so it
     overlays the stack; the layer selection stays as the user left it. On a rerun only
     the data, the contrast limits (for images) and the plugin's metadata change; the
@@ -180,16 +188,17 @@ def show_output(
     placement = {"scale": tuple(source.scale[-2:]), "translate": tuple(source.translate[-2:])}
     # napari selects every layer it adds; the user's selection (e.g. the scribbles layer
     # being painted) is kept instead
+    name = output_name(role, source)
     selection = viewer.layers.selection
     selected, active = set(selection), selection.active
     if style.layer_type == "labels":
         palette = {"colormap": label_colormap()} if style.colormap == SEGMENT_PALETTE else {}
         layer = viewer.add_labels(
-            data, name=style.name, metadata=meta, **placement, **palette, **style.extra
+            data, name=name, metadata=meta, **placement, **palette, **style.extra
         )
     else:
         layer = viewer.add_image(
-            data, name=style.name, metadata=meta, **placement, **_image_style(role, data)
+            data, name=name, metadata=meta, **placement, **_image_style(role, data)
         )
     selection.clear()
     selection.update(selected)
