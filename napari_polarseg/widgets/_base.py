@@ -15,7 +15,7 @@ from qtpy.QtWidgets import QScrollArea, QWidget
 
 from ..engine import PolarsegError
 from ._layers import ANGLES_KEY, find_output, layer_tag, source_key
-from ._runner import WorkerSlot, format_angles, parse_angles
+from ._runner import PROGRESS_STEPS, WorkerSlot, format_angles, parse_angles
 
 if TYPE_CHECKING:
     import napari
@@ -139,8 +139,9 @@ class StackWidget(ScrollingContainer):
             tooltip="Stop the running computation (within about a second); what was "
             "shown before stays",
         )
-        #: stages of the current (or last) run done; long runs also show in napari's
-        #: activity dock (see ``_runner.ACTIVITY_DELAY``)
+        #: stages of the current (or last) run done, PROGRESS_STEPS ticks each (a long
+        #: stage moves it as it goes); long runs also show in napari's activity dock
+        #: (see ``_runner.ACTIVITY_DELAY``)
         self.progress = ProgressBar(label="progress", value=0, min=0, max=1)
         self.status = Label(value="")
         self.status.native.setWordWrap(True)
@@ -280,15 +281,17 @@ class StackWidget(ScrollingContainer):
         on_partial: Any = None,
         live: bool = False,
         cancellable: bool = False,
+        reports: bool = False,
     ) -> None:
         """Run ``job`` in the widget's worker slot. A ``live`` rerun (after a parameter
         change) enables Cancel and reports progress only if it still runs
         ``_runner.REPORT_INTERVAL`` later: one that ends sooner repaints nothing before
         its result. A ``cancellable`` job gets a ``cancel`` callable
-        (:meth:`~napari_polarseg.widgets._runner.WorkerSlot.submit`)."""
+        (:meth:`~napari_polarseg.widgets._runner.WorkerSlot.submit`), a job that
+        ``reports`` a ``report`` callable for progress within its stages."""
         if not live:
             self.cancel_button.enabled = True
-        self._slot.submit(job, args, total, on_result, on_partial, live, cancellable)
+        self._slot.submit(job, args, total, on_result, on_partial, live, cancellable, reports)
 
     def _set_status(self, text: str) -> None:
         try:
@@ -296,10 +299,11 @@ class StackWidget(ScrollingContainer):
         except RuntimeError:  # the widget was deleted while a worker ended
             pass
 
-    def _set_progress(self, index: int, total: int) -> None:
+    def _set_progress(self, index: float, total: int) -> None:
         try:
-            self.progress.max = max(total, 1)
-            self.progress.value = min(index, total)
+            # PROGRESS_STEPS ticks per stage: a share of a stage (index 2.4) moves the bar
+            self.progress.max = max(total, 1) * PROGRESS_STEPS
+            self.progress.value = round(min(index, total) * PROGRESS_STEPS)
             if self._slot.worker is not None:
                 self.cancel_button.enabled = True
         except RuntimeError:  # the widget was deleted while a worker ended

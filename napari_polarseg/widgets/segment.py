@@ -118,6 +118,7 @@ def segment_job(
     mask_key: str | None = None,
     prefetch: bool = False,
     cancel: Callable[[], bool] | None = None,
+    report: Callable[[str, float, int], None] | None = None,
 ) -> Generator[Any, None, Any]:
     """Worker job: run the stale stages of the layer's cached pipeline, then assemble.
 
@@ -138,16 +139,35 @@ def segment_job(
     it before every product of its eigensolvers and raises
     :class:`~napari_polarseg.engine.errors.Cancelled`: Cancel or a newer request stops a
     long cut (or a prefetch) at once instead of at the end of the stage.
+
+    ``report`` (the runner's, ``WorkerSlot.submit(..., reports=True)``) receives the
+    progress within the stages that loop in chunks (harmonics, reconstruction) as
+    ``(stage, index, total)`` with a fractional ``index`` on the same scale as the
+    yields (:meth:`Pipeline.run_iter <napari_polarseg.engine.Pipeline.run_iter>`).
     """
     pipe = store.obtain(key, data, angles_rad, params, region=region, mask_key=mask_key)
     total = len(STAGES)
     if pipe.is_fresh("reconstruction"):
-        yield from pipe.run_iter(reconstruction=True, cancel=cancel)
+        yield from pipe.run_iter(reconstruction=True, cancel=cancel, progress=report)
     else:
-        for stage, index, _ in pipe.run_iter(reconstruction=False, cancel=cancel):
+        within = None
+        if report is not None:
+
+            def within(stage: str, index: float, _n: int) -> None:
+                report(stage, index, total)
+
+        last = 0
+        for stage, index, _ in pipe.run_iter(False, cancel=cancel, progress=within):
+            last = index
             yield stage, index, total
         yield Partial(pipe.result(reconstruction=False, params=params))
-        pipe.get("reconstruction")
+        share = None
+        if report is not None:
+
+            def share(done: float) -> None:
+                report(STAGES[-1], last + done * (total - last), total)
+
+        pipe.get("reconstruction", share)
         yield STAGES[-1], total, total
     result = pipe.result(reconstruction=True, params=params)
     if prefetch:
@@ -1303,7 +1323,8 @@ class SegmentWidget(StackWidget):
             job, total = classifier_job, len(CLASSIFIER_STAGES)
         # a new stroke or request stops the prediction, or the cut's eigensolver, at once
         cancellable = True
-        self._submit(job, args, total, on_result, on_partial, self._live_run, cancellable)
+        reports = job is segment_job  # progress within the harmonics and reconstruction
+        self._submit(job, args, total, on_result, on_partial, self._live_run, cancellable, reports)
 
     def _show(
         self,
