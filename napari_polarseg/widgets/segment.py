@@ -26,6 +26,7 @@ from ..engine.params import (
     SCALE_MODES,
     SPECULAR_BRANCHES,
 )
+from ..engine.stokes import stokes_components
 from ..io import read_params_file
 from ._base import StackWidget
 from ._layers import find_output, label_colormap, remove_output, show_output, source_key
@@ -40,6 +41,7 @@ from ._runner import (
     content_digest,
     scribble_problem,
 )
+from .polarisation import VIEW_OUTPUTS, composite_for, view_mode_box
 
 if TYPE_CHECKING:
     import napari
@@ -396,8 +398,12 @@ class SegmentWidget(StackWidget):
     (Image, hidden: 1 − (p1 − p2), one minus the margin between the two most probable
     classes, 0 sure … 1 a tie: where another stroke helps most); the probabilities of
     every class are :attr:`probabilities` (K, H, W) with their labels in
-    :attr:`classes`, the uncertainty is :attr:`uncertainty`. A docked *Polarisation
-    plots* widget is handed every new classifier (its feature importances).
+    :attr:`classes`, the uncertainty is :attr:`uncertainty`. With *HSV and Stokes layers*
+    (advanced) also ``S0/S1/S2 Stokes`` (hidden) and ``AoLP/DoLP HSV`` in the chosen *HSV
+    view* (with intensity, light, or dark: value from ρ, black where unpolarised), the
+    layers the *Polarisation image* widget shares; changing the view redraws them only.
+    A docked *Polarisation plots* widget is handed every new classifier (its feature
+    importances).
 
     Parameters
     ----------
@@ -645,6 +651,13 @@ class SegmentWidget(StackWidget):
             "parameters…' and polarseg segment --params), summary.json and overview.png, "
             "as polarseg segment --out writes them",
         )
+        self.views = CheckBox(
+            text="HSV and Stokes layers",
+            value=False,
+            tooltip="Also add the AoLP/DoLP HSV view and the S0, S1, S2 Stokes layers "
+            "(hidden) of each result, as the Polarisation image widget does",
+        )
+        self.view_mode = view_mode_box()
         self.parameter_widgets = [getattr(self, name) for name in CONTROLLED]
         # the few controls a user touches first stay in view; the rest (every parameter
         # the preset sets, the mask, the files) sit in the collapsed "advanced" section
@@ -654,6 +667,8 @@ class SegmentWidget(StackWidget):
                 *(getattr(self, name) for name in CONTROLLED if name not in FIRST_CONTROLS),
                 self.mask_layer,
                 self.classifier_file,
+                self.views,
+                self.view_mode,
             ],
             labels=True,
             label="",
@@ -667,6 +682,8 @@ class SegmentWidget(StackWidget):
             "and the parameter and classifier files",
         )
         self.show_advanced.changed.connect(self._on_show_advanced)
+        self.views.changed.connect(self._on_views_changed)
+        self.view_mode.changed.connect(self._on_views_changed)
         self._add_parameters(
             [
                 self.preset,
@@ -760,6 +777,31 @@ class SegmentWidget(StackWidget):
 
     def _on_show_advanced(self, shown: bool) -> None:
         self.advanced.visible = bool(shown)
+
+    def _on_views_changed(self, *_: Any) -> None:
+        """Draw the views of the chosen stack's shown result at once (no rerun)."""
+        layer = self.stack_layer.value
+        shown = None if layer is None else self._shown.get(source_key(layer))
+        if self.views.value and shown is not None and layer in self._viewer.layers:
+            segments = find_output(self._viewer, "segments", layer)
+            meta = (
+                {}
+                if segments is None
+                else {"polarseg_params": segments.metadata.get("polarseg_params")}
+            )
+            self._show_views(layer, shown[0], meta)
+
+    def _show_views(self, layer: Layer, result: SegmentationResult, meta: dict) -> None:
+        """The S0, S1, S2 Stokes layers (hidden) and the AoLP/DoLP HSV view of ``result``
+        in the chosen *HSV view* (:data:`~napari_polarseg.widgets.polarisation.VIEW_MODES`),
+        below the segments; the Polarisation image widget shares these layers."""
+        arrays = (np.asarray(result.intensity), np.asarray(result.dop), np.asarray(result.phase))
+        for role, data in zip(VIEW_OUTPUTS[:-1], stokes_components(*arrays), strict=True):
+            self._show_below_segments(role, data, layer, meta)
+        mode = str(self.view_mode.value)
+        rgb, rho_max = composite_for(*arrays, 0.0, mode)
+        composite = {"polarseg_composite": {"dolp_max": rho_max, "mode": mode}}
+        self._show_below_segments("hsv", rgb, layer, {**meta, **composite})
 
     def _on_preset_changed(self, name: str) -> None:
         self.set_params(PRESETS[name])
@@ -1378,6 +1420,8 @@ class SegmentWidget(StackWidget):
                 residual = np.array(result.residual)
                 self._show_below_segments("residual", residual, layer, meta)
                 self._show_below_segments("masked", masked, layer, meta)
+            if self.views.value:
+                self._show_views(layer, result, meta)
         if out is not None:
             assert confidence is not None
             prediction = out.prediction
