@@ -138,8 +138,30 @@ def get_reader(path: str | list[str]) -> ReaderFunction | None:
     return None
 
 
+def mosaic_placement(info: dict[str, Any]) -> dict[str, tuple[float, float]]:
+    """Scale and translate that put a stack decoded from a raw mosaic frame on that frame.
+
+    A super-pixel decoding makes one stack pixel of each period × period cell of the raw
+    frame (period 2 for a polariser mosaic, 4 for a colour-polarisation one): the stack
+    gets scale ``period`` and the translate that centres each of its pixels on its cell.
+    Convention: napari's pixel centres, pixel (i, j) of a layer at scale 1 and no
+    translate is centred on world (i, j) and covers i − ½ … i + ½; cell k of the raw frame
+    covers raw pixels ``period·k … period·k + period − 1``, centred on ``period·k + (period
+    − 1)/2``, hence translate ``(period − 1)/2`` (0.5 for a 2 × 2 super-pixel) and stack
+    pixel k covers exactly raw ``period·k − ½ … period·k + period − ½``. An interpolated
+    decoding (full resolution) and every other format need nothing (empty dict).
+    """
+    if info.get("format") != "mosaic" or info.get("demosaic") != "superpixel":
+        return {}
+    period = 4.0 if info.get("bayer") else 2.0
+    offset = (period - 1.0) / 2.0
+    return {"scale": (period, period), "translate": (offset, offset)}
+
+
 def stack_layer_data(data: Any, name: str | None = None) -> LayerData:
-    """napari layer data tuple of a :class:`napari_polarseg.io.StackData`."""
+    """napari layer data tuple of a :class:`napari_polarseg.io.StackData`; a stack decoded
+    by super-pixel from a raw mosaic frame overlays that frame (:func:`mosaic_placement`,
+    the angle axis keeps scale 1)."""
     angles = [float(a) for a in np.asarray(data.angles_deg, dtype=float).ravel()]
     source = str(data.source)
     info = {k: v for k, v in data.metadata.items() if k != "warnings"}
@@ -147,7 +169,12 @@ def stack_layer_data(data: Any, name: str | None = None) -> LayerData:
     if data.colour_stack is not None:
         metadata["colour_stack"] = data.colour_stack
     layer_name = name or Path(source).stem or Path(source).name
-    return (data.stack, {"name": layer_name, "metadata": metadata, "colormap": "gray"}, "image")
+    kwargs: dict[str, Any] = {"name": layer_name, "metadata": metadata, "colormap": "gray"}
+    placement = mosaic_placement(info)
+    if placement:
+        kwargs["scale"] = (1.0, *placement["scale"])
+        kwargs["translate"] = (0.0, *placement["translate"])
+    return (data.stack, kwargs, "image")
 
 
 def read_angle_stack(path: str | list[str]) -> list[LayerData]:

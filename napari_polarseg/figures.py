@@ -191,25 +191,41 @@ def components_figure(
     return _map_grid(data.blocks, titles, fig, theme, "RdBu_r")
 
 
+#: Colours of the reconstructions in :func:`histograms_figure` (matplotlib's tab10
+#: orange, green, red, purple, …: none is the original's grey or the theme's colours).
+RECONSTRUCTION_COLOURS = ("#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#17becf", "#bcbd22")
+
+
 def histograms_figure(
     data: plots.ReconstructionHistograms, fig: Figure | None = None, theme: dict[str, str] = LIGHT
 ) -> Figure:
-    """Histogram of Î and of its reconstructions on shared bins (thesis figure 5.17)."""
-    from matplotlib import colormaps
-
-    fig = _figure(fig, (5.5, 3.8), theme)
-    ax = fig.add_subplot(1, 1, 1)
-    ax.stairs(data.original, data.edges, color=theme["foreground"], lw=1.6, label="original Î")
-    cmap = colormaps["plasma"]
+    """Histogram of Î and of its reconstructions on shared bins (thesis figure 5.17), as
+    small multiples: one panel per degree L, each with the original Î (grey, filled)
+    behind that reconstruction (a coloured step line, its own colour), on one x-axis (the
+    robust range of :func:`~napari_polarseg.engine.plots.reconstruction_histograms`).
+    Heights are shares of the counted pixels, so a sample of blocks reads as the whole."""
     n = max(1, len(data.reconstructed))
-    for i, (d, counts) in enumerate(data.reconstructed.items()):
-        colour = cmap(0.15 + 0.7 * i / max(1, n - 1))
-        ax.stairs(counts, data.edges, color=colour, lw=1.0, label=f"L = {d}")
-    ax.set_xlabel("Î intensity")
-    ax.set_ylabel("pixels")
-    ax.set_title(f"original and reconstructed Î (w = {data.window})")
-    _style(ax, theme)
-    _legend(ax, theme)
+    fig = _figure(fig, (5.5, 1.6 + 1.3 * n), theme)
+    axes = fig.subplots(n, 1, sharex=True, squeeze=False)[:, 0]
+    total = max(1, data.n_pixels or int(data.original.sum()))
+    share = 100.0 / total
+    for i, (ax, (d, counts)) in enumerate(zip(axes, data.reconstructed.items(), strict=False)):
+        ax.stairs(data.original * share, data.edges, fill=True, color="0.6", alpha=0.5, label="Î")
+        colour = RECONSTRUCTION_COLOURS[i % len(RECONSTRUCTION_COLOURS)]
+        error = data.mean_error.get(d)
+        label = f"L = {d}" + ("" if error is None else f" (mean |error| {error:.3g})")
+        ax.stairs(counts * share, data.edges, color=colour, lw=1.4, label=label)
+        ax.set_ylabel("% of pixels")
+        _style(ax, theme)
+        _legend(ax, theme, loc="best")
+    outside = max([data.outside_original, *data.outside.values()])
+    share_out = 100.0 * outside / total
+    beyond = f" (≤ {share_out:.1f} % of pixels beyond)" if outside else ""
+    axes[-1].set_xlabel(f"Î intensity{beyond}")
+    axes[-1].set_xlim(float(data.edges[0]), float(data.edges[-1]))
+    what = f", {data.sampled_blocks} random blocks" if data.sampled_blocks else ""
+    axes[0].set_title(f"Î and its reconstructions (w = {data.window}{what})", fontsize="medium")
+    axes[0].title.set_color(theme["foreground"])
     return fig
 
 

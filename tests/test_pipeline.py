@@ -334,3 +334,35 @@ def test_matrix_pool_reuses_memory_but_never_an_array_still_held():
     fresh.run(reconstruction=False)
     np.testing.assert_array_equal(pipe.get("affinity"), fresh.get("affinity"))
     np.testing.assert_array_equal(pipe.get("labels")[0], fresh.get("labels")[0])
+
+
+@pytest.mark.parametrize("coefficients", ["thesis", "ridge"])
+def test_run_iter_reports_progress_within_the_chunked_stages(coefficients):
+    # 160 x 170 pixels in 10 x 10 blocks: 272 blocks, several chunks per chunked stage
+    stack, _ = two_material_stack(shape=(160, 170))
+    params = SegmentParams(window=10, degree=8, coefficients=coefficients)
+    pipe = Pipeline(stack, ANGLES, params)
+    reports: list[tuple[str, float, int]] = []
+    steps = list(pipe.run_iter(progress=lambda *r: reports.append(r)))
+    names = [s for s, _, _ in steps]
+    n = len(names)
+    by_stage = {name: [i for s, i, _ in reports if s == name] for name in names}
+    for name in ("harmonics", "reconstruction"):
+        i = names.index(name)
+        values = by_stage[name]
+        inside = [v for v in values if i < v < i + 1]
+        assert len(inside) >= 2, (name, values)  # strictly between the stage boundaries
+        assert values == sorted(values) and values[-1] == i + 1
+    assert {s for s, _, _ in reports} == {"harmonics", "reconstruction"}
+    assert all(total == n for _, _, total in reports)
+    # the yields and the result are those of a run without progress
+    ref = Pipeline(stack, ANGLES, params)
+    assert [s[:2] for s in ref.run_iter()] == [s[:2] for s in steps]
+    np.testing.assert_array_equal(pipe.result().labels, ref.result().labels)
+    # get(stage, progress): only that stage reports, not one computed on the way to it
+    fresh = Pipeline(stack, ANGLES, params)
+    shares: list[float] = []
+    fresh.get("pca", shares.append)  # computes the (chunked) harmonics first
+    assert fresh.is_fresh("harmonics") and shares == []
+    fresh.get("reconstruction", shares.append)
+    assert len(shares) >= 2 and shares[-1] == 1 and all(0 < s <= 1 for s in shares)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from napari_polarseg.engine import Pipeline, PolarsegError, SegmentParams, plots
+from napari_polarseg.engine import Pipeline, PolarsegError, SegmentParams, harmonics, plots
 from napari_polarseg.engine.harmonics import coefficient_index, degree_order
 from napari_polarseg.engine.synthetic import make_scene
 
@@ -84,13 +84,35 @@ def test_component_maps_on_blocks_and_pixels(result):
 def test_histograms_share_bins_and_higher_degree_fits_closer(result):
     hist = plots.result_histograms(result, degrees=(4, 12, 20))
     n = result.intensity.size
-    assert hist.original.sum() == n
+    assert hist.n_pixels == n and hist.sampled_blocks is None
+    # the bins span the curves' robust ranges; the pixels beyond are counted apart
+    assert hist.original.sum() + hist.outside_original == n
+    assert 0 < hist.outside_original < 0.02 * n
     for d in (4, 12, 20):
-        assert hist.reconstructed[d].sum() == n
+        assert hist.reconstructed[d].sum() + hist.outside[d] == n
         assert hist.reconstructed[d].shape == hist.original.shape
     assert hist.edges.size == hist.original.size + 1
     assert hist.l1_distance(20) < hist.l1_distance(4)
     assert hist.mean_error[20] < hist.mean_error[4]
+
+
+def test_sampled_histograms_reconstruct_the_sampled_blocks_as_in_the_image(result):
+    w = result.params.window
+    nby, nbx = result.block_labels.shape
+    arrays = [result.intensity, result.zenith, result.azimuth]
+    (I, zen, azi), k = plots.sample_blocks(arrays, w, max_blocks=7, seed=3)
+    assert k == 7 and I.shape == (w, 7 * w)
+    full = harmonics.reconstruct_intensity(*arrays, w, 6, ridge=result.params.ridge)
+    strip = harmonics.reconstruct_intensity(I, zen, azi, w, 6, ridge=result.params.ridge)
+    pick = np.sort(np.random.default_rng(3).choice(nby * nbx, 7, replace=False))
+    for j, b in enumerate(pick):
+        r, c = divmod(int(b), nbx)
+        block = (slice(r * w, (r + 1) * w), slice(c * w, (c + 1) * w))
+        np.testing.assert_array_equal(I[:, j * w : (j + 1) * w], result.intensity[block])
+        np.testing.assert_allclose(strip[:, j * w : (j + 1) * w], full[block], atol=1e-9)
+    hist = plots.result_histograms(result, (4,), max_blocks=7)
+    assert hist.sampled_blocks == 7 and hist.n_pixels == 7 * w * w
+    assert plots.sample_blocks(arrays, w, max_blocks=nby * nbx)[1] is None  # all kept
 
 
 def test_error_table_decreases_with_degree(result):

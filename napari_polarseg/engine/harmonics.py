@@ -112,25 +112,39 @@ def single_threaded_blas() -> Iterator[None]:
         yield
 
 
+#: ``progress`` of the chunked functions: called with the share of the work done (0..1].
+Progress = Callable[[float], None]
+
+
 def run_chunks(
-    bounds: list[tuple[int, int]], work: Callable[[int, int], None], n_points: int
+    bounds: list[tuple[int, int]],
+    work: Callable[[int, int], None],
+    n_points: int,
+    progress: Progress | None = None,
 ) -> None:
     """Call ``work(start, stop)`` for every chunk, on :data:`N_THREADS` threads.
 
     ``work`` must write only to its own slice of preallocated outputs. Small jobs (fewer
-    than :data:`MIN_PARALLEL_POINTS` points) run in the calling thread.
+    than :data:`MIN_PARALLEL_POINTS` points) run in the calling thread. ``progress`` is
+    called in the calling thread with the share of the chunks done after each one (in
+    chunk order), the last time with 1.
     """
+    n = len(bounds)
     with single_threaded_blas():
-        if N_THREADS == 1 or len(bounds) < 2 or n_points < MIN_PARALLEL_POINTS:
+        if N_THREADS == 1 or n < 2 or n_points < MIN_PARALLEL_POINTS:
             try:
-                for a, b in bounds:
+                for i, (a, b) in enumerate(bounds):
                     work(a, b)
+                    if progress is not None:
+                        progress((i + 1) / n)
             finally:
                 _local.__dict__.clear()  # scratch of the calling thread is not kept
             return
-        with ThreadPoolExecutor(min(N_THREADS, len(bounds))) as pool:
-            for f in [pool.submit(work, a, b) for a, b in bounds]:
+        with ThreadPoolExecutor(min(N_THREADS, n)) as pool:
+            for i, f in enumerate([pool.submit(work, a, b) for a, b in bounds]):
                 f.result()
+                if progress is not None:
+                    progress((i + 1) / n)
 
 
 def _chunk_bounds(n: int, step: int) -> list[tuple[int, int]]:
@@ -339,6 +353,7 @@ def block_coefficients(
     method: str = "thesis",
     ridge: float = 1e-3,
     weights: np.ndarray | None = None,
+    progress: Progress | None = None,
 ) -> np.ndarray:
     """Spherical-harmonic coefficients of Î(θ, φ) per non-overlapping w × w block.
 
@@ -359,6 +374,9 @@ def block_coefficients(
         Relative ridge penalty for ``method="ridge"``.
     weights : array (H, W) of {0, 1}, optional
         Pixels to use (1) or ignore (0), e.g. saturated or invalid pixels.
+    progress : callable(share), optional
+        Called with the share of the blocks done after each chunk of them
+        (:func:`run_chunks`).
 
     Returns
     -------
@@ -375,7 +393,9 @@ def block_coefficients(
         raise PolarsegError(f"coefficient method must be 'thesis' or 'ridge', got {method!r}")
     nby, nbx = block_grid(intensity.shape, window)
     if method == "ridge":
-        coef, _ = _ridge_blocks(intensity, zenith, azimuth, window, degree, ridge, weights)
+        coef, _ = _ridge_blocks(
+            intensity, zenith, azimuth, window, degree, ridge, weights, progress=progress
+        )
         return coef.reshape(nby, nbx, -1)
     k = n_coefficients(degree)
     m = window * window
@@ -396,7 +416,7 @@ def block_coefficients(
         _fill_harmonics(degree, *_unit_vectors(th[sl].ravel(), ph[sl].ravel()), buf, f[sl].ravel())
         out[sl] = buf.reshape(k, b1 - b0, m).sum(axis=2).T / count[sl, None]
 
-    run_chunks(_chunk_bounds(nb, per), work, nb * m)
+    run_chunks(_chunk_bounds(nb, per), work, nb * m, progress)
     return out.reshape(nby, nbx, k)
 
 
@@ -410,6 +430,7 @@ def _ridge_blocks(
     weights: np.ndarray | None,
     reconstruct: bool = False,
     coefficients: bool = True,
+    progress: Progress | None = None,
 ) -> tuple[np.ndarray | None, np.ndarray | None]:
     """Per-block ridge fit: coefficients (n_blocks, K) and, optionally, Y a per pixel.
 
@@ -462,7 +483,7 @@ def _ridge_blocks(
         if rec is not None and not shortcut:
             rec[sl] = np.matmul(a[:, None, :], Y)[:, 0, :]
 
-    run_chunks(_chunk_bounds(nb, per), work, nb * m)
+    run_chunks(_chunk_bounds(nb, per), work, nb * m, progress)
     return coef, rec
 
 
@@ -524,6 +545,7 @@ def reconstruct_intensity(
     degree: int,
     ridge: float = 1e-3,
     weights: np.ndarray | None = None,
+    progress: Progress | None = None,
 ) -> np.ndarray:
     """Î rebuilt per pixel from its block's harmonic expansion (thesis section 5.5).
 
@@ -532,6 +554,7 @@ def reconstruct_intensity(
     evaluated at every pixel's own (θ, φ) — in the same pass that fits them, so the
     harmonics of the block pixels are evaluated once. Remainder-strip pixels use the
     nearest block's coefficients. Returns an (H, W) array in the units of ``intensity``.
+    ``progress`` is called with the share of the blocks fitted after each chunk of them.
     """
     nby, nbx = block_grid(intensity.shape, window)
     h, w = intensity.shape
@@ -546,6 +569,7 @@ def reconstruct_intensity(
         weights,
         reconstruct=True,
         coefficients=hb < h or wb < w,  # only the remainder strips need them
+        progress=progress,
     )
     out = np.empty((h, w))
     out[:hb, :wb] = _unblockify(rec.reshape(nby, nbx, -1), window)

@@ -361,6 +361,11 @@ class Pipeline:
     _matrices: MatrixPool = field(default_factory=lambda: MatrixPool(), init=False, repr=False)
     #: the ``cancel`` of the running run_iter / prefetch, handed to the cut
     _cancel: Callable[[], bool] | None = field(default=None, init=False, repr=False)
+    #: (stage, callback(share done)) of the running run_iter / get: the stage's chunked
+    #: loops report to it (harmonics and reconstruction)
+    _within: tuple[str, Callable[[float], None]] | None = field(
+        default=None, init=False, repr=False
+    )
 
     def __post_init__(self) -> None:
         raw = self.stack
@@ -417,6 +422,12 @@ class Pipeline:
         return valid_blocks(~self.get("polarisation").invalid, self._p().window)
 
     # -- stages -----------------------------------------------------------------------
+    def _progress(self, stage: str) -> Callable[[float], None] | None:
+        """The progress callback of ``stage`` when it is the stage being run (an upstream
+        stage computed on the way reports nothing)."""
+        within = self._within
+        return within[1] if within is not None and within[0] == stage else None
+
     def _compute(self, stage: str) -> Any:
         p = self._p()
         if stage == "polarisation":
@@ -448,6 +459,7 @@ class Pipeline:
                 method=p.coefficients,
                 ridge=p.ridge,
                 weights=None if not pol.invalid.any() else ~pol.invalid,
+                progress=self._progress(stage),
             )
         if stage == "pca":
             coef = self.get("harmonics")
@@ -535,6 +547,7 @@ class Pipeline:
                 p.degree,
                 ridge=p.ridge,
                 weights=None if not pol.invalid.any() else ~pol.invalid,
+                progress=self._progress(stage),
             )
             return Reconstruction(rec, np.abs(rec - pol.intensity))
         raise KeyError(stage)
@@ -609,16 +622,20 @@ class Pipeline:
             stats = np.concatenate([feat.harmonic_features(coef, "zonal"), stats], axis=1)
         return polstats.standardise(stats) if standardise else stats
 
-    def get(self, stage: str) -> Any:
+    def get(self, stage: str, progress: Callable[[float], None] | None = None) -> Any:
         """Value of a stage for the current parameters, computing it if stale.
 
         The parameters are read once per call (a snapshot used for the cache key and by
         every upstream stage it needs), so a change made from another thread while the
-        stage computes can never store a value under the wrong key.
+        stage computes can never store a value under the wrong key. ``progress`` is
+        called with the share of ``stage`` done (0..1] by the stages that loop in chunks
+        (harmonics, reconstruction), after each chunk.
         """
         outer = self._active is None
         if outer:
             self._active = self.params
+        if progress is not None:
+            self._within = (stage, progress)
         try:
             key = self.key(stage)
             entry = self._cache.get(stage)
@@ -634,6 +651,8 @@ class Pipeline:
         finally:
             if outer:
                 self._active = None
+            if progress is not None:
+                self._within = None
 
     def stage_seconds(self, stage: str) -> float:
         """Seconds the last computation of ``stage`` took (0 if never computed)."""
@@ -641,24 +660,37 @@ class Pipeline:
 
     # -- running ----------------------------------------------------------------------
     def run_iter(
-        self, reconstruction: bool = True, cancel: Callable[[], bool] | None = None
+        self,
+        reconstruction: bool = True,
+        cancel: Callable[[], bool] | None = None,
+        progress: Callable[[str, float, int], None] | None = None,
     ) -> Iterator[tuple[str, int, int]]:
         """Run stage by stage, yielding ``(stage, index, total)`` after each.
 
         Stopping the iteration between yields cancels the run; cached stages stay valid.
         ``cancel`` also stops the labels stage's normalized cut from within: it is called
         before every product of its eigensolvers, and True raises :class:`Cancelled`
-        (the splits made so far stay cached in the cut tree).
+        (the splits made so far stay cached in the cut tree). ``progress`` is called
+        *within* the stages that loop in chunks (harmonics, reconstruction) with
+        ``(stage, index, total)``, ``index`` a float between the stage's boundaries: the
+        stages done plus the share of this one done (e.g. 2.4 of 8 in the third stage).
         """
         names = self.stages(reconstruction)
+        n = len(names)
         self._recomputed = []
         for i, name in enumerate(names):
             self._cancel = cancel
+            within = None
+            if progress is not None:
+
+                def within(share: float, name: str = name, i: int = i) -> None:
+                    progress(name, i + share, n)
+
             try:
-                self.get(name)
+                self.get(name, within)
             finally:
                 self._cancel = None
-            yield name, i + 1, len(names)
+            yield name, i + 1, n
 
     def run(
         self,

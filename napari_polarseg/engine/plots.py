@@ -9,7 +9,8 @@ and :mod:`napari_polarseg.widgets.plots` for the napari dock widget).
 - :func:`component_maps` — first principal components over the block grid and at pixel
   resolution (figures 5.4/5.13);
 - :func:`reconstruction_histograms` — histograms of Î and of its reconstructions at
-  several degrees on shared bins (figure 5.17);
+  several degrees on shared bins over a robust range (figure 5.17), optionally of a
+  sample of blocks (:func:`sample_blocks`);
 - :func:`reconstruction_error_table` — mean |Î rebuilt − Î| per window and degree
   (table 5.1);
 - :func:`feature_importances` — the largest feature importances of a trained pixel
@@ -19,7 +20,7 @@ and :mod:`napari_polarseg.widgets.plots` for the napari dock widget).
 from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -92,13 +93,23 @@ class ComponentMaps:
 
 @dataclass
 class ReconstructionHistograms:
-    """Histograms of Î and of its reconstruction at each degree, on the same ``edges``."""
+    """Histograms of Î and of its reconstruction at each degree, on the same ``edges``.
+
+    The edges span the union of the curves' :func:`robust_range`:
+    ``outside_original`` and ``outside[L]`` count the pixels beyond it, so the counts of
+    a curve plus its outside count are ``n_pixels``, the pixels counted (all the used
+    pixels, or those of ``sampled_blocks`` random blocks).
+    """
 
     edges: np.ndarray
     original: np.ndarray
     reconstructed: dict[int, np.ndarray]
     mean_error: dict[int, float]
     window: int
+    outside_original: int = 0
+    outside: dict[int, int] = field(default_factory=dict)
+    n_pixels: int = 0
+    sampled_blocks: int | None = None
 
     @property
     def centres(self) -> np.ndarray:
@@ -230,6 +241,51 @@ def _reconstruct(
     )
 
 
+def sample_blocks(
+    arrays: Sequence[np.ndarray | None], window: int, max_blocks: int, seed: int = 0
+) -> tuple[list[np.ndarray | None], int | None]:
+    """At most ``max_blocks`` random whole w × w blocks of each (H, W) array (None stays
+    None), laid side by side in one (w, k·w) strip, and k (None when every block is kept
+    and the arrays are returned as they are). The blocks are the same in every array and
+    in block order; a block fit (:mod:`.harmonics`) sees each one as in the full image.
+    Remainder strips (beyond the last whole block) are never sampled."""
+    if max_blocks < 1:
+        raise PolarsegError(f"max_blocks must be >= 1, got {max_blocks}")
+    first = next(a for a in arrays if a is not None)
+    nby, nbx = harmonics.block_grid(np.shape(first), int(window))
+    if nby * nbx <= max_blocks:
+        return list(arrays), None
+    pick = np.sort(np.random.default_rng(seed).choice(nby * nbx, max_blocks, replace=False))
+    offsets = np.arange(window)
+    rows = (pick // nbx)[:, None] * window + offsets  # (k, w) pixel rows of each block
+    cols = (pick % nbx)[:, None] * window + offsets
+    out: list[np.ndarray | None] = []
+    for a in arrays:
+        if a is None:
+            out.append(None)
+            continue
+        blocks = np.asarray(a)[rows[:, :, None], cols[:, None, :]]  # (k, w, w)
+        out.append(blocks.transpose(1, 0, 2).reshape(window, max_blocks * window))
+    return out, int(max_blocks)
+
+
+#: Percentiles of each curve's values (Î and every reconstruction) whose union bounds the
+#: bins of :func:`reconstruction_histograms`: a degree-20 fit overshoots by orders of
+#: magnitude at a few pixels of a real frame, and bins spanning every value (−40,000 …
+#: 80,000 on the fruits frame) squeezed all four curves into a few bins.
+HISTOGRAM_PERCENTILES = (0.5, 99.5)
+
+
+def robust_range(values: np.ndarray) -> tuple[float, float]:
+    """The :data:`HISTOGRAM_PERCENTILES` of the finite ``values`` ((0, 1) if none)."""
+    values = np.asarray(values, dtype=float)
+    values = values[np.isfinite(values)]
+    if values.size == 0:
+        return 0.0, 1.0
+    lo, hi = np.percentile(values, HISTOGRAM_PERCENTILES)
+    return float(lo), float(hi)
+
+
 def reconstruction_histograms(
     intensity: np.ndarray,
     zenith: np.ndarray,
@@ -239,27 +295,48 @@ def reconstruction_histograms(
     bins: int = 64,
     ridge: float = 1e-3,
     weights: np.ndarray | None = None,
+    max_blocks: int | None = None,
+    seed: int = 0,
 ) -> ReconstructionHistograms:
     """Histogram of Î and of its block-harmonic reconstruction at each degree (figure
-    5.17), all on the same ``bins`` equal bins spanning every value. Only the pixels of
-    ``weights`` (bool, True = used) are counted when given."""
+    5.17), all on the same ``bins`` equal bins over the union of the curves'
+    :func:`robust_range` (the pixels beyond are counted apart). Only the pixels of
+    ``weights`` (bool, True = used) are counted when given. With ``max_blocks``, only
+    that many random blocks (:func:`sample_blocks`, ``seed``) are reconstructed and
+    counted: the time no longer grows with the image (the mean errors are then those of
+    the sample)."""
     intensity = np.asarray(intensity, dtype=float)
+    sampled = None
+    if max_blocks is not None:
+        (intensity, zenith, azimuth, weights), sampled = sample_blocks(
+            [intensity, np.asarray(zenith), np.asarray(azimuth), weights],
+            int(window),
+            int(max_blocks),
+            seed,
+        )
+        assert intensity is not None and zenith is not None and azimuth is not None
     used = np.isfinite(intensity) if weights is None else np.asarray(weights, dtype=bool)
     recs = {
         int(d): _reconstruct(intensity, zenith, azimuth, window, d, ridge, weights) for d in degrees
     }
     values = [intensity[used]] + [r[used] for r in recs.values()]
-    lo = min(float(np.min(v)) for v in values)
-    hi = max(float(np.max(v)) for v in values)
+    ranges = np.array([robust_range(v) for v in values])
+    lo, hi = float(ranges[:, 0].min()), float(ranges[:, 1].max())
     if not hi > lo:
         hi = lo + 1.0
     edges = np.linspace(lo, hi, int(bins) + 1)
+    counts = [np.histogram(v, edges)[0] for v in values]
+    outside = [int(v.size - c.sum()) for v, c in zip(values, counts, strict=True)]
     return ReconstructionHistograms(
         edges=edges,
-        original=np.histogram(values[0], edges)[0],
-        reconstructed={d: np.histogram(r[used], edges)[0] for d, r in recs.items()},
+        original=counts[0],
+        reconstructed=dict(zip(recs, counts[1:], strict=True)),
         mean_error={d: float(np.mean(np.abs(r - intensity)[used])) for d, r in recs.items()},
         window=int(window),
+        outside_original=outside[0],
+        outside=dict(zip(recs, outside[1:], strict=True)),
+        n_pixels=int(values[0].size),
+        sampled_blocks=sampled,
     )
 
 
@@ -285,9 +362,13 @@ def reconstruction_error_table(
 
 
 def result_histograms(
-    result: SegmentationResult, degrees: Sequence[int] = (4, 12, 20), bins: int = 64
+    result: SegmentationResult,
+    degrees: Sequence[int] = (4, 12, 20),
+    bins: int = 64,
+    max_blocks: int | None = None,
 ) -> ReconstructionHistograms:
-    """:func:`reconstruction_histograms` with the result's Î, θ, azimuth, w and ridge."""
+    """:func:`reconstruction_histograms` with the result's Î, θ, azimuth, w and ridge
+    (of at most ``max_blocks`` random blocks when given)."""
     return reconstruction_histograms(
         result.intensity,
         result.zenith,
@@ -297,6 +378,7 @@ def result_histograms(
         bins=bins,
         ridge=result.params.ridge,
         weights=_weights(result),
+        max_blocks=max_blocks,
     )
 
 

@@ -1,4 +1,5 @@
-"""What both widgets share: the angle-stack chooser, the angles field, Run/Cancel, status."""
+"""What the widgets share: docks that scroll, the angle-stack chooser, the angles field,
+Run/Cancel, status."""
 
 from __future__ import annotations
 
@@ -9,10 +10,12 @@ import numpy as np
 from magicgui.widgets import ComboBox, Container, Label, LineEdit, ProgressBar, PushButton
 from napari.layers import Image, Labels
 from napari.utils.notifications import show_error
+from qtpy.QtCore import QEvent, QObject
+from qtpy.QtWidgets import QScrollArea, QWidget
 
 from ..engine import PolarsegError
 from ._layers import ANGLES_KEY, find_output, layer_tag, source_key
-from ._runner import WorkerSlot, format_angles, parse_angles
+from ._runner import PROGRESS_STEPS, WorkerSlot, format_angles, parse_angles
 
 if TYPE_CHECKING:
     import napari
@@ -30,7 +33,78 @@ def is_angle_stack(layer: Layer) -> bool:
     )
 
 
-class StackWidget(Container):
+class WidthFollower(QObject):
+    """Keeps a vertical scroll area at least as wide as the widget it scrolls.
+
+    magicgui sets the area's minimum width when a control is added, before it widens the
+    label column (and a section shown later widens the controls again): the area then
+    cut off the right edge of the controls. This follows every layout change instead.
+    """
+
+    def __init__(self, area: QScrollArea) -> None:
+        super().__init__(area)
+        self._area = area
+        area.widget().installEventFilter(self)
+
+    def eventFilter(self, watched: QObject, event: QEvent) -> bool:  # noqa: N802 (Qt)
+        if event.type() == QEvent.Type.LayoutRequest:
+            self.fit()
+        return False
+
+    def fit(self) -> None:
+        """Set the area's minimum width to its widget's plus the vertical scroll bar."""
+        bar = self._area.verticalScrollBar().sizeHint().width()
+        frame = 2 * self._area.frameWidth()
+        self._area.setMinimumWidth(self._area.widget().minimumSizeHint().width() + bar + frame)
+
+
+class ScrollingContainer(Container):
+    """A labelled vertical Container whose controls scroll when its dock is too short.
+
+    napari docks a magicgui widget's ``native`` (``add_dock_widget`` of napari 0.9 has no
+    scroll option), and magicgui's ``scrollable=True`` puts the widget holding the
+    controls' layout inside a ``QScrollArea``, its ``root_native_widget``. Here ``native``
+    is that scroll area, so napari docks the scroll area and the window's minimum height
+    no longer grows with the controls; :attr:`content` is the widget with the layout
+    (where a subclass adds plain Qt widgets such as a plot canvas).
+    """
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__(scrollable=True, **kwargs)
+        # the scroll area stretches the controls' widget to its height: a stretch below
+        # them keeps them packed at the top (napari adds one to a dock that does not scroll)
+        self.content.layout().addStretch(1)
+        self._width = WidthFollower(self.native)
+
+    @property
+    def native(self) -> QScrollArea:
+        """The scroll area around the controls: the widget napari docks."""
+        return self.root_native_widget
+
+    @property
+    def content(self) -> QWidget:
+        """The widget inside the scroll area that holds the controls' layout."""
+        return self.root_native_widget.widget()
+
+    def add_native(self, widget: QWidget, expand: bool = False) -> None:
+        """Add a plain Qt ``widget`` below the controls (add every magicgui widget first).
+
+        With ``expand`` it takes the height the controls leave (a plot canvas) in place of
+        the stretch that packs them at the top; widgets added after it follow it.
+        """
+        layout = self.content.layout()
+        last = layout.count() - 1
+        packed = last >= 0 and layout.itemAt(last).spacerItem() is not None
+        if packed and expand:
+            layout.takeAt(last)
+            layout.addWidget(widget, 1)  # the only stretch: the controls keep their height
+        elif packed:
+            layout.insertWidget(last, widget)
+        else:
+            layout.addWidget(widget)
+
+
+class StackWidget(ScrollingContainer):
     """Base of the plugin's widgets: stack layer, polariser angles, Run, Cancel, status.
 
     Subclasses add their parameter widgets with :meth:`_add_parameters`, implement
@@ -65,8 +139,9 @@ class StackWidget(Container):
             tooltip="Stop the running computation (within about a second); what was "
             "shown before stays",
         )
-        #: stages of the current (or last) run done; long runs also show in napari's
-        #: activity dock (see ``_runner.ACTIVITY_DELAY``)
+        #: stages of the current (or last) run done, PROGRESS_STEPS ticks each (a long
+        #: stage moves it as it goes); long runs also show in napari's activity dock
+        #: (see ``_runner.ACTIVITY_DELAY``)
         self.progress = ProgressBar(label="progress", value=0, min=0, max=1)
         self.status = Label(value="")
         self.status.native.setWordWrap(True)
@@ -206,15 +281,17 @@ class StackWidget(Container):
         on_partial: Any = None,
         live: bool = False,
         cancellable: bool = False,
+        reports: bool = False,
     ) -> None:
         """Run ``job`` in the widget's worker slot. A ``live`` rerun (after a parameter
         change) enables Cancel and reports progress only if it still runs
         ``_runner.REPORT_INTERVAL`` later: one that ends sooner repaints nothing before
         its result. A ``cancellable`` job gets a ``cancel`` callable
-        (:meth:`~napari_polarseg.widgets._runner.WorkerSlot.submit`)."""
+        (:meth:`~napari_polarseg.widgets._runner.WorkerSlot.submit`), a job that
+        ``reports`` a ``report`` callable for progress within its stages."""
         if not live:
             self.cancel_button.enabled = True
-        self._slot.submit(job, args, total, on_result, on_partial, live, cancellable)
+        self._slot.submit(job, args, total, on_result, on_partial, live, cancellable, reports)
 
     def _set_status(self, text: str) -> None:
         try:
@@ -222,10 +299,11 @@ class StackWidget(Container):
         except RuntimeError:  # the widget was deleted while a worker ended
             pass
 
-    def _set_progress(self, index: int, total: int) -> None:
+    def _set_progress(self, index: float, total: int) -> None:
         try:
-            self.progress.max = max(total, 1)
-            self.progress.value = min(index, total)
+            # PROGRESS_STEPS ticks per stage: a share of a stage (index 2.4) moves the bar
+            self.progress.max = max(total, 1) * PROGRESS_STEPS
+            self.progress.value = round(min(index, total) * PROGRESS_STEPS)
             if self._slot.worker is not None:
                 self.cancel_button.enabled = True
         except RuntimeError:  # the widget was deleted while a worker ended

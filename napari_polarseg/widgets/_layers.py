@@ -16,6 +16,9 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from napari.layers import Image, Labels
+from napari.utils.colormaps import CyclicLabelColormap
+
+from ..palette import segment_rgba
 
 if TYPE_CHECKING:
     import napari
@@ -44,6 +47,18 @@ class LayerStyle:
     extra: dict[str, Any] = field(default_factory=dict)
 
 
+#: ``LayerStyle.colormap`` of a Labels layer drawn with :func:`label_colormap`.
+SEGMENT_PALETTE = "segment palette"
+
+
+def label_colormap() -> CyclicLabelColormap:
+    """The labels colormap of segments and scribbles: label 0 transparent, labels 1, 2, …
+    the bright, pairwise distinct colours of :data:`napari_polarseg.palette.SEGMENT_COLOURS`
+    (cycled after the tenth)."""
+    colours = np.concatenate([np.zeros((1, 4)), segment_rgba()])
+    return CyclicLabelColormap(colors=colours, background_value=0)
+
+
 #: Output layers by role.
 ROLES: dict[str, LayerStyle] = {
     # of the four maps only ρ starts visible: stacked, the top one hides the others, and
@@ -56,7 +71,9 @@ ROLES: dict[str, LayerStyle] = {
         "φ phase", colormap="twilight", limits=(0.0, math.pi), extra={"visible": False}
     ),
     "zenith": LayerStyle("θ zenith", colormap="magma", extra={"visible": False}),
-    "segments": LayerStyle("segments", layer_type="labels", extra={"opacity": 0.6}),
+    "segments": LayerStyle(
+        "segments", layer_type="labels", colormap=SEGMENT_PALETTE, extra={"opacity": 0.6}
+    ),
     "error": LayerStyle("reconstruction error", colormap="inferno", extra={"visible": False}),
     # 1 where a pixel was left out of the fit and the features (mask, saturated, black, …)
     "masked": LayerStyle(
@@ -84,6 +101,13 @@ ROLES: dict[str, LayerStyle] = {
 def source_key(layer: Layer) -> str:
     """Stable identifier of an input layer for the tags of its outputs."""
     return str(layer.unique_id)
+
+
+def output_name(role: str, source: Layer) -> str:
+    """Name of a new ``role`` layer computed from ``source``: the role's name and the
+    source layer's, e.g. ``"segments (leaves)"``, so outputs of several stacks tell
+    which stack they came from (napari would number them ``segments [1]``, …)."""
+    return f"{ROLES[role].name} ({source.name})"
 
 
 def layer_tag(layer: Layer) -> dict[str, Any] | None:
@@ -137,6 +161,7 @@ def show_output(
 ) -> Layer:
     """Add the ``role`` layer for ``source``, or replace the data of the existing one.
 
+    A new layer is named after its role and its source (:func:`output_name`).
     The layer takes the scale and translation of the last two axes of ``source`` so it
     overlays the stack; the layer selection stays as the user left it. On a rerun only
     the data, the contrast limits (for images) and the plugin's metadata change; the
@@ -163,13 +188,17 @@ def show_output(
     placement = {"scale": tuple(source.scale[-2:]), "translate": tuple(source.translate[-2:])}
     # napari selects every layer it adds; the user's selection (e.g. the scribbles layer
     # being painted) is kept instead
+    name = output_name(role, source)
     selection = viewer.layers.selection
     selected, active = set(selection), selection.active
     if style.layer_type == "labels":
-        layer = viewer.add_labels(data, name=style.name, metadata=meta, **placement, **style.extra)
+        palette = {"colormap": label_colormap()} if style.colormap == SEGMENT_PALETTE else {}
+        layer = viewer.add_labels(
+            data, name=name, metadata=meta, **placement, **palette, **style.extra
+        )
     else:
         layer = viewer.add_image(
-            data, name=style.name, metadata=meta, **placement, **_image_style(role, data)
+            data, name=name, metadata=meta, **placement, **_image_style(role, data)
         )
     selection.clear()
     selection.update(selected)

@@ -78,6 +78,10 @@ ACTIVITY_DELAY = 1.0
 #: a 0.85 s rerun take 1.6 s).
 REPORT_INTERVAL = 0.25
 
+#: Ticks per stage of the progress bars (the widget's and the activity dock's, which take
+#: integers): the engine reports shares of its long stages.
+PROGRESS_STEPS = 100
+
 
 @dataclass(frozen=True)
 class Result:
@@ -174,6 +178,17 @@ def guarded(job: Job, *args: Any, **kwargs: Any) -> Generator[Stage, None, Any]:
         except RuntimeError as exc:
             raise StageFailed(f"{type(exc).__name__}: {exc}") from exc
     return result
+
+
+def stage_text(stage: str, index: float, total: int) -> str:
+    """The status line of a running job: ``"running: pca (4/8)"`` after a stage,
+    ``"running: harmonics 40 % (2/8)"`` within one (a fractional ``index``)."""
+    if not stage:
+        return "running…"
+    done = int(index)
+    share = index - done
+    within = f" {share:.0%}".replace("%", " %") if share > 0 else ""
+    return f"running: {stage}{within} ({done}/{total})"
 
 
 def error_message(exc: BaseException) -> str:
@@ -467,6 +482,7 @@ class _Request:
     on_partial: Callable[[int, Any], None] | None
     live: bool
     cancellable: bool = False
+    reports: bool = False
 
 
 class WorkerSlot:
@@ -529,6 +545,7 @@ class WorkerSlot:
         on_partial: Callable[[int, Any], None] | None = None,
         live: bool = False,
         cancellable: bool = False,
+        reports: bool = False,
     ) -> None:
         """Run ``job(*args)`` now, or as soon as the running worker has stopped.
 
@@ -544,10 +561,15 @@ class WorkerSlot:
         ``cancellable`` job is called as ``job(*args, cancel=stop)``: ``stop()`` is True
         once a newer request or :meth:`cancel` has asked the run to stop (the job may then
         raise :class:`~napari_polarseg.engine.errors.Cancelled`, which ends the run as if
-        it had been stopped between stages).
+        it had been stopped between stages). A job that ``reports`` is called with
+        ``report=callable(stage, index, total)`` too, for progress *within* a stage
+        (``index`` a float between the stage boundaries, e.g. 2.4 of 8 while the third
+        stage is 40 % done; the engine's :meth:`Pipeline.run_iter
+        <napari_polarseg.engine.Pipeline.run_iter>` ``progress``): called from the
+        worker's thread, it is handled like a yielded stage (throttled the same way).
         """
 
-        request = _Request(job, args, total, on_result, on_partial, live, cancellable)
+        request = _Request(job, args, total, on_result, on_partial, live, cancellable, reports)
 
         def launch() -> None:
             self._launch(request)
@@ -578,7 +600,14 @@ class WorkerSlot:
         def stop() -> bool:
             return bool(started) and bool(started[0].abort_requested)
 
+        def report_within(stage: str, index: float, total: int) -> None:
+            # the worker's thread: its yielded signal is queued to the GUI thread
+            if started:
+                started[0].yielded.emit((stage, index, total))
+
         kwargs: dict[str, Any] = {"cancel": stop} if request.cancellable else {}
+        if request.reports:
+            kwargs["report"] = report_within
         worker = create_worker(
             guarded, job, *args, _start_thread=False, _ignore_errors=True, **kwargs
         )
@@ -590,7 +619,7 @@ class WorkerSlot:
         ended = False
         delivered = False  # the job yielded its Result: what follows is quiet
         partial = False  # a Partial was shown: its status line stays until the result
-        done = [0, ""]  # stages finished, name of the last one
+        done = [0, ""]  # stages finished (a float within a stage), name of the stage
         last = [time.monotonic(), False]  # time of the last report, a report pending
 
         def report() -> None:
@@ -599,20 +628,21 @@ class WorkerSlot:
                 return
             index, stage = done
             if not partial:
-                self.on_status(f"running: {stage} ({index}/{total})" if stage else "running…")
+                self.on_status(stage_text(stage, index, total))
             self.on_progress(index, total)
             pbar = self.activity
             if pbar is not None and self.worker is worker:
                 pbar.set_description(f"{self.desc}: {stage}")
-                pbar.update(index - pbar.n)
+                pbar.update(round(index * PROGRESS_STEPS) - pbar.n)
 
         def show_activity() -> None:
             if ended or delivered or self.worker is not worker or self.activity is not None:
                 return
             from napari.utils import progress
 
-            self.activity = progress(total=total, desc=f"{self.desc}: {done[1] or 'starting'}")
-            self.activity.update(done[0])
+            desc = f"{self.desc}: {done[1] or 'starting'}"
+            self.activity = progress(total=total * PROGRESS_STEPS, desc=desc)
+            self.activity.update(round(done[0] * PROGRESS_STEPS))
 
         def deliver(value: Any) -> None:
             if run_id == self.run_id and self._pending is None:

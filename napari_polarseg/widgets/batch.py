@@ -25,7 +25,6 @@ import numpy as np
 from magicgui.widgets import (
     CheckBox,
     ComboBox,
-    Container,
     FileEdit,
     Label,
     LineEdit,
@@ -45,8 +44,8 @@ from ..engine.timeseries import (
     TimeSeriesResult,
     segment_timeseries,
 )
-from ._base import is_angle_stack
-from ._layers import ANGLES_KEY
+from ._base import ScrollingContainer, is_angle_stack
+from ._layers import ANGLES_KEY, label_colormap
 from ._runner import WorkerSlot, parse_angles
 
 if TYPE_CHECKING:
@@ -130,7 +129,7 @@ def params_from(viewer: napari.viewer.Viewer, source: str, path: Any = None) -> 
     )
 
 
-class BatchWidget(Container):
+class BatchWidget(ScrollingContainer):
     """Apply the current parameters to every scene of a folder (the batch engine).
 
     Scenes are the stack files (``.tif``, ``.npz``, …) and sub-folders of the input
@@ -380,7 +379,11 @@ def add_timeseries_layers(
         place = {"scale": tuple(source.scale[-2:]), "translate": tuple(source.translate[-2:])}
     layers = [
         viewer.add_labels(
-            np.asarray(labels, np.int32) + 1, name=f"{name} segments", opacity=0.6, **place
+            np.asarray(labels, np.int32) + 1,
+            name=f"{name} segments",
+            opacity=0.6,
+            colormap=label_colormap(),
+            **place,
         ),
         viewer.add_labels(np.asarray(changes, np.uint8), name=f"{name} change", **place),
     ]
@@ -430,7 +433,7 @@ def timeseries_job(
     return result
 
 
-class TimeSeriesWidget(Container):
+class TimeSeriesWidget(ScrollingContainer):
     """Segment several angle-stack layers (days of one view) and map what changed.
 
     Select the day layers in time order (the list order), choose the method, the

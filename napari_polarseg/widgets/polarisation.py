@@ -28,10 +28,70 @@ OUTPUTS = ("intensity", "dop", "phase", "zenith")
 VIEW_OUTPUTS = ("s0", "s1", "s2", "hsv")
 
 
-def composite_for(intensity: np.ndarray, dop: np.ndarray, phase: np.ndarray, dolp_max: float):
-    """The HSV composite with ρ_max = ``dolp_max``, or automatic (0): (RGB, ρ_max used)."""
+#: Text shown for each variant of the HSV view (``CompositeParams.mode``): hue is always
+#: the AoLP φ. "with intensity": saturation from ρ, value from Î (the scene's shading
+#: shows); "light": saturation from ρ on a white ground (value 1: unpolarised pixels are
+#: white); "dark": full saturation, value from ρ, so unpolarised pixels are black and only
+#: polarised ones show colour, brighter the more polarised (polanalyser's
+#: ``applyColorToAoLP`` light and dark variants).
+VIEW_MODES = {"with intensity": "intensity", "light": "light", "dark": "dark"}
+
+#: Tooltip of the HSV view menus (Polarisation image, Segment by material).
+VIEW_MODE_TOOLTIP = (
+    "Colouring of the AoLP/DoLP HSV layer (hue = AoLP φ): with intensity: saturation ρ, "
+    "value Î; light: saturation ρ on white (unpolarised = white); dark: value ρ on black "
+    "(unpolarised = black, colour only where polarised). Redraws only that layer"
+)
+
+
+def composite_for(
+    intensity: np.ndarray,
+    dop: np.ndarray,
+    phase: np.ndarray,
+    dolp_max: float,
+    mode: str = "intensity",
+) -> tuple[np.ndarray, float]:
+    """The HSV composite with ρ_max = ``dolp_max``, or automatic (0), in the ``mode`` of
+    :data:`VIEW_MODES` (:func:`~napari_polarseg.engine.views.aolp_dolp_composite`; "dark":
+    value from ρ on black): (RGB, ρ_max used)."""
     rho_max = auto_dolp_max(dop) if dolp_max <= 0 else float(dolp_max)
-    return aolp_dolp_composite(intensity, dop, phase, CompositeParams(dolp_max=rho_max)), rho_max
+    params = CompositeParams(dolp_max=rho_max, mode=mode)
+    return aolp_dolp_composite(intensity, dop, phase, params), rho_max
+
+
+def view_mode_box(**kwargs: Any) -> ComboBox:
+    """The "HSV view" menu of :data:`VIEW_MODES`."""
+    return ComboBox(
+        label="HSV view",
+        choices=list(VIEW_MODES.items()),
+        value="intensity",
+        tooltip=VIEW_MODE_TOOLTIP,
+        **kwargs,
+    )
+
+
+def show_views(
+    viewer: napari.viewer.Viewer,
+    source: Any,
+    arrays: tuple[np.ndarray, np.ndarray, np.ndarray],
+    dolp_max: float,
+    mode: str,
+    metadata: dict[str, Any] | None = None,
+    stokes: bool = True,
+) -> list[Any]:
+    """Add or update the S0, S1, S2 Stokes layers (hidden; with ``stokes``) and the HSV
+    composite of ``source`` from its Î, ρ, φ ``arrays`` (the layers both widgets share:
+    whichever computed last shows). Returns the layers, the composite last."""
+    intensity, dop, phase = arrays
+    shown = []
+    if stokes:
+        components = stokes_components(intensity, dop, phase)
+        for role, data in zip(VIEW_OUTPUTS[:-1], components, strict=True):
+            shown.append(show_output(viewer, role, data, source, metadata))
+    rgb, rho_max = composite_for(intensity, dop, phase, dolp_max, mode)
+    meta = {**(metadata or {}), "polarseg_composite": {"dolp_max": rho_max, "mode": mode}}
+    shown.append(show_output(viewer, "hsv", rgb, source, meta))
+    return shown
 
 
 def polarisation_job(
@@ -63,8 +123,10 @@ class PolarisationWidget(StackWidget):
     ``ρ degree of polarisation``, ``φ phase`` (radians, 0..π) and ``θ zenith`` (radians,
     from ρ with the chosen Fresnel model and refractive index), then the Stokes components
     ``S0/S1/S2 Stokes`` (hidden) and the RGB ``AoLP/DoLP HSV`` composite (hue = φ,
-    saturation = ρ / the *DoLP maximum*, value = Î). Changing the DoLP maximum redraws
-    only the composite. The work runs in a napari worker thread; the widget only calls
+    saturation = ρ / the *DoLP maximum*, value = Î; the *HSV view* menu offers the light
+    and dark variants of :data:`VIEW_MODES`, "dark" meaning full saturation with the value
+    from ρ: black where unpolarised). Changing the DoLP maximum or the view redraws only
+    the composite. The work runs in a napari worker thread; the widget only calls
     the engine.
 
     Parameters
@@ -113,12 +175,14 @@ class PolarisationWidget(StackWidget):
             "percentile of ρ rounded up to 0.05. Redraws only that layer",
         )
         self.dolp_max.native.setSpecialValueText("auto")
+        self.view_mode = view_mode_box()
         #: Î, ρ, φ of the last result per stack layer (source key): the composite's input
         self._views_input: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
         self.model.changed.connect(self._on_model_changed)
-        self.dolp_max.changed.connect(self._on_dolp_max_changed)
+        self.dolp_max.changed.connect(self._on_view_changed)
+        self.view_mode.changed.connect(self._on_view_changed)
         self._add_parameters(
-            [self.refractive_index, self.model, self.specular_branch, self.dolp_max]
+            [self.refractive_index, self.model, self.specular_branch, self.dolp_max, self.view_mode]
         )
 
     def _on_model_changed(self, model: str) -> None:
@@ -129,12 +193,12 @@ class PolarisationWidget(StackWidget):
         arrays = self._views_input.get(source_key(layer))
         if arrays is None:
             return None
-        rgb, rho_max = composite_for(*arrays, float(self.dolp_max.value))
-        return show_output(
-            self._viewer, "hsv", rgb, layer, {"polarseg_composite": {"dolp_max": rho_max}}
-        )
+        mode = str(self.view_mode.value)
+        return show_views(
+            self._viewer, layer, arrays, float(self.dolp_max.value), mode, stokes=False
+        )[-1]
 
-    def _on_dolp_max_changed(self, _value: float) -> None:
+    def _on_view_changed(self, _value: float) -> None:
         layer = self.stack_layer.value
         if layer is None or find_output(self._viewer, "hsv", layer) is None:
             return

@@ -26,9 +26,10 @@ from ..engine.params import (
     SCALE_MODES,
     SPECULAR_BRANCHES,
 )
+from ..engine.stokes import stokes_components
 from ..io import read_params_file
 from ._base import StackWidget
-from ._layers import find_output, remove_output, show_output, source_key
+from ._layers import find_output, label_colormap, remove_output, show_output, source_key
 from ._runner import (
     CLASSIFIER_STAGES,
     ClassifierOutput,
@@ -40,6 +41,7 @@ from ._runner import (
     content_digest,
     scribble_problem,
 )
+from .polarisation import VIEW_OUTPUTS, composite_for, view_mode_box
 
 if TYPE_CHECKING:
     import napari
@@ -97,6 +99,9 @@ CONTROLLED = (
     "n_segments",
 )
 
+#: Parameter controls shown above the collapsed *advanced settings* section.
+FIRST_CONTROLS = ("n_segments",)
+
 #: Controls of the normalized cut only: disabled while scribbles replace the cut.
 CUT_ONLY = ("scale", "scale_mode", "clustering", "min_segment_blocks", "n_segments")
 
@@ -115,6 +120,7 @@ def segment_job(
     mask_key: str | None = None,
     prefetch: bool = False,
     cancel: Callable[[], bool] | None = None,
+    report: Callable[[str, float, int], None] | None = None,
 ) -> Generator[Any, None, Any]:
     """Worker job: run the stale stages of the layer's cached pipeline, then assemble.
 
@@ -135,16 +141,35 @@ def segment_job(
     it before every product of its eigensolvers and raises
     :class:`~napari_polarseg.engine.errors.Cancelled`: Cancel or a newer request stops a
     long cut (or a prefetch) at once instead of at the end of the stage.
+
+    ``report`` (the runner's, ``WorkerSlot.submit(..., reports=True)``) receives the
+    progress within the stages that loop in chunks (harmonics, reconstruction) as
+    ``(stage, index, total)`` with a fractional ``index`` on the same scale as the
+    yields (:meth:`Pipeline.run_iter <napari_polarseg.engine.Pipeline.run_iter>`).
     """
     pipe = store.obtain(key, data, angles_rad, params, region=region, mask_key=mask_key)
     total = len(STAGES)
     if pipe.is_fresh("reconstruction"):
-        yield from pipe.run_iter(reconstruction=True, cancel=cancel)
+        yield from pipe.run_iter(reconstruction=True, cancel=cancel, progress=report)
     else:
-        for stage, index, _ in pipe.run_iter(reconstruction=False, cancel=cancel):
+        within = None
+        if report is not None:
+
+            def within(stage: str, index: float, _n: int) -> None:
+                report(stage, index, total)
+
+        last = 0
+        for stage, index, _ in pipe.run_iter(False, cancel=cancel, progress=within):
+            last = index
             yield stage, index, total
         yield Partial(pipe.result(reconstruction=False, params=params))
-        pipe.get("reconstruction")
+        share = None
+        if report is not None:
+
+            def share(done: float) -> None:
+                report(STAGES[-1], last + done * (total - last), total)
+
+        pipe.get("reconstruction", share)
         yield STAGES[-1], total, total
     result = pipe.result(reconstruction=True, params=params)
     if prefetch:
@@ -338,7 +363,10 @@ class SegmentWidget(StackWidget):
     Run and Cancel; a live-update toggle that reruns after every change, including every
     stroke painted into the chosen mask or scribbles layer; *Export results…*
     (:meth:`export_results`: the chosen stack's last result as the folder ``polarseg
-    segment --out`` writes).
+    segment --out`` writes). The stack, the angles, the preset, the number of segments,
+    the scribbles, live update, Run and Cancel show at first; the *advanced settings*
+    check box shows the rest (:attr:`advanced`, collapsed by default). The dock scrolls
+    (:class:`~napari_polarseg.widgets._base.ScrollingContainer`).
     Saturated samples (at the integer dtype's maximum) and black ones (at or below 0)
     are always left out of the fit and counted in the status line.
 
@@ -370,8 +398,12 @@ class SegmentWidget(StackWidget):
     (Image, hidden: 1 − (p1 − p2), one minus the margin between the two most probable
     classes, 0 sure … 1 a tie: where another stroke helps most); the probabilities of
     every class are :attr:`probabilities` (K, H, W) with their labels in
-    :attr:`classes`, the uncertainty is :attr:`uncertainty`. A docked *Polarisation
-    plots* widget is handed every new classifier (its feature importances).
+    :attr:`classes`, the uncertainty is :attr:`uncertainty`. With *HSV and Stokes layers*
+    (advanced) also ``S0/S1/S2 Stokes`` (hidden) and ``AoLP/DoLP HSV`` in the chosen *HSV
+    view* (with intensity, light, or dark: value from ρ, black where unpolarised), the
+    layers the *Polarisation image* widget shares; changing the view redraws them only.
+    A docked *Polarisation plots* widget is handed every new classifier (its feature
+    importances).
 
     Parameters
     ----------
@@ -619,17 +651,48 @@ class SegmentWidget(StackWidget):
             "parameters…' and polarseg segment --params), summary.json and overview.png, "
             "as polarseg segment --out writes them",
         )
+        self.views = CheckBox(
+            text="HSV and Stokes layers",
+            value=False,
+            tooltip="Also add the AoLP/DoLP HSV view and the S0, S1, S2 Stokes layers "
+            "(hidden) of each result, as the Polarisation image widget does",
+        )
+        self.view_mode = view_mode_box()
         self.parameter_widgets = [getattr(self, name) for name in CONTROLLED]
+        # the few controls a user touches first stay in view; the rest (every parameter
+        # the preset sets, the mask, the files) sit in the collapsed "advanced" section
+        self.advanced = Container(
+            widgets=[
+                self.params_file,
+                *(getattr(self, name) for name in CONTROLLED if name not in FIRST_CONTROLS),
+                self.mask_layer,
+                self.classifier_file,
+                self.views,
+                self.view_mode,
+            ],
+            labels=True,
+            label="",
+            visible=False,
+        )
+        self.advanced.margins = (0, 0, 0, 0)
+        self.show_advanced = CheckBox(
+            text="advanced settings",
+            value=False,
+            tooltip="Show every parameter of the pipeline (the preset sets them), the mask, "
+            "and the parameter and classifier files",
+        )
+        self.show_advanced.changed.connect(self._on_show_advanced)
+        self.views.changed.connect(self._on_views_changed)
+        self.view_mode.changed.connect(self._on_views_changed)
         self._add_parameters(
             [
                 self.preset,
-                self.params_file,
-                *self.parameter_widgets,
-                self.mask_layer,
+                *(getattr(self, name) for name in FIRST_CONTROLS),
                 self.scribbles_layer,
                 self.new_scribbles_button,
-                self.classifier_file,
                 self.live,
+                self.show_advanced,
+                self.advanced,
             ]
         )
         self.insert(self.index(self.progress), self.export_button)  # after Run and Cancel
@@ -711,6 +774,34 @@ class SegmentWidget(StackWidget):
                 raise PolarsegError(
                     f"{name} {value} is outside the widget's range {control.min:g}..{control.max:g}"
                 )
+
+    def _on_show_advanced(self, shown: bool) -> None:
+        self.advanced.visible = bool(shown)
+
+    def _on_views_changed(self, *_: Any) -> None:
+        """Draw the views of the chosen stack's shown result at once (no rerun)."""
+        layer = self.stack_layer.value
+        shown = None if layer is None else self._shown.get(source_key(layer))
+        if self.views.value and shown is not None and layer in self._viewer.layers:
+            segments = find_output(self._viewer, "segments", layer)
+            meta = (
+                {}
+                if segments is None
+                else {"polarseg_params": segments.metadata.get("polarseg_params")}
+            )
+            self._show_views(layer, shown[0], meta)
+
+    def _show_views(self, layer: Layer, result: SegmentationResult, meta: dict) -> None:
+        """The S0, S1, S2 Stokes layers (hidden) and the AoLP/DoLP HSV view of ``result``
+        in the chosen *HSV view* (:data:`~napari_polarseg.widgets.polarisation.VIEW_MODES`),
+        below the segments; the Polarisation image widget shares these layers."""
+        arrays = (np.asarray(result.intensity), np.asarray(result.dop), np.asarray(result.phase))
+        for role, data in zip(VIEW_OUTPUTS[:-1], stokes_components(*arrays), strict=True):
+            self._show_below_segments(role, data, layer, meta)
+        mode = str(self.view_mode.value)
+        rgb, rho_max = composite_for(*arrays, 0.0, mode)
+        composite = {"polarseg_composite": {"dolp_max": rho_max, "mode": mode}}
+        self._show_below_segments("hsv", rgb, layer, {**meta, **composite})
 
     def _on_preset_changed(self, name: str) -> None:
         self.set_params(PRESETS[name])
@@ -1065,6 +1156,7 @@ class SegmentWidget(StackWidget):
         layer = self._viewer.add_labels(
             np.zeros((h, w), dtype=np.int32),
             name=f"{stack.name} scribbles",
+            colormap=label_colormap(),  # the segments' colours: a stroke and its segment match
             scale=tuple(stack.scale[-2:]),
             translate=tuple(stack.translate[-2:]),
         )
@@ -1273,7 +1365,8 @@ class SegmentWidget(StackWidget):
             job, total = classifier_job, len(CLASSIFIER_STAGES)
         # a new stroke or request stops the prediction, or the cut's eigensolver, at once
         cancellable = True
-        self._submit(job, args, total, on_result, on_partial, self._live_run, cancellable)
+        reports = job is segment_job  # progress within the harmonics and reconstruction
+        self._submit(job, args, total, on_result, on_partial, self._live_run, cancellable, reports)
 
     def _show(
         self,
@@ -1327,6 +1420,8 @@ class SegmentWidget(StackWidget):
                 residual = np.array(result.residual)
                 self._show_below_segments("residual", residual, layer, meta)
                 self._show_below_segments("masked", masked, layer, meta)
+            if self.views.value:
+                self._show_views(layer, result, meta)
         if out is not None:
             assert confidence is not None
             prediction = out.prediction

@@ -232,10 +232,9 @@ class SweepWidget(StackWidget):
         buttons.margins = (0, 0, 0, 0)
         self.append(self.metric)
         # below the labelled controls: heatmaps, the two buttons, the table
-        layout = self.native.layout()
-        layout.addWidget(self.canvas)
-        layout.addWidget(buttons.native)
-        layout.addWidget(self.table.native)
+        self.add_native(self.canvas, expand=True)
+        self.add_native(buttons.native)
+        self.add_native(self.table.native)
         self._buttons = buttons
         self.metric.changed.connect(self.draw)
         self.use_button.changed.connect(self.use_best)

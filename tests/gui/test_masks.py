@@ -55,11 +55,11 @@ def test_labels_region_restricts_the_segmentation(viewer, open_sample, add_widge
     assert viewer.layers[-1] is segments  # still on top
 
     masked = widget.output("masked")
-    assert isinstance(masked, Labels) and masked.name == "masked pixels"
+    assert isinstance(masked, Labels) and masked.name == f"masked pixels ({stack.name})"
     assert not masked.visible
     np.testing.assert_array_equal(masked.data, (region == 0).astype(np.uint8))
     residual = widget.output("residual")
-    assert isinstance(residual, Image) and residual.name == "fit residual"
+    assert isinstance(residual, Image) and residual.name == f"fit residual ({stack.name})"
     assert not residual.visible
     np.testing.assert_allclose(residual.data, ref.residual, rtol=1e-9, atol=1e-9)
     assert f"masked: {h * w - np.count_nonzero(region)} outside the mask" in widget.status.value

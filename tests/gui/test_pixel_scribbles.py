@@ -108,7 +108,7 @@ def test_painting_retrains_live_on_the_kept_features(viewer, open_sample, add_wi
 
     # probabilities and uncertainty: hidden images below the segments, in [0, 1]
     prob, unc = widget.output("probability"), widget.output("uncertainty")
-    assert isinstance(unc, Image) and unc.name == "uncertainty" and not unc.visible
+    assert isinstance(unc, Image) and unc.name == f"uncertainty ({stack.name})" and not unc.visible
     assert isinstance(prob, Image) and not prob.visible
     assert unc.data.shape == (h, w) and unc.data.dtype == np.float32
     assert 0.0 <= float(unc.data.min()) and float(unc.data.max()) <= 1.0

@@ -150,3 +150,43 @@ def test_next_cut_is_prefetched_after_a_result(viewer, open_sample, add_widget, 
     want = engine_result(stack, widget.params())
     np.testing.assert_array_equal(widget.output("segments").data, want.labels + 1)
     assert widget.pipeline.calls["cut"] == 1  # the same tree, one split further
+
+
+def test_progress_moves_within_the_harmonics_stage(
+    viewer, open_sample, add_widget, qtbot, monkeypatch
+):
+    import napari_polarseg.engine.pipeline as pipeline_module
+    from napari_polarseg.widgets._base import PROGRESS_STEPS
+
+    original = pipeline_module.harmonics.block_coefficients
+
+    def slow(*args, progress=None, **kwargs):
+        # each chunk's report stays the newest for longer than the report interval, so
+        # the throttled progress bar shows it
+        def slowly(share):
+            progress(share)
+            time.sleep(2 * REPORT_INTERVAL)
+
+        return original(*args, progress=None if progress is None else slowly, **kwargs)
+
+    monkeypatch.setattr(pipeline_module.harmonics, "block_coefficients", slow)
+    open_sample("leaves")
+    widget = add_widget("Segment by material")
+    widget.set_params(**FAST)  # 156 blocks: two chunks of the harmonic fit
+    seen: list[tuple[int, int]] = []
+    statuses: list[str] = []  # the status line at each move of the bar (set just before)
+
+    def moved(value: int) -> None:
+        seen.append((value, widget.progress.max))
+        statuses.append(widget.status.value)
+
+    widget.progress.changed.connect(moved)
+    run_and_wait(qtbot, widget)
+    assert error_messages() == []
+    stages = widget.pipeline.stages()
+    i = stages.index("harmonics")
+    inside = [v for v, top in seen if i * PROGRESS_STEPS < v < (i + 1) * PROGRESS_STEPS]
+    assert inside, seen  # strictly between the stage boundaries
+    assert all(top == len(stages) * PROGRESS_STEPS for _, top in seen if top)
+    assert any(s.startswith("running: harmonics 50 %") for s in statuses), statuses
+    assert widget.progress.value == widget.progress.max

@@ -140,7 +140,7 @@ def test_scribbles_beat_the_unsupervised_cut(viewer, open_sample, add_widget, qt
     assert widget.classes.tolist() == [1, 2, 3]
     np.testing.assert_array_equal(widget.classes[np.argmax(proba, axis=0)], labels)
     prob = widget.output("probability")
-    assert isinstance(prob, Image) and prob.name == "class probability"
+    assert isinstance(prob, Image) and prob.name == f"class probability ({stack.name})"
     assert prob.data.shape == (h, w) and not prob.visible
     np.testing.assert_allclose(prob.data, proba.max(axis=0), atol=1e-6)
     assert prob.data.min() >= 1 / n_materials - 1e-6 and prob.data.max() <= 1 + 1e-6

@@ -30,7 +30,7 @@ def test_hsv_and_stokes_layers_after_compute_and_the_dolp_maximum(
     pol = polarisation_image(np.asarray(stack.data), np.deg2rad(stack.metadata["angles_deg"]))
     h, w = SAMPLES["leaves"][1:]
 
-    hsv = viewer.layers["AoLP/DoLP HSV"]
+    hsv = viewer.layers[f"AoLP/DoLP HSV ({stack.name})"]
     assert hsv.rgb and hsv.visible and hsv.metadata[TAG]["role"] == "hsv"
     assert hsv.data.shape == (h, w, 3) and hsv.data.dtype == np.uint8
     auto = auto_dolp_max(pol.dop)
@@ -41,35 +41,40 @@ def test_hsv_and_stokes_layers_after_compute_and_the_dolp_maximum(
 
     stokes = stokes_components(pol.intensity, pol.dop, pol.phase)
     for k in range(3):
-        layer = viewer.layers[f"S{k} Stokes"]
+        layer = viewer.layers[f"S{k} Stokes ({stack.name})"]
         assert not layer.visible and layer.metadata[TAG]["role"] == f"s{k}"
         np.testing.assert_allclose(layer.data, stokes[k], rtol=1e-12, atol=1e-9)
     # of the four maps only ρ starts visible (stacked, the top one would hide the others)
-    shown = {n: viewer.layers[n].visible for n in ("Î intensity", "φ phase", "θ zenith")}
-    assert viewer.layers["ρ degree of polarisation"].visible and not any(shown.values())
+    shown = {
+        n: viewer.layers[f"{n} ({stack.name})"].visible
+        for n in ("Î intensity", "φ phase", "θ zenith")
+    }
+    assert viewer.layers[f"ρ degree of polarisation ({stack.name})"].visible and not any(
+        shown.values()
+    )
 
     # the DoLP maximum redraws only the composite, without a new computation
     def no_job(*args, **kwargs):
         raise AssertionError("the DoLP maximum must not recompute the polarisation image")
 
     monkeypatch.setattr(polarisation_module, "polarisation_job", no_job)
-    intensity_data = viewer.layers["Î intensity"].data
+    intensity_data = viewer.layers[f"Î intensity ({stack.name})"].data
     before = hsv.data.copy()
     n_layers = len(viewer.layers)
     widget.dolp_max.value = 0.02
-    after = viewer.layers["AoLP/DoLP HSV"].data
+    after = viewer.layers[f"AoLP/DoLP HSV ({stack.name})"].data
     assert not np.array_equal(after, before)
     np.testing.assert_array_equal(
         after,
         aolp_dolp_composite(pol.intensity, pol.dop, pol.phase, CompositeParams(dolp_max=0.02)),
     )
-    assert viewer.layers["AoLP/DoLP HSV"] is hsv and len(viewer.layers) == n_layers
-    assert viewer.layers["Î intensity"].data is intensity_data
+    assert viewer.layers[f"AoLP/DoLP HSV ({stack.name})"] is hsv and len(viewer.layers) == n_layers
+    assert viewer.layers[f"Î intensity ({stack.name})"].data is intensity_data
     # a lower maximum saturates more pixels
     sat = lambda rgb: rgb.max(axis=-1).astype(int) - rgb.min(axis=-1)  # noqa: E731
     assert sat(after).mean() > sat(before).mean()
     widget.dolp_max.value = 0.0  # back to auto: the first picture again
-    np.testing.assert_array_equal(viewer.layers["AoLP/DoLP HSV"].data, before)
+    np.testing.assert_array_equal(viewer.layers[f"AoLP/DoLP HSV ({stack.name})"].data, before)
 
 
 def test_a_run_keeps_the_users_layer_selection(viewer, open_sample, add_widget, qtbot):

@@ -74,22 +74,22 @@ def test_both_widgets_match_the_engine(viewer, open_sample, add_widget, qtbot, k
     }
     h, w = SAMPLES[key][1:]
     for role, name in POLARISATION_LAYERS.items():
-        layer = viewer.layers[name]
+        layer = viewer.layers[f"{name} ({stack.name})"]
         assert isinstance(layer, Image)
         assert layer.metadata[TAG]["role"] == role
         assert layer.data.shape == (h, w)
         np.testing.assert_allclose(layer.data, expected[role], rtol=1e-12, atol=1e-12)
-    dop = viewer.layers["ρ degree of polarisation"]
+    dop = viewer.layers[f"ρ degree of polarisation ({stack.name})"]
     assert 0.0 <= dop.data.min() and dop.data.max() <= 1.0
     lo, hi = np.percentile(pol.dop, [1, 99])
     assert dop.contrast_limits == pytest.approx([lo, hi])
     assert dop.colormap.name == "viridis"
-    phase = viewer.layers["φ phase"]
+    phase = viewer.layers[f"φ phase ({stack.name})"]
     assert phase.colormap.name == "twilight"
     assert tuple(phase.contrast_limits) == (0.0, math.pi)
     assert 0.0 <= phase.data.min() and phase.data.max() < math.pi
-    assert viewer.layers["Î intensity"].colormap.name == "gray"
-    zenith = viewer.layers["θ zenith"].data
+    assert viewer.layers[f"Î intensity ({stack.name})"].colormap.name == "gray"
+    zenith = viewer.layers[f"θ zenith ({stack.name})"].data
     assert 0.0 <= zenith.min() and zenith.max() <= math.pi / 2
 
     # -- Segment by material ------------------------------------------------------------------
@@ -97,12 +97,12 @@ def test_both_widgets_match_the_engine(viewer, open_sample, add_widget, qtbot, k
     run_and_wait(qtbot, seg_widget)
     assert error_messages() == []
     ref = engine_result(stack, SegmentParams(**FAST))
-    segments = viewer.layers["segments"]
+    segments = viewer.layers[f"segments ({stack.name})"]
     assert isinstance(segments, Labels)
     assert segments.data.shape == (h, w)  # pixel resolution over the whole image
     np.testing.assert_array_equal(segments.data, ref.labels + 1)
     assert set(np.unique(segments.data)) == set(range(1, ref.n_segments + 1))
-    error = viewer.layers["reconstruction error"]
+    error = viewer.layers[f"reconstruction error ({stack.name})"]
     assert isinstance(error, Image) and error.data.shape == (h, w)
     np.testing.assert_allclose(error.data, ref.reconstruction_error, rtol=1e-9, atol=1e-9)
     assert error.data.min() >= 0
@@ -165,9 +165,11 @@ def test_thesis_defaults_run_off_the_gui_thread(
     assert len(delivered) == 4  # the segments, then everything
     assert max(np.diff(delivered)[::2]) < 1.5
     ref = engine_result(stack, SegmentParams())
-    np.testing.assert_array_equal(viewer.layers["segments"].data, ref.labels + 1)
+    np.testing.assert_array_equal(viewer.layers[f"segments ({stack.name})"].data, ref.labels + 1)
     np.testing.assert_allclose(
-        viewer.layers["reconstruction error"].data, ref.reconstruction_error, atol=1e-9
+        viewer.layers[f"reconstruction error ({stack.name})"].data,
+        ref.reconstruction_error,
+        atol=1e-9,
     )
     # the BLAS thread limit held during the run is lifted again
     after = {pool["filepath"]: pool["num_threads"] for pool in threadpool_info()}
@@ -246,7 +248,9 @@ def test_changing_only_segments_reuses_cached_harmonics(
         widget.n_segments.value = k
         wait_idle(qtbot, widget)
         ref = engine_result(stack, SegmentParams(**{**FAST, "n_segments": k}))
-        np.testing.assert_array_equal(viewer.layers["segments"].data, ref.labels + 1)
+        np.testing.assert_array_equal(
+            viewer.layers[f"segments ({stack.name})"].data, ref.labels + 1
+        )
     assert widget.pipeline is pipe  # one pipeline kept per stack layer
     assert pipe.calls["harmonics"] == 1  # harmonics were not computed again
     assert calls.count("thesis") == 1
@@ -388,9 +392,9 @@ def test_engine_errors_become_notifications(viewer, open_sample, add_widget, qtb
 
 def test_polarisation_widget_reports_missing_angles(viewer, add_widget, qtbot):
     data = np.random.default_rng(0).uniform(1, 2, size=(4, 32, 40))
-    viewer.add_image(data, name="no angles")
+    stack = viewer.add_image(data, name="no angles")
     widget = add_widget("Polarisation image")
-    assert widget.stack_layer.value is viewer.layers["no angles"]
+    assert widget.stack_layer.value is stack
     assert widget.angles.value == ""
     click(qtbot, widget.run_button)
     assert error_messages() == [
@@ -398,7 +402,7 @@ def test_polarisation_widget_reports_missing_angles(viewer, add_widget, qtbot):
     ]
     widget.angles.value = "0,45,90,135"
     run_and_wait(qtbot, widget)
-    assert viewer.layers["Î intensity"].data.shape == (32, 40)
+    assert viewer.layers[f"Î intensity ({stack.name})"].data.shape == (32, 40)
 
 
 def test_segments_visible_in_a_canvas_screenshot(make_napari_viewer, qtbot):
