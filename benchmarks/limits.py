@@ -1,7 +1,7 @@
 """What limits unsupervised material segmentation on the synthetic scenes, measured.
 
 Issue 6 asks for ARI >= 0.8 from the best unsupervised option, or figures explaining what
-limits it. This script gives those figures (README "Why not 0.8"). For each scene, block
+limits it. This script gives those figures (docs/quality.md, "Why not 0.8"). For each scene, block
 side w = 12, it trains a *supervised* classifier (standardised logistic regression) on
 the blocks of one rendering (seed 1) and tests it on another (seed 2), then the other way
 round, and reports the mean pixel ARI on the held-out rendering. A supervised classifier

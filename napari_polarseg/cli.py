@@ -311,7 +311,7 @@ PRESET_HELP = (
     "auto: superpixels clustered by their polarisation, the best unsupervised method "
     "measured on rendered and real frames; thesis: the thesis pipeline as published; "
     "recommended: the thesis pipeline with the block parameters that score best on the "
-    "synthetic scenes (README, 'Segmentation quality')"
+    "synthetic scenes (docs/quality.md)"
 )
 #: Presets of the commands whose own analysis cuts the block graph (sweep, timeseries).
 BLOCK_PRESETS = ("thesis", "recommended")

@@ -23,8 +23,8 @@ import numpy as np
 from PIL import Image
 
 ROOT = Path(__file__).resolve().parents[1]
-#: The real frames beside the repository: ../shared/data/polanalyser (README, "Optional real
-#: data", says where they come from).
+#: The real frames beside the repository: ../shared/data/polanalyser (docs/data.md, "Optional
+#: real data", says where they come from).
 SOURCE_DIR = ROOT / ".." / "shared" / "data" / "polanalyser"
 SOURCE_NAME = "fruits_IMX250MZR.png"
 SOURCE_SHA256 = "8e9c22aa2ab0c4b48374a3fa27330fc4800daeb178e3a4bfd513d7e0f5d4fa49"
@@ -76,7 +76,7 @@ def main(argv: list[str] | None = None) -> int:
     if not src.is_file():
         print(
             f"error: {SOURCE_NAME} not found in {args.source} (the real frames go in "
-            "../shared/data/polanalyser beside the repository; see the README)",
+            "../shared/data/polanalyser beside the repository; see docs/data.md)",
             file=sys.stderr,
         )
         return 1

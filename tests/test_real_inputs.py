@@ -67,7 +67,7 @@ REAL_MEDIAN_RHO = {
 needs_real_data = pytest.mark.skipif(
     not REAL_DIR.is_dir(),
     reason="real polarisation-camera frames not found in ../shared/data/polanalyser "
-    "(beside the repository; README, 'Optional real data')",
+    "(beside the repository; docs/data.md, 'Optional real data')",
 )
 
 

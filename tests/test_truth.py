@@ -32,7 +32,7 @@ REAL_DIR = (REPO / ".." / "shared" / "data" / "polanalyser").resolve()
 needs_real_data = pytest.mark.skipif(
     not REAL_DIR.is_dir(),
     reason="real polarisation-camera frames not found in ../shared/data/polanalyser "
-    "(beside the repository; README, 'Optional real data')",
+    "(beside the repository; docs/data.md, 'Optional real data')",
 )
 
 #: Pixels per class as measured when the polygons and strokes were drawn (regression check).

@@ -30,7 +30,7 @@ MIN_AUC = 0.75
 @pytest.mark.skipif(
     not REAL_DIR.is_dir(),
     reason="real polarisation-camera frames not found in ../shared/data/polanalyser "
-    "(beside the repository; README, 'Data')",
+    "(beside the repository; docs/data.md, 'Optional real data')",
 )
 @pytest.mark.parametrize("path", truth_files(), ids=lambda p: p.stem)
 def test_uncertainty_ranks_the_classifiers_mistakes_first(path):

@@ -17,10 +17,10 @@ Eigensolvers
   products is what counts, and the preconditioner is what keeps it low on the thesis's
   own affinity (s = 1 with 10–20 PCA components): that graph has fallen apart into
   nearly isolated blocks, diag(N)_i = 1 − W_ii/d_i is tiny exactly there, and the
-  Fiedler vectors live there. On the 4,752-block reference image plain Lanczos
-  (``eigsh``) needs ~400 products per cut, LOBPCG 30–60 (~100 from a cold start on
-  the n = 1.6 affinity). A cold solve starts from random vectors and the indicators of
-  the blocks with the smallest diag(N).
+  Fiedler vectors live there: plain Lanczos (``eigsh``) needs several times as many
+  products per cut (figures: docs/performance.md, "Measurements behind the code"). A
+  cold solve starts from random vectors and the indicators of the blocks with the
+  smallest diag(N).
 - Why not ``scipy.sparse.linalg.lobpcg`` (used before): its overhead per iteration was
   about half a product; it has one tolerance for all vectors, so guards cost as much as
   the Fiedler vector; with one vector it settled on the wrong eigenpair on the
@@ -33,7 +33,7 @@ Eigensolvers
 - Dense products: one float32 matrix (from :data:`FLOAT32_MIN_NODES` nodes: W itself
   when it is float32, as the pipeline stores its affinity there, else one float32 copy)
   serves the whole tree, multiplied with BLAS ``symv`` (it reads one triangle:
-  half the memory traffic of ``gemv``; 1.4 ms against 2.8 ms at 4,752 nodes). A segment
+  half the memory traffic of ``gemv``). A segment
   with more than :data:`COPY_MAX_FRACTION` of the nodes is multiplied through the whole
   matrix (scatter into zeros, product, gather: W[s][:, s] x = (W x̃)[s]); a smaller one
   gets its own float32 copy. Float32 round-off (~1e-7 relative per product) is ten
@@ -41,14 +41,13 @@ Eigensolvers
   summed in float64.
 - Sparse W (k nearest neighbours, spatial neighbourhoods): Lanczos (``eigsh``, two
   eigenpairs of D^−½ W D^−½, tolerance EIG_TOL / 10). Products are cheap there and
-  LOBPCG's per-iteration overhead dominates (4 s against 0.5 s on a 19,584-block
-  camera frame). pyamg is not used: Lanczos already takes well under a second. Except
-  on a graph that has *fallen apart* (a node keeps more than 1 − :data:`FALLEN_APART`
-  of its degree to itself, as with the thesis scale s = 1): there Lanczos must resolve
-  eigenvalues of D^−½ W D^−½ within 1e-5 of 1 and took 161,000 products (4 minutes) on
-  a 8,000-block kNN graph of 12-dimensional features, 268,000 on the 12,444 blocks of
-  the polanalyser camera frame, where the block LOBPCG with its Jacobi preconditioner
-  needs about 10: such graphs are solved by the block LOBPCG first.
+  LOBPCG's per-iteration overhead dominates. pyamg is not used: Lanczos is fast
+  enough. Except on a graph that has *fallen apart* (a node keeps more than
+  1 − :data:`FALLEN_APART` of its degree to itself, as with the thesis scale s = 1):
+  there Lanczos must resolve eigenvalues of D^−½ W D^−½ within 1e-5 of 1 and needs
+  orders of magnitude more products than the block LOBPCG with its Jacobi
+  preconditioner: such graphs are solved by the block LOBPCG first (figures:
+  docs/performance.md, "Measurements behind the code").
 - Each falls back on the other, and finally on a dense solve (up to
   :data:`DENSE_FALLBACK_MAX` nodes) when neither gave any vector.
 
@@ -59,15 +58,10 @@ Bounded work, isolated blocks, Cancel
   LOBPCG iteration with four active vectors makes four), all solvers of the solve
   together; Lanczos, when it goes first, may take :data:`LANCZOS_SHARE` of them. When
   the budget is spent, the cut is made along the best vector the block LOBPCG has (its
-  lowest Ritz vector) and :meth:`CutTree.cut_limits` counts the solve as capped. On the
-  inputs measured the cap never bites (largest solves: Lanczos 811 products on the
-  polanalyser carps frame with the recommended preset, 1,496 before on the fruits
-  frame with the thesis preset, which now takes the block LOBPCG; block LOBPCG ≤ 130);
-  the time bound is the cap times a product's cost, measured on the busy 2-core host
-  (load 3–6): ~0.9 ms on a 12,000-node sparse graph (a chain-of-groups affinity: 3
-  solves, 5,681 products, 5 s; 130,298 products and 80 s without the cap), 5–7 ms on
-  a 3,000–6,000-node dense one (one capped solve 10–14 s; the first cut of a
-  3,000-node chain of groups made 117,000 products in 6 minutes without the cap).
+  lowest Ritz vector) and :meth:`CutTree.cut_limits` counts the solve as capped. The
+  cap is set well above the largest solves of normal inputs, so that it only stops
+  pathological graphs; the time bound is the cap times a product's cost (both
+  measured: docs/performance.md, "Measurements behind the code").
 - Isolated blocks: a block of a segment that keeps all but less than
   :data:`ISOLATED_NCUT` of its degree to itself has a singleton cut below what an
   iterative solver resolves (its residual tolerance is :data:`EIG_TOL`): many
@@ -85,8 +79,8 @@ Bounded work, isolated blocks, Cancel
 - A :class:`CutTree` can be warm-started from the eigenvectors of an earlier tree on
   the same blocks (the pipeline does this when the affinity changed but not the block
   grid, e.g. its scale or the refractive index): each segment's solve also starts from
-  the vectors of the smallest old segment containing it, restricted to it (reference
-  image, s = 1 → 2: 85 instead of 101 products for the first two cuts).
+  the vectors of the smallest old segment containing it, restricted to it (fewer
+  products than a cold start).
 
 The splitting point along y is the one with the lowest Ncut value (eq. 4.29) over *all*
 thresholds between distinct values of y, found in one pass with cumulative sums.
@@ -118,8 +112,8 @@ EIG_TOL = 1e-6
 #: Iteration cap of LOBPCG before falling back to Lanczos.
 LOBPCG_MAXITER = 400
 #: Default cap on the products with the affinity one segment's eigensolve may make, all
-#: solvers together (module docstring: "Bounded work"); the largest solve measured on
-#: normal inputs made 811.
+#: solvers together (module docstring: "Bounded work"); above the largest solves of
+#: normal inputs (docs/performance.md, "Measurements behind the code").
 MAX_CUT_PRODUCTS = 2_000
 #: Share of the products Lanczos may take when it goes first (sparse graphs that have
 #: not fallen apart); the rest is kept for the block LOBPCG.
@@ -135,10 +129,9 @@ FALLEN_APART = 1e-3
 ISOLATED_NCUT = EIG_TOL
 #: Smallest ``max_products`` accepted (the block solver's first step needs a few).
 MIN_CUT_PRODUCTS = 20
-#: Vectors iterated along with the Fiedler vector by the dense LOBPCG (see module doc).
-#: Products for the cuts of the reference image's interactive changes (k = 3, the 4th
-#: cut, s = 2, n = 1.6, and the same with the recommended preset), summed: 1 guard at
-#: tolerance 1e-2 480, 2 at 1e-2 452, 2 at 3e-2 410, 3 at 5e-2 398, 4 at 5e-2 407.
+#: Vectors iterated along with the Fiedler vector by the dense LOBPCG (see module doc);
+#: with :data:`GUARD_TOL`, the setting that made the fewest products on the reference
+#: image's interactive changes (docs/performance.md, "Measurements behind the code").
 GUARD_VECTORS = 3
 #: Residual tolerance of the guard vectors: they widen the search space and start the
 #: children; only the first vector is ever cut along, to :data:`EIG_TOL`.
@@ -203,9 +196,9 @@ def _symmetric_product(M: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
     symv wants Fortran order or it copies the whole matrix on every call; a symmetric M
     equals its transpose, so a C-ordered M is passed as M.T (a fancy-indexed copy can
     come out in either order). Not one ``gemm`` for a block: for the few columns used
-    here OpenBLAS's gemm was slower than the symv calls (6 columns: ~10 ms against
-    ~9 ms), and after a gemm or a gemv on a large matrix the next few dozen symv calls
-    ran 3–5 times slower on the reference machine (so the tree uses no gemv either).
+    here OpenBLAS's gemm was slower than the symv calls, and after a gemm or a gemv on a
+    large matrix the next few dozen symv calls ran slower (so the tree uses no gemv
+    either; docs/performance.md, "Measurements behind the code").
     """
     symv = get_blas_funcs("symv", (M,))
     MT = M.T if M.flags.c_contiguous else np.asfortranarray(M)
@@ -433,11 +426,10 @@ def _lobpcg(
     """:func:`_lobpcg_steps` with its tall-and-skinny algebra on one BLAS thread.
 
     Each iteration makes a dozen products of n × (≤ 13) blocks (Gram matrices, Ritz
-    combinations, projections). OpenBLAS splits them between its threads, which on
-    the reference 2-core machine under load made them 25–45 times slower (12 ms
-    against 0.5 ms for a 12,000 × 12 Gram matrix; 36 ms an iteration on a 12,000-node
-    sparse graph, where 400 iterations took 14 s). ``apply`` (the products with the
-    affinity, memory-bound: they gain from the threads) runs with the caller's threads.
+    combinations, projections). OpenBLAS splits them between its threads, which on a
+    loaded machine made them many times slower (docs/performance.md, "Measurements
+    behind the code"). ``apply`` (the products with the affinity, memory-bound: they
+    gain from the threads) runs with the caller's threads.
     """
     libs = _blas_libraries()
     saved = [lib.num_threads for lib in libs]

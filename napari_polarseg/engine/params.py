@@ -214,7 +214,7 @@ def _check_choice(name: str, value: Any, choices: tuple[str, ...]) -> None:
 
 
 #: Parameters that beat the thesis defaults on the bundled synthetic scenes (chosen with
-#: ``benchmarks/evaluate.py --sweep``; README "Segmentation quality" has the table).
+#: ``benchmarks/evaluate.py --sweep``; docs/quality.md has the table).
 #: The thesis's absolute affinity scale s = 1 with 10-20 PCA components gives affinities
 #: near e^-30: the graph falls apart and the cut peels off single blocks, so the scale is
 #: relative to the median distance here; the azimuth-invariant zonal coefficients drop

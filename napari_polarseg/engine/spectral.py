@@ -22,8 +22,8 @@ work"): Lanczos may make :data:`~napari_polarseg.engine.ncut.LANCZOS_SHARE` of
 ``max_products`` products with the affinity, then the block LOBPCG (Jacobi
 preconditioner, which copes with a graph that has fallen apart) the rest, after which
 its best vectors are used and the decomposition is counted as capped
-(:meth:`SpectralClustering.cut_limits`). The largest decomposition measured on normal
-inputs made 650 products (polanalyser carps frame, recommended preset, k = 6). ``cancel``
+(:meth:`SpectralClustering.cut_limits`); normal inputs stay well below the cap
+(docs/performance.md, "Measurements behind the code"). ``cancel``
 (called before every product) stops it with
 :class:`~napari_polarseg.engine.errors.Cancelled`.
 """

@@ -62,20 +62,17 @@ Job = Callable[..., Generator[Any, None, Any]]
 #: Seconds a run must last before it appears in napari's activity dock (a progress bar
 #: there and an animated "in progress" spinner in the status bar). Interactive reruns end
 #: sooner and show their stages only in the widget: the spinner repaints the window ~25
-#: times a second, which on a software-rendered canvas (Mesa llvmpipe under Xvfb) took
-#: half of a 2-core machine and made the engine's stages up to twice as slow (issue 5).
-#: Live reruns (a changed value, a painted stroke) never appear there, however long they
-#: last: a retraining of the pixel classifier after a stroke took 6.4 s to the segments
-#: with the dock shown after 1 s and 2.9 s without it (medians of 6 strokes each,
-#: interleaved, on the 720 x 660 reference stack of benchmarks/bench_gui.py, issue 12).
+#: times a second, which on a software-rendered canvas (Mesa llvmpipe under Xvfb) takes
+#: CPU from the engine's stages. Live reruns (a changed value, a painted stroke) never
+#: appear there, however long they last: the spinner slowed a retraining of the pixel
+#: classifier after a stroke as much (docs/performance.md, "Measurements behind the code").
 ACTIVITY_DELAY = 1.0
 
 #: Least seconds between two reports (status line, progress bars) of a running job; a
 #: live rerun's first report comes one interval after its start, so a rerun that ends
 #: sooner changes nothing in the window until its result is shown. Every report repaints
-#: the window, which on a software-rendered canvas composes all of it again: 10–100 ms of
-#: CPU taken from the worker on the reference 2-core machine (eight reports per run made
-#: a 0.85 s rerun take 1.6 s).
+#: the window, which on a software-rendered canvas composes all of it again, with CPU
+#: taken from the worker (docs/performance.md, "Measurements behind the code").
 REPORT_INTERVAL = 0.25
 
 #: Ticks per stage of the progress bars (the widget's and the activity dock's, which take
@@ -122,14 +119,14 @@ class _BlasShare:
     """Leave a core to the GUI thread while workers compute, on machines with 3+ cores.
 
     OpenBLAS threads spin while they wait for work; with as many of them as cores they
-    compete with the GUI thread (and with Xvfb/Mesa) and froze the event loop for a
-    third of a second here while a progress spinner was animating. While at least one
+    compete with the GUI thread (and with Xvfb/Mesa) and froze the event loop while a
+    progress spinner was animating. While at least one
     worker runs, BLAS pools are limited to ``cpu_count - 1`` threads; the original
     limits come back when the last worker ends. With 2 cores (or 1) nothing is limited:
     since runs no longer repaint the window while they compute (``REPORT_INTERVAL``,
-    ``ACTIVITY_DELAY``), one BLAS thread only made the eigensolver's products 1.7 times
-    slower (3.6 against 2.1 ms at 4,752 blocks) and left the event loop's longest stall
-    where it was (0.07–0.14 s either way, ``benchmarks/bench_gui.py``). Needs
+    ``ACTIVITY_DELAY``), one BLAS thread only made the eigensolver's products slower and
+    left the event loop's longest stall where it was (docs/performance.md, "Measurements
+    behind the code"). Needs
     ``threadpoolctl`` (a scikit-learn dependency); without it nothing is changed.
     """
 

@@ -454,7 +454,7 @@ class SegmentWidget(StackWidget):
             tooltip="auto: superpixels clustered by their polarisation (the best "
             "unsupervised method measured on rendered and real frames); thesis: the "
             "published pipeline; recommended: its block parameters that score best on "
-            "the synthetic scenes (README, 'Segmentation quality')",
+            "the synthetic scenes (docs/quality.md)",
         )
         self.load_button = PushButton(
             text="Load parameters…",

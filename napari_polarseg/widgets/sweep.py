@@ -147,7 +147,7 @@ class SweepWidget(StackWidget):
     layer (any label ids; the stack's height × width) every cell also gets its adjusted
     Rand index. *best by* chooses the criterion of the best cell (the default, stability,
     is the label-free one that tracked the ground truth best on the synthetic scenes;
-    README "Parameter sweep"). *Run sweep* runs in a worker with a progress bar;
+    docs/cli.md, "Parameter sweep"). *Run sweep* runs in a worker with a progress bar;
     *Cancel* stops after the running cell. The canvas shows one metric as heatmaps (rows
     w, columns L, one per n; the best cell outlined) and the table every cell.
 
