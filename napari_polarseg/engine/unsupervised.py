@@ -20,9 +20,9 @@ those few hundred to few thousand nodes:
    the same cue taken image-wide, log ρ̄ less a cubic in log Î fitted over all regions
    (:func:`dop_given_intensity`).
    Optionally the per-pixel feature stack of :mod:`.pixel_features` averaged per region.
-   The features may be diffused over the region graph, not across its edges
-   (``UnsupervisedParams.diffusion``), then are standardised (weighted by region area)
-   and reduced by PCA to the
+   The features are standardised (weighted by region area), may be diffused over the
+   region graph but not across its edges (``UnsupervisedParams.diffusion``) and are
+   reduced by PCA to the
    components that explain ``variance`` of the total (:func:`.features.pca_features`).
 3. **Clustering** (``UnsupervisedParams.clustering``): a Gaussian mixture (scikit-learn
    ``GaussianMixture``, full covariances, seeded) or k-means weighted by region area
@@ -153,8 +153,8 @@ class UnsupervisedParams:
         Relabel the pixels on segment borders (:func:`refine_boundaries`): a watershed
         border on a straight edge is a pixel off on one side.
     diffusion : float
-        λ of the edge-aware diffusion of the node features over the region graph before
-        they are standardised (:mod:`.region_diffusion`), [0, 1]; 0 = none.
+        λ of the edge-aware diffusion of the standardised node features over the region
+        graph (:mod:`.region_diffusion`), [0, 1]; 0 = none.
     diffusion_range : float
         Reach of that diffusion as a share of the image's side √(H·W): after t steps a
         feature has spread over about √(λ t) regions of side √area, so
@@ -491,19 +491,6 @@ def maf_features(
     return f / np.maximum(f.std(axis=0), 1e-12)
 
 
-def _smooth_posteriors(
-    post: np.ndarray, adjacency: sps.csr_matrix, strength: float, iterations: int
-) -> np.ndarray:
-    """P ← (1 − λ) P + λ A P, A the row-normalised border lengths, ``iterations`` times."""
-    if strength <= 0 or iterations <= 0:
-        return post
-    deg = np.asarray(adjacency.sum(axis=1)).ravel()
-    a = sps.diags(1.0 / np.where(deg > 0, deg, 1.0)) @ adjacency
-    for _ in range(iterations):
-        post = (1 - strength) * post + strength * (a @ post)
-    return post
-
-
 def _cluster_mixture(
     z: np.ndarray, k: int, weight: np.ndarray, adjacency: sps.csr_matrix, p: UnsupervisedParams
 ) -> np.ndarray:
@@ -524,7 +511,8 @@ def _cluster_mixture(
         d = squared_distances(z, fit.centres)
         post = np.exp(-(d - d.min(axis=1, keepdims=True)) / 2)
         post /= post.sum(axis=1, keepdims=True)
-    post = _smooth_posteriors(post, adjacency, p.smoothing, p.smoothing_iterations)
+    # the posteriors smoothed by the same lazy walk as the features (module docstring)
+    post = diffuse(post, adjacency, p.smoothing, p.smoothing_iterations)
     return np.argmax(post, axis=1)
 
 
