@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass, field, fields
 from typing import Any
 
 import numpy as np
@@ -27,94 +27,242 @@ MAX_DEGREE = 60
 
 
 @dataclass(frozen=True)
-class SegmentParams:
-    """Every tunable of the pipeline (thesis section 4.5 defaults).
+class ParamSpec:
+    """How one :class:`SegmentParams` field is described, asked for and shown.
+
+    The one description of each parameter: the CLI flags (``--help``), the plugin's
+    controls (label, range, tooltip) and the class docstring are all made from it.
 
     Attributes
     ----------
-    window : int
-        Side w of the non-overlapping w x w pixel blocks (thesis: 10).
-    degree : int
-        Highest spherical-harmonic degree L; the block vector has (L+1)^2 entries
-        (thesis: 12).
-    refractive_index : float
-        Assumed refractive index n for zenith from degree of polarisation (thesis: 1.45).
-    model : {"diffuse", "specular"}
-        Fresnel model for the zenith: diffuse eq. 3.13 (corrected) or specular eq. 3.11.
-    specular_branch : {"below-brewster", "above-brewster"}
-        Which of the two specular zenith solutions to take (specular rho is not
-        monotonic; it peaks at 1 at Brewster's angle).
-    coefficients : {"thesis", "ridge"}
-        Block coefficient estimator: the thesis mean estimator eq. 4.21 or a per-block
-        ridge least-squares fit.
-    ridge : float
-        Ridge penalty, relative to the mean diagonal of the block Gram matrix.
-    features : {"thesis", "zonal", "energy", "polstats", "zonal+polstats"}
-        Block features fed to the PCA: every coefficient (thesis), the azimuth-invariant
-        m = 0 coefficients, the rotation-invariant energy per degree, direct
-        polarisation statistics of the block (distributions of ρ, θ and Î and their
-        relation; :mod:`~napari_polarseg.engine.polstats`), or the zonal coefficients
-        and the statistics together.
-    variance : float
-        Share of variance the PCA keeps, in (0, 1] (thesis: 0.95).
-    scale : float
-        Affinity scale s in S = exp(-D / s) (thesis: 1).
-    scale_mode : {"absolute", "median"}
-        ``"absolute"``: s as given (thesis). ``"median"``: s is relative to the median
-        squared Mahalanobis distance between blocks, which keeps the graph connected
-        whatever the number of PCA components.
-    spatial_radius : float
-        Radius, in blocks, of Shi & Malik's spatial term in the affinity; 0 (thesis)
-        switches it off and connects every pair of blocks.
-    spatial_sigma : float
-        Width σ_X, in blocks, of the spatial term exp(−‖X_i − X_j‖² / σ_X²).
-    n_segments : int
-        Number of segments the recursive normalized cut stops at.
-    ncut_threshold : float or None
-        Stop splitting earlier when the best cut's Ncut value exceeds this.
-    min_segment_blocks : int
-        Smallest segment, in blocks, a cut may produce.
-    clustering : {"recursive", "kway"}
-        ``"recursive"``: greedy recursive two-way normalized cuts (thesis section 4.4.1).
-        ``"kway"``: k-way spectral clustering — the first k generalized eigenvectors of
-        the same affinity, rows normalised, k-means (Ng, Jordan & Weiss 2002)
-        (:mod:`~napari_polarseg.engine.spectral`). ``"superpixels"``: no block graph;
-        edge-following superpixels clustered by their ρ statistics
-        (:func:`~napari_polarseg.engine.unsupervised.segment_unsupervised` with its
-        measured defaults), labels at pixel resolution; the block fields above still give
-        the harmonic maps and the reconstruction-error map.
-    fit : {"lsq", "robust"}
-        Fit of the polarisation image: exact linear least squares (optimal for Gaussian
-        noise), or a robust IRLS fit (Tukey's biweight from a trimmed start) that
-        resists outlying frames; see :func:`~napari_polarseg.engine.polarisation_image`.
-    affinity_graph : {"auto", "dense", "sparse"}
-        How the block affinity is stored. ``"dense"``: every pair of blocks (the thesis;
-        n_blocks² values). ``"sparse"``: with a spatial term, the pairs within
-        ``spatial_radius`` (exact); without one, each block's k nearest neighbours in
-        feature space (:data:`~napari_polarseg.engine.features.KNN_NEIGHBORS`).
-        ``"auto"``: sparse with a spatial term (it is exact) or above
-        :data:`~napari_polarseg.engine.pipeline.DENSE_MAX_BLOCKS` blocks, else dense.
+    help : str
+        What the parameter is, with its unit (one or more sentences).
+    flag : str
+        The CLI option, e.g. ``"--window"``.
+    metavar : str or None
+        The CLI metavar of a numeric option.
+    label : str or None
+        The plugin control's label; None: no control (the preset sets it).
+    minimum, maximum : float or None
+        The control's range (the engine's own checks are :meth:`SegmentParams.validate`).
+    step : float or None
+        The float control's step.
+    decimals : int or None
+        Decimals a float control shows.
+    choices : tuple of str or None
+        The values a menu offers.
+    choice_names : dict or None
+        Text shown in the menu for some of the choices.
+    optional : bool
+        The value may be None (the CLI takes ``none``).
     """
 
-    window: int = 10
-    degree: int = 12
-    refractive_index: float = 1.45
-    model: str = "diffuse"
-    specular_branch: str = "below-brewster"
-    coefficients: str = "thesis"
-    ridge: float = 1e-3
-    features: str = "thesis"
-    variance: float = 0.95
-    scale: float = 1.0
-    scale_mode: str = "absolute"
-    spatial_radius: float = 0.0
-    spatial_sigma: float = 2.0
-    n_segments: int = 3
-    ncut_threshold: float | None = None
-    min_segment_blocks: int = 1
-    clustering: str = "recursive"
-    fit: str = "lsq"
-    affinity_graph: str = "auto"
+    help: str
+    flag: str
+    metavar: str | None = None
+    label: str | None = None
+    minimum: float | None = None
+    maximum: float | None = None
+    step: float | None = None
+    decimals: int | None = None
+    choices: tuple[str, ...] | None = None
+    choice_names: dict[str, str] | None = None
+    optional: bool = False
+
+    def menu(self) -> list[tuple[str, str]]:
+        """(text, value) pairs of a menu parameter, in the order of :attr:`choices`."""
+        names = self.choice_names or {}
+        return [(names.get(c, c), c) for c in self.choices or ()]
+
+
+def _param(default: Any, **spec: Any) -> Any:
+    """A dataclass field whose metadata holds its :class:`ParamSpec`."""
+    return field(default=default, metadata={"spec": ParamSpec(**spec)})
+
+
+@dataclass(frozen=True)
+class SegmentParams:
+    """Every tunable of the pipeline (thesis section 4.5 defaults).
+
+    Each field's description, CLI flag and plugin control come from its
+    :class:`ParamSpec` (:data:`PARAM_SPECS`); the attribute list below is made from them.
+    """
+
+    window: int = _param(
+        10,
+        help="Side w of the non-overlapping w x w pixel blocks, in pixels",
+        flag="--window",
+        metavar="W",
+        label="window size",
+        minimum=2,
+        maximum=4096,
+    )
+    degree: int = _param(
+        12,
+        help="Highest spherical-harmonic degree L; the block vector has (L+1)² entries",
+        flag="--degree",
+        metavar="L",
+        label="harmonic degree",
+        minimum=0,
+        maximum=MAX_DEGREE,
+    )
+    refractive_index: float = _param(
+        1.45,
+        help="Assumed refractive index n > 1 for the zenith from the degree of "
+        "polarisation ρ (dimensionless)",
+        flag="--refractive-index",
+        metavar="N",
+        label="refractive index",
+        minimum=1.01,
+        maximum=3.0,
+        step=0.01,
+        decimals=3,
+    )
+    model: str = _param(
+        "diffuse",
+        help="Fresnel model for the zenith: diffuse (eq. 3.13, corrected) or specular (eq. 3.11)",
+        flag="--model",
+        label="model",
+        choices=MODELS,
+    )
+    specular_branch: str = _param(
+        "below-brewster",
+        help="Which zenith solution of the specular model to take: specular ρ takes each "
+        "value twice, peaking at 1 at Brewster's angle",
+        flag="--specular-branch",
+        label="specular branch",
+        choices=SPECULAR_BRANCHES,
+    )
+    coefficients: str = _param(
+        "thesis",
+        help="Block coefficient estimator: the thesis mean estimator (eq. 4.21) or a "
+        "per-block ridge least-squares fit",
+        flag="--coefficients",
+        label="coefficients",
+        choices=COEFFICIENT_METHODS,
+    )
+    ridge: float = _param(
+        1e-3,
+        help="Ridge penalty of the 'ridge' estimator, relative to the mean diagonal of the "
+        "block Gram matrix",
+        flag="--ridge",
+    )
+    features: str = _param(
+        "thesis",
+        help="Block features for the PCA: every coefficient (thesis), the "
+        "azimuth-invariant m = 0 coefficients (zonal), the energy per degree (energy), "
+        "polarisation statistics of the block: the distributions of ρ, θ and Î and "
+        "their relation (polstats), or the zonal coefficients and the statistics "
+        "together (zonal+polstats)",
+        flag="--features",
+        label="features",
+        choices=FEATURE_KINDS,
+    )
+    variance: float = _param(
+        0.95,
+        help="Share of the variance the PCA keeps, in (0, 1]",
+        flag="--variance",
+        label="PCA variance",
+        minimum=0.05,
+        maximum=1.0,
+        step=0.01,
+        decimals=3,
+    )
+    scale: float = _param(
+        1.0,
+        help="Affinity scale s in S = exp(-D / s)",
+        flag="--scale",
+        label="affinity scale",
+        minimum=0.001,
+        maximum=1e6,
+        step=0.1,
+        decimals=3,
+    )
+    scale_mode: str = _param(
+        "absolute",
+        help="absolute: s as given (thesis); median: s relative to the median squared "
+        "Mahalanobis distance between blocks, which keeps the graph connected whatever "
+        "the number of PCA components",
+        flag="--scale-mode",
+        label="scale mode",
+        choices=SCALE_MODES,
+    )
+    spatial_radius: float = _param(
+        0.0,
+        help="Radius, in blocks, of Shi & Malik's spatial term in the affinity; 0 switches "
+        "it off and connects every pair of blocks",
+        flag="--spatial-radius",
+        metavar="R",
+    )
+    spatial_sigma: float = _param(
+        2.0,
+        help="Width σ_X, in blocks, of the spatial term exp(−‖X_i − X_j‖² / σ_X²)",
+        flag="--spatial-sigma",
+        metavar="S",
+    )
+    n_segments: int = _param(
+        3,
+        help="Number of segments the normalized cut stops at (k of the k-way clustering "
+        "and of the superpixel clustering)",
+        flag="--segments",
+        metavar="K",
+        label="segments",
+        minimum=1,
+        maximum=256,
+    )
+    ncut_threshold: float | None = _param(
+        None,
+        help="Stop splitting earlier when the best cut's Ncut value exceeds this (none: never)",
+        flag="--ncut-threshold",
+        metavar="T",
+        optional=True,
+    )
+    min_segment_blocks: int = _param(
+        1,
+        help="Smallest segment, in blocks, a cut may produce",
+        flag="--min-segment-blocks",
+        metavar="B",
+        label="min segment (blocks)",
+        minimum=1,
+        maximum=100_000,
+    )
+    clustering: str = _param(
+        "recursive",
+        help="How the graph is split into segments: recursive two-way normalized cuts "
+        "(thesis section 4.4.1), k-way spectral clustering (the first k generalized "
+        "eigenvectors, rows normalised, k-means; Ng, Jordan & Weiss 2002), or "
+        "superpixels: no block graph, edge-following superpixels clustered by their "
+        "polarisation, labels at pixel resolution (the block fields still give the "
+        "harmonic maps and the reconstruction-error map)",
+        flag="--clustering",
+        label="clustering",
+        choices=CLUSTERING_METHODS,
+        choice_names={
+            "recursive": "recursive two-way",
+            "kway": "k-way spectral",
+            "superpixels": "superpixels (unsupervised)",
+        },
+    )
+    fit: str = _param(
+        "lsq",
+        help="Per-pixel sinusoid fit of the polarisation image: exact linear least squares "
+        "(optimal for Gaussian noise), or robust IRLS (Tukey's biweight from a trimmed "
+        "start) that resists outlying frames (needs 5 or more distinct angles to make a "
+        "difference)",
+        flag="--fit",
+        label="fit",
+        choices=FIT_METHODS,
+        choice_names={"lsq": "least squares", "robust": "robust"},
+    )
+    affinity_graph: str = _param(
+        "auto",
+        help="How the block affinity is stored: every pair of blocks (dense, the thesis); "
+        "the pairs within spatial_radius, or without a spatial term each block's k "
+        "nearest neighbours in feature space (sparse); sparse with a spatial term or "
+        "above 6000 blocks, else dense (auto)",
+        flag="--affinity-graph",
+        choices=AFFINITY_GRAPHS,
+    )
 
     def __post_init__(self) -> None:
         self.validate()
@@ -243,3 +391,34 @@ PRESETS: dict[str, SegmentParams] = {
     "thesis": SegmentParams(),
     "recommended": RECOMMENDED,
 }
+
+
+#: What each preset is: the CLI's ``--preset`` help and the plugin's preset tooltip.
+PRESET_HELP: dict[str, str] = {
+    "auto": "superpixels clustered by their polarisation, the best unsupervised method "
+    "measured on rendered and real frames",
+    "thesis": "the thesis pipeline as published",
+    "recommended": "the thesis pipeline with the block parameters that score best on the "
+    "synthetic scenes (docs/quality.md)",
+}
+
+#: The description of every SegmentParams field, by name, in field order.
+PARAM_SPECS: dict[str, ParamSpec] = {f.name: f.metadata["spec"] for f in fields(SegmentParams)}
+
+
+def _attribute_docs() -> str:
+    """The numpydoc *Attributes* section of :class:`SegmentParams`, from its specs."""
+    lines = ["", "    Attributes", "    ----------"]
+    for f in fields(SegmentParams):
+        spec = PARAM_SPECS[f.name]
+        kind = (
+            "{" + ", ".join(f'"{c}"' for c in spec.choices) + "}"
+            if spec.choices
+            else (f.type if isinstance(f.type, str) else f.type.__name__)
+        )
+        lines.append(f"    {f.name} : {kind}")
+        lines.append(f"        {spec.help} (``{spec.flag}``; thesis: {f.default!r}).")
+    return "\n".join(lines) + "\n"
+
+
+SegmentParams.__doc__ = (SegmentParams.__doc__ or "") + _attribute_docs()
