@@ -31,8 +31,8 @@ from evaluate import DEGENERATE_SHARE, REAL_DIR, ari, ari_where, largest_share, 
 
 from napari_polarseg.engine import Pipeline, SegmentParams
 from napari_polarseg.engine.params import RECOMMENDED
-from napari_polarseg.engine.synthetic import SCENES, make_scene, scribble_strokes
-from napari_polarseg.engine.unsupervised import (
+from napari_polarseg.engine.synthetic.scenes import SCENES, make_scene, scribble_strokes
+from napari_polarseg.engine.unsupervised.segmenter import (
     MATERIAL_CUE,
     UnsupervisedParams,
     segment_unsupervised,
@@ -253,7 +253,7 @@ def truth_threshold(synthetic: list, feature: str = "dolp@4") -> list[str]:
     """ARI of one pixel feature cut at the threshold chosen *with the truth* (the best of
     49 quantiles), per two-class scene and seed: what a one-threshold rule on it could
     reach at best."""
-    from napari_polarseg.engine.pixel_features import PixelFeatureParams, pixel_features
+    from napari_polarseg.engine.features.pixel_features import PixelFeatureParams, pixel_features
 
     scale = float(feature.split("@")[1])
     lines = []

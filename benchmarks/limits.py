@@ -36,10 +36,15 @@ from sklearn.metrics import adjusted_rand_score
 from sklearn.pipeline import make_pipeline
 from sklearn.preprocessing import StandardScaler
 
-from napari_polarseg.engine import Pipeline, harmonics, polstats
-from napari_polarseg.engine.features import harmonic_features
+from napari_polarseg.engine import Pipeline
+from napari_polarseg.engine.features import harmonics, polstats
+from napari_polarseg.engine.features.pca import harmonic_features
 from napari_polarseg.engine.params import RECOMMENDED
-from napari_polarseg.engine.synthetic import SCENES, diffuse_dop_from_transmission, make_scene
+from napari_polarseg.engine.synthetic.scenes import (
+    SCENES,
+    diffuse_dop_from_transmission,
+    make_scene,
+)
 
 WINDOW = 12
 SEEDS = (1, 2)

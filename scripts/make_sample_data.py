@@ -26,7 +26,11 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from napari_polarseg.engine.synthetic import SCENES, SyntheticScene, make_scene  # noqa: E402
+from napari_polarseg.engine.synthetic.scenes import (  # noqa: E402
+    SCENES,
+    SyntheticScene,
+    make_scene,
+)
 
 DEFAULT_OUT = ROOT / "napari_polarseg" / "sample_data"
 

@@ -9,7 +9,7 @@ from sklearn.cluster import KMeans
 from sklearn.metrics import adjusted_rand_score
 
 from napari_polarseg.engine.errors import PolarsegError
-from napari_polarseg.engine.kmeans import weighted_kmeans
+from napari_polarseg.engine.unsupervised.kmeans import weighted_kmeans
 
 
 def blobs(seed: int, k: int = 3, n: int = 600, d: int = 3, spread: float = 0.3):

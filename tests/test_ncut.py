@@ -105,7 +105,7 @@ def fallen_apart(n=700, seed=0):
 
 
 def test_block_lobpcg_finds_the_smallest_eigenpair_on_a_clustered_spectrum():
-    from napari_polarseg.engine import ncut
+    from napari_polarseg.engine.graph import ncut
 
     W, group = fallen_apart()
     assert W.shape[0] > ncut.DENSE_EIGH_MAX  # the iterative path
@@ -165,7 +165,7 @@ def test_warm_started_tree_equals_cold_tree():
 @pytest.mark.parametrize("order", ["C", "F"])
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])
 def test_symmetric_product_takes_either_memory_order(order, dtype):
-    from napari_polarseg.engine.ncut import _symmetric_product
+    from napari_polarseg.engine.graph.ncut import _symmetric_product
 
     rng = np.random.default_rng(0)
     A = rng.random((50, 50))
@@ -177,7 +177,7 @@ def test_symmetric_product_takes_either_memory_order(order, dtype):
 
 @pytest.mark.parametrize("kept", [2400, 1000])  # through the whole matrix / own copy
 def test_dense_segment_products_degrees_and_split_sums(kept):
-    from napari_polarseg.engine.ncut import _DenseGraph, _lower_prefix_sums
+    from napari_polarseg.engine.graph.ncut import _DenseGraph, _lower_prefix_sums
 
     rng = np.random.default_rng(1)
     n = 2500  # float32 products from FLOAT32_MIN_NODES
@@ -201,7 +201,11 @@ def test_dense_segment_products_degrees_and_split_sums(kept):
 def test_float32_affinity_is_used_as_is_with_float64_degrees(kept):
     """A float32 W of FLOAT32_MIN_NODES nodes or more (the pipeline's affinity) is the
     product matrix itself; degrees and prefix sums are accumulated in float64."""
-    from napari_polarseg.engine.ncut import FLOAT32_MIN_NODES, _DenseGraph, _lower_prefix_sums
+    from napari_polarseg.engine.graph.ncut import (
+        FLOAT32_MIN_NODES,
+        _DenseGraph,
+        _lower_prefix_sums,
+    )
 
     rng = np.random.default_rng(2)
     n = 2500
@@ -246,7 +250,7 @@ def test_float32_tree_gives_the_float64_labels():
 
 
 def test_prefetch_solves_what_the_next_split_needs():
-    from napari_polarseg.engine import ncut
+    from napari_polarseg.engine.graph import ncut
 
     W, _ = fallen_apart(seed=0)
     tree = CutTree(W)
@@ -292,7 +296,7 @@ def chain_of_groups(n_groups=200, size=5, eps=1e-2, seed=0):
 
 
 def test_cut_on_a_fallen_apart_graph_stops_at_its_product_cap():
-    from napari_polarseg.engine import ncut
+    from napari_polarseg.engine.graph import ncut
 
     size, cap = 5, 300
     W = chain_of_groups(size=size)
@@ -339,7 +343,7 @@ def isolated_graph(n=700, isolated=(42, 500), seed=0):
 
 
 def test_isolated_blocks_are_peeled_off_without_an_eigensolve():
-    from napari_polarseg.engine import ncut
+    from napari_polarseg.engine.graph import ncut
 
     W = isolated_graph()
     tree = CutTree(W)
@@ -362,8 +366,8 @@ def test_sparse_graph_that_fell_apart_is_solved_by_the_block_solver():
     """A kNN graph of 12-dimensional features at the thesis scale (s = 1): the most
     isolated node keeps all but 1e-5 of its degree. Lanczos alone made 161,000 products
     (4 minutes) at 8,000 nodes; the preconditioned block solver needs a few dozen."""
-    from napari_polarseg.engine import features as feat
-    from napari_polarseg.engine import ncut
+    from napari_polarseg.engine.features import pca as feat
+    from napari_polarseg.engine.graph import ncut
 
     x = np.random.default_rng(0).standard_normal((3000, 12))
     W = feat.knn_affinity(x, 1.0)

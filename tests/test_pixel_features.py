@@ -5,7 +5,7 @@ import pytest
 from scipy import ndimage
 
 from napari_polarseg.engine.errors import PolarsegError
-from napari_polarseg.engine.pixel_features import (
+from napari_polarseg.engine.features.pixel_features import (
     GROUPS,
     PixelFeatureParams,
     gaussian_smooth,
@@ -14,7 +14,7 @@ from napari_polarseg.engine.pixel_features import (
     pyramid_factor,
     upsample,
 )
-from napari_polarseg.engine.superpixels import region_count, superpixels
+from napari_polarseg.engine.unsupervised.superpixels import region_count, superpixels
 
 
 def _image(shape=(96, 104), seed=0):

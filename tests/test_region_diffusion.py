@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from napari_polarseg.engine.region_diffusion import (
+from napari_polarseg.engine.unsupervised.region_diffusion import (
     MAX_STEPS,
     border_strength,
     diffuse,

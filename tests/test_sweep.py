@@ -11,9 +11,7 @@ from sklearn.metrics import adjusted_rand_score, silhouette_score
 
 from napari_polarseg import io as pio
 from napari_polarseg.engine import Cancelled, PolarsegError, SegmentParams, diffuse_dop
-from napari_polarseg.engine.features import whiten
-from napari_polarseg.engine.params import RECOMMENDED
-from napari_polarseg.engine.sweep import (
+from napari_polarseg.engine.analysis.sweep import (
     COLUMNS,
     SCORE_COLUMNS,
     SCORES,
@@ -25,7 +23,9 @@ from napari_polarseg.engine.sweep import (
     read_csv_rows,
     sweep,
 )
-from napari_polarseg.engine.synthetic import make_scene
+from napari_polarseg.engine.features.pca import whiten
+from napari_polarseg.engine.params import RECOMMENDED
+from napari_polarseg.engine.synthetic.scenes import make_scene
 
 ANGLES = np.deg2rad(np.arange(0.0, 180.0, 30.0))
 BASE = SegmentParams(n_segments=2)

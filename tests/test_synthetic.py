@@ -9,7 +9,7 @@ import pytest
 from scipy import ndimage
 
 from napari_polarseg.engine.errors import PolarsegError
-from napari_polarseg.engine.synthetic import (
+from napari_polarseg.engine.synthetic.scenes import (
     DEFAULT_ANGLES_DEG,
     MATERIALS,
     SCENES,

@@ -11,15 +11,17 @@ from scipy import ndimage
 from sklearn.metrics import roc_auc_score
 
 from napari_polarseg import cli
-from napari_polarseg.engine import PolarsegError, harmonics, polarimage
-from napari_polarseg.engine import synthetic as syn
-from napari_polarseg.engine.params import RECOMMENDED
-from napari_polarseg.engine.timeseries import (
+from napari_polarseg.engine import PolarsegError
+from napari_polarseg.engine.analysis.timeseries import (
     METHODS,
     change_map,
     change_statistics,
     segment_timeseries,
 )
+from napari_polarseg.engine.features import harmonics
+from napari_polarseg.engine.params import RECOMMENDED
+from napari_polarseg.engine.physics import polarimage
+from napari_polarseg.engine.synthetic import scenes as syn
 
 #: RECOMMENDED with two segments (fruit, bruise) and a smaller minimum segment.
 PARAMS = RECOMMENDED.replace(n_segments=2, min_segment_blocks=2)
@@ -378,7 +380,8 @@ def test_cli_timeseries_needs_two_inputs(tmp_path, capsys) -> None:
 def test_polarisation_statistics_share_one_standardisation_over_the_days():
     # two days of the same scene, the second uniformly brighter: per-day z-scores would
     # erase that difference; the shared basis must keep it
-    from napari_polarseg.engine import Pipeline, polstats
+    from napari_polarseg.engine import Pipeline
+    from napari_polarseg.engine.features import polstats
 
     sc = syn.make_scene("leaves", shape=(64, 72), seed=3)
     params = RECOMMENDED.replace(window=8, features="polstats", n_segments=2)
@@ -398,7 +401,7 @@ def test_cli_timeseries_with_a_saved_classifier(tmp_path, capsys) -> None:
     """--classifier labels every day with the same classes."""
     inputs, truths = _fruit_day_files(tmp_path)
     strokes = tmp_path / "strokes.npy"
-    from napari_polarseg.engine.synthetic import scribble_strokes
+    from napari_polarseg.engine.synthetic.scenes import scribble_strokes
 
     np.save(strokes, scribble_strokes(truths[0], per_material=8, length=10))
     clf = tmp_path / "fruit.polarseg-clf"

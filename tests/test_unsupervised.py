@@ -7,7 +7,7 @@ import pytest
 from sklearn.metrics import adjusted_rand_score
 
 from napari_polarseg.engine.errors import PolarsegError
-from napari_polarseg.engine.unsupervised import (
+from napari_polarseg.engine.unsupervised.segmenter import (
     CLUSTERINGS,
     NODE_FEATURES,
     UnsupervisedParams,

@@ -28,11 +28,14 @@ from typing import Any, NamedTuple
 import numpy as np
 from scipy import ndimage
 
-from . import features as feat
-from . import fresnel, harmonics, ncut, polarimage, polstats, spectral, unsupervised
-from .degenerate import DegenerateCheck, degenerate_result
+from .analysis.degenerate import DegenerateCheck, degenerate_result
 from .errors import Cancelled, PolarsegError
+from .features import harmonics, polstats
+from .features import pca as feat
+from .graph import ncut, spectral
 from .params import SegmentParams
+from .physics import fresnel, polarimage
+from .unsupervised import segmenter as unsupervised
 
 #: Stage names in execution order.
 STAGES = (
@@ -853,7 +856,7 @@ class Pipeline:
         self, scribbles: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]:
         """(block labels, pixel labels, probability maps, classes, training blocks)."""
-        from .scribbles import classify_blocks, training_blocks
+        from .analysis.scribbles import classify_blocks, training_blocks
 
         scribbles = np.asarray(scribbles)
         shape = self.stack.shape[1:]

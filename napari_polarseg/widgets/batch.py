@@ -37,13 +37,13 @@ from napari.utils.notifications import show_error
 
 from .. import batch as batch_engine
 from ..engine import PolarsegError, SegmentParams
-from ..engine.params import AUTO, RECOMMENDED
-from ..engine.timeseries import (
+from ..engine.analysis.timeseries import (
     DEFAULT_FALSE_ALARM,
     METHODS,
     TimeSeriesResult,
     segment_timeseries,
 )
+from ..engine.params import AUTO, RECOMMENDED
 from ._base import ScrollingContainer, is_angle_stack
 from ._layers import ANGLES_KEY, label_colormap
 from ._runner import WorkerSlot, parse_angles

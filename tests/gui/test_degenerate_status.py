@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 from _gui_helpers import click, engine_result, error_messages, run_and_wait, wait_idle
 
-from napari_polarseg.engine import Cancelled, SegmentParams, ncut
+from napari_polarseg.engine import Cancelled, SegmentParams
+from napari_polarseg.engine.graph import ncut
 from napari_polarseg.engine.params import RECOMMENDED
 
 pytestmark = pytest.mark.gui

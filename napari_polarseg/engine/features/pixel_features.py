@@ -53,9 +53,9 @@ from typing import Any
 import numpy as np
 from scipy import ndimage
 
-from .errors import PolarsegError
-from .fresnel import zenith_from_diffuse_dop
-from .superpixels import auto_region_area, region_means, superpixels
+from ..errors import PolarsegError
+from ..physics.fresnel import zenith_from_diffuse_dop
+from ..unsupervised.superpixels import auto_region_area, region_means, superpixels
 
 #: Feature groups (module docstring), in the order their features appear.
 GROUPS = ("intensity", "polarisation", "zenith", "filters", "invariant", "regions")

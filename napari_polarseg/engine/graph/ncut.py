@@ -103,7 +103,7 @@ import scipy.sparse as sps
 from scipy.linalg.blas import get_blas_funcs
 from scipy.sparse.linalg import ArpackNoConvergence, LinearOperator, eigsh
 
-from .errors import Cancelled, PolarsegError
+from ..errors import Cancelled, PolarsegError
 
 #: Graphs up to this many nodes use a dense eigensolver; larger ones are iterative.
 DENSE_EIGH_MAX = 300
@@ -227,7 +227,7 @@ class _DenseGraph:
     diag: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
-        from .harmonics import run_chunks
+        from ..features.harmonics import run_chunks
 
         n = self.W.shape[0]
         single = np.asarray(self.W).dtype == np.float32 and n >= FLOAT32_MIN_NODES
@@ -876,7 +876,7 @@ def _lower_prefix_sums(
     contributes its entries to nodes ranked before it: a masked row sum, computed in row
     chunks on the cores (no permuted n × n copy, no triangle mask).
     """
-    from .harmonics import run_chunks
+    from ..features.harmonics import run_chunks
 
     m, n = order.size, W.shape[0]
     nodes = np.arange(m) if idx is None else idx

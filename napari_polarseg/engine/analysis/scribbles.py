@@ -13,8 +13,8 @@ import warnings
 
 import numpy as np
 
-from .errors import PolarsegError
-from .harmonics import pixel_block_index
+from ..errors import PolarsegError
+from ..features.harmonics import pixel_block_index
 from .pixel_classifier import check_scribbles
 
 #: A block is a training example of class c when at least this share of its scribbled

@@ -23,8 +23,8 @@ from typing import Any
 import numpy as np
 from scipy import ndimage
 
-from .errors import Cancelled, PolarsegError
-from .pixel_features import FeatureStack, PixelFeatureParams
+from ..errors import Cancelled, PolarsegError
+from ..features.pixel_features import FeatureStack, PixelFeatureParams
 
 #: Classifier kinds of :class:`ClassifierParams`.
 MODELS = ("random_forest", "extra_trees", "hist_gradient_boosting")

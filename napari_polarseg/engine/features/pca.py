@@ -9,7 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import PolarsegError
+from ..errors import PolarsegError
 from .harmonics import degree_order
 
 FEATURE_KINDS = ("thesis", "zonal", "energy")

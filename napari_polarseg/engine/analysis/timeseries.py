@@ -99,11 +99,12 @@ from typing import Any
 import numpy as np
 from scipy import stats
 
-from . import features as feat
-from . import harmonics, ncut, polstats
-from .errors import Cancelled, PolarsegError
-from .params import SegmentParams
-from .pipeline import MAX_DENSE_BLOCKS, POLSTATS_KINDS, Pipeline
+from ..errors import Cancelled, PolarsegError
+from ..features import harmonics, polstats
+from ..features import pca as feat
+from ..graph import ncut
+from ..params import SegmentParams
+from ..pipeline import MAX_DENSE_BLOCKS, POLSTATS_KINDS, Pipeline
 
 #: Ways to segment the days (see the module docstring); the first is the default.
 METHODS = ("tracked", "reference", "joint")
@@ -841,7 +842,7 @@ def segment_timeseries(
 
     t0 = time.perf_counter()
     if params.clustering == "kway":
-        from .spectral import SpectralClustering
+        from ..graph.spectral import SpectralClustering
 
         tree: Any = SpectralClustering(W, min_size=min_size)
     else:

@@ -38,7 +38,7 @@ import warnings
 
 import numpy as np
 
-from .errors import PolarsegError
+from ..errors import PolarsegError
 from .harmonics import _blockify, block_grid
 
 #: Names of the columns :func:`block_polarisation_statistics` returns, in order.

@@ -26,7 +26,7 @@ from scipy import ndimage
 from skimage.filters import window
 from skimage.registration import phase_cross_correlation
 
-from .errors import PolarsegError
+from ..errors import PolarsegError
 
 
 def _finite_frame(frame: np.ndarray) -> np.ndarray:

@@ -22,7 +22,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import ndimage
 
-from .errors import PolarsegError
+from ..errors import PolarsegError
 
 #: Polariser angles (degrees) of the 2 × 2 super-pixel of the Sony IMX250MZR, row-major:
 #: top-left 90, top-right 45, bottom-left 135, bottom-right 0.

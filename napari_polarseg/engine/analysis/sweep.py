@@ -63,12 +63,12 @@ from typing import Any
 
 import numpy as np
 
-from .errors import Cancelled, PolarsegError
+from ..errors import Cancelled, PolarsegError
+from ..features.pca import whiten
+from ..limits import check_pipeline_memory
+from ..params import SegmentParams
+from ..pipeline import Pipeline
 from .evaluation import adjusted_rand_index
-from .features import whiten
-from .limits import check_pipeline_memory
-from .params import SegmentParams
-from .pipeline import Pipeline
 
 #: Criteria a sweep can pick its best cell by (``score`` and ``best(by=...)``).
 SCORES = ("stability", "combined", "silhouette", "ncut", "ari")

@@ -52,7 +52,7 @@ from functools import cache
 
 import numpy as np
 
-from .errors import PolarsegError
+from ..errors import PolarsegError
 
 #: Largest bytes of harmonic values one worker evaluates at once (bounds peak memory).
 CHUNK_BYTES = 64 * 2**20

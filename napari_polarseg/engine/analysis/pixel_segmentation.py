@@ -24,22 +24,22 @@ from typing import Any
 
 import numpy as np
 
-from .colour_mosaic import COLOURS, colour_polarisation_images
-from .harmonics import top_left_block_labels
-from .pipeline import Pipeline, SegmentationResult
+from ..features.harmonics import top_left_block_labels
+from ..features.pixel_features import (
+    EPS_INTENSITY,
+    FeatureStack,
+    PixelFeatureParams,
+    multichannel_features,
+    pixel_features,
+)
+from ..physics.colour_mosaic import COLOURS, colour_polarisation_images
+from ..pipeline import Pipeline, SegmentationResult
 from .pixel_classifier import (
     ClassifierParams,
     PixelClassifier,
     PixelPrediction,
     predict_pixels,
     train_pixel_classifier,
-)
-from .pixel_features import (
-    EPS_INTENSITY,
-    FeatureStack,
-    PixelFeatureParams,
-    multichannel_features,
-    pixel_features,
 )
 
 

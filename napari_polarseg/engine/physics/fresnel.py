@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import PolarsegError
+from ..errors import PolarsegError
 
 ArrayLike = np.ndarray | float
 

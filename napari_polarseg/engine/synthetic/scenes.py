@@ -51,7 +51,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import ndimage
 
-from .errors import PolarsegError
+from ..errors import PolarsegError
 
 __all__ = [
     "DEFAULT_ANGLES_DEG",

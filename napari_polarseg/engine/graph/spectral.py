@@ -39,7 +39,7 @@ import scipy.linalg
 import scipy.sparse as sps
 from scipy.sparse.linalg import ArpackNoConvergence, eigsh
 
-from .errors import PolarsegError
+from ..errors import PolarsegError
 from .ncut import (
     EIG_TOL,
     LANCZOS_SHARE,

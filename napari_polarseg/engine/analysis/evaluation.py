@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from .errors import PolarsegError
+from ..errors import PolarsegError
 
 
 def _check_pair(truth: np.ndarray, labels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

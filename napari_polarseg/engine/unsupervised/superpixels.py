@@ -19,7 +19,7 @@ import numpy as np
 from scipy import ndimage
 from skimage.segmentation import watershed
 
-from .errors import PolarsegError
+from ..errors import PolarsegError
 
 #: Default mean region area, pixels (about 20 × 20).
 REGION_AREA = 400

@@ -47,7 +47,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import ndimage
 
-from .errors import PolarsegError
+from ..errors import PolarsegError
 from .mosaic import DEMOSAIC_METHODS, IMX250MZR_LAYOUT, check_layout, check_raw
 from .polarimage import PolarisationImage, polarisation_image
 

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import PolarsegError
+from ..errors import PolarsegError
 
 #: Variants of :func:`aolp_dolp_composite` (``CompositeParams.mode``).
 COMPOSITE_MODES = ("intensity", "light", "dark")

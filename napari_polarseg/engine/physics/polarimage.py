@@ -46,7 +46,7 @@ from typing import Any
 
 import numpy as np
 
-from .errors import PolarsegError
+from ..errors import PolarsegError
 
 #: Two polariser angles closer than this (radians, modulo π) are the same state.
 ANGLE_TOLERANCE = 1e-6
@@ -290,7 +290,7 @@ def _unweighted_fit(
     68 MB of fresh pages on the 720 × 660 × 19 reference stack, 0.2–0.4 s of a first run).
     Returns ``coef`` (3, P), the RMS residual over the states (P,) and the states' angles.
     """
-    from .harmonics import run_chunks
+    from ..features.harmonics import run_chunks
 
     n = angles.size
     flat = data.reshape(n, -1)

@@ -72,11 +72,11 @@ import numpy as np
 import scipy.sparse as sps
 from scipy import ndimage
 
-from .degenerate import degenerate_result
-from .errors import PolarsegError
-from .features import pca_features, whiten
+from ..analysis.degenerate import degenerate_result
+from ..errors import PolarsegError
+from ..features.pca import pca_features, whiten
+from ..features.pixel_features import EPS_DOP, EPS_INTENSITY, check_maps
 from .kmeans import squared_distances, weighted_kmeans
-from .pixel_features import EPS_DOP, EPS_INTENSITY, check_maps
 from .region_diffusion import diffuse, diffusion_steps, edge_aware_adjacency
 from .superpixels import COMPACTNESS, auto_region_area
 
@@ -520,8 +520,8 @@ def _cluster_graph(
     z: np.ndarray, k: int, adjacency: sps.csr_matrix, p: UnsupervisedParams
 ) -> np.ndarray:
     """Node labels of a normalized cut of the Mahalanobis affinity on neighbouring regions."""
-    from .ncut import recursive_ncut
-    from .spectral import SpectralClustering
+    from ..graph.ncut import recursive_ncut
+    from ..graph.spectral import SpectralClustering
 
     n = z.shape[0]
     w = whiten(z)
@@ -656,7 +656,7 @@ def segment_unsupervised(
     names = list(p.features)
     cols = [node_features(i, d, ph, regions, p.features)] if p.features else []
     if p.pixel_scales:
-        from .pixel_features import PixelFeatureParams, pixel_features
+        from ..features.pixel_features import PixelFeatureParams, pixel_features
         from .superpixels import region_means
 
         stack = pixel_features(
