@@ -621,7 +621,7 @@ def main(argv: list[str] | None = None) -> int:
 
     from napari_polarseg.engine import Pipeline, SegmentParams
     from napari_polarseg.engine.features import harmonics
-    from napari_polarseg.engine.features import pca as feat
+    from napari_polarseg.engine.graph import affinity as feat
     from napari_polarseg.engine.graph import ncut
     from napari_polarseg.engine.params import RECOMMENDED
 

@@ -366,7 +366,7 @@ def test_sparse_graph_that_fell_apart_is_solved_by_the_block_solver():
     """A kNN graph of 12-dimensional features at the thesis scale (s = 1): the most
     isolated node keeps all but 1e-5 of its degree. Lanczos alone made 161,000 products
     (4 minutes) at 8,000 nodes; the preconditioned block solver needs a few dozen."""
-    from napari_polarseg.engine.features import pca as feat
+    from napari_polarseg.engine.graph import affinity as feat
     from napari_polarseg.engine.graph import ncut
 
     x = np.random.default_rng(0).standard_normal((3000, 12))

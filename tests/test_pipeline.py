@@ -230,7 +230,7 @@ def test_scale_change_reuses_the_distances_and_large_graphs_are_float32():
     scale recomputes only the exponential. From ncut.FLOAT32_MIN_NODES blocks the
     distances and the affinity are float32, and the labels equal those of the float64
     affinity (the issue's condition for float32)."""
-    from napari_polarseg.engine.features import pca as feat
+    from napari_polarseg.engine.graph import affinity as feat
     from napari_polarseg.engine.graph import ncut
     from napari_polarseg.engine.synthetic.scenes import make_scene
 

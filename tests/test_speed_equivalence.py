@@ -20,7 +20,7 @@ from napari_polarseg.engine import (
     block_coefficients,
     reconstruct_intensity,
 )
-from napari_polarseg.engine.features import pca as feat
+from napari_polarseg.engine.graph import affinity as feat
 from napari_polarseg.engine.graph import ncut
 from napari_polarseg.engine.params import RECOMMENDED
 

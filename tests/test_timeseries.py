@@ -99,9 +99,9 @@ def figures(result, truths) -> dict[str, float]:
     unchanged = before == after
     grown = (before == 0) & (after == 1)
     w = result.change_window
-    block_grown = harmonics._blockify(grown.astype(float), w).mean(-1)
-    touched = harmonics._blockify((~unchanged).astype(float), w).mean(-1)
-    in_map = harmonics._blockify(result.changes[0].astype(float), w).mean(-1) > 0.5
+    block_grown = harmonics.blockify(grown.astype(float), w).mean(-1)
+    touched = harmonics.blockify((~unchanged).astype(float), w).mean(-1)
+    in_map = harmonics.blockify(result.changes[0].astype(float), w).mean(-1) > 0.5
     blocks = ((block_grown > 0.5) | (touched == 0)).ravel()
     sel = unchanged | grown
     return {
@@ -236,7 +236,7 @@ def test_labels_share_one_numbering_and_a_growing_change_stays_one_segment() -> 
     for t in range(2):
         np.testing.assert_array_equal(res.changes[t], change_map(res.labels[t], res.labels[t + 1]))
         # only significant change blocks move
-        moved = harmonics._blockify(res.changes[t].astype(float), 6).mean(-1) > 0
+        moved = harmonics.blockify(res.changes[t].astype(float), 6).mean(-1) > 0
         assert not (moved & ~res.change_significant[t]).any()
     # the growth on both days went into the same changed segment
     main = max(res.changed_segments, key=lambda s: s["blocks"])
@@ -274,7 +274,7 @@ def test_change_statistics_of_a_known_change() -> None:
     stack = syn.render_stack(inten, dop, scene.phase, scene.angles, noise_sigma=0.001, rng=0)
     after = polarimage.polarisation_image(stack, scene.angles)
     st = change_statistics(pol, after, 6)
-    expected = harmonics._blockify(patch.astype(float), 6).mean(-1) > 0
+    expected = harmonics.blockify(patch.astype(float), 6).mean(-1) > 0
     np.testing.assert_array_equal(st.significant, expected)
     assert st.gain == pytest.approx(1.05, rel=1e-3)
     assert np.all(st.mean[expected][:, 0] < -0.005)  # Î 1 % lower (after the gain)

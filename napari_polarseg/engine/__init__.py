@@ -32,8 +32,9 @@ from .features.harmonics import (
     reconstruct_intensity,
     upsample_block_labels,
 )
-from .features.pca import PCAResult, affinity_matrix, mahalanobis_sq, pca_features, whiten
+from .features.pca import PCAResult, mahalanobis_sq, pca_features, whiten
 from .features.pixel_features import FeatureStack, PixelFeatureParams, pixel_features
+from .graph.affinity import affinity_matrix
 from .graph.ncut import CutTree, best_split, bipartition, fiedler_vector, recursive_ncut
 from .limits import check_pipeline_memory, estimate_pipeline_bytes
 from .params import SegmentParams

@@ -102,7 +102,7 @@ from scipy import stats
 from ..errors import Cancelled, PolarsegError
 from ..features import harmonics, polstats
 from ..features import pca as feat
-from ..graph import ncut
+from ..graph import affinity, ncut
 from ..params import SegmentParams
 from ..pipeline import MAX_DENSE_BLOCKS, POLSTATS_KINDS, Pipeline
 
@@ -295,7 +295,7 @@ def change_statistics(
         dlog = np.where(valid, np.log(np.where(valid, ib, 1.0) / np.where(valid, ia, 1.0)), 0.0)
     qa, ua = _stokes(before, valid)
     qb, ub = _stokes(after, valid)
-    blocks = lambda a: harmonics._blockify(a, window).reshape(grid[0] * grid[1], -1)  # noqa: E731
+    blocks = lambda a: harmonics.blockify(a, window).reshape(grid[0] * grid[1], -1)  # noqa: E731
     v = blocks(valid.astype(float))
     n = v.sum(axis=1)
     tested = n >= MIN_CHANGE_PIXELS
@@ -833,9 +833,9 @@ def segment_timeseries(
         graph_feats, min_size = scores, params.min_segment_blocks * n_days
     else:
         graph_feats, min_size = scores[:n_blocks], params.min_segment_blocks
-    W = feat.affinity_matrix(graph_feats, params.scale, params.scale_mode)
+    W = affinity.affinity_matrix(graph_feats, params.scale, params.scale_mode)
     if params.spatial_radius > 0:
-        kernel = feat.spatial_kernel(grid, params.spatial_radius, params.spatial_sigma)
+        kernel = affinity.spatial_kernel(grid, params.spatial_radius, params.spatial_sigma)
         reps = W.shape[0] // n_blocks
         W *= np.tile(kernel, (reps, reps))  # the same position on any day is a neighbour
     done("affinity", t0)

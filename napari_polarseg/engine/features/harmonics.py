@@ -43,28 +43,16 @@ Estimators
 
 from __future__ import annotations
 
-import os
-import threading
-from collections.abc import Callable, Iterator
-from concurrent.futures import ThreadPoolExecutor
-from contextlib import contextmanager
 from functools import cache
 
 import numpy as np
 
+from ..chunks import CHUNK_BYTES, Progress, chunk_bounds, run_chunks, scratch
 from ..errors import PolarsegError
 
-#: Largest bytes of harmonic values one worker evaluates at once (bounds peak memory).
-CHUNK_BYTES = 64 * 2**20
 #: Points per chunk of the recurrence: small enough to stay in cache (8192 was fastest
 #: at L = 12 on the reference machine), large enough to amortise Python overhead.
 CHUNK_POINTS = 8192
-#: Worker threads for chunked work; numpy and LAPACK release the GIL in their loops.
-N_THREADS = max(1, min(8, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else 1))
-#: Below this many points chunked work stays in the calling thread.
-MIN_PARALLEL_POINTS = 50_000
-
-_local = threading.local()
 
 
 def n_coefficients(degree: int) -> int:
@@ -89,82 +77,10 @@ def degree_order(degree: int) -> tuple[np.ndarray, np.ndarray]:
 # -- evaluation ---------------------------------------------------------------------------
 
 
-_controller: list = []  # the threadpoolctl controller, found once (see below)
-
-
-@contextmanager
-def single_threaded_blas() -> Iterator[None]:
-    """Limit BLAS/LAPACK to one thread (threadpoolctl, shipped with scikit-learn).
-
-    Batched small matrix products and solves (100 × 169 per block) are 5–7 times *slower*
-    with OpenBLAS's own two threads than with one; the engine parallelises over chunks of
-    blocks instead. The libraries are looked up once: ``threadpool_limits`` scans every
-    loaded shared object on each call (about 1–2 ms, paid by every chunked stage).
-    """
-    try:
-        from threadpoolctl import ThreadpoolController
-    except ImportError:  # pragma: no cover - a dependency of scikit-learn
-        yield
-        return
-    if not _controller:
-        _controller.append(ThreadpoolController())
-    with _controller[0].limit(limits=1, user_api="blas"):
-        yield
-
-
-#: ``progress`` of the chunked functions: called with the share of the work done (0..1].
-Progress = Callable[[float], None]
-
-
-def run_chunks(
-    bounds: list[tuple[int, int]],
-    work: Callable[[int, int], None],
-    n_points: int,
-    progress: Progress | None = None,
-) -> None:
-    """Call ``work(start, stop)`` for every chunk, on :data:`N_THREADS` threads.
-
-    ``work`` must write only to its own slice of preallocated outputs. Small jobs (fewer
-    than :data:`MIN_PARALLEL_POINTS` points) run in the calling thread. ``progress`` is
-    called in the calling thread with the share of the chunks done after each one (in
-    chunk order), the last time with 1.
-    """
-    n = len(bounds)
-    with single_threaded_blas():
-        if N_THREADS == 1 or n < 2 or n_points < MIN_PARALLEL_POINTS:
-            try:
-                for i, (a, b) in enumerate(bounds):
-                    work(a, b)
-                    if progress is not None:
-                        progress((i + 1) / n)
-            finally:
-                _local.__dict__.clear()  # scratch of the calling thread is not kept
-            return
-        with ThreadPoolExecutor(min(N_THREADS, n)) as pool:
-            for i, f in enumerate([pool.submit(work, a, b) for a, b in bounds]):
-                f.result()
-                if progress is not None:
-                    progress((i + 1) / n)
-
-
-def _chunk_bounds(n: int, step: int) -> list[tuple[int, int]]:
-    return [(a, min(n, a + step)) for a in range(0, n, step)]
-
-
 def _points_per_chunk(k: int, multiple: int = 1) -> int:
     """Points per chunk for K harmonics: cache-sized, memory-capped, a multiple of M."""
     pts = max(1, min(CHUNK_POINTS, CHUNK_BYTES // (8 * max(k, 1))))
     return max(multiple, (pts // multiple) * multiple)
-
-
-def _buffer(name: str, shape: tuple[int, ...]) -> np.ndarray:
-    """Per-thread scratch array, reused between chunks (no page faults per chunk)."""
-    buf = getattr(_local, name, None)
-    size = int(np.prod(shape))
-    if buf is None or buf.size < size:
-        buf = np.empty(size)
-        setattr(_local, name, buf)
-    return buf[:size].reshape(shape)
 
 
 @cache
@@ -220,7 +136,7 @@ def _fill_harmonics(
         np.multiply(seed, c0, out=row0)
     if degree == 0:
         return
-    tmp = _buffer("rec_tmp", (max(2 * degree - 3, 2), n))
+    tmp = scratch("rec_tmp", (max(2 * degree - 3, 2), n))
     t = tmp[0]
     np.multiply(row0, np.sqrt(3.0), out=t)
     np.multiply(t, y, out=out[1, :n])
@@ -294,11 +210,11 @@ def real_sph_harm(degree: int, zenith: np.ndarray, azimuth: np.ndarray) -> np.nd
     out = np.empty((th.size, k))
 
     def work(a: int, b: int) -> None:
-        buf = _buffer("harm_out", (k, b - a))
+        buf = scratch("harm_out", (k, b - a))
         _fill_harmonics(degree, *_unit_vectors(th[a:b], ph[a:b]), buf)
         out[a:b] = buf.T
 
-    run_chunks(_chunk_bounds(th.size, _points_per_chunk(k)), work, th.size)
+    run_chunks(chunk_bounds(th.size, _points_per_chunk(k)), work, th.size)
     return out.reshape(shape + (k,))
 
 
@@ -313,7 +229,7 @@ def block_grid(shape: tuple[int, int], window: int) -> tuple[int, int]:
     return h // window, w // window
 
 
-def _blockify(a: np.ndarray, window: int) -> np.ndarray:
+def blockify(a: np.ndarray, window: int) -> np.ndarray:
     """(R*w, C*w, ...) -> (R, C, w*w, ...) without copying more than once."""
     r, c = a.shape[0] // window, a.shape[1] // window
     rest = a.shape[2:]
@@ -322,7 +238,7 @@ def _blockify(a: np.ndarray, window: int) -> np.ndarray:
 
 
 def _unblockify(a: np.ndarray, window: int) -> np.ndarray:
-    """(R, C, w*w) -> (R*w, C*w), the inverse of :func:`_blockify`."""
+    """(R, C, w*w) -> (R*w, C*w), the inverse of :func:`blockify`."""
     r, c = a.shape[:2]
     return a.reshape(r, c, window, window).transpose(0, 2, 1, 3).reshape(r * window, c * window)
 
@@ -338,7 +254,7 @@ def _block_inputs(
     m = window * window
 
     def flat(a: np.ndarray) -> np.ndarray:
-        return _blockify(np.asarray(a, dtype=float), window).reshape(-1, m)
+        return blockify(np.asarray(a, dtype=float), window).reshape(-1, m)
 
     wts = None if weights is None else flat(weights)
     return flat(intensity), flat(zenith), flat(azimuth), wts
@@ -411,12 +327,12 @@ def block_coefficients(
 
     def work(b0: int, b1: int) -> None:
         n = (b1 - b0) * m
-        buf = _buffer("harm_out", (k, n))
+        buf = scratch("harm_out", (k, n))
         sl = slice(b0, b1)
         _fill_harmonics(degree, *_unit_vectors(th[sl].ravel(), ph[sl].ravel()), buf, f[sl].ravel())
         out[sl] = buf.reshape(k, b1 - b0, m).sum(axis=2).T / count[sl, None]
 
-    run_chunks(_chunk_bounds(nb, per), work, nb * m, progress)
+    run_chunks(chunk_bounds(nb, per), work, nb * m, progress)
     return out.reshape(nby, nbx, k)
 
 
@@ -458,7 +374,7 @@ def _ridge_blocks(
     def work(b0: int, b1: int) -> None:
         nbc = b1 - b0
         sl = slice(b0, b1)
-        buf = _buffer("harm_out", (k, nbc * m))
+        buf = scratch("harm_out", (k, nbc * m))
         _fill_harmonics(degree, *_unit_vectors(th[sl].ravel(), ph[sl].ravel()), buf)
         Y = buf.reshape(k, nbc, m).transpose(1, 0, 2)  # (blocks, K, M) view
         fb = f[sl]
@@ -483,7 +399,7 @@ def _ridge_blocks(
         if rec is not None and not shortcut:
             rec[sl] = np.matmul(a[:, None, :], Y)[:, 0, :]
 
-    run_chunks(_chunk_bounds(nb, per), work, nb * m, progress)
+    run_chunks(chunk_bounds(nb, per), work, nb * m, progress)
     return coef, rec
 
 
@@ -529,11 +445,11 @@ def evaluate_expansion(
     out = np.empty(th.size)
 
     def work(a: int, b: int) -> None:
-        buf = _buffer("harm_out", (k, b - a))
+        buf = scratch("harm_out", (k, b - a))
         _fill_harmonics(degree, *_unit_vectors(th[a:b], ph[a:b]), buf)
         out[a:b] = np.einsum("ki,ik->i", buf, coefficients[a:b])
 
-    run_chunks(_chunk_bounds(th.size, _points_per_chunk(k)), work, th.size)
+    run_chunks(chunk_bounds(th.size, _points_per_chunk(k)), work, th.size)
     return out
 
 

@@ -39,7 +39,7 @@ import warnings
 import numpy as np
 
 from ..errors import PolarsegError
-from .harmonics import _blockify, block_grid
+from .harmonics import block_grid, blockify
 
 #: Names of the columns :func:`block_polarisation_statistics` returns, in order.
 STAT_NAMES: tuple[str, ...] = (
@@ -60,7 +60,7 @@ _FLOOR = 1e-5
 
 def _blocks(a: np.ndarray, window: int) -> np.ndarray:
     """(rows·cols, w²) pixels of the whole blocks of a 2-D array (remainder strips dropped)."""
-    b = _blockify(np.asarray(a), window)
+    b = blockify(np.asarray(a), window)
     return b.reshape(-1, b.shape[-1])
 
 

@@ -103,6 +103,7 @@ import scipy.sparse as sps
 from scipy.linalg.blas import get_blas_funcs
 from scipy.sparse.linalg import ArpackNoConvergence, LinearOperator, eigsh
 
+from ..chunks import chunk_bounds, run_chunks
 from ..errors import Cancelled, PolarsegError
 
 #: Graphs up to this many nodes use a dense eigensolver; larger ones are iterative.
@@ -227,8 +228,6 @@ class _DenseGraph:
     diag: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
-        from ..features.harmonics import run_chunks
-
         n = self.W.shape[0]
         single = np.asarray(self.W).dtype == np.float32 and n >= FLOAT32_MIN_NODES
         W = self.W = np.ascontiguousarray(self.W, dtype=np.float32 if single else float)
@@ -246,7 +245,7 @@ class _DenseGraph:
                 self.d[a:b] = W[a:b].sum(axis=1, dtype=np.float64)
 
             step = max(1, 2**20 // n)
-            run_chunks([(a, min(n, a + step)) for a in range(0, n, step)], work, n * n // 8)
+            run_chunks(chunk_bounds(n, step), work, n * n // 8)
             if not np.all(np.isfinite(self.d)) or np.any(self.d <= 0):
                 raise PolarsegError(
                     "affinity has an isolated node (zero degree) or a non-finite degree"
@@ -876,8 +875,6 @@ def _lower_prefix_sums(
     contributes its entries to nodes ranked before it: a masked row sum, computed in row
     chunks on the cores (no permuted n × n copy, no triangle mask).
     """
-    from ..features.harmonics import run_chunks
-
     m, n = order.size, W.shape[0]
     nodes = np.arange(m) if idx is None else idx
     rank = np.full(n, m, dtype=np.intp)
@@ -896,8 +893,7 @@ def _lower_prefix_sums(
         sums[a:b] = np.where(before, block, block.dtype.type(0)).sum(axis=1, dtype=np.float64)
 
     step = max(1, 2**20 // max(n, 1))  # rows per chunk: ~8 MB of float64
-    bounds = [(a, min(rows.size, a + step)) for a in range(0, rows.size, step)]
-    run_chunks(bounds, work, rows.size * n // 8)
+    run_chunks(chunk_bounds(rows.size, step), work, rows.size * n // 8)
     if rows.size != m:
         sums = sums[nodes]
     return sums[order]

@@ -46,6 +46,7 @@ from typing import Any
 
 import numpy as np
 
+from ..chunks import chunk_bounds, run_chunks
 from ..errors import PolarsegError
 
 #: Two polariser angles closer than this (radians, modulo π) are the same state.
@@ -290,8 +291,6 @@ def _unweighted_fit(
     68 MB of fresh pages on the 720 × 660 × 19 reference stack, 0.2–0.4 s of a first run).
     Returns ``coef`` (3, P), the RMS residual over the states (P,) and the states' angles.
     """
-    from ..features.harmonics import run_chunks
-
     n = angles.size
     flat = data.reshape(n, -1)
     counts = np.bincount(groups, minlength=n_groups).astype(np.float64)
@@ -312,7 +311,7 @@ def _unweighted_fit(
         residual[a:b] = np.sqrt(np.einsum("ij,ij->j", r, r) / n_groups)
 
     step = 1 << 15
-    run_chunks([(a, min(p, a + step)) for a in range(0, p, step)], work, p)
+    run_chunks(chunk_bounds(p, step), work, p)
     return coef, residual, angles[first]
 
 
