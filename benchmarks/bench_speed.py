@@ -223,12 +223,12 @@ def straightforward_ncut(
 
 
 def _labels_of(segments: list[np.ndarray], n: int) -> np.ndarray:
-    from napari_polarseg.engine.graph.ncut import _first_appearance_order
+    from napari_polarseg.engine.graph.ncut import first_appearance_order
 
     labels = np.empty(n, dtype=np.int32)
     for lab, seg in enumerate(segments):
         labels[seg] = lab
-    return _first_appearance_order(labels)
+    return first_appearance_order(labels)
 
 
 def straightforward_segment(stack: np.ndarray, angles: np.ndarray, params) -> np.ndarray:
@@ -715,7 +715,7 @@ def main(argv: list[str] | None = None) -> int:
     np.cos(ms * af[None]), np.sin(ms * af[None])
     b_leg12 = (time.perf_counter() - t0) * 10
     coef = pipe.get("harmonics")
-    # as the pipeline stores it from ncut.FLOAT32_MIN_NODES blocks (each entry computed
+    # as the pipeline stores it from dense_graph.FLOAT32_MIN_NODES blocks (each entry computed
     # in float64); the cut tree multiplies with it directly
     t_aff_ours, W = median_time(
         lambda: feat.affinity_matrix(pipe.get("pca").features, 1.0, "absolute", np.float32),

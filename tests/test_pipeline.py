@@ -227,11 +227,11 @@ def test_masked_out_blocks_are_no_graph_nodes_and_take_their_neighbours_label():
 
 def test_scale_change_reuses_the_distances_and_large_graphs_are_float32():
     """The squared distances are kept with the block features: a change of the affinity
-    scale recomputes only the exponential. From ncut.FLOAT32_MIN_NODES blocks the
+    scale recomputes only the exponential. From dense_graph.FLOAT32_MIN_NODES blocks the
     distances and the affinity are float32, and the labels equal those of the float64
     affinity (the issue's condition for float32)."""
     from napari_polarseg.engine.graph import affinity as feat
-    from napari_polarseg.engine.graph import ncut
+    from napari_polarseg.engine.graph import dense_graph, ncut
     from napari_polarseg.engine.synthetic.scenes import make_scene
 
     scene = make_scene("camouflage", shape=(200, 208), angles_deg=np.arange(0, 180, 30))
@@ -240,7 +240,7 @@ def test_scale_change_reuses_the_distances_and_large_graphs_are_float32():
     pipe.run(reconstruction=False)
     W = pipe.get("affinity")
     n = W.shape[0]
-    assert n >= ncut.FLOAT32_MIN_NODES and W.dtype == np.float32
+    assert n >= dense_graph.FLOAT32_MIN_NODES and W.dtype == np.float32
     D = pipe._distances[1]
     assert D.dtype == np.float32
     features = pipe.get("pca").features.reshape(n, -1)

@@ -35,7 +35,8 @@ from .features.harmonics import (
 from .features.pca import PCAResult, mahalanobis_sq, pca_features, whiten
 from .features.pixel_features import FeatureStack, PixelFeatureParams, pixel_features
 from .graph.affinity import affinity_matrix
-from .graph.ncut import CutTree, best_split, bipartition, fiedler_vector, recursive_ncut
+from .graph.eigensolver import fiedler_vector
+from .graph.ncut import CutTree, best_split, bipartition, recursive_ncut
 from .limits import check_pipeline_memory, estimate_pipeline_bytes
 from .params import SegmentParams
 from .physics.colour_mosaic import demosaic_colour, luminance

@@ -32,7 +32,7 @@ from .analysis.degenerate import DegenerateCheck, degenerate_result
 from .errors import Cancelled, PolarsegError
 from .features import harmonics, polstats
 from .features import pca as feat
-from .graph import affinity, ncut, spectral
+from .graph import affinity, dense_graph, ncut, spectral
 from .params import SegmentParams
 from .physics import fresnel, polarimage
 from .unsupervised import segmenter as unsupervised
@@ -584,7 +584,7 @@ class Pipeline:
         if self._distances is None or self._distances[0] != key:
             self._distances = None  # free the old matrix before building the new one
             n = features.shape[0]
-            dtype = np.float32 if n >= ncut.FLOAT32_MIN_NODES else np.float64
+            dtype = np.float32 if n >= dense_graph.FLOAT32_MIN_NODES else np.float64
             D = feat.mahalanobis_sq(features, dtype, out=self._matrices.take((n, n), dtype))
             self._distances = [key, D, None]
         cached = self._distances

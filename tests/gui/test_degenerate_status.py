@@ -53,7 +53,7 @@ def slow_products(monkeypatch):
     """Every product of the cut's eigensolvers takes until ``release`` (at most 30 s),
     checking the run's cancel request every 5 ms as the solvers do between products."""
     entered, release = threading.Event(), threading.Event()
-    original = ncut._Budget.take
+    original = ncut.Budget.take
 
     def take(self, columns, stop=None):
         entered.set()
@@ -64,7 +64,7 @@ def slow_products(monkeypatch):
             time.sleep(0.005)
         return original(self, columns, stop)
 
-    monkeypatch.setattr(ncut._Budget, "take", take)
+    monkeypatch.setattr(ncut.Budget, "take", take)
     yield entered, release
     release.set()
 

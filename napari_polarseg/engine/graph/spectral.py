@@ -40,20 +40,10 @@ import scipy.sparse as sps
 from scipy.sparse.linalg import ArpackNoConvergence, eigsh
 
 from ..errors import PolarsegError
-from .ncut import (
-    EIG_TOL,
-    LANCZOS_SHARE,
-    LOBPCG_MAXITER,
-    MAX_CUT_PRODUCTS,
-    _Budget,
-    _check_products,
-    _degrees,
-    _diagonal,
-    _first_appearance_order,
-    _lobpcg,
-    _OutOfProducts,
-    _start_candidates,
-)
+from .budget import MAX_CUT_PRODUCTS, Budget, OutOfProducts, check_products
+from .dense_graph import degrees, diagonal
+from .eigensolver import EIG_TOL, LANCZOS_SHARE, LOBPCG_MAXITER, lobpcg, start_candidates
+from .ncut import first_appearance_order
 
 #: Graphs up to this many nodes are decomposed densely.
 DENSE_MAX = 1_500
@@ -78,13 +68,13 @@ def normalized_eigenvectors(
     again if both fail outright. ``cancel`` is called before every product (True raises
     :class:`~napari_polarseg.engine.errors.Cancelled`).
     """
-    return _eigenvectors(W, k, _Budget(_check_products(max_products), cancel))
+    return _eigenvectors(W, k, Budget(check_products(max_products), cancel))
 
 
-def _eigenvectors(W, k: int, budget: _Budget) -> np.ndarray:
+def _eigenvectors(W, k: int, budget: Budget) -> np.ndarray:
     n = W.shape[0]
     k = int(min(k, n))
-    d = _degrees(W)  # checks for isolated nodes
+    d = degrees(W)  # checks for isolated nodes
     d_is = 1.0 / np.sqrt(d)
     if n > DENSE_MAX and k < n - 1:
         Wm = W.tocsr() if sps.issparse(W) else np.asarray(W, dtype=np.float64)
@@ -101,18 +91,18 @@ def _eigenvectors(W, k: int, budget: _Budget) -> np.ndarray:
                 warnings.simplefilter("ignore")
                 vals, vecs = eigsh(op, k=k, which="LA", v0=v0, tol=1e-8)
             return vecs[:, np.argsort(vals)[::-1]]
-        except (ArpackNoConvergence, _OutOfProducts):
+        except (ArpackNoConvergence, OutOfProducts):
             pass  # a graph fallen apart into isolated blocks: the block solver copes
         # the k − 1 smallest eigenvectors of N = I − D^−½ W D^−½ orthogonal to its
         # known smallest one, u = D^½ 1 (the largest of D^−½ W D^−½)
         u = np.sqrt(d)[:, None] / np.sqrt(d.sum())
-        precond = 1.0 / np.maximum(1.0 - _diagonal(W) / d, 1e-8)
+        precond = 1.0 / np.maximum(1.0 - diagonal(W) / d, 1e-8)
         try:
-            _, Z, _, _ = _lobpcg(
+            _, Z, _, _ = lobpcg(
                 lambda X: X - product(X),
                 precond,
                 u,
-                _start_candidates(d, precond, [], k - 1),
+                start_candidates(d, precond, [], k - 1),
                 k - 1,
                 EIG_TOL,
                 EIG_TOL,
@@ -120,7 +110,7 @@ def _eigenvectors(W, k: int, budget: _Budget) -> np.ndarray:
                 budget,
             )
             return np.hstack([u, Z])
-        except (_OutOfProducts, np.linalg.LinAlgError):
+        except (OutOfProducts, np.linalg.LinAlgError):
             pass
     dense = W.toarray() if sps.issparse(W) else np.asarray(W, dtype=np.float64)
     vals, vecs = scipy.linalg.eigh(dense * d_is[:, None] * d_is[None, :])
@@ -170,7 +160,7 @@ class SpectralClustering:
             raise PolarsegError(f"affinity must be square, got shape {self.W.shape}")
         if n < 1:
             raise PolarsegError("affinity has no nodes")
-        self.max_products = _check_products(self.max_products)
+        self.max_products = check_products(self.max_products)
         self._counts = {"eigensolver_capped": 0, "isolated_skipped": 0, "products": 0}
 
     def cut_limits(self, k: int | None = None) -> dict[str, int]:
@@ -194,7 +184,7 @@ class SpectralClustering:
         n = self.W.shape[0]
         k = min(k, n)
         if self._vectors is None or self._vectors.shape[1] < k:
-            budget = _Budget(self.max_products, cancel)
+            budget = Budget(self.max_products, cancel)
             try:
                 self._vectors = _eigenvectors(self.W, min(n, k + EXTRA_VECTORS), budget)
             finally:
@@ -222,7 +212,7 @@ class SpectralClustering:
                 x = self.embedding(k, cancel)
                 km = KMeans(k, n_init=KMEANS_INIT, random_state=KMEANS_SEED).fit(x)
                 lab = self._merge_small(km.labels_, x, km.cluster_centers_)
-            self._labels[k] = _first_appearance_order(lab)
+            self._labels[k] = first_appearance_order(lab)
         lab = self._labels[k]
         self._ncut = [float(v) for v in kway_ncut(self.W, lab)] if lab.max() > 0 else []
         return lab.copy()
