@@ -137,7 +137,8 @@ from .engine.params import (
 )
 from .engine.physics.colour_mosaic import BAYER_ORDERS
 from .engine.physics.mosaic import DEMOSAIC_METHODS
-from .engine.physics.polarimage import PixelMask, validity_mask
+from .engine.physics.pixel_mask import PixelMask
+from .engine.physics.polarimage import validity_mask
 from .engine.physics.registration import register_stack, shift_frames
 from .engine.pipeline import STAGES, Pipeline, SegmentationResult
 from .export import FLOAT_OUTPUTS as FLOAT_OUTPUTS  # the output contract (batch.py reads it)

@@ -115,7 +115,8 @@ from .engine.physics.mosaic import (
     demosaic_flags,
     subtract_dark,
 )
-from .engine.physics.polarimage import auto_saturation_level, distinct_angle_count
+from .engine.physics.pixel_mask import auto_saturation_level
+from .engine.physics.polarimage import distinct_angle_count
 from .tiff_angles import FROM_JSON, tiff_angles
 
 PathLike = str | os.PathLike

@@ -40,10 +40,9 @@ from napari_polarseg.engine.physics.mosaic import (
     spread_flags_interpolated,
     subtract_dark,
 )
+from napari_polarseg.engine.physics.pixel_mask import PixelMask, auto_saturation_level
 from napari_polarseg.engine.physics.polarimage import (
-    PixelMask,
     angle_groups,
-    auto_saturation_level,
     average_duplicate_angles,
     duplicate_angle_frames,
     validity_mask,

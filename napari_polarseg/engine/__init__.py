@@ -55,8 +55,8 @@ from .physics.fresnel import (
     zenith_from_specular_dop,
 )
 from .physics.mosaic import demosaic, demosaic_interpolated, demosaic_superpixel, subtract_dark
+from .physics.pixel_mask import PixelMask
 from .physics.polarimage import (
-    PixelMask,
     PolarisationImage,
     average_duplicate_angles,
     distinct_angle_count,

@@ -40,26 +40,18 @@ Angles are radians, measured from the image's column axis towards its row axis.
 
 from __future__ import annotations
 
-import warnings
-from dataclasses import dataclass, replace
-from typing import Any
+from dataclasses import dataclass
 
 import numpy as np
 
-from ..chunks import chunk_bounds, run_chunks
 from ..errors import PolarsegError
+from .pixel_mask import DARK, NONFINITE, SATURATED, PixelMask, auto_saturation_level, finite_level
+from .sinusoid_fit import ROBUST_LOSSES, irls, sinusoid_design, unweighted_fit, weighted_fit
 
 #: Two polariser angles closer than this (radians, modulo π) are the same state.
 ANGLE_TOLERANCE = 1e-6
 #: Largest magnitude of a sample: beyond it squares overflow in float64 downstream.
 MAX_ABS_VALUE = 1e100
-#: Robust losses of :func:`polarisation_image` (``loss=``).
-ROBUST_LOSSES = ("tukey", "huber")
-#: Tuning constants (in units of the residual scale) for 95 % efficiency under Gaussian noise.
-HUBER_C = 1.345
-TUKEY_C = 4.685
-#: Bits of :attr:`PixelMask.flags` (per sample).
-SATURATED, DARK, NONFINITE = 1, 2, 4
 
 
 @dataclass(frozen=True)
@@ -207,12 +199,6 @@ def average_duplicate_angles(
     return mean.reshape(shape), angles[first], np.where(used > 0, wsum, 0.0).reshape(shape)
 
 
-def sinusoid_design(angles: np.ndarray) -> np.ndarray:
-    """Design matrix (N, 3) with columns 1, cos 2α, sin 2α for angles α in radians."""
-    a = np.asarray(angles, dtype=float)
-    return np.stack([np.ones_like(a), np.cos(2 * a), np.sin(2 * a)], axis=1)
-
-
 def check_stack(stack: np.ndarray, angles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Validate an angle stack; return it (N, H, W) and the angles as float64 (N,).
 
@@ -275,144 +261,6 @@ def _all_finite(data: np.ndarray) -> bool:
     if data.size == 0:
         return True
     return bool(np.isfinite(data.min()) and np.isfinite(data.max()))
-
-
-def _unweighted_fit(
-    data: np.ndarray, angles: np.ndarray, groups: np.ndarray, n_groups: int
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Least-squares fit of eq. 3.14 when every sample counts once: (coef, RMS, angles).
-
-    The fit of the per-state means (frames at one angle modulo π averaged, each state
-    weighted by its frame count, as :func:`average_duplicate_angles` with unit weights)
-    is linear in the frames: coef = M A x and the residual of the states r = (A − D M A) x
-    for a pixel's samples x, with A (G, N) the averaging, D (G, 3) the design and M its
-    weighted pseudo-inverse. Both small matrices are formed once and applied to chunks of
-    pixels on the cores (no (G, P) array of means or residuals: the means alone were
-    68 MB of fresh pages on the 720 × 660 × 19 reference stack, 0.2–0.4 s of a first run).
-    Returns ``coef`` (3, P), the RMS residual over the states (P,) and the states' angles.
-    """
-    n = angles.size
-    flat = data.reshape(n, -1)
-    counts = np.bincount(groups, minlength=n_groups).astype(np.float64)
-    first = np.array([np.flatnonzero(groups == g)[0] for g in range(n_groups)])
-    average = (groups[None, :] == np.arange(n_groups)[:, None]) / counts[:, None]  # A
-    design = sinusoid_design(angles[first])
-    sw = np.sqrt(counts)[:, None]
-    to_coef = (np.linalg.pinv(design * sw) * sw.T) @ average  # M A (3, N)
-    to_residual = average - design @ to_coef  # (G, N)
-    p = flat.shape[1]
-    coef = np.empty((3, p))
-    residual = np.empty(p)
-
-    def work(a: int, b: int) -> None:
-        x = flat[:, a:b]
-        np.matmul(to_coef, x, out=coef[:, a:b])
-        r = to_residual @ x
-        residual[a:b] = np.sqrt(np.einsum("ij,ij->j", r, r) / n_groups)
-
-    step = 1 << 15
-    run_chunks(chunk_bounds(p, step), work, p)
-    return coef, residual, angles[first]
-
-
-def _weighted_fit(
-    design: np.ndarray, y: np.ndarray, w: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """Per-pixel weighted least squares of y ≈ design @ c.
-
-    ``design`` (G, 3), ``y`` and ``w`` (G, Q). Solves every 3 × 3 normal system in closed
-    form (adjugate over determinant, vectorised). Returns ``coef`` (3, Q) and ``ok`` (Q,):
-    False where the normal matrix is singular (fewer than 3 distinct angles with positive
-    weight); ``coef`` is 0 there.
-    """
-    pairs = [(0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)]
-    products = np.stack([design[:, i] * design[:, j] for i, j in pairs], axis=0)  # (6, G)
-    m00, m01, m02, m11, m12, m22 = products @ w  # each (Q,)
-    b0, b1, b2 = design.T @ (w * y)  # each (Q,)
-    c00 = m11 * m22 - m12 * m12
-    c01 = m02 * m12 - m01 * m22
-    c02 = m01 * m12 - m02 * m11
-    c11 = m00 * m22 - m02 * m02
-    c12 = m01 * m02 - m00 * m12
-    c22 = m00 * m11 - m01 * m01
-    det = m00 * c00 + m01 * c01 + m02 * c02
-    trace = m00 + m11 + m22
-    ok = (trace > 0) & (det > 1e-9 * (trace / 3.0) ** 3)
-    inv_det = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)
-    coef = np.stack(
-        [
-            (c00 * b0 + c01 * b1 + c02 * b2) * inv_det,
-            (c01 * b0 + c11 * b1 + c12 * b2) * inv_det,
-            (c02 * b0 + c12 * b1 + c22 * b2) * inv_det,
-        ]
-    )
-    return coef, ok
-
-
-def _trimmed_start(
-    design: np.ndarray, y: np.ndarray, base: np.ndarray, coef: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """Least-trimmed-squares start: per pixel the best fit that leaves out one sample.
-
-    Returns the starting coefficients (3, Q) and the normalised median absolute residual
-    of that fit over all usable samples (Q,), the pixel's noise scale.
-    Pixels with fewer than 5 usable samples keep ``coef`` (no outlier is detectable).
-    """
-    usable = base > 0
-    n_used = usable.sum(axis=0)
-    best_rss = np.full(y.shape[1], np.inf)
-    best = coef.copy()
-    for k in range(y.shape[0]):
-        w = base.copy()
-        w[k] = 0.0
-        trial, ok = _weighted_fit(design, y, w)
-        rss = np.sum(w * (y - design @ trial) ** 2, axis=0)
-        better = ok & (rss < best_rss) & (n_used >= 5)
-        best = np.where(better, trial, best)
-        best_rss = np.where(better, rss, best_rss)
-    residual = np.abs(y - design @ best)
-    if usable.all():
-        mad = np.median(residual, axis=0)
-    else:
-        with np.errstate(all="ignore"), warnings.catch_warnings():
-            warnings.simplefilter("ignore", RuntimeWarning)  # pixels with no usable sample
-            mad = np.nan_to_num(np.nanmedian(np.where(usable, residual, np.nan), axis=0))
-    return best, 1.4826 * mad * np.sqrt(n_used / np.maximum(n_used - 3, 1))
-
-
-def _irls(
-    design: np.ndarray,
-    y: np.ndarray,
-    base: np.ndarray,
-    coef: np.ndarray,
-    ok: np.ndarray,
-    loss: str,
-    iterations: int,
-) -> tuple[np.ndarray, np.ndarray]:
-    """M-estimate by IRLS from a trimmed start with a fixed scale (module docstring)."""
-    coef, scale = _trimmed_start(design, y, base, coef)
-    n_used = (base > 0).sum(axis=0)
-    detectable = n_used >= 5
-    pooled = float(np.median(scale[detectable])) if detectable.any() else 0.0
-    floor = 1e-9 * np.abs(coef[0]) + np.finfo(float).tiny
-    scale = np.maximum(np.maximum(scale, pooled), floor)
-    weights = base
-    for _ in range(iterations):
-        residual = y - design @ coef
-        if loss == "tukey":
-            u = np.abs(residual) / (TUKEY_C * scale)
-            rw = np.where(u < 1.0, (1.0 - np.minimum(u, 1.0) ** 2) ** 2, 0.0)
-        else:
-            u = np.abs(residual) / (HUBER_C * scale)
-            rw = 1.0 / np.maximum(u, 1.0)
-        weights = base * rw
-        new, new_ok = _weighted_fit(design, y, weights)
-        new_ok &= ok
-        step = np.where(new_ok, np.max(np.abs(new - coef), axis=0), 0.0)
-        coef = np.where(new_ok, new, coef)
-        if np.all(step <= 1e-9 * scale):
-            break
-    return coef, weights
 
 
 def polarisation_image(
@@ -487,9 +335,27 @@ def polarisation_image(
     g = int(groups.max()) + 1
     if weights is None and not (robust and g > 4) and _all_finite(data):
         # every sample usable and weighted once: one pseudo-inverse fits every pixel
-        coef, residual, fit_angles = _unweighted_fit(data, angles, groups, g)
+        coef, residual, fit_angles = unweighted_fit(data, angles, groups, g)
         ok = np.ones(coef.shape[1], dtype=bool)
         return _polarisation_result(coef, ok, ok, residual, None, fit_angles, (h, w))
+    return _weighted_polarisation(data, angles, weights, robust and g > 4, loss, int(iterations))
+
+
+def _weighted_polarisation(
+    data: np.ndarray,
+    angles: np.ndarray,
+    weights: np.ndarray | None,
+    robust: bool,
+    loss: str,
+    iterations: int,
+) -> PolarisationImage:
+    """:func:`polarisation_image` with sample weights, missing samples or the robust fit.
+
+    Duplicate angles averaged (:func:`average_duplicate_angles`), then one weighted
+    pseudo-inverse for the pixels whose every sample is usable and a 3 × 3 solve per
+    pixel for the others; ``robust``: IRLS with ``loss`` from there (eq. 3.14).
+    """
+    n, h, w = data.shape
     data = data.astype(np.float64, copy=False)
     finite = np.isfinite(data)
     if weights is not None:
@@ -521,10 +387,10 @@ def polarisation_image(
         ok = full.copy()
         coef[:, full] = solve @ y[:, full]
         part = ~full
-        coef[:, part], ok[part] = _weighted_fit(design, y[:, part], base[:, part])
+        coef[:, part], ok[part] = weighted_fit(design, y[:, part], base[:, part])
     final_w = base
-    if robust and g > 4:
-        coef, final_w = _irls(design, y, base, coef, ok, loss, int(iterations))
+    if robust:
+        coef, final_w = irls(design, y, base, coef, ok, loss, iterations)
     usable = base > 0
     n_used = np.maximum(usable.sum(axis=0), 1)
     residual = np.sqrt(np.sum(np.where(usable, (y - design @ coef) ** 2, 0.0), axis=0) / n_used)
@@ -569,137 +435,6 @@ def _polarisation_result(
 
 
 # -- validity mask --------------------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class PixelMask:
-    """Which samples and pixels the fit and the block features may use.
-
-    A pixel is used only if every one of its samples is usable (not saturated, not black,
-    finite) and it lies inside the user's region. Pixels may be excluded for several
-    reasons at once; each count below counts a pixel once per reason.
-
-    Attributes
-    ----------
-    flags : ndarray (N, H, W) uint8
-        Per sample, the OR of :data:`SATURATED` (1), :data:`DARK` (2) and
-        :data:`NONFINITE` (4); 0 = usable.
-    region : ndarray (H, W) of bool or None
-        The user's region (True = segment here), or None for the whole image.
-    saturation_level : float or None
-        Samples at or above it were flagged saturated (None: not checked).
-    dark_level : float or None
-        Samples at or below it were flagged dark (None: not checked).
-    """
-
-    flags: np.ndarray
-    region: np.ndarray | None = None
-    saturation_level: float | None = None
-    dark_level: float | None = None
-
-    @property
-    def shape(self) -> tuple[int, int]:
-        """(H, W) of the frames."""
-        return tuple(self.flags.shape[1:])  # type: ignore[return-value]
-
-    def _any(self, bit: int) -> np.ndarray:
-        return np.any(self.flags & bit, axis=0)
-
-    @property
-    def saturated(self) -> np.ndarray:
-        """(H, W) pixels saturated in at least one frame."""
-        return self._any(SATURATED)
-
-    @property
-    def dark(self) -> np.ndarray:
-        """(H, W) pixels at or below the dark level in at least one frame."""
-        return self._any(DARK)
-
-    @property
-    def nonfinite(self) -> np.ndarray:
-        """(H, W) pixels with a NaN or infinite sample in at least one frame."""
-        return self._any(NONFINITE)
-
-    @property
-    def outside(self) -> np.ndarray:
-        """(H, W) pixels outside the user's region."""
-        if self.region is None:
-            return np.zeros(self.shape, dtype=bool)
-        return ~self.region
-
-    @property
-    def valid(self) -> np.ndarray:
-        """(H, W) pixels the fit and the features use."""
-        ok = ~np.any(self.flags, axis=0)
-        return ok if self.region is None else ok & self.region
-
-    @property
-    def sample_weights(self) -> np.ndarray:
-        """(N, H, W) float64: 1 for usable samples, 0 for flagged ones."""
-        return (self.flags == 0).astype(np.float64)
-
-    def counts(self) -> dict[str, Any]:
-        """JSON-ready pixel counts per reason and the levels used."""
-        valid = self.valid
-        return {
-            "valid_pixels": int(np.count_nonzero(valid)),
-            "masked_pixels": int(valid.size - np.count_nonzero(valid)),
-            "saturated_pixels": int(np.count_nonzero(self.saturated)),
-            "dark_pixels": int(np.count_nonzero(self.dark)),
-            "nonfinite_pixels": int(np.count_nonzero(self.nonfinite)),
-            "outside_region_pixels": int(np.count_nonzero(self.outside)),
-            "saturation_level": self.saturation_level,
-            "dark_level": self.dark_level,
-        }
-
-    def shifted(self, shifts: np.ndarray) -> PixelMask:
-        """The mask of a registered stack: each frame's flags moved by its shift.
-
-        A flag spreads to every pixel the resampled frame takes a share of the flagged
-        sample from (bilinear support), so nothing flagged is lost.
-        """
-        from scipy import ndimage
-
-        shifts = np.asarray(shifts, dtype=float).reshape(-1, 2)
-        out = self.flags.copy()
-        for k, d in enumerate(shifts):
-            if not np.any(d):
-                continue
-            frame = np.zeros(self.shape, dtype=np.uint8)
-            for bit in (SATURATED, DARK, NONFINITE):
-                plane = (self.flags[k] & bit).astype(np.float64)
-                if plane.any():
-                    moved = ndimage.shift(plane, d, order=1, mode="nearest")
-                    frame |= np.where(moved > 1e-6, bit, 0).astype(np.uint8)
-            out[k] = frame
-        return replace(self, flags=out)
-
-
-def _level(value: Any, name: str) -> float | None:
-    if value is None:
-        return None
-    try:
-        level = float(value)
-    except (TypeError, ValueError):
-        raise PolarsegError(f"{name} must be a number, got {value!r}") from None
-    if not np.isfinite(level):
-        raise PolarsegError(f"{name} must be a finite number, got {value!r}")
-    return level
-
-
-def auto_saturation_level(dtype: np.dtype, bits: int | None = None) -> float | None:
-    """Saturation level of integer data: 2**bits − 1, or the dtype's maximum.
-
-    Float data has no natural saturation level (returns None). ``bits`` is the number of
-    significant bits (e.g. 12 for a 12-bit camera stored in uint16).
-    """
-    dtype = np.dtype(dtype)
-    if dtype == np.bool_ or not np.issubdtype(dtype, np.integer):
-        return None
-    top = float(np.iinfo(dtype).max)
-    if bits is not None and 0 < bits < np.iinfo(dtype).bits:
-        return min(top, float(2**bits - 1))
-    return top
 
 
 def validity_mask(
@@ -751,13 +486,8 @@ def validity_mask(
         raise PolarsegError(f"a validity mask needs a stack (N, H, W), got shape {stack.shape}")
     if stack.dtype == np.bool_:
         stack = stack.astype(np.uint8)
-    if isinstance(saturation, str):
-        if saturation != "auto":
-            raise PolarsegError(f"saturation must be a number, 'auto' or None, got {saturation!r}")
-        level = auto_saturation_level(stack.dtype)
-    else:
-        level = _level(saturation, "saturation level")
-    dark = _level(dark_level, "dark level")
+    level = _saturation_level(saturation, stack.dtype)
+    dark = finite_level(dark_level, "dark level")
     # uint8 flags set in place (no int64 temporaries of the stack's size); an integer
     # stack is finite everywhere
     flags = np.zeros(stack.shape, dtype=np.uint8)
@@ -782,18 +512,30 @@ def validity_mask(
             flag(SATURATED, stack >= level)
         if dark is not None:
             flag(DARK, stack <= dark)
-    keep = None
-    if region is not None:
-        region = np.asarray(region)
-        if region.shape != stack.shape[1:]:
-            raise PolarsegError(
-                f"the mask is {region.shape[0]} x {region.shape[1]} pixels but the frames are "
-                f"{stack.shape[1]} x {stack.shape[2]}"
-                if region.ndim == 2
-                else f"the mask must be a 2-D image, got shape {region.shape}"
-            )
-        keep = region.astype(bool) if region.dtype.kind != "f" else np.nan_to_num(region) != 0
+    keep = None if region is None else _region_pixels(region, stack.shape)
     return PixelMask(flags, keep, level, dark)
+
+
+def _saturation_level(saturation: float | str | None, dtype: np.dtype) -> float | None:
+    """The level of :func:`validity_mask`'s ``saturation``: a number, "auto" or None."""
+    if isinstance(saturation, str):
+        if saturation != "auto":
+            raise PolarsegError(f"saturation must be a number, 'auto' or None, got {saturation!r}")
+        return auto_saturation_level(dtype)
+    return finite_level(saturation, "saturation level")
+
+
+def _region_pixels(region: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
+    """The user's region of a stack of ``shape`` (N, H, W) as (H, W) bool: non-zero = in."""
+    region = np.asarray(region)
+    if region.shape != shape[1:]:
+        raise PolarsegError(
+            f"the mask is {region.shape[0]} x {region.shape[1]} pixels but the frames are "
+            f"{shape[1]} x {shape[2]}"
+            if region.ndim == 2
+            else f"the mask must be a 2-D image, got shape {region.shape}"
+        )
+    return region.astype(bool) if region.dtype.kind != "f" else np.nan_to_num(region) != 0
 
 
 def check_usable(stack: np.ndarray, mask: PixelMask) -> None:
