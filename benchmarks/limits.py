@@ -40,11 +40,8 @@ from napari_polarseg.engine import Pipeline
 from napari_polarseg.engine.features import harmonics, polstats
 from napari_polarseg.engine.features.pca import harmonic_features
 from napari_polarseg.engine.params import RECOMMENDED
-from napari_polarseg.engine.synthetic.scenes import (
-    SCENES,
-    diffuse_dop_from_transmission,
-    make_scene,
-)
+from napari_polarseg.engine.synthetic.optics import diffuse_dop_from_transmission
+from napari_polarseg.engine.synthetic.scenes import SCENES, make_scene
 
 WINDOW = 12
 SEEDS = (1, 2)

@@ -147,7 +147,7 @@ def test_intensity_baseline_full_size():
 
 def test_known_normals_come_back_through_the_pipeline():
     """A dome rendered with known normals and n gives its zenith and azimuth back."""
-    from napari_polarseg.engine.synthetic.scenes import (
+    from napari_polarseg.engine.synthetic.optics import (
         diffuse_dop_from_transmission,
         render_stack,
     )

@@ -9,18 +9,14 @@ import pytest
 from scipy import ndimage
 
 from napari_polarseg.engine.errors import PolarsegError
-from napari_polarseg.engine.synthetic.scenes import (
-    DEFAULT_ANGLES_DEG,
-    MATERIALS,
-    SCENES,
-    Material,
+from napari_polarseg.engine.synthetic.optics import (
     diffuse_dop_from_transmission,
     fresnel_transmission_amplitudes,
     fresnel_transmittances,
-    make_scene,
     render_stack,
-    render_surface,
 )
+from napari_polarseg.engine.synthetic.scenes import DEFAULT_ANGLES_DEG, SCENES, make_scene
+from napari_polarseg.engine.synthetic.surface import MATERIALS, Material, render_surface
 
 SAMPLE_DIR = Path(__file__).resolve().parents[1] / "napari_polarseg" / "sample_data"
 

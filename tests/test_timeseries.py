@@ -21,6 +21,7 @@ from napari_polarseg.engine.analysis.timeseries import (
 from napari_polarseg.engine.features import harmonics
 from napari_polarseg.engine.params import RECOMMENDED
 from napari_polarseg.engine.physics import polarimage
+from napari_polarseg.engine.synthetic import geometry, optics, surface
 from napari_polarseg.engine.synthetic import scenes as syn
 
 #: RECOMMENDED with two segments (fruit, bruise) and a smaller minimum segment.
@@ -35,41 +36,41 @@ def render_fruit_days(
     Same geometry, texture and micro-facets every day (the same view of the same fruit);
     on each day the bruise is the day-1 bruise grown by ``grow_px[t]`` pixels (a
     distance threshold on the supersampled grid) and the sensor noise is new. Built
-    from the generator's own pieces (``_fruit_geometry``, ``render_surface``,
+    from the generator's own pieces (``fruit_geometry``, ``render_surface``,
     ``render_stack``), replaying :func:`~napari_polarseg.engine.synthetic.make_scene`.
 
     Returns angles (radians), the uint16 stacks and the ground-truth labels per day.
     """
     geo_seq, tex_seq, rough_seq, noise_seq = np.random.SeedSequence(seed).spawn(4)
-    grid = syn._Grid(shape, syn._SUPERSAMPLE)
-    p, q, mat, materials, groups = syn._fruit_geometry(np.random.default_rng(geo_seq), grid)
-    field = syn._unit_field(np.random.default_rng(tex_seq), grid, syn._TEXTURE_SIGMA_PX)
-    texture = np.clip(1.0 + syn._TEXTURE_STD * field, 0.5, None)
-    distance = ndimage.distance_transform_edt(mat != 1) / syn._SUPERSAMPLE  # pixels
+    grid = geometry.Grid(shape, syn.SUPERSAMPLE)
+    p, q, mat, materials, groups = geometry.fruit_geometry(np.random.default_rng(geo_seq), grid)
+    field = geometry.unit_field(np.random.default_rng(tex_seq), grid, syn.TEXTURE_SIGMA_PX)
+    texture = np.clip(1.0 + syn.TEXTURE_STD * field, 0.5, None)
+    distance = ndimage.distance_transform_edt(mat != 1) / syn.SUPERSAMPLE  # pixels
     angles = np.deg2rad(syn.DEFAULT_ANGLES_DEG)
     noise = noise_seq.spawn(len(grow_px))
     stacks, truths = [], []
-    surfaces: dict[float, syn.SurfaceRender] = {}
+    surfaces: dict[float, surface.SurfaceRender] = {}
     for day, grow in enumerate(grow_px):
         day_mat = (distance <= grow).astype(np.intp) if grow > 0 else mat
-        surf = surfaces.get(grow) or syn.render_surface(
+        surf = surfaces.get(grow) or surface.render_surface(
             p,
             q,
             day_mat,
             materials,
-            supersample=syn._SUPERSAMPLE,
+            supersample=syn.SUPERSAMPLE,
             texture=texture,
-            light_zenith_deg=syn._LIGHT_ZENITH_DEG,
-            light_azimuth_deg=syn._LIGHT_AZIMUTH_DEG,
-            ambient=syn._AMBIENT,
-            target_intensity=syn._TARGET_INTENSITY,
+            light_zenith_deg=syn.LIGHT_ZENITH_DEG,
+            light_azimuth_deg=syn.LIGHT_AZIMUTH_DEG,
+            ambient=syn.AMBIENT,
+            target_intensity=syn.TARGET_INTENSITY,
             albedo_groups=groups,
-            facets=syn._FACETS,
+            facets=syn.FACETS,
             rng=np.random.default_rng(rough_seq),
         )
         surfaces[grow] = surf
         stacks.append(
-            syn.render_stack(
+            optics.render_stack(
                 surf.intensity,
                 surf.dop,
                 surf.phase,
@@ -271,7 +272,7 @@ def test_change_statistics_of_a_known_change() -> None:
     patch[12:24, 18:36] = True
     dop = np.where(patch, 0.7 * scene.dop, scene.dop)
     inten = np.where(patch, 0.99 * scene.intensity, scene.intensity) * 1.05  # + exposure
-    stack = syn.render_stack(inten, dop, scene.phase, scene.angles, noise_sigma=0.001, rng=0)
+    stack = optics.render_stack(inten, dop, scene.phase, scene.angles, noise_sigma=0.001, rng=0)
     after = polarimage.polarisation_image(stack, scene.angles)
     st = change_statistics(pol, after, 6)
     expected = harmonics.blockify(patch.astype(float), 6).mean(-1) > 0
