@@ -1188,7 +1188,7 @@ def _number_list_arg(kind: type, what: str):
 
 
 def _add_sweep_parser(sub: Any) -> None:
-    from .engine.analysis.sweep import DEFAULT_SCORE, SCORES
+    from .engine.analysis.sweep_result import DEFAULT_SCORE, SCORES
 
     sw = sub.add_parser(
         "sweep",

@@ -26,7 +26,7 @@ from .engine.errors import PolarsegError
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
-    from .engine.analysis.sweep import SweepResult
+    from .engine.analysis.sweep_result import SweepResult
     from .engine.pipeline import SegmentationResult
 
 #: Colours of the light default theme: figure background, text/axes, accent.

@@ -12,16 +12,18 @@ from sklearn.metrics import adjusted_rand_score, silhouette_score
 from napari_polarseg import io as pio
 from napari_polarseg.engine import Cancelled, PolarsegError, SegmentParams, diffuse_dop
 from napari_polarseg.engine.analysis.sweep import (
-    COLUMNS,
-    SCORE_COLUMNS,
-    SCORES,
-    SweepResult,
     block_silhouette,
     combined_score,
     iter_sweep,
     neighbour_stability,
-    read_csv_rows,
     sweep,
+)
+from napari_polarseg.engine.analysis.sweep_result import (
+    COLUMNS,
+    SCORE_COLUMNS,
+    SCORES,
+    SweepResult,
+    read_csv_rows,
 )
 from napari_polarseg.engine.features.pca import whiten
 from napari_polarseg.engine.params import RECOMMENDED
