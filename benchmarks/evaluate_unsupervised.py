@@ -32,11 +32,8 @@ from evaluate import DEGENERATE_SHARE, REAL_DIR, ari, ari_where, largest_share, 
 from napari_polarseg.engine import Pipeline, SegmentParams
 from napari_polarseg.engine.params import RECOMMENDED
 from napari_polarseg.engine.synthetic.scenes import SCENES, make_scene, scribble_strokes
-from napari_polarseg.engine.unsupervised.segmenter import (
-    MATERIAL_CUE,
-    UnsupervisedParams,
-    segment_unsupervised,
-)
+from napari_polarseg.engine.unsupervised.params import MATERIAL_CUE, UnsupervisedParams
+from napari_polarseg.engine.unsupervised.segmenter import segment_unsupervised
 
 #: Today's best unsupervised option per synthetic scene (issue 13): the floor.
 SYNTHETIC_FLOOR = {"leaves": 0.19, "camouflage": 0.36, "fruit": 0.24}
