@@ -12,12 +12,8 @@ from sklearn.metrics import roc_auc_score
 
 from napari_polarseg import cli
 from napari_polarseg.engine import PolarsegError
-from napari_polarseg.engine.analysis.timeseries import (
-    METHODS,
-    change_map,
-    change_statistics,
-    segment_timeseries,
-)
+from napari_polarseg.engine.analysis.change_test import change_map, change_statistics
+from napari_polarseg.engine.analysis.timeseries import METHODS, segment_timeseries
 from napari_polarseg.engine.features import harmonics
 from napari_polarseg.engine.params import RECOMMENDED
 from napari_polarseg.engine.physics import polarimage
