@@ -93,16 +93,15 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
-from typing import Any
+from dataclasses import dataclass
+from typing import Any, NamedTuple
 
 import numpy as np
-from scipy import stats
 
 from ..errors import Cancelled, PolarsegError
 from ..features import harmonics, polstats
 from ..features import pca as feat
-from ..graph import affinity, ncut
+from ..graph import affinity, ncut, spectral
 from ..params import SegmentParams
 from ..pipeline import MAX_DENSE_BLOCKS, POLSTATS_KINDS, Pipeline
 from .change_test import (
@@ -112,154 +111,11 @@ from .change_test import (
     change_statistics,
     default_change_window,
 )
+from .timeseries_result import TimeSeriesResult
 from .tracking import block_majority, track_labels
 
 #: Ways to segment the days (see the module docstring); the first is the default.
 METHODS = ("tracked", "reference", "joint")
-
-
-@dataclass
-class TimeSeriesResult:
-    """Segments of several days of one view, consistent over time, and their changes.
-
-    Attributes
-    ----------
-    params : SegmentParams
-        Parameters used for every day.
-    method : {"tracked", "reference", "joint"}
-        How the blocks were segmented (module docstring).
-    labels : ndarray (T, H, W) int32
-        Segment of every pixel on each day; segment k means the same material on every
-        day (0 = first segment; for ``tracked``, 0 … ``n_base_segments`` − 1 are day 1's
-        segments and the later ones the materials blocks changed into).
-    block_labels : ndarray (T, rows, cols) int32
-        Segment of every block of the label grid (side ``label_window``: the w × w
-        segmentation blocks for ``reference`` and ``joint``, the change blocks for
-        ``tracked``; the majority of the block's pixels).
-    changes : ndarray (T − 1, H, W) bool
-        ``changes[t]``: the pixel is in another segment on day t + 1 than on day t (the
-        change map; block-shaped).
-    block_changes : ndarray (T − 1, rows, cols) bool
-        The same per block of the label grid.
-    change_score : ndarray (T − 1, H, W) float32
-        Graded change map: the change score of the pixel's change block
-        (:class:`ChangeStatistics`; 3.09 = the evidence of a p-value of 0.001 that the
-        polarisation image changed), whatever the segments did.
-    block_change_score : ndarray (T − 1, rows_c, cols_c)
-        The same per change block (side ``change_window``).
-    change_significant : ndarray (T − 1, rows_c, cols_c) bool
-        Change blocks whose change is significant at ``false_alarm``; for ``tracked``
-        these are the blocks that moved to a changed segment (or stayed in one).
-    change_statistics : list of ChangeStatistics
-        The full test of each pair of consecutive days.
-    feature_distance : ndarray (T − 1, H, W) float32
-        Mahalanobis distance (covariance of all days' blocks) between the shared-basis
-        features of the pixel's segmentation block on day t and on day t + 1 (the older,
-        weaker graded measure, kept for comparison).
-    block_feature_distance : ndarray (T − 1, rows_w, cols_w)
-        The same per segmentation block.
-    features : ndarray (T, n_blocks, n_components)
-        Block features of every day in the shared PCA basis.
-    explained_variance_ratio : ndarray (n_components,)
-        Share of the variance (over all days' blocks) each kept component explains.
-    components : ndarray (n_components, n_features)
-        The shared principal axes.
-    segment_means : ndarray (K, n_components)
-        Mean feature vector of each segment (``joint``: over all days' blocks;
-        ``reference``: over day 1's; ``tracked``: over the pixels of all days, each with
-        its segmentation block's features).
-    ncut_values : list of float
-        Ncut value of each split.
-    n_base_segments : int
-        Segments of the cut (day 1 for ``tracked`` and ``reference``).
-    changed_segments : list of dict
-        ``tracked`` only: for every segment after the base ones, the day it first
-        appears, its change blocks and their mean change (:data:`CHANGE_COMPONENTS`).
-    label_window, change_window : int
-        Sides of the label-grid and change blocks.
-    false_alarm : float
-        Per-block false-alarm probability of the change test.
-    change_from : {"all", "polarisation", "intensity"}
-        What the change test compared (:func:`change_statistics`).
-    pipelines : list of Pipeline
-        The per-day pipelines (their cached stages hold Î, ρ, φ, normals, coefficients).
-    timings : dict
-        Seconds per step.
-    """
-
-    params: SegmentParams
-    method: str
-    labels: np.ndarray
-    block_labels: np.ndarray
-    changes: np.ndarray
-    block_changes: np.ndarray
-    change_score: np.ndarray
-    block_change_score: np.ndarray
-    change_significant: np.ndarray
-    change_statistics: list[ChangeStatistics]
-    feature_distance: np.ndarray
-    block_feature_distance: np.ndarray
-    features: np.ndarray
-    explained_variance_ratio: np.ndarray
-    components: np.ndarray
-    segment_means: np.ndarray
-    ncut_values: list[float]
-    n_base_segments: int
-    changed_segments: list[dict[str, Any]]
-    label_window: int
-    change_window: int
-    false_alarm: float
-    change_from: str
-    pipelines: list[Pipeline] = field(default_factory=list, repr=False)
-    timings: dict[str, float] = field(default_factory=dict)
-
-    @property
-    def n_days(self) -> int:
-        return int(self.labels.shape[0])
-
-    @property
-    def n_segments(self) -> int:
-        return int(self.labels.max()) + 1
-
-    def changed_fraction(self) -> np.ndarray:
-        """Share of the pixels that changed segment between each pair of consecutive days."""
-        if self.changes.shape[0] == 0:
-            return np.zeros(0)
-        return self.changes.reshape(self.changes.shape[0], -1).mean(axis=1)
-
-    def summary(self) -> dict[str, Any]:
-        """JSON-ready figures: segments per day, changes per pair of days, PCA, timings."""
-        k = self.n_segments
-        return {
-            "method": self.method,
-            "n_days": self.n_days,
-            "n_segments": k,
-            "n_base_segments": self.n_base_segments,
-            "changed_segments": [dict(s) for s in self.changed_segments],
-            "segment_pixels": [
-                np.bincount(day.ravel(), minlength=k).tolist() for day in self.labels
-            ],
-            "label_window": self.label_window,
-            "block_grid": list(self.block_labels.shape[1:]),
-            "changed_blocks": [int(c.sum()) for c in self.block_changes],
-            "changed_pixels": [int(c.sum()) for c in self.changes],
-            "changed_pixel_fraction": [float(v) for v in self.changed_fraction()],
-            "change_window": self.change_window,
-            "change_grid": list(self.block_change_score.shape[1:]),
-            "false_alarm": self.false_alarm,
-            "change_from": self.change_from,
-            "score_threshold": float(stats.norm.isf(self.false_alarm)),
-            "significant_change_blocks": [int(s.sum()) for s in self.change_significant],
-            "max_change_score": [float(s.max(initial=0.0)) for s in self.block_change_score],
-            "intensity_gain": [s.gain for s in self.change_statistics],
-            "noise_inflation": [s.inflation for s in self.change_statistics],
-            "mean_feature_distance": [float(d.mean()) for d in self.block_feature_distance],
-            "n_components": int(self.features.shape[-1]),
-            "explained_variance": float(np.sum(self.explained_variance_ratio)),
-            "explained_variance_ratio": [float(v) for v in self.explained_variance_ratio],
-            "ncut_values": [float(v) for v in self.ncut_values],
-            "seconds": {name: round(v, 6) for name, v in self.timings.items()},
-        }
 
 
 def _as_list(angles: Sequence[np.ndarray] | np.ndarray, n: int) -> list[np.ndarray]:
@@ -333,6 +189,137 @@ def segment_timeseries(
     >>> res.labels.shape, res.changes.shape, res.change_score.shape  # doctest: +SKIP
     ((2, 120, 130), (1, 120, 130), (1, 120, 130))
     """
+    opt = _check_options(params, method, change_window, false_alarm, change_from)
+    stacks, angle_list, mask_list = _inputs(stacks, angles, masks)
+    steps = _Steps(len(stacks) + 5, progress, cancel)
+    # 1. per-day pipelines up to the block coefficients
+    pipelines, vectors, shape, grid = _day_pipelines(stacks, angle_list, mask_list, opt, steps)
+    # 2. one PCA over the blocks of all days
+    pca = steps.run("shared pca", _shared_pca, vectors, opt.params)
+    # 3. the change test between consecutive days, from the polarisation images
+    pols = [pipe.get("polarisation") for pipe in pipelines]
+    change_stats = steps.run("change test", _change_tests, pols, opt)
+    # 4. segments: the affinity, the cut and every day's labels
+    tree, segs = _cut_days(pca.features, grid, shape, opt, change_stats, steps)
+    # 5. change maps
+    maps = steps.run("labels", _change_maps, segs, change_stats, shape, opt)
+    return _result(opt, segs, maps, change_stats, pca, tree, pipelines, steps.timings)
+
+
+class _Options(NamedTuple):
+    """The checked options of :func:`segment_timeseries`."""
+
+    params: SegmentParams
+    method: str
+    change_window: int
+    false_alarm: float
+    change_from: str
+
+
+def _cut_days(
+    scores: np.ndarray,
+    grid: tuple[int, ...],
+    shape: tuple[int, ...],
+    opt: _Options,
+    change_stats: list[ChangeStatistics],
+    steps: _Steps,
+) -> tuple[Any, _Segments]:
+    """Steps "affinity" and "cut": the block graph, its cut and the labels of every day."""
+    n_days = scores.shape[0] // int(np.prod(grid))
+    W, min_size = steps.run("affinity", _block_graph, scores, grid, n_days, opt.params, opt.method)
+    t0 = time.perf_counter()
+    tree = _cut_tree(W, min_size, opt.params)
+    segs = _segments(
+        opt.method, tree, scores, grid, shape, opt.params, change_stats, opt.change_window
+    )
+    steps.done("cut", t0)
+    return tree, segs
+
+
+def _inputs(
+    stacks: Sequence[np.ndarray],
+    angles: Sequence[np.ndarray] | np.ndarray,
+    masks: Sequence[Any] | None,
+) -> tuple[list[np.ndarray], list[np.ndarray], list[Any]]:
+    """The days' stacks, angles (one array per day) and masks (None entries allowed)."""
+    stacks = list(stacks)
+    n_days = len(stacks)
+    if n_days < 2:
+        raise PolarsegError(f"a time series needs at least 2 scenes, got {n_days}")
+    angle_list = _as_list(angles, n_days)
+    mask_list = [None] * n_days if masks is None else list(masks)
+    if len(mask_list) != n_days:
+        raise PolarsegError(f"{n_days} stacks but {len(mask_list)} masks")
+    return stacks, angle_list, mask_list
+
+
+def _change_tests(pols: list[Any], opt: _Options) -> list[ChangeStatistics]:
+    """:func:`~.change_test.change_statistics` between every pair of consecutive days."""
+    return [
+        change_statistics(
+            a, b, opt.change_window, false_alarm=opt.false_alarm, change_from=opt.change_from
+        )
+        for a, b in zip(pols[:-1], pols[1:], strict=True)
+    ]
+
+
+def _result(
+    opt: _Options,
+    segs: _Segments,
+    maps: dict[str, np.ndarray],
+    change_stats: list[ChangeStatistics],
+    pca: feat.PCAResult,
+    tree: Any,
+    pipelines: list[Pipeline],
+    timings: dict[str, float],
+) -> TimeSeriesResult:
+    """The :class:`TimeSeriesResult` of the steps' outputs."""
+    n_days = segs.labels.shape[0]
+    return TimeSeriesResult(
+        params=opt.params,
+        method=opt.method,
+        labels=segs.labels,
+        block_labels=segs.block_labels,
+        changes=maps["changes"],
+        block_changes=maps["block_changes"],
+        change_score=maps["change_score"],
+        block_change_score=maps["block_change_score"],
+        change_significant=np.stack([s.significant for s in change_stats]),
+        change_statistics=change_stats,
+        feature_distance=maps["feature_distance"],
+        block_feature_distance=segs.distance,
+        features=pca.features.reshape(n_days, segs.distance[0].size, -1),
+        explained_variance_ratio=pca.explained_variance_ratio,
+        components=pca.components,
+        segment_means=segs.segment_means,
+        ncut_values=list(tree.ncut_values),
+        n_base_segments=segs.k,
+        changed_segments=segs.changed_segments,
+        label_window=segs.label_window,
+        change_window=opt.change_window,
+        false_alarm=opt.false_alarm,
+        change_from=opt.change_from,
+        pipelines=pipelines,
+        timings=timings,
+    )
+
+
+def _shared_pca(vectors: list[np.ndarray], params: SegmentParams) -> feat.PCAResult:
+    """One PCA over the blocks of all days (polarisation statistics z-scored over all)."""
+    pooled = np.concatenate(vectors, axis=0)
+    if params.features in POLSTATS_KINDS:
+        pooled = polstats.standardise(pooled)  # one z-score over every day's blocks
+    return feat.pca_features(pooled, params.variance)
+
+
+def _check_options(
+    params: SegmentParams | None,
+    method: str,
+    change_window: int | None,
+    false_alarm: float,
+    change_from: str,
+) -> _Options:
+    """Refuse bad options of :func:`segment_timeseries` (default parameters: the thesis's)."""
     params = SegmentParams() if params is None else params
     if not isinstance(params, SegmentParams):
         raise PolarsegError("params must be a SegmentParams")
@@ -353,35 +340,54 @@ def segment_timeseries(
         change_window = default_change_window(params.window)
     if int(change_window) != change_window or change_window < 2:
         raise PolarsegError(f"change_window must be an integer >= 2, got {change_window!r}")
-    change_window = int(change_window)
-    stacks = list(stacks)
-    n_days = len(stacks)
-    if n_days < 2:
-        raise PolarsegError(f"a time series needs at least 2 scenes, got {n_days}")
-    angle_list = _as_list(angles, n_days)
-    mask_list = [None] * n_days if masks is None else list(masks)
-    if len(mask_list) != n_days:
-        raise PolarsegError(f"{n_days} stacks but {len(mask_list)} masks")
+    return _Options(params, method, int(change_window), float(false_alarm), change_from)
 
-    total = n_days + 5
-    step = 0
-    timings: dict[str, float] = {}
 
-    def done(stage: str, t0: float) -> None:
-        nonlocal step
-        step += 1
-        timings[stage] = time.perf_counter() - t0
-        if progress is not None:
-            progress(stage, step, total)
-        if cancel is not None and step < total and cancel():
+class _Steps:
+    """Progress, timings and Cancel between the steps of :func:`segment_timeseries`."""
+
+    def __init__(
+        self,
+        total: int,
+        progress: Callable[[str, int, int], None] | None,
+        cancel: Callable[[], bool] | None,
+    ) -> None:
+        self.total, self.step = total, 0
+        self.progress, self.cancel = progress, cancel
+        self.timings: dict[str, float] = {}
+
+    def run(self, stage: str, work: Callable[..., Any], *args: Any) -> Any:
+        """``work(*args)`` as the step ``stage``: timed, reported, then Cancel checked."""
+        t0 = time.perf_counter()
+        out = work(*args)
+        self.done(stage, t0)
+        return out
+
+    def done(self, stage: str, t0: float) -> None:
+        """Record ``stage`` (started at ``t0``), report it, raise Cancelled if asked."""
+        self.step += 1
+        self.timings[stage] = time.perf_counter() - t0
+        if self.progress is not None:
+            self.progress(stage, self.step, self.total)
+        if self.cancel is not None and self.step < self.total and self.cancel():
             raise Cancelled(f"cancelled after {stage!r}")
 
-    # 1. per-day pipelines up to the block coefficients
+
+def _day_pipelines(
+    stacks: list[np.ndarray],
+    angle_list: list[np.ndarray],
+    mask_list: list[Any],
+    opt: _Options,
+    steps: _Steps,
+) -> tuple[list[Pipeline], list[np.ndarray], tuple[int, ...], tuple[int, ...]]:
+    """Every day's pipeline up to the block coefficients, and its unstandardised block
+    vectors; (pipelines, vectors, image shape, block grid). Days must share one view."""
+    params, change_window = opt.params, opt.change_window
     pipelines: list[Pipeline] = []
     vectors: list[np.ndarray] = []
     shape: tuple[int, ...] | None = None
     grid: tuple[int, ...] | None = None
-    for t in range(n_days):
+    for t in range(len(stacks)):
         t0 = time.perf_counter()
         try:
             pipe = Pipeline(np.asarray(stacks[t]), angle_list[t], params, mask=mask_list[t])
@@ -404,32 +410,20 @@ def segment_timeseries(
                 f"{shape[0]} x {shape[1]}: a time series needs the same view every day"
             )
         pipelines.append(pipe)
-        done(f"day {t + 1} harmonics", t0)
+        steps.done(f"day {t + 1} harmonics", t0)
     assert shape is not None and grid is not None
+    return pipelines, vectors, shape, grid
+
+
+def _block_graph(
+    scores: np.ndarray, grid: tuple[int, ...], n_days: int, params: SegmentParams, method: str
+) -> tuple[np.ndarray, int]:
+    """The dense affinity the cut runs on (:func:`~..graph.affinity.affinity_matrix`,
+    times the spatial kernel tiled over the days) and the minimum segment size.
+
+    ``"joint"``: every day's blocks in one graph; else day 1's blocks only.
+    """
     n_blocks = int(np.prod(grid))
-
-    # 2. one PCA over the blocks of all days
-    t0 = time.perf_counter()
-    pooled = np.concatenate(vectors, axis=0)
-    if params.features in POLSTATS_KINDS:
-        pooled = polstats.standardise(pooled)  # one z-score over every day's blocks
-    pca = feat.pca_features(pooled, params.variance)
-    scores = pca.features
-    done("shared pca", t0)
-
-    # 3. the change test between consecutive days, from the polarisation images
-    t0 = time.perf_counter()
-    pols = [pipe.get("polarisation") for pipe in pipelines]
-    change_stats = [
-        change_statistics(
-            pols[t], pols[t + 1], change_window, false_alarm=false_alarm, change_from=change_from
-        )
-        for t in range(n_days - 1)
-    ]
-    done("change test", t0)
-
-    # 4. segments
-    t0 = time.perf_counter()
     if method == "joint":
         if scores.shape[0] > MAX_DENSE_BLOCKS:
             raise PolarsegError(
@@ -445,17 +439,45 @@ def segment_timeseries(
         kernel = affinity.spatial_kernel(grid, params.spatial_radius, params.spatial_sigma)
         reps = W.shape[0] // n_blocks
         W *= np.tile(kernel, (reps, reps))  # the same position on any day is a neighbour
-    done("affinity", t0)
+    return W, min_size
 
-    t0 = time.perf_counter()
+
+def _cut_tree(W: np.ndarray, min_size: int, params: SegmentParams) -> Any:
+    """The cut of the pipeline's clustering: k-way spectral or the recursive Ncut tree."""
     if params.clustering == "kway":
-        from ..graph.spectral import SpectralClustering
+        return spectral.SpectralClustering(W, min_size=min_size)
+    return ncut.CutTree(W, min_size=min_size, threshold=params.ncut_threshold)
 
-        tree: Any = SpectralClustering(W, min_size=min_size)
-    else:
-        tree = ncut.CutTree(W, min_size=min_size, threshold=params.ncut_threshold)
+
+@dataclass
+class _Segments:
+    """Labels of every day from the cut (:func:`_segments`)."""
+
+    labels: np.ndarray
+    block_labels: np.ndarray
+    segment_means: np.ndarray
+    changed_segments: list[dict[str, Any]]
+    label_window: int
+    k: int
+    distance: np.ndarray
+
+
+def _segments(
+    method: str,
+    tree: Any,
+    scores: np.ndarray,
+    grid: tuple[int, ...],
+    shape: tuple[int, ...],
+    params: SegmentParams,
+    change_stats: list[ChangeStatistics],
+    change_window: int,
+) -> _Segments:
+    """Pixel and block labels of every day by ``method`` (module docstring), the segment
+    means and the feature distance of every block between consecutive days."""
     graph_labels = tree.labels(params.n_segments).astype(np.int32)
     k = int(graph_labels.max()) + 1
+    n_blocks = int(np.prod(grid))
+    n_days = scores.shape[0] // n_blocks
     # Mahalanobis distance under the covariance of all days' blocks = Euclidean on z
     z = feat.whiten(scores)
     changed_segments: list[dict[str, Any]] = []
@@ -484,53 +506,37 @@ def segment_timeseries(
         ).astype(np.int32)
     zd = z.reshape(n_days, n_blocks, -1)
     distance = np.sqrt(((zd[1:] - zd[:-1]) ** 2).sum(-1)).reshape(n_days - 1, *grid)
-    done("cut", t0)
+    return _Segments(
+        labels, block_labels, segment_means, changed_segments, label_window, k, distance
+    )
 
-    # 5. change maps
-    t0 = time.perf_counter()
-    block_changes = block_labels[1:] != block_labels[:-1]
+
+def _change_maps(
+    segs: _Segments, change_stats: list[ChangeStatistics], shape: tuple[int, ...], opt: _Options
+) -> dict[str, np.ndarray]:
+    """What changed between consecutive days: labels, blocks, scores and distances as maps."""
+    method, window, change_window = opt.method, opt.params.window, opt.change_window
+    labels, n_pairs = segs.labels, segs.labels.shape[0] - 1
+    block_changes = segs.block_labels[1:] != segs.block_labels[:-1]
     if method == "tracked":
         # a block whose minority pixels moved also changed
         block_changes = np.stack(
-            [_block_any(labels[t + 1] != labels[t], label_window) for t in range(n_days - 1)]
+            [_block_any(labels[t + 1] != labels[t], segs.label_window) for t in range(n_pairs)]
         )
-    changes = labels[1:] != labels[:-1]
     block_score = np.stack([s.score for s in change_stats])
     pixel_score = np.stack(
         [harmonics.upsample_block_labels(s, shape, change_window) for s in block_score]
     ).astype(np.float32)
     pixel_distance = np.stack(
-        [harmonics.upsample_block_labels(d, shape, params.window) for d in distance]
+        [harmonics.upsample_block_labels(d, shape, window) for d in segs.distance]
     ).astype(np.float32)
-    done("labels", t0)
-
-    return TimeSeriesResult(
-        params=params,
-        method=method,
-        labels=labels,
-        block_labels=block_labels,
-        changes=changes,
-        block_changes=block_changes,
-        change_score=pixel_score,
-        block_change_score=block_score,
-        change_significant=np.stack([s.significant for s in change_stats]),
-        change_statistics=change_stats,
-        feature_distance=pixel_distance,
-        block_feature_distance=distance,
-        features=scores.reshape(n_days, n_blocks, -1),
-        explained_variance_ratio=pca.explained_variance_ratio,
-        components=pca.components,
-        segment_means=segment_means,
-        ncut_values=list(tree.ncut_values),
-        n_base_segments=k,
-        changed_segments=changed_segments,
-        label_window=label_window,
-        change_window=change_window,
-        false_alarm=float(false_alarm),
-        change_from=change_from,
-        pipelines=pipelines,
-        timings=timings,
-    )
+    return {
+        "changes": labels[1:] != labels[:-1],
+        "block_changes": block_changes,
+        "change_score": pixel_score,
+        "block_change_score": block_score,
+        "feature_distance": pixel_distance,
+    }
 
 
 def _block_any(mask: np.ndarray, window: int) -> np.ndarray:
