@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import csv
+import io as io_module
 import json
 import math
+from typing import Any
 
 import numpy as np
 import pytest
@@ -22,8 +25,8 @@ from napari_polarseg.engine.analysis.sweep_result import (
     COLUMNS,
     SCORE_COLUMNS,
     SCORES,
+    SweepCell,
     SweepResult,
-    read_csv_rows,
 )
 from napari_polarseg.engine.features.pca import whiten
 from napari_polarseg.engine.params import RECOMMENDED
@@ -304,3 +307,12 @@ def test_synthetic_leaves_small_grid():
     assert max(c.ari for c in res.cells if c.window == 30) < min(
         c.ari for c in res.cells if c.window != 30
     )
+
+
+def read_csv_rows(text: str) -> list[dict[str, Any]]:
+    """Rows of a :meth:`SweepResult.to_csv` table with their types (empty → NaN/None)."""
+    rows = []
+    for raw in csv.DictReader(io_module.StringIO(text)):
+        cell = SweepCell.from_dict(raw)
+        rows.append(cell.row())
+    return rows

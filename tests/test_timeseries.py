@@ -12,7 +12,7 @@ from sklearn.metrics import roc_auc_score
 
 from napari_polarseg import cli
 from napari_polarseg.engine import PolarsegError
-from napari_polarseg.engine.analysis.change_test import change_map, change_statistics
+from napari_polarseg.engine.analysis.change_test import change_statistics
 from napari_polarseg.engine.analysis.timeseries import METHODS, segment_timeseries
 from napari_polarseg.engine.features import harmonics
 from napari_polarseg.engine.params import RECOMMENDED
@@ -422,3 +422,24 @@ def test_cli_timeseries_with_a_saved_classifier(tmp_path, capsys) -> None:
         ["timeseries", *inputs, "--out", str(tmp_path / "s2"), "--classifier", str(bad)]
     )
     assert code == 2 and "bad.polarseg-clf" in capsys.readouterr().err
+
+
+def change_map(before: np.ndarray, after: np.ndarray) -> np.ndarray:
+    """Where two labellings of the same view disagree (True = the segment changed).
+
+    Moved here from the engine (only the tests used it): ``TimeSeriesResult.changes``
+    must equal it for consecutive days.
+
+    Parameters
+    ----------
+    before, after : array (H, W) of int
+        Labels of two consecutive days.
+
+    Returns
+    -------
+    ndarray (H, W) bool
+    """
+    a, b = np.asarray(before), np.asarray(after)
+    if a.shape != b.shape:
+        raise PolarsegError(f"labels of {a.shape} and {b.shape} cannot be compared")
+    return a != b

@@ -264,24 +264,3 @@ def change_statistics(
         false_alarm=float(false_alarm),
         threshold=float(stats.norm.isf(false_alarm)),
     )
-
-
-def change_map(before: np.ndarray, after: np.ndarray) -> np.ndarray:
-    """Where two labellings of the same view disagree (True = the segment changed).
-
-    Only meaningful for labels in one shared numbering (:func:`segment_timeseries`);
-    labels of two independent runs are numbered arbitrarily.
-
-    Parameters
-    ----------
-    before, after : array (H, W) of int
-        Labels of two consecutive days.
-
-    Returns
-    -------
-    ndarray (H, W) bool
-    """
-    a, b = np.asarray(before), np.asarray(after)
-    if a.shape != b.shape:
-        raise PolarsegError(f"labels of {a.shape} and {b.shape} cannot be compared")
-    return a != b

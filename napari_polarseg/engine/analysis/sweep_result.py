@@ -338,15 +338,6 @@ class SweepResult:
         return buf.getvalue()
 
 
-def read_csv_rows(text: str) -> list[dict[str, Any]]:
-    """Rows of a :meth:`SweepResult.to_csv` table with their types (empty → NaN/None)."""
-    rows = []
-    for raw in csv.DictReader(io.StringIO(text)):
-        cell = SweepCell.from_dict(raw)
-        rows.append(cell.row())
-    return rows
-
-
 def _csv_value(value: Any) -> str:
     if value is None:
         return ""

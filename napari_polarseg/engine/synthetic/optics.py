@@ -67,34 +67,6 @@ def fresnel_transmission_amplitudes(
     return t_s, t_p
 
 
-def fresnel_transmittances(zenith: ArrayLike, n: ArrayLike) -> tuple[FloatArray, FloatArray]:
-    """Fresnel power transmittances for light leaving a dielectric into air.
-
-    Parameters
-    ----------
-    zenith : array_like
-        Exit angle θ in radians, in [0, π/2].
-    n : array_like
-        Refractive index of the material relative to air (dimensionless, >= 1).
-
-    Returns
-    -------
-    T_s, T_p : ndarray
-        ``T = (cos θ / (n cos θ_i)) |t|²`` for the s and p components (fractions of the
-        power incident from inside). Both are 0 at grazing exit (θ = π/2).
-
-    See Also
-    --------
-    fresnel_transmission_amplitudes
-    """
-    theta, n = _check_zenith_n(zenith, n)
-    t_s, t_p = fresnel_transmission_amplitudes(theta, n)
-    sin_i = np.sin(theta) / n
-    cos_i = np.sqrt(np.clip(1.0 - sin_i**2, 0.0, None))
-    factor = np.cos(theta) / (n * cos_i)
-    return factor * t_s**2, factor * t_p**2
-
-
 def diffuse_dop_from_transmission(zenith: ArrayLike, n: ArrayLike) -> FloatArray:
     """Diffuse degree of polarisation from the Fresnel transmission coefficients.
 

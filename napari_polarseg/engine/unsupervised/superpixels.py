@@ -12,7 +12,6 @@ edges. It is used instead of SLIC because it is several times faster on a camera
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 
 import numpy as np
@@ -73,8 +72,3 @@ def auto_region_area(shape: tuple[int, int], regions: int, smallest: int, larges
     """Superpixel area (pixels) that cuts an image of ``shape`` into about ``regions``
     regions, kept within [``smallest``, ``largest``]."""
     return int(min(max(shape[0] * shape[1] // regions, smallest), largest))
-
-
-def region_count(shape: tuple[int, int], region_area: int = REGION_AREA) -> int:
-    """Number of seeds :func:`superpixels` places on an image of ``shape``."""
-    return max(1, int(round(math.prod(shape) / region_area)))
