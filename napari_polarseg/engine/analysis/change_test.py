@@ -149,6 +149,69 @@ def _noise_inflation(x: np.ndarray, dof: int, false_alarm: float) -> float:
     return lam
 
 
+def _both_valid(before: Any, after: Any, shape: tuple[int, ...]) -> np.ndarray:
+    """Pixels valid on both days (an image without ``invalid`` counts as all valid)."""
+    valid = np.ones(shape, dtype=bool)
+    for img in (before, after):
+        if getattr(img, "invalid", None) is not None:
+            valid &= ~np.asarray(img.invalid, dtype=bool)
+    return valid
+
+
+def _hotelling_scores(
+    m: np.ndarray, c: np.ndarray, n: np.ndarray, tested: np.ndarray, false_alarm: float
+) -> tuple[np.ndarray, np.ndarray, float]:
+    """Hotelling's T² of the block mean changes ``m`` (B, p) with covariances ``c`` over
+    ``n`` pixels, calibrated by the noise inflation: (score, p-value, inflation)."""
+    p = m.shape[1]
+    ridge = 1e-12 * np.einsum("bkk->b", c) / p + 1e-300
+    c = c + ridge[:, None, None] * np.eye(p)
+    t2 = n * np.einsum("bk,bk->b", m, np.linalg.solve(c, m[..., None])[..., 0])
+    f = np.where(tested, t2 * (n - p) / (p * np.maximum(n - 1.0, 1.0)), 0.0)
+    pv = stats.f.sf(f, p, np.maximum(n - p, 1.0))
+    x = stats.chi2.isf(np.clip(pv, 1e-300, 1.0), p)  # the same evidence as a χ²(p)
+    lam = _noise_inflation(x[tested], p, false_alarm) if tested.any() else 1.0
+    pv = np.where(tested, stats.chi2.sf(x / lam, p), 1.0)
+    score = np.clip(stats.norm.isf(np.clip(pv, 1e-300, 1.0)), 0.0, MAX_SCORE)
+    return score, pv, lam
+
+
+def _block_differences(
+    dlog: np.ndarray,
+    before: tuple[np.ndarray, np.ndarray],
+    after: tuple[np.ndarray, np.ndarray],
+    valid: np.ndarray,
+    window: int,
+) -> tuple[np.ndarray, ...]:
+    """Per change block: (pixels n, tested, log gain, mean change (B, 3), its covariance
+    (B, 3, 3), t values (B, 3)) of log Î (less the global gain) and of the Stokes change
+    along / across the block's mean polarisation direction."""
+    grid = harmonics.block_grid(dlog.shape, window)
+    (qa, ua), (qb, ub) = before, after
+    blocks = lambda a: harmonics.blockify(a, window).reshape(grid[0] * grid[1], -1)  # noqa: E731
+    v = blocks(valid.astype(float))
+    n = v.sum(axis=1)
+    tested = n >= MIN_CHANGE_PIXELS
+    n_safe = np.maximum(n, 2.0)
+    # global gain from the blocks' mean log Î change
+    dl = blocks(dlog)
+    ml = (dl * v).sum(axis=1) / n_safe
+    var_l = (((dl - ml[:, None]) * v) ** 2).sum(axis=1) / (n_safe - 1.0) / n_safe
+    gain = _robust_gain(ml[tested], var_l[tested])
+    # the polarisation change along / across the block's mean direction (both days)
+    psi = np.arctan2(blocks(ua + ub).sum(axis=1), blocks(qa + qb).sum(axis=1))[:, None]
+    dq, du = blocks(qb - qa), blocks(ub - ua)
+    par = dq * np.cos(psi) + du * np.sin(psi)
+    perp = du * np.cos(psi) - dq * np.sin(psi)
+    d = np.stack([(dl - gain) * v, par, perp], axis=-1)  # (B, n, 3), 0 where unusable
+    mean = d.sum(axis=1) / n_safe[:, None]
+    resid = (d - mean[:, None, :]) * v[..., None]
+    cov = np.einsum("bik,bil->bkl", resid, resid) / (n_safe - 1.0)[:, None, None]
+    se = np.sqrt(np.einsum("bkk->bk", cov) / n_safe[:, None])
+    t = np.divide(mean, se, out=np.zeros_like(mean), where=se > 0)
+    return n, tested, gain, mean, cov, t
+
+
 def change_statistics(
     before: Any,
     after: Any,
@@ -202,61 +265,26 @@ def change_statistics(
     window = int(window)
     grid = harmonics.block_grid(ia.shape, window)
     if valid is None:
-        valid = np.ones(ia.shape, dtype=bool)
-        for img in (before, after):
-            if getattr(img, "invalid", None) is not None:
-                valid &= ~np.asarray(img.invalid, dtype=bool)
+        valid = _both_valid(before, after, ia.shape)
     valid = np.asarray(valid, dtype=bool) & (ia > 0) & (ib > 0)
     with np.errstate(divide="ignore", invalid="ignore"):
         dlog = np.where(valid, np.log(np.where(valid, ib, 1.0) / np.where(valid, ia, 1.0)), 0.0)
     qa, ua = _stokes(before, valid)
     qb, ub = _stokes(after, valid)
-    blocks = lambda a: harmonics.blockify(a, window).reshape(grid[0] * grid[1], -1)  # noqa: E731
-    v = blocks(valid.astype(float))
-    n = v.sum(axis=1)
-    tested = n >= MIN_CHANGE_PIXELS
-    n_safe = np.maximum(n, 2.0)
-
-    # global gain from the blocks' mean log Î change
-    dl = blocks(dlog)
-    ml = (dl * v).sum(axis=1) / n_safe
-    var_l = (((dl - ml[:, None]) * v) ** 2).sum(axis=1) / (n_safe - 1.0) / n_safe
-    gain = _robust_gain(ml[tested], var_l[tested])
-
-    # the polarisation change along / across the block's mean direction (both days)
-    psi = np.arctan2(blocks(ua + ub).sum(axis=1), blocks(qa + qb).sum(axis=1))[:, None]
-    dq, du = blocks(qb - qa), blocks(ub - ua)
-    par = dq * np.cos(psi) + du * np.sin(psi)
-    perp = du * np.cos(psi) - dq * np.sin(psi)
-    d = np.stack([(dl - gain) * v, par, perp], axis=-1)  # (B, n, 3), 0 where unusable
-    mean = d.sum(axis=1) / n_safe[:, None]
-    resid = (d - mean[:, None, :]) * v[..., None]
-    cov = np.einsum("bik,bil->bkl", resid, resid) / (n_safe - 1.0)[:, None, None]
-    se = np.sqrt(np.einsum("bkk->bk", cov) / n_safe[:, None])
-    t = np.divide(mean, se, out=np.zeros_like(mean), where=se > 0)
+    n, tested, gain, mean, cov, t = _block_differences(dlog, (qa, ua), (qb, ub), valid, window)
 
     comps = CHANGE_SOURCES[change_from]
-    p = len(comps)
-    tested &= n > p + 1
-    m = mean[:, comps]
-    c = cov[:, comps][:, :, comps]
-    ridge = 1e-12 * np.einsum("bkk->b", c) / p + 1e-300
-    c = c + ridge[:, None, None] * np.eye(p)
-    t2 = n * np.einsum("bk,bk->b", m, np.linalg.solve(c, m[..., None])[..., 0])
-    f = np.where(tested, t2 * (n - p) / (p * np.maximum(n - 1.0, 1.0)), 0.0)
-    pv = stats.f.sf(f, p, np.maximum(n - p, 1.0))
-    x = stats.chi2.isf(np.clip(pv, 1e-300, 1.0), p)  # the same evidence as a χ²(p)
-    lam = _noise_inflation(x[tested], p, false_alarm) if tested.any() else 1.0
-    pv = np.where(tested, stats.chi2.sf(x / lam, p), 1.0)
-    score = np.clip(stats.norm.isf(np.clip(pv, 1e-300, 1.0)), 0.0, MAX_SCORE)
-    shape = grid
+    tested &= n > len(comps) + 1
+    score, pv, lam = _hotelling_scores(
+        mean[:, comps], cov[:, comps][:, :, comps], n, tested, false_alarm
+    )
     return ChangeStatistics(
-        score=score.reshape(shape),
-        pvalue=pv.reshape(shape),
-        significant=(tested & (pv < false_alarm)).reshape(shape),
-        mean=mean.reshape(*shape, 3),
-        t=t.reshape(*shape, 3),
-        n_pixels=n.astype(np.int64).reshape(shape),
+        score=score.reshape(grid),
+        pvalue=pv.reshape(grid),
+        significant=(tested & (pv < false_alarm)).reshape(grid),
+        mean=mean.reshape(*grid, 3),
+        t=t.reshape(*grid, 3),
+        n_pixels=n.astype(np.int64).reshape(grid),
         window=window,
         components=comps,
         gain=float(np.exp(gain)),

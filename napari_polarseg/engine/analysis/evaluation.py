@@ -217,6 +217,24 @@ def _masked_means(values: np.ndarray, index: np.ndarray, weights: np.ndarray, k:
         return np.where(total > 0, sums / np.where(total > 0, total, 1), np.nan)
 
 
+def _segment_pca_means(
+    k: int,
+    block_labels: np.ndarray | None,
+    features: np.ndarray | None,
+    block_valid: np.ndarray | None,
+) -> np.ndarray:
+    """(k, 3) means of the first three PCA block features per segment (NaN where none)."""
+    pca = np.full((k, 3), np.nan)
+    if block_labels is not None and features is not None:
+        bl = np.asarray(block_labels).ravel().astype(np.int64)
+        f = np.asarray(features, dtype=np.float64).reshape(bl.size, -1)
+        bw = np.ones(bl.size) if block_valid is None else np.asarray(block_valid, float).ravel()
+        kb = max(k, int(bl.max()) + 1)
+        for j in range(min(3, f.shape[1])):
+            pca[:, j] = _masked_means(f[:, j], bl, bw, kb)[:k]
+    return pca
+
+
 def segment_statistics(
     labels: np.ndarray,
     intensity: np.ndarray,
@@ -278,14 +296,7 @@ def segment_statistics(
     c = _masked_means(np.cos(2 * phi), index, weight, k)
     phase_mean = np.mod(np.rad2deg(0.5 * np.arctan2(s, c)), 180.0)
     pixels = np.bincount(index, minlength=k)
-    pca = np.full((k, 3), np.nan)
-    if block_labels is not None and features is not None:
-        bl = np.asarray(block_labels).ravel().astype(np.int64)
-        f = np.asarray(features, dtype=np.float64).reshape(bl.size, -1)
-        bw = np.ones(bl.size) if block_valid is None else np.asarray(block_valid, float).ravel()
-        kb = max(k, int(bl.max()) + 1)
-        for j in range(min(3, f.shape[1])):
-            pca[:, j] = _masked_means(f[:, j], bl, bw, kb)[:k]
+    pca = _segment_pca_means(k, block_labels, features, block_valid)
     rows = []
     for i in range(k):
         rows.append(

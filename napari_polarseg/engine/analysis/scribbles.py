@@ -86,6 +86,25 @@ def training_blocks(
     return blocks, remap[best[blocks]], names[used]
 
 
+def _checked_blocks(
+    features: np.ndarray, n_blocks: int, valid: np.ndarray | None
+) -> tuple[np.ndarray, np.ndarray]:
+    """(features as (n_blocks, F) float64, usable blocks) of :func:`classify_blocks`."""
+    x = np.asarray(features, dtype=np.float64)
+    if x.ndim == 1:
+        x = x[:, None]
+    if x.ndim != 2 or x.shape[0] != n_blocks:
+        raise PolarsegError(f"features are {x.shape} but the block grid has {n_blocks} blocks")
+    if not np.all(np.isfinite(x)):
+        raise PolarsegError("block features contain NaN or infinite values")
+    use = np.ones(n_blocks, bool) if valid is None else np.asarray(valid, bool).ravel()
+    if use.size != n_blocks:
+        raise PolarsegError(f"valid has {use.size} entries but the grid has {n_blocks} blocks")
+    if not use.any():
+        raise PolarsegError("the mask leaves no block to classify")
+    return x, use
+
+
 def classify_blocks(
     features: np.ndarray,
     grid: tuple[int, int],
@@ -139,19 +158,8 @@ def classify_blocks(
     from sklearn.pipeline import make_pipeline
     from sklearn.preprocessing import StandardScaler
 
-    x = np.asarray(features, dtype=np.float64)
-    if x.ndim == 1:
-        x = x[:, None]
     r, c = (int(v) for v in grid)
-    if x.ndim != 2 or x.shape[0] != r * c:
-        raise PolarsegError(f"features are {x.shape} but the block grid has {r * c} blocks")
-    if not np.all(np.isfinite(x)):
-        raise PolarsegError("block features contain NaN or infinite values")
-    use = np.ones(r * c, bool) if valid is None else np.asarray(valid, bool).ravel()
-    if use.size != r * c:
-        raise PolarsegError(f"valid has {use.size} entries but the grid has {r * c} blocks")
-    if not use.any():
-        raise PolarsegError("the mask leaves no block to classify")
+    x, use = _checked_blocks(features, r * c, valid)
     blocks, targets, classes = training_blocks(scribbles, (r, c), window)
     keep = use[blocks]
     blocks, targets = blocks[keep], targets[keep]

@@ -417,20 +417,8 @@ def sweep(
     SegmentParams(window=10, degree=8, ...)
     >>> res.grid("silhouette")[0]       # w × L for the first n            # doctest: +SKIP
     """
-    gen = iter_sweep(
-        stack,
-        angles,
-        base,
-        windows,
-        degrees,
-        refractive_indices,
-        ground_truth,
-        score,
-        cancel,
-        mask,
-        max_bytes,
-        keep_labels,
-    )
+    rest = (ground_truth, score, cancel, mask, max_bytes, keep_labels)
+    gen = iter_sweep(stack, angles, base, windows, degrees, refractive_indices, *rest)
     while True:
         try:
             done, total, _ = next(gen)

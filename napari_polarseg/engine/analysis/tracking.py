@@ -112,16 +112,7 @@ def track_labels(
                     cur[back] = origin[sl][back]
                     origin[sl][back] = cur[back]
                     continue
-            best, best_key = -1, (-1, -2.0)
-            for j, seg in enumerate(segments):
-                theirs = seg.signs(st.threshold)
-                both = (own != 0) & (theirs != 0)
-                if np.any(own[both] != theirs[both]):
-                    continue
-                cos = float(_unit(t) @ _unit(seg.t_sum))
-                key = (int(both.sum()), cos)
-                if key > best_key:
-                    best, best_key = j, key
+            best, best_key = _best_segment(segments, own, t, st.threshold)
             if best < 0 or (best_key[0] == 0 and best_key[1] <= 0.0):
                 best = len(segments)
                 segments.append(
@@ -135,19 +126,39 @@ def track_labels(
             origin[sl][moved] = cur[moved]
             cur[...] = k0 + best
         labels.append(lab)
-    info = [
-        {
-            "segment": k0 + j,
-            "first_day": seg.first_day,
-            "blocks": seg.blocks,
-            "mean_change": {
-                name: float(v)
-                for name, v in zip(CHANGE_COMPONENTS, seg.change_sum / seg.blocks, strict=True)
-            },
-        }
-        for j, seg in enumerate(segments)
-    ]
+    info = [_segment_info(k0 + j, seg) for j, seg in enumerate(segments)]
     return np.stack(labels).astype(np.int32), info
+
+
+def _best_segment(
+    segments: list[_ChangedSegment], own: np.ndarray, t: np.ndarray, threshold: float
+) -> tuple[int, tuple[int, float]]:
+    """The compatible changed segment sharing most signs with a block (ties: the closest
+    mean direction): (its index or −1, (shared signs, cosine))."""
+    best, best_key = -1, (-1, -2.0)
+    for j, seg in enumerate(segments):
+        theirs = seg.signs(threshold)
+        both = (own != 0) & (theirs != 0)
+        if np.any(own[both] != theirs[both]):
+            continue
+        cos = float(_unit(t) @ _unit(seg.t_sum))
+        key = (int(both.sum()), cos)
+        if key > best_key:
+            best, best_key = j, key
+    return best, best_key
+
+
+def _segment_info(segment: int, seg: _ChangedSegment) -> dict[str, Any]:
+    """The dict :func:`track_labels` reports for a changed segment."""
+    return {
+        "segment": segment,
+        "first_day": seg.first_day,
+        "blocks": seg.blocks,
+        "mean_change": {
+            name: float(v)
+            for name, v in zip(CHANGE_COMPONENTS, seg.change_sum / seg.blocks, strict=True)
+        },
+    }
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
