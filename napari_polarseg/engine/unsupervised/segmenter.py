@@ -377,6 +377,67 @@ def _first_appearance(labels: np.ndarray, node_labels: np.ndarray) -> tuple[np.n
     return order[labels], order[node_labels]
 
 
+def _region_features(
+    i: np.ndarray, d: np.ndarray, ph: np.ndarray, regions: np.ndarray, p: UnsupervisedParams
+) -> tuple[np.ndarray, list[str]]:
+    """Node features (n, c) of the superpixels, non-finite values 0, and their names: the
+    region features of :func:`node_features`, then the region means of pixel features."""
+    names = list(p.features)
+    cols = [node_features(i, d, ph, regions, p.features)] if p.features else []
+    if p.pixel_scales:
+        from ..features.pixel_features import PixelFeatureParams, pixel_features
+        from .superpixels import region_means
+
+        stack = pixel_features(
+            i,
+            d,
+            ph,
+            PixelFeatureParams(scales=p.pixel_scales, groups=p.pixel_groups),
+        )
+        cols.append(region_means(stack.planes, regions).T.astype(np.float64))
+        names += [f"pixel:{nm}" for nm in stack.names]
+    x = np.concatenate(cols, axis=1)
+    return np.where(np.isfinite(x), x, 0.0), names
+
+
+def _cluster_regions(
+    x: np.ndarray,
+    weight: np.ndarray,
+    regions: np.ndarray,
+    edges: np.ndarray,
+    adjacency: sps.csr_matrix,
+    k: int,
+    p: UnsupervisedParams,
+) -> tuple[np.ndarray, np.ndarray]:
+    """(projected node features z, node labels) for k >= 2 segments: standardised and
+    clipped features, diffused over the region graph, projected (PCA or MAF), clustered."""
+    xs = _standardise(x, weight)
+    if p.clip > 0:
+        xs = np.clip(xs, -p.clip, p.clip)
+    steps = diffusion_steps(p.diffusion_range, x.shape[0], p.diffusion)
+    if steps:  # after the standardising: a column of mere noise shrinks, not rescaled
+        graph = edge_aware_adjacency(regions, edges, p.diffusion_tau)
+        xs = diffuse(xs, graph, p.diffusion, steps)
+    if p.projection == "maf":
+        z = maf_features(xs, adjacency, weight, p.variance, p.components)
+    else:
+        z = pca_features(xs, p.variance).features
+    if p.clustering in ("gmm", "kmeans"):
+        return z, _cluster_mixture(z, k, weight, adjacency, p)
+    return z, _cluster_graph(z, k, adjacency, p)
+
+
+def _refined(labels: np.ndarray, i: np.ndarray, d: np.ndarray, k: int) -> np.ndarray:
+    """Labels after up to :data:`REFINE_PASSES` passes of :func:`refine_boundaries`."""
+    spread = within_spread(labels, i, d)
+    for _ in range(REFINE_PASSES):
+        moved = refine_boundaries(labels, i, d, k, spread)
+        if np.array_equal(moved, labels):
+            break  # converged: no border pixel moved
+        labels = moved
+    return labels.astype(np.int32)
+
+
 def segment_unsupervised(
     intensity: np.ndarray,
     dop: np.ndarray,
@@ -430,53 +491,18 @@ def segment_unsupervised(
         raise PolarsegError(
             f"only {n} superpixels for {k} segments: lower region_area (now {area} px)"
         )
-    names = list(p.features)
-    cols = [node_features(i, d, ph, regions, p.features)] if p.features else []
-    if p.pixel_scales:
-        from ..features.pixel_features import PixelFeatureParams, pixel_features
-        from .superpixels import region_means
-
-        stack = pixel_features(
-            i,
-            d,
-            ph,
-            PixelFeatureParams(scales=p.pixel_scales, groups=p.pixel_groups),
-        )
-        cols.append(region_means(stack.planes, regions).T.astype(np.float64))
-        names += [f"pixel:{nm}" for nm in stack.names]
-    x = np.concatenate(cols, axis=1)
-    x = np.where(np.isfinite(x), x, 0.0)
+    x, names = _region_features(i, d, ph, regions, p)
     weight = np.bincount(regions.ravel(), minlength=n).astype(float)
     adjacency = region_adjacency(regions)
     if k == 1:
         node_labels = np.zeros(n, dtype=np.int32)
         z = np.zeros((n, 0))
     else:
-        xs = _standardise(x, weight)
-        if p.clip > 0:
-            xs = np.clip(xs, -p.clip, p.clip)
-        steps = diffusion_steps(p.diffusion_range, n, p.diffusion)
-        if steps:  # after the standardising: a column of mere noise shrinks, not rescaled
-            graph = edge_aware_adjacency(regions, edges, p.diffusion_tau)
-            xs = diffuse(xs, graph, p.diffusion, steps)
-        if p.projection == "maf":
-            z = maf_features(xs, adjacency, weight, p.variance, p.components)
-        else:
-            z = pca_features(xs, p.variance).features
-        if p.clustering in ("gmm", "kmeans"):
-            node_labels = _cluster_mixture(z, k, weight, adjacency, p)
-        else:
-            node_labels = _cluster_graph(z, k, adjacency, p)
+        z, node_labels = _cluster_regions(x, weight, regions, edges, adjacency, k, p)
     node_labels = np.asarray(node_labels, dtype=np.int32)
     labels = node_labels[regions]
     if p.refine_boundaries and k > 1:
-        spread = within_spread(labels, i, d)
-        for _ in range(REFINE_PASSES):
-            moved = refine_boundaries(labels, i, d, int(node_labels.max()) + 1, spread)
-            if np.array_equal(moved, labels):
-                break  # converged: no border pixel moved
-            labels = moved
-        labels = labels.astype(np.int32)
+        labels = _refined(labels, i, d, int(node_labels.max()) + 1)
     labels, node_labels = _first_appearance(labels, node_labels)
     check = degenerate_result(labels, requested=k)
     return UnsupervisedResult(
