@@ -102,6 +102,34 @@ def diffuse_dop_from_transmission(zenith: ArrayLike, n: ArrayLike) -> FloatArray
     return (a_p - a_s) / (a_p + a_s)
 
 
+def _polarisation_maps(
+    intensity: ArrayLike, dop: ArrayLike, phase: ArrayLike
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Î, ρ, φ as float64 maps of one 2-D shape (broadcast), or PolarsegError."""
+    try:
+        i_arr, rho, phi = np.broadcast_arrays(
+            np.asarray(intensity, dtype=np.float64),
+            np.asarray(dop, dtype=np.float64),
+            np.asarray(phase, dtype=np.float64),
+        )
+    except ValueError as exc:
+        raise PolarsegError("intensity, dop and phase must have the same shape") from exc
+    if i_arr.ndim != 2:
+        raise PolarsegError(f"intensity, dop and phase must be 2-D, got shape {i_arr.shape}")
+    return i_arr, rho, phi
+
+
+def _shift_frames(stack: FloatArray, shifts: ArrayLike) -> None:
+    """Translate every frame of ``stack`` in place by its (rows, cols) shift (cubic)."""
+    n = stack.shape[0]
+    sh = np.asarray(shifts, dtype=np.float64)
+    if sh.shape != (n, 2) or not np.all(np.isfinite(sh)):
+        raise PolarsegError(f"shifts must be finite with shape ({n}, 2), got {sh.shape}")
+    for k in range(n):
+        if np.any(sh[k] != 0.0):
+            stack[k] = ndimage.shift(stack[k], sh[k], order=3, mode="nearest")
+
+
 def render_stack(
     intensity: ArrayLike,
     dop: ArrayLike,
@@ -164,16 +192,26 @@ def render_stack(
     >>> stack[:, 0, 0].round(6).tolist()
     [0.6, 0.5, 0.4]
     """
-    try:
-        i_arr, rho, phi = np.broadcast_arrays(
-            np.asarray(intensity, dtype=np.float64),
-            np.asarray(dop, dtype=np.float64),
-            np.asarray(phase, dtype=np.float64),
-        )
-    except ValueError as exc:
-        raise PolarsegError("intensity, dop and phase must have the same shape") from exc
-    if i_arr.ndim != 2:
-        raise PolarsegError(f"intensity, dop and phase must be 2-D, got shape {i_arr.shape}")
+    i_arr, rho, phi = _polarisation_maps(intensity, dop, phase)
+    alpha = _checked_angles(angles, noise_sigma, full_scale, bit_depth)
+
+    a = alpha[:, None, None]
+    stack = i_arr[None] * (1.0 + rho[None] * np.cos(2.0 * a - 2.0 * phi[None]))
+
+    if shifts is not None:
+        _shift_frames(stack, shifts)
+
+    if noise_sigma > 0:
+        gen = np.random.default_rng(rng)
+        stack = stack + gen.normal(0.0, noise_sigma * full_scale, size=stack.shape)
+
+    return stack if bit_depth is None else _quantised(stack, full_scale, int(bit_depth))
+
+
+def _checked_angles(
+    angles: ArrayLike, noise_sigma: float, full_scale: float, bit_depth: int | None
+) -> FloatArray:
+    """The angles of :func:`render_stack` as float64 after checking its options."""
     alpha = np.asarray(angles, dtype=np.float64)
     if alpha.ndim != 1 or alpha.size == 0:
         raise PolarsegError(f"angles must be a non-empty 1-D array, got shape {alpha.shape}")
@@ -183,26 +221,11 @@ def render_stack(
         raise PolarsegError(f"full_scale must be > 0, got {full_scale!r}")
     if bit_depth is not None and (int(bit_depth) != bit_depth or not 1 <= bit_depth <= 16):
         raise PolarsegError(f"bit_depth must be an integer in 1..16 or None, got {bit_depth!r}")
+    return alpha
 
-    a = alpha[:, None, None]
-    stack = i_arr[None] * (1.0 + rho[None] * np.cos(2.0 * a - 2.0 * phi[None]))
 
-    if shifts is not None:
-        sh = np.asarray(shifts, dtype=np.float64)
-        if sh.shape != (alpha.size, 2) or not np.all(np.isfinite(sh)):
-            raise PolarsegError(
-                f"shifts must be finite with shape ({alpha.size}, 2), got {sh.shape}"
-            )
-        for k in range(alpha.size):
-            if np.any(sh[k] != 0.0):
-                stack[k] = ndimage.shift(stack[k], sh[k], order=3, mode="nearest")
-
-    if noise_sigma > 0:
-        gen = np.random.default_rng(rng)
-        stack = stack + gen.normal(0.0, noise_sigma * full_scale, size=stack.shape)
-
-    if bit_depth is None:
-        return stack
-    top = 2 ** int(bit_depth) - 1
+def _quantised(stack: FloatArray, full_scale: float, bit_depth: int) -> NDArray:
+    """Integer codes of a ``bit_depth`` sensor (uint8 up to 8 bits, else uint16)."""
+    top = 2**bit_depth - 1
     codes = np.clip(np.rint(stack / full_scale * top), 0, top)
     return codes.astype(np.uint8 if bit_depth <= 8 else np.uint16)
