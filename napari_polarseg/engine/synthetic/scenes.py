@@ -54,7 +54,7 @@ from scipy import ndimage
 from ..errors import PolarsegError
 from .geometry import GEOMETRIES, Grid, unit_field
 from .optics import FloatArray, render_stack
-from .surface import render_surface
+from .surface import Material, SurfaceRender, render_surface
 
 __all__ = [
     "DEFAULT_ANGLES_DEG",
@@ -85,6 +85,17 @@ AMBIENT = 0.1
 TARGET_INTENSITY = 0.4
 TEXTURE_STD = 0.05
 TEXTURE_SIGMA_PX = 1.0
+
+
+#: Label names of the materials (a scene's ``material_names``).
+LABEL_NAMES = {
+    "matte_board": "background",
+    "natural_leaf": "natural",
+    "plastic_leaf": "plastic",
+    "camouflage_net": "net",
+    "fruit_skin": "fruit",
+    "bruised_tissue": "bruise",
+}
 
 
 @dataclass
@@ -192,88 +203,19 @@ def make_scene(
     >>> scene.stack.shape, scene.stack.dtype.name, scene.material_names
     ((7, 64, 72), 'uint16', ['fruit', 'bruise'])
     """
-    if name not in GEOMETRIES:
-        raise PolarsegError(f"name must be one of {', '.join(SCENES)}; got {name!r}")
-    try:
-        h, w = (int(v) for v in shape)
-    except (TypeError, ValueError) as exc:
-        raise PolarsegError(f"shape must be two integers (H, W), got {shape!r}") from exc
-    if h < 32 or w < 32:
-        raise PolarsegError(f"shape must be at least (32, 32), got {shape!r}")
-    angles = np.deg2rad(np.asarray(angles_deg, dtype=np.float64))
-    if angles.ndim != 1 or angles.size == 0 or not np.all(np.isfinite(angles)):
-        raise PolarsegError("angles_deg must be a non-empty sequence of finite numbers")
+    h, w, angles = _scene_grid(name, shape, angles_deg)
 
     geo_rng, tex_rng, rough_rng, noise_rng = (
         np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(4)
     )
-    grid = Grid((h, w), SUPERSAMPLE)
-    p, q, mat, materials, groups = GEOMETRIES[name](geo_rng, grid)
-    texture = np.clip(1.0 + TEXTURE_STD * unit_field(tex_rng, grid, TEXTURE_SIGMA_PX), 0.5, None)
-    surf = render_surface(
-        p,
-        q,
-        mat,
-        materials,
-        supersample=SUPERSAMPLE,
-        texture=texture,
-        light_zenith_deg=LIGHT_ZENITH_DEG,
-        light_azimuth_deg=LIGHT_AZIMUTH_DEG,
-        ambient=AMBIENT,
-        target_intensity=TARGET_INTENSITY,
-        albedo_groups=groups,
-        facets=FACETS,
-        rng=rough_rng,
-    )
+    surf, materials = _scene_surface(name, (h, w), geo_rng, tex_rng, rough_rng)
+    sensor = {"noise_sigma": noise_sigma, "bit_depth": bit_depth, "full_scale": 1.0}
     stack = render_stack(
-        surf.intensity,
-        surf.dop,
-        surf.phase,
-        angles,
-        noise_sigma=noise_sigma,
-        bit_depth=bit_depth,
-        full_scale=1.0,
-        rng=noise_rng,
-        shifts=shifts,
+        surf.intensity, surf.dop, surf.phase, angles, rng=noise_rng, shifts=shifts, **sensor
     )
-    label_names = {
-        "matte_board": "background",
-        "natural_leaf": "natural",
-        "plastic_leaf": "plastic",
-        "camouflage_net": "net",
-        "fruit_skin": "fruit",
-        "bruised_tissue": "bruise",
-    }
-    names = [label_names.get(m.name, m.name) for m in materials]
-    params: dict[str, Any] = {
-        "scene": name,
-        "shape": [h, w],
-        "angles_deg": [float(a) for a in np.asarray(angles_deg, dtype=np.float64)],
-        "bit_depth": bit_depth,
-        "full_scale": 1.0,
-        "noise_sigma": float(noise_sigma),
-        "seed": seed,
-        "shifts": None if shifts is None else np.asarray(shifts, dtype=float).tolist(),
-        "supersample": SUPERSAMPLE,
-        "facets_per_subpixel": FACETS,
-        "light_zenith_deg": LIGHT_ZENITH_DEG,
-        "light_azimuth_deg": LIGHT_AZIMUTH_DEG,
-        "ambient": AMBIENT,
-        "target_intensity": TARGET_INTENSITY,
-        "texture_std": TEXTURE_STD,
-        "texture_sigma_px": TEXTURE_SIGMA_PX,
-        "materials": {
-            label: {
-                "material": m.name,
-                "refractive_index": m.refractive_index,
-                "depolarisation": m.depolarisation,
-                "roughness_deg": m.roughness_deg,
-                "albedo": float(a),
-                "description": m.description,
-            }
-            for label, m, a in zip(names, materials, surf.albedo, strict=True)
-        },
-    }
+    names = [LABEL_NAMES.get(m.name, m.name) for m in materials]
+    params = _scene_params(name, (h, w), angles_deg, bit_depth, noise_sigma, seed, shifts)
+    params["materials"] = _material_params(names, materials, surf.albedo)
     return SyntheticScene(
         stack=stack,
         angles=angles,
@@ -320,3 +262,99 @@ def scribble_strokes(
             strokes[rr, cc] = i + 1
             drawn += 1
     return strokes
+
+
+def _scene_grid(
+    name: str, shape: tuple[int, int], angles_deg: Sequence[float]
+) -> tuple[int, int, FloatArray]:
+    """(H, W, angles in radians) of :func:`make_scene`, after checking its arguments."""
+    if name not in GEOMETRIES:
+        raise PolarsegError(f"name must be one of {', '.join(SCENES)}; got {name!r}")
+    try:
+        h, w = (int(v) for v in shape)
+    except (TypeError, ValueError) as exc:
+        raise PolarsegError(f"shape must be two integers (H, W), got {shape!r}") from exc
+    if h < 32 or w < 32:
+        raise PolarsegError(f"shape must be at least (32, 32), got {shape!r}")
+    angles = np.deg2rad(np.asarray(angles_deg, dtype=np.float64))
+    if angles.ndim != 1 or angles.size == 0 or not np.all(np.isfinite(angles)):
+        raise PolarsegError("angles_deg must be a non-empty sequence of finite numbers")
+    return h, w, angles
+
+
+def _scene_surface(
+    name: str,
+    shape: tuple[int, int],
+    geo_rng: np.random.Generator,
+    tex_rng: np.random.Generator,
+    rough_rng: np.random.Generator,
+) -> tuple[SurfaceRender, list[Material]]:
+    """The scene's geometry and albedo texture, rendered (:func:`.surface.render_surface`)."""
+    h, w = shape
+    grid = Grid((h, w), SUPERSAMPLE)
+    p, q, mat, materials, groups = GEOMETRIES[name](geo_rng, grid)
+    texture = np.clip(1.0 + TEXTURE_STD * unit_field(tex_rng, grid, TEXTURE_SIGMA_PX), 0.5, None)
+    surf = render_surface(
+        p,
+        q,
+        mat,
+        materials,
+        supersample=SUPERSAMPLE,
+        texture=texture,
+        light_zenith_deg=LIGHT_ZENITH_DEG,
+        light_azimuth_deg=LIGHT_AZIMUTH_DEG,
+        ambient=AMBIENT,
+        target_intensity=TARGET_INTENSITY,
+        albedo_groups=groups,
+        facets=FACETS,
+        rng=rough_rng,
+    )
+    return surf, materials
+
+
+def _scene_params(
+    name: str,
+    shape: tuple[int, int],
+    angles_deg: Sequence[float],
+    bit_depth: int | None,
+    noise_sigma: float,
+    seed: int | None,
+    shifts: Any,
+) -> dict[str, Any]:
+    """The ``params`` record of a scene, without its materials."""
+    h, w = shape
+    return {
+        "scene": name,
+        "shape": [h, w],
+        "angles_deg": [float(a) for a in np.asarray(angles_deg, dtype=np.float64)],
+        "bit_depth": bit_depth,
+        "full_scale": 1.0,
+        "noise_sigma": float(noise_sigma),
+        "seed": seed,
+        "shifts": None if shifts is None else np.asarray(shifts, dtype=float).tolist(),
+        "supersample": SUPERSAMPLE,
+        "facets_per_subpixel": FACETS,
+        "light_zenith_deg": LIGHT_ZENITH_DEG,
+        "light_azimuth_deg": LIGHT_AZIMUTH_DEG,
+        "ambient": AMBIENT,
+        "target_intensity": TARGET_INTENSITY,
+        "texture_std": TEXTURE_STD,
+        "texture_sigma_px": TEXTURE_SIGMA_PX,
+    }
+
+
+def _material_params(
+    names: list[str], materials: list[Material], albedo: Sequence[float]
+) -> dict[str, dict[str, Any]]:
+    """Per label, its material's parameters and albedo (``params["materials"]``)."""
+    return {
+        label: {
+            "material": m.name,
+            "refractive_index": m.refractive_index,
+            "depolarisation": m.depolarisation,
+            "roughness_deg": m.roughness_deg,
+            "albedo": float(a),
+            "description": m.description,
+        }
+        for label, m, a in zip(names, materials, albedo, strict=True)
+    }
