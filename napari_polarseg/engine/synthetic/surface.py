@@ -221,6 +221,58 @@ def render_surface(
         On mismatched shapes, a grid not divisible by ``supersample``, or material
         indices out of range.
     """
+    checks = (supersample, facets, ambient, albedo_groups, texture)
+    p, q, mat, tex, groups = _checked_surface(
+        slope_col, slope_row, material_map, len(materials), *checks
+    )
+    s, n_facets, k_mat = int(supersample), int(facets), len(materials)
+    gen = np.random.default_rng(rng)
+
+    n_idx = np.array([m.refractive_index for m in materials])
+    light = (light_zenith_deg, light_azimuth_deg, ambient)
+    s0, s1, s2 = _facet_stokes(p, q, mat, materials, tex, light, n_facets, gen)
+
+    # Albedo: every Stokes component is proportional to it.
+    albedo, present = _albedo(mat, s0, groups, k_mat, target_intensity, n_facets)
+    scale = np.where(present, albedo, 0.0)[mat] / n_facets
+    s0, s1, s2 = s0 * scale, s1 * scale, s2 * scale
+
+    S0, S1, S2 = (_block_mean(c, s) for c in (s0, s1, s2))
+    intensity = S0
+    with np.errstate(invalid="ignore", divide="ignore"):
+        dop = np.where(S0 > 0, np.hypot(S1, S2) / S0, 0.0)
+    phase = np.mod(0.5 * np.arctan2(S2, S1), np.pi)
+
+    # Macroscopic normal (no roughness), averaged over the pixel.
+    zenith, azimuth = _pixel_normal(p, q, s)
+
+    frac = np.stack([_block_mean((mat == k).astype(np.float64), s) for k in range(k_mat)])
+    labels = np.argmax(frac, axis=0).astype(np.intp)
+    return SurfaceRender(
+        intensity=intensity,
+        dop=dop,
+        phase=phase,
+        zenith=zenith,
+        azimuth=azimuth,
+        labels=labels,
+        refractive_index=n_idx[labels],
+        albedo=albedo,
+    )
+
+
+def _checked_surface(
+    slope_col: ArrayLike,
+    slope_row: ArrayLike,
+    material_map: ArrayLike,
+    k_mat: int,
+    supersample: int,
+    facets: int,
+    ambient: float,
+    albedo_groups: Sequence[int] | None,
+    texture: ArrayLike | None,
+) -> tuple[FloatArray, FloatArray, NDArray, FloatArray, NDArray]:
+    """(slopes p, q, material map, texture, albedo groups) of :func:`render_surface`,
+    after checking its arguments."""
     p = np.asarray(slope_col, dtype=np.float64)
     q = np.asarray(slope_row, dtype=np.float64)
     mat = np.asarray(material_map)
@@ -236,7 +288,6 @@ def render_surface(
         raise PolarsegError(f"grid shape {p.shape} is not divisible by supersample={s}")
     if not np.issubdtype(mat.dtype, np.integer):
         raise PolarsegError("material_map must hold integers")
-    k_mat = len(materials)
     if mat.size and (mat.min() < 0 or mat.max() >= k_mat):
         raise PolarsegError(f"material_map values must be in 0..{k_mat - 1}")
     if not 0.0 <= ambient < 1.0:
@@ -247,8 +298,24 @@ def render_surface(
     tex = np.ones_like(p) if texture is None else np.asarray(texture, dtype=np.float64)
     if tex.shape != p.shape or np.any(tex <= 0):
         raise PolarsegError("texture must be positive with the shape of slope_col")
-    gen = np.random.default_rng(rng)
+    return p, q, mat, tex, groups
 
+
+def _facet_stokes(
+    p: FloatArray,
+    q: FloatArray,
+    mat: NDArray,
+    materials: Sequence[Material],
+    tex: FloatArray,
+    light: tuple[float, float, float],
+    n_facets: int,
+    gen: np.random.Generator,
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Stokes sums (s0, s1, s2) over ``n_facets`` rough facets per sub-pixel, unit albedo.
+
+    ``light``: zenith and azimuth (degrees) of the distant light and the ambient term.
+    """
+    light_zenith_deg, light_azimuth_deg, ambient = light
     n_idx = np.array([m.refractive_index for m in materials])
     depol = np.array([m.depolarisation for m in materials])
     tan_rough = np.tan(np.deg2rad([m.roughness_deg for m in materials]))
@@ -278,7 +345,19 @@ def render_surface(
         s1 += e0 * rho_f * np.cos(two_phi)
         s2 += e0 * rho_f * np.sin(two_phi)
 
-    # Albedo: every Stokes component is proportional to it.
+    return s0, s1, s2
+
+
+def _albedo(
+    mat: NDArray,
+    s0: FloatArray,
+    groups: NDArray,
+    k_mat: int,
+    target_intensity: float | None,
+    n_facets: int,
+) -> tuple[FloatArray, NDArray[np.bool_]]:
+    """Albedo of every material (NaN if absent) and which are present: one per group,
+    calibrated so that the group's mean Î is ``target_intensity`` (1 when None)."""
     counts = np.bincount(mat.ravel(), minlength=k_mat)
     present = counts > 0
     albedo = np.where(present, 1.0, np.nan)
@@ -288,31 +367,15 @@ def render_surface(
             members = (groups == g) & present
             if members.any():
                 albedo[members] = target_intensity * counts[members].sum() / sums[members].sum()
-    scale = np.where(present, albedo, 0.0)[mat] / n_facets
-    s0, s1, s2 = s0 * scale, s1 * scale, s2 * scale
+    return albedo, present
 
-    S0, S1, S2 = (_block_mean(c, s) for c in (s0, s1, s2))
-    intensity = S0
-    with np.errstate(invalid="ignore", divide="ignore"):
-        dop = np.where(S0 > 0, np.hypot(S1, S2) / S0, 0.0)
-    phase = np.mod(0.5 * np.arctan2(S2, S1), np.pi)
 
-    # Macroscopic normal (no roughness), averaged over the pixel.
+def _pixel_normal(p: FloatArray, q: FloatArray, s: int) -> tuple[FloatArray, FloatArray]:
+    """Zenith and azimuth (radians) of the macroscopic normal averaged over each pixel."""
     mnorm = np.sqrt(1.0 + p**2 + q**2)
     mx, my, mz = (_block_mean(c, s) for c in (-p / mnorm, -q / mnorm, 1.0 / mnorm))
     mlen = np.sqrt(mx**2 + my**2 + mz**2)
     zenith = np.arccos(np.clip(mz / mlen, 0.0, 1.0))
     azimuth = np.mod(np.arctan2(my, mx), 2.0 * np.pi)
 
-    frac = np.stack([_block_mean((mat == k).astype(np.float64), s) for k in range(k_mat)])
-    labels = np.argmax(frac, axis=0).astype(np.intp)
-    return SurfaceRender(
-        intensity=intensity,
-        dop=dop,
-        phase=phase,
-        zenith=zenith,
-        azimuth=azimuth,
-        labels=labels,
-        refractive_index=n_idx[labels],
-        albedo=albedo,
-    )
+    return zenith, azimuth
