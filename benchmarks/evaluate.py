@@ -18,7 +18,7 @@ the ARI against ground truth of every option the "Segmentation quality" table
 - ``plain baseline``: a random forest on 20 Gaussian-smoothed polarisation features
   (``baselines.plain_baseline``) trained on the same strokes — the floor every method
   is read against;
-- ``pixel classifier``: the product's scribble classifier (``engine.pixel_classifier``
+- ``pixel classifier``: the product's scribble classifier (``engine.analysis.pixel_classifier``
   with its default features and parameters) on the same strokes;
 - then, per scene, the pixel classifier against its target (0.8) and the plain
   baseline, beside a bound: the best classifier we train on the richest pixel features

@@ -1,6 +1,6 @@
 """Unsupervised segmentation on superpixels (issue 13): every variant tried, measured.
 
-For every variant of :data:`VARIANTS` (``napari_polarseg.engine.unsupervised``), prints
+For every variant of :data:`VARIANTS` (``napari_polarseg.engine.unsupervised.segmenter``), prints
 the mean ARI over the seeds of each synthetic scene (``evaluate.load``; k = the truth's
 classes) and the ARI over the hand-labelled pixels of each real frame
 (``napari_polarseg.truth``; k = the truth file's classes), beside k-means on intensity

@@ -9,7 +9,7 @@ that knows the answer on a whole training scene is an upper bound for what an
 unsupervised method can extract from the same features. Feature sets:
 
 - ``available``: everything the pipeline can compute — zonal harmonic coefficients
-  (degree 8) and every polarisation statistic (engine.polstats);
+  (degree 8) and every polarisation statistic (engine.features.polstats);
 - ``oracle geometry``: the true zenith θ of every pixel from the generator (no method
   has it) and the measured ρ: per block the least-squares factor ``k`` in
   ``ρ ≈ k · ρ_Fresnel(θ_true, 1.45)`` — the material's polarisation at a *known* tilt,

@@ -1,4 +1,4 @@
-"""The hand-written weighted k-means (engine/kmeans.py) against known answers and
+"""The hand-written weighted k-means (engine/unsupervised/kmeans.py) against known answers and
 against scikit-learn's KMeans."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Plot data of the analyst's bench (engine/plots.py) and the PNGs of figures.save_plots."""
+"""Plot data of the analyst's bench (engine/analysis/plots.py), PNGs of figures.save_plots."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Block polarisation statistics (engine/polstats.py) against hand-computed blocks."""
+"""Block polarisation statistics (engine/features/polstats.py) against hand-computed blocks."""
 
 import numpy as np
 import pytest

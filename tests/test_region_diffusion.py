@@ -1,4 +1,4 @@
-"""Edge-aware diffusion over the region graph (engine/region_diffusion.py)."""
+"""Edge-aware diffusion over the region graph (engine/unsupervised/region_diffusion.py)."""
 
 from __future__ import annotations
 

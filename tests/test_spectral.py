@@ -1,4 +1,4 @@
-"""k-way spectral clustering (engine/spectral.py) against planted partitions and by hand."""
+"""k-way spectral clustering (engine/graph/spectral.py) against planted partitions and by hand."""
 
 import numpy as np
 import pytest

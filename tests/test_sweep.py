@@ -1,4 +1,4 @@
-"""Parameter sweep (engine/sweep.py): scores, best cell, cache reuse, cancel, tables."""
+"""Parameter sweep (engine/analysis/sweep.py): scores, best cell, cache reuse, cancel, tables."""
 
 from __future__ import annotations
 

@@ -33,7 +33,7 @@ def render_fruit_days(
     on each day the bruise is the day-1 bruise grown by ``grow_px[t]`` pixels (a
     distance threshold on the supersampled grid) and the sensor noise is new. Built
     from the generator's own pieces (``fruit_geometry``, ``render_surface``,
-    ``render_stack``), replaying :func:`~napari_polarseg.engine.synthetic.make_scene`.
+    ``render_stack``), replaying :func:`~napari_polarseg.engine.synthetic.scenes.make_scene`.
 
     Returns angles (radians), the uint16 stacks and the ground-truth labels per day.
     """

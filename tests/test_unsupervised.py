@@ -1,4 +1,4 @@
-"""Unsupervised segmentation on superpixels (engine/unsupervised.py)."""
+"""Unsupervised segmentation on superpixels (engine/unsupervised/segmenter.py)."""
 
 from __future__ import annotations
 

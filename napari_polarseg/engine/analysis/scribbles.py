@@ -29,7 +29,7 @@ def training_blocks(
 
     Every pixel belongs to its w × w block; pixels of the remainder strips (when the
     size is not a multiple of w) to the nearest whole block, as for the labels
-    (:func:`~napari_polarseg.engine.harmonics.pixel_block_index`). A block is an example
+    (:func:`~napari_polarseg.engine.features.harmonics.pixel_block_index`). A block is an example
     of class c when c holds at least :data:`MAJORITY` of its scribbled pixels (the
     smaller label wins an exact tie); blocks without scribbles are not used.
 

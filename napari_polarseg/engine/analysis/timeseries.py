@@ -166,7 +166,7 @@ def segment_timeseries(
         What the change test compares (:func:`change_statistics`).
     masks : sequence, optional
         Per-day ``mask`` for :class:`~napari_polarseg.engine.Pipeline` (region arrays
-        or :class:`~napari_polarseg.engine.polarimage.PixelMask`, None entries allowed).
+        or :class:`~napari_polarseg.engine.physics.pixel_mask.PixelMask`, None entries allowed).
     progress : callable(stage, index, total), optional
         Called after each step.
     cancel : callable() -> bool, optional

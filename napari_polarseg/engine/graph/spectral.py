@@ -18,7 +18,7 @@ k-means centre is nearest; the labels are numbered in order of first appearance,
 recursive cut's are.
 
 The eigensolve's work is bounded as the recursive cut's is (:mod:`.ncut`, "Bounded
-work"): Lanczos may make :data:`~napari_polarseg.engine.ncut.LANCZOS_SHARE` of
+work"): Lanczos may make :data:`~napari_polarseg.engine.graph.eigensolver.LANCZOS_SHARE` of
 ``max_products`` products with the affinity, then the block LOBPCG (Jacobi
 preconditioner, which copes with a graph that has fallen apart) the rest, after which
 its best vectors are used and the decomposition is counted as capped
@@ -140,7 +140,7 @@ def kway_ncut(W, labels: np.ndarray) -> np.ndarray:
 class SpectralClustering:
     """k-way spectral clustering of one affinity, eigenvectors cached across k.
 
-    Same interface as :class:`~napari_polarseg.engine.ncut.CutTree` where the pipeline
+    Same interface as :class:`~napari_polarseg.engine.graph.ncut.CutTree` where the pipeline
     uses it: ``labels(k)`` and ``ncut_values`` (here the two-way Ncut value of every
     segment of the last partition against the rest, :func:`kway_ncut`).
     """

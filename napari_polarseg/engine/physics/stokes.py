@@ -13,7 +13,7 @@ units); on a four-angle camera S1 = I(0°) − I(90°) and S2 = I(45°) − I(13
 S2²) / S0 and φ = ½ atan2(S2, S1) give the polarisation image back (the AoLP is φ, the
 DoLP ρ).
 
-Angle convention (the package's, see :mod:`napari_polarseg.engine.polarimage`): α and φ
+Angle convention (the package's, see :mod:`napari_polarseg.engine.physics.polarimage`): α and φ
 are measured from the image's column axis (along a row, towards larger column index: 0°
 points right) towards its row axis (towards larger row index: 90° points down). On an
 image shown with row 0 at the top that is clockwise. S1 > 0 means polarised along the
