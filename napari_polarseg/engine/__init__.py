@@ -19,7 +19,7 @@ from .analysis.pixel_classifier import (
     train_pixel_classifier,
 )
 from .analysis.pixel_segmentation import PixelSegmentation, PixelSegmenter
-from .analysis.sweep_result import SweepCell, SweepResult  # the function: engine.analysis.sweep.sweep
+from .analysis.sweep_result import SweepCell, SweepResult  # sweep(): analysis.sweep.sweep
 from .errors import Cancelled, PolarsegError
 from .features.harmonics import (
     block_coefficients,
