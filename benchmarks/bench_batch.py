@@ -27,7 +27,7 @@ import numpy as np
 
 from napari_polarseg import batch
 from napari_polarseg.engine.params import RECOMMENDED
-from napari_polarseg.engine.synthetic import SCENES, make_scene
+from napari_polarseg.engine.synthetic.scenes import SCENES, make_scene
 
 
 def write_scenes(folder: Path, n: int, shape: tuple[int, int]) -> list[Path]:

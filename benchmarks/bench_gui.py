@@ -43,7 +43,7 @@ def reference_stack(cache: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         with np.load(path, allow_pickle=False) as f:
             if "labels" in f.files:
                 return f["stack"], np.asarray(f["angles"], dtype=float), f["labels"]
-    from napari_polarseg.engine.synthetic import make_scene
+    from napari_polarseg.engine.synthetic.scenes import make_scene
 
     scene = make_scene("leaves", shape=(720, 660), angles_deg=np.arange(0, 181, 10))
     cache.mkdir(parents=True, exist_ok=True)
@@ -54,7 +54,7 @@ def reference_stack(cache: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 def brush_strokes(labels: np.ndarray, seed: int) -> list[tuple[int, np.ndarray]]:
     """One stroke per material (scribble value, (n, 2) pixel positions along it), drawn
     by ``synthetic.scribble_strokes``; painted with a brush of ``BRUSH_SIZE``."""
-    from napari_polarseg.engine.synthetic import scribble_strokes
+    from napari_polarseg.engine.synthetic.scenes import scribble_strokes
 
     line = scribble_strokes(labels, seed=seed, per_material=1, length=STROKE_LENGTH)
     return [(int(v), np.argwhere(line == v)) for v in np.unique(line) if v > 0]
@@ -158,7 +158,7 @@ def main(argv: list[str] | None = None) -> None:
         rows.append((f"change {name} -> {value:g}", seg, total, TARGETS[name], parts))
 
     # scribble mode: first strokes of every material (pixel features computed once) ...
-    from napari_polarseg.engine.synthetic import scribble_strokes
+    from napari_polarseg.engine.synthetic.scenes import scribble_strokes
 
     scribbles = widget.new_scribbles_layer()
     run_events(idle)

@@ -30,13 +30,13 @@ from bench_speed import median_time
 from scipy import ndimage
 
 from napari_polarseg.engine import polarisation_image
-from napari_polarseg.engine.pixel_classifier import (
+from napari_polarseg.engine.analysis.pixel_classifier import (
     ClassifierParams,
     predict_pixels,
     train_pixel_classifier,
 )
-from napari_polarseg.engine.pixel_features import EPS_INTENSITY, pixel_features
-from napari_polarseg.engine.synthetic import make_scene, scribble_strokes
+from napari_polarseg.engine.features.pixel_features import EPS_INTENSITY, pixel_features
+from napari_polarseg.engine.synthetic.scenes import make_scene, scribble_strokes
 
 REPO = Path(__file__).resolve().parents[1]
 REAL = REPO.parent / "shared" / "data" / "polanalyser" / "fruits_IMX250MZR.png"
@@ -100,7 +100,7 @@ def main(argv: list[str] | None = None) -> int:
             stroke_img = truth.strokes
         else:
             cam = make_scene("leaves", shape=(1024, 1224), angles_deg=(0, 45, 90, 135))
-            from napari_polarseg.engine.mosaic import mosaic_superpixel
+            from napari_polarseg.engine.physics.mosaic import mosaic_superpixel
 
             frame = tmp / "frame.npy"
             np.save(frame, mosaic_superpixel(cam.stack, (90, 45, 135, 0)))

@@ -189,7 +189,7 @@ def straightforward_ncut(
     ``history``, if given, receives (labels, seconds since the start) after every split,
     so that one run gives the labels and times of every smaller number of segments.
     """
-    from napari_polarseg.engine.ncut import best_split
+    from napari_polarseg.engine.graph.ncut import best_split
 
     t_start = time.perf_counter()
     n = W.shape[0]
@@ -223,18 +223,18 @@ def straightforward_ncut(
 
 
 def _labels_of(segments: list[np.ndarray], n: int) -> np.ndarray:
-    from napari_polarseg.engine.ncut import _first_appearance_order
+    from napari_polarseg.engine.graph.ncut import first_appearance_order
 
     labels = np.empty(n, dtype=np.int32)
     for lab, seg in enumerate(segments):
         labels[seg] = lab
-    return _first_appearance_order(labels)
+    return first_appearance_order(labels)
 
 
 def straightforward_segment(stack: np.ndarray, angles: np.ndarray, params) -> np.ndarray:
     """Block labels of the straightforward pipeline (no spatial term, dense, eigh)."""
     from napari_polarseg.engine import Pipeline
-    from napari_polarseg.engine.features import harmonic_features
+    from napari_polarseg.engine.features.pca import harmonic_features
 
     pipe = Pipeline(stack, angles, params)
     pol, nrm = pipe.get("polarisation"), pipe.get("normals")
@@ -352,7 +352,7 @@ def print_table(rows: list[Row]) -> None:
 
 def build_inputs(cache: Path) -> dict[str, Path]:
     """Render (or reuse) the reference stack and the camera frame; return their paths."""
-    from napari_polarseg.engine.synthetic import make_scene
+    from napari_polarseg.engine.synthetic.scenes import make_scene
 
     cache.mkdir(parents=True, exist_ok=True)
     paths = {}
@@ -443,7 +443,7 @@ def thesis_frame_child(task: str, path: Path) -> dict:
 def bounded_rows(cache: Path) -> tuple[list[Row], list[str]]:
     """The rows of issue 13's bounded cuts (module docstring) and their details
     (``cache``: the folder of the rendered inputs, :func:`build_inputs`)."""
-    from napari_polarseg.engine import ncut
+    from napari_polarseg.engine.graph import ncut
 
     rows: list[Row] = []
     notes: list[str] = []
@@ -619,8 +619,10 @@ def main(argv: list[str] | None = None) -> int:
         print(f"total benchmark time {time.perf_counter() - t_start:.0f} s")
         return 0
 
-    from napari_polarseg.engine import Pipeline, SegmentParams, harmonics, ncut
-    from napari_polarseg.engine import features as feat
+    from napari_polarseg.engine import Pipeline, SegmentParams
+    from napari_polarseg.engine.features import harmonics
+    from napari_polarseg.engine.graph import affinity as feat
+    from napari_polarseg.engine.graph import ncut
     from napari_polarseg.engine.params import RECOMMENDED
 
     t_start = time.perf_counter()
@@ -713,7 +715,7 @@ def main(argv: list[str] | None = None) -> int:
     np.cos(ms * af[None]), np.sin(ms * af[None])
     b_leg12 = (time.perf_counter() - t0) * 10
     coef = pipe.get("harmonics")
-    # as the pipeline stores it from ncut.FLOAT32_MIN_NODES blocks (each entry computed
+    # as the pipeline stores it from dense_graph.FLOAT32_MIN_NODES blocks (each entry computed
     # in float64); the cut tree multiplies with it directly
     t_aff_ours, W = median_time(
         lambda: feat.affinity_matrix(pipe.get("pca").features, 1.0, "absolute", np.float32),

@@ -22,7 +22,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
 from test_timeseries import PARAMS, figures, render_fruit_days  # noqa: E402
 
-from napari_polarseg.engine.timeseries import METHODS, segment_timeseries  # noqa: E402
+from napari_polarseg.engine.analysis.timeseries import METHODS, segment_timeseries  # noqa: E402
 
 
 def main(argv: list[str] | None = None) -> int:

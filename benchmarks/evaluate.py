@@ -18,7 +18,7 @@ the ARI against ground truth of every option the "Segmentation quality" table
 - ``plain baseline``: a random forest on 20 Gaussian-smoothed polarisation features
   (``baselines.plain_baseline``) trained on the same strokes — the floor every method
   is read against;
-- ``pixel classifier``: the product's scribble classifier (``engine.pixel_classifier``
+- ``pixel classifier``: the product's scribble classifier (``engine.analysis.pixel_classifier``
   with its default features and parameters) on the same strokes;
 - then, per scene, the pixel classifier against its target (0.8) and the plain
   baseline, beside a bound: the best classifier we train on the richest pixel features
@@ -53,11 +53,15 @@ from baselines import intensity_kmeans, plain_baseline, real_frames
 from sklearn.metrics import adjusted_rand_score
 
 from napari_polarseg.engine import Pipeline, SegmentParams, intensity_baseline
+from napari_polarseg.engine.analysis.pixel_classifier import ClassifierParams, make_model
+from napari_polarseg.engine.analysis.pixel_segmentation import PixelSegmenter
+from napari_polarseg.engine.features.pixel_features import (
+    GROUPS,
+    PixelFeatureParams,
+    pixel_features,
+)
 from napari_polarseg.engine.params import AUTO, RECOMMENDED
-from napari_polarseg.engine.pixel_classifier import ClassifierParams, make_model
-from napari_polarseg.engine.pixel_features import GROUPS, PixelFeatureParams, pixel_features
-from napari_polarseg.engine.pixel_segmentation import PixelSegmenter
-from napari_polarseg.engine.synthetic import SCENES, make_scene, scribble_strokes
+from napari_polarseg.engine.synthetic.scenes import SCENES, make_scene, scribble_strokes
 
 #: The page whose table block ``--docs`` (alias ``--readme``) rewrites.
 QUALITY_PAGE = Path(__file__).resolve().parents[1] / "docs" / "quality.md"

@@ -1,6 +1,6 @@
 """Unsupervised segmentation on superpixels (issue 13): every variant tried, measured.
 
-For every variant of :data:`VARIANTS` (``napari_polarseg.engine.unsupervised``), prints
+For every variant of :data:`VARIANTS` (``napari_polarseg.engine.unsupervised.segmenter``), prints
 the mean ARI over the seeds of each synthetic scene (``evaluate.load``; k = the truth's
 classes) and the ARI over the hand-labelled pixels of each real frame
 (``napari_polarseg.truth``; k = the truth file's classes), beside k-means on intensity
@@ -31,12 +31,9 @@ from evaluate import DEGENERATE_SHARE, REAL_DIR, ari, ari_where, largest_share, 
 
 from napari_polarseg.engine import Pipeline, SegmentParams
 from napari_polarseg.engine.params import RECOMMENDED
-from napari_polarseg.engine.synthetic import SCENES, make_scene, scribble_strokes
-from napari_polarseg.engine.unsupervised import (
-    MATERIAL_CUE,
-    UnsupervisedParams,
-    segment_unsupervised,
-)
+from napari_polarseg.engine.synthetic.scenes import SCENES, make_scene, scribble_strokes
+from napari_polarseg.engine.unsupervised.params import MATERIAL_CUE, UnsupervisedParams
+from napari_polarseg.engine.unsupervised.segmenter import segment_unsupervised
 
 #: Today's best unsupervised option per synthetic scene (issue 13): the floor.
 SYNTHETIC_FLOOR = {"leaves": 0.19, "camouflage": 0.36, "fruit": 0.24}
@@ -253,7 +250,7 @@ def truth_threshold(synthetic: list, feature: str = "dolp@4") -> list[str]:
     """ARI of one pixel feature cut at the threshold chosen *with the truth* (the best of
     49 quantiles), per two-class scene and seed: what a one-threshold rule on it could
     reach at best."""
-    from napari_polarseg.engine.pixel_features import PixelFeatureParams, pixel_features
+    from napari_polarseg.engine.features.pixel_features import PixelFeatureParams, pixel_features
 
     scale = float(feature.split("@")[1])
     lines = []

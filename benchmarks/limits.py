@@ -9,7 +9,7 @@ that knows the answer on a whole training scene is an upper bound for what an
 unsupervised method can extract from the same features. Feature sets:
 
 - ``available``: everything the pipeline can compute — zonal harmonic coefficients
-  (degree 8) and every polarisation statistic (engine.polstats);
+  (degree 8) and every polarisation statistic (engine.features.polstats);
 - ``oracle geometry``: the true zenith θ of every pixel from the generator (no method
   has it) and the measured ρ: per block the least-squares factor ``k`` in
   ``ρ ≈ k · ρ_Fresnel(θ_true, 1.45)`` — the material's polarisation at a *known* tilt,
@@ -36,10 +36,12 @@ from sklearn.metrics import adjusted_rand_score
 from sklearn.pipeline import make_pipeline
 from sklearn.preprocessing import StandardScaler
 
-from napari_polarseg.engine import Pipeline, harmonics, polstats
-from napari_polarseg.engine.features import harmonic_features
+from napari_polarseg.engine import Pipeline
+from napari_polarseg.engine.features import harmonics, polstats
+from napari_polarseg.engine.features.pca import harmonic_features
 from napari_polarseg.engine.params import RECOMMENDED
-from napari_polarseg.engine.synthetic import SCENES, diffuse_dop_from_transmission, make_scene
+from napari_polarseg.engine.synthetic.optics import diffuse_dop_from_transmission
+from napari_polarseg.engine.synthetic.scenes import SCENES, make_scene
 
 WINDOW = 12
 SEEDS = (1, 2)

@@ -37,7 +37,7 @@ from typing import Any
 import numpy as np
 import tifffile
 
-from .engine.polarimage import distinct_angle_count
+from .engine.physics.polarimage import distinct_angle_count
 from .io import FRAME_SUFFIXES, SENSOR_NAMES, angle_from_name, read_stack, single_frame_file
 
 #: Sony polarisation sensors named in raw files (mono ``…MZR``, colour ``…MYR``).

@@ -88,9 +88,9 @@ from sklearn.tree import DecisionTreeClassifier, ExtraTreeClassifier
 from sklearn.tree._tree import Tree
 
 from . import __version__
+from .engine.analysis.pixel_classifier import PixelClassifier
 from .engine.errors import PolarsegError
 from .engine.limits import format_bytes, memory_limit
-from .engine.pixel_classifier import PixelClassifier
 from .io import atomic_output
 
 PathLike = str | os.PathLike

@@ -121,11 +121,9 @@ import numpy as np
 
 from . import __version__
 from . import io as pio
-from .engine.colour_mosaic import BAYER_ORDERS
+from .engine.analysis.evaluation import adjusted_rand_index, evaluate
 from .engine.errors import PolarsegError
-from .engine.evaluation import adjusted_rand_index, evaluate
 from .engine.limits import check_pipeline_memory, memory_limit
-from .engine.mosaic import DEMOSAIC_METHODS
 from .engine.params import (
     CLUSTERING_METHODS,
     COEFFICIENT_METHODS,
@@ -137,9 +135,12 @@ from .engine.params import (
     SPECULAR_BRANCHES,
     SegmentParams,
 )
+from .engine.physics.colour_mosaic import BAYER_ORDERS
+from .engine.physics.mosaic import DEMOSAIC_METHODS
+from .engine.physics.pixel_mask import PixelMask
+from .engine.physics.polarimage import validity_mask
+from .engine.physics.registration import register_stack, shift_frames
 from .engine.pipeline import STAGES, Pipeline, SegmentationResult
-from .engine.polarimage import PixelMask, validity_mask
-from .engine.registration import register_stack, shift_frames
 from .export import FLOAT_OUTPUTS as FLOAT_OUTPUTS  # the output contract (batch.py reads it)
 from .export import OutputError, classifier_summary, write_result_folder
 from .export import labels_image as _labels_image
@@ -982,7 +983,7 @@ class LabelSource:
 
     def label(self, run: Run) -> None:
         from .classifier_file import load_pixel_classifier
-        from .engine.pixel_segmentation import PixelSegmenter
+        from .engine.analysis.pixel_segmentation import PixelSegmenter
 
         classifier = None
         if self.classifier_file:
@@ -1187,7 +1188,7 @@ def _number_list_arg(kind: type, what: str):
 
 
 def _add_sweep_parser(sub: Any) -> None:
-    from .engine.sweep import DEFAULT_SCORE, SCORES
+    from .engine.analysis.sweep_result import DEFAULT_SCORE, SCORES
 
     sw = sub.add_parser(
         "sweep",
@@ -1291,7 +1292,7 @@ def sweep_table(result: Any, best: Any = None) -> list[str]:
 
 def _cmd_sweep(args: argparse.Namespace) -> int:
     from . import figures
-    from .engine.sweep import sweep
+    from .engine.analysis.sweep import sweep
 
     params = _params_from_args(args)
     for flag, value in (("--plots", args.plots), ("--overview", args.overview)):
@@ -1562,7 +1563,7 @@ def _classify_days(
     """The time series with every day labelled by the saved pixel classifier at ``path``
     (the same classes every day, so a label means the same material on every day)."""
     from .classifier_file import load_pixel_classifier
-    from .engine.pixel_segmentation import PixelSegmenter
+    from .engine.analysis.pixel_segmentation import PixelSegmenter
 
     classifier = load_pixel_classifier(path)
     labels = np.stack(
@@ -1580,7 +1581,7 @@ def _classify_days(
 
 def _cmd_timeseries(args: argparse.Namespace) -> int:
     from .batch import expand_inputs
-    from .engine.timeseries import segment_timeseries
+    from .engine.analysis.timeseries import segment_timeseries
 
     params = _params_from_args(args)
     paths = expand_inputs(args.input)

@@ -29,12 +29,13 @@ import numpy as np
 
 from . import __version__
 from . import io as pio
+from .engine.analysis.evaluation import STATISTICS_COLUMNS, segment_statistics
+from .engine.analysis.views import CompositeParams, aolp_dolp_composite, auto_dolp_max
 from .engine.errors import PolarsegError
-from .engine.evaluation import STATISTICS_COLUMNS, segment_statistics
+from .engine.physics.pixel_mask import PixelMask
+from .engine.physics.polarimage import duplicate_angle_frames
+from .engine.physics.stokes import STOKES_CONVENTION, stokes_components
 from .engine.pipeline import SegmentationResult, valid_blocks
-from .engine.polarimage import PixelMask, duplicate_angle_frames
-from .engine.stokes import STOKES_CONVENTION, stokes_components
-from .engine.views import CompositeParams, aolp_dolp_composite, auto_dolp_max
 
 #: The polarisation views every result folder holds beside the contract files.
 STOKES_FILE = "stokes.tif"
@@ -215,7 +216,7 @@ def overview_figure(
     from matplotlib.colors import ListedColormap, Normalize
     from matplotlib.figure import Figure
 
-    from .engine.evaluation import adjusted_rand_index
+    from .engine.analysis.evaluation import adjusted_rand_index
 
     if composite is None:
         if dolp_max is None:

@@ -20,14 +20,14 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from . import io as pio
-from .engine import plots
+from .engine.analysis import plots
 from .engine.errors import PolarsegError
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
+    from .engine.analysis.sweep_result import SweepResult
     from .engine.pipeline import SegmentationResult
-    from .engine.sweep import SweepResult
 
 #: Colours of the light default theme: figure background, text/axes, accent.
 LIGHT = {"background": "#ffffff", "foreground": "#000000", "accent": "#1f77b4"}

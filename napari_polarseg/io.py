@@ -96,7 +96,10 @@ from typing import Any
 import numpy as np
 import tifffile
 
-from .engine.colour_mosaic import (
+from .engine.errors import PolarsegError
+from .engine.limits import check_bytes, memory_limit
+from .engine.params import SegmentParams
+from .engine.physics.colour_mosaic import (
     COLOURS,
     IMX250MYR_BAYER,
     IMX250MYR_LAYOUT,
@@ -105,17 +108,15 @@ from .engine.colour_mosaic import (
     demosaic_colour_flags,
     luminance,
 )
-from .engine.errors import PolarsegError
-from .engine.limits import check_bytes, memory_limit
-from .engine.mosaic import (
+from .engine.physics.mosaic import (
     DEMOSAIC_METHODS,
     IMX250MZR_LAYOUT,
     demosaic,
     demosaic_flags,
     subtract_dark,
 )
-from .engine.params import SegmentParams
-from .engine.polarimage import auto_saturation_level, distinct_angle_count
+from .engine.physics.pixel_mask import auto_saturation_level
+from .engine.physics.polarimage import distinct_angle_count
 from .tiff_angles import FROM_JSON, tiff_angles
 
 PathLike = str | os.PathLike

@@ -33,7 +33,7 @@ from .engine.errors import PolarsegError
 from .engine.limits import check_bytes
 
 if TYPE_CHECKING:
-    from .engine.polarimage import PolarisationImage
+    from .engine.physics.polarimage import PolarisationImage
 
 #: Folder of the bundled truth files.
 TRUTH_DIR = Path(__file__).resolve().parent / "sample_data" / "truth"
@@ -197,7 +197,7 @@ def frame_polarisation_image(truth: TruthFile, folder: str | PathLike[str]) -> P
     PolarsegError
         If the frame is missing or its super-pixel grid is not :attr:`TruthFile.shape`.
     """
-    from .engine.polarimage import polarisation_image, validity_mask
+    from .engine.physics.polarimage import polarisation_image, validity_mask
     from .io import read_stack
 
     data = read_stack(real_frame_path(truth, folder), mosaic=list(truth.mosaic))

@@ -1,7 +1,7 @@
 #!/usr/bin/env python
 """Write the bundled sample angle stacks and their README.
 
-Renders every scene of :data:`napari_polarseg.engine.synthetic.SCENES` with the defaults
+Renders every scene of :data:`napari_polarseg.engine.synthetic.scenes.SCENES` with the defaults
 (seed 0, 120 × 130 pixels, 7 angles 0..180° in 30° steps, 12-bit, 0.3 % noise) and saves
 
     napari_polarseg/sample_data/<name>.npz   stack (uint16, N × H × W),
@@ -26,7 +26,11 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from napari_polarseg.engine.synthetic import SCENES, SyntheticScene, make_scene  # noqa: E402
+from napari_polarseg.engine.synthetic.scenes import (  # noqa: E402
+    SCENES,
+    SyntheticScene,
+    make_scene,
+)
 
 DEFAULT_OUT = ROOT / "napari_polarseg" / "sample_data"
 
@@ -104,7 +108,7 @@ def readme_text(sections: list[str], params: dict) -> str:
     header = f"""# Sample data
 
 Synthetic polarisation angle stacks with ground-truth material labels, rendered from
-physics by `napari_polarseg.engine.synthetic.make_scene` and written by
+physics by `napari_polarseg.engine.synthetic.scenes.make_scene` and written by
 `scripts/make_sample_data.py` (do not edit by hand; rerun the script). Any scene can be
 re-rendered with its full ground truth (noise-free Î, ρ, φ, zenith, azimuth, refractive
 index) with `make_scene(name, seed={params["seed"]})`.

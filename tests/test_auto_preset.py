@@ -18,8 +18,8 @@ from test_unsupervised import planted
 from napari_polarseg import cli
 from napari_polarseg import io as pio
 from napari_polarseg.engine import Pipeline, PolarsegError, SegmentParams
+from napari_polarseg.engine.analysis.timeseries import segment_timeseries
 from napari_polarseg.engine.params import AUTO, RECOMMENDED
-from napari_polarseg.engine.timeseries import segment_timeseries
 
 ANGLES = np.deg2rad([0.0, 45.0, 90.0, 135.0])
 

@@ -21,7 +21,7 @@ import tifffile
 from napari_polarseg import batch, cli
 from napari_polarseg.engine import PolarsegError
 from napari_polarseg.engine.params import RECOMMENDED
-from napari_polarseg.engine.synthetic import make_scene
+from napari_polarseg.engine.synthetic.scenes import make_scene
 
 # tasks defined here travel to the workers by value (the workers cannot import tests/)
 cloudpickle.register_pickle_by_value(sys.modules[__name__])

@@ -19,7 +19,7 @@ import napari_polarseg
 from napari_polarseg import cli
 from napari_polarseg import io as pio
 from napari_polarseg.engine import SegmentParams, diffuse_dop
-from napari_polarseg.engine.mosaic import mosaic_superpixel
+from napari_polarseg.engine.physics.mosaic import mosaic_superpixel
 
 ANGLES = np.arange(0.0, 180.0, 30.0)  # 6 frames
 H, W = 57, 63  # not multiples of the window

@@ -16,7 +16,9 @@ from skimage import io as skio
 from napari_polarseg import cli
 from napari_polarseg import io as pio
 from napari_polarseg.engine import SegmentParams
-from napari_polarseg.engine.colour_mosaic import (
+from napari_polarseg.engine.analysis.pixel_segmentation import PixelSegmenter
+from napari_polarseg.engine.errors import PolarsegError
+from napari_polarseg.engine.physics.colour_mosaic import (
     BAYER_ORDERS,
     LUMINANCE_WEIGHTS,
     colour_mosaic,
@@ -27,10 +29,8 @@ from napari_polarseg.engine.colour_mosaic import (
     demosaic_colour_superpixel,
     luminance,
 )
-from napari_polarseg.engine.errors import PolarsegError
+from napari_polarseg.engine.physics.polarimage import polarisation_image
 from napari_polarseg.engine.pipeline import Pipeline
-from napari_polarseg.engine.pixel_segmentation import PixelSegmenter
-from napari_polarseg.engine.polarimage import polarisation_image
 
 SONY = (90.0, 45.0, 135.0, 0.0)
 LAYOUTS = [SONY, (0.0, 45.0, 90.0, 135.0), (135.0, 0.0, 45.0, 90.0)]
@@ -340,7 +340,7 @@ def test_colour_features_separate_materials_of_one_luminance():
 def test_shift_frames_moves_every_colour_as_the_registration_moved_the_luminance():
     from scipy import ndimage
 
-    from napari_polarseg.engine.registration import register_stack, shift_frames
+    from napari_polarseg.engine.physics.registration import register_stack, shift_frames
 
     texture = ndimage.gaussian_filter(np.random.default_rng(7).normal(0, 1, (48, 48)), 3)
     s0 = np.stack([(150 + 800 * texture) * k for k in (1.0, 0.8, 0.6)])

@@ -6,8 +6,7 @@ import numpy as np
 import pytest
 from sklearn.metrics import adjusted_rand_score
 
-from napari_polarseg.engine.errors import PolarsegError
-from napari_polarseg.engine.evaluation import (
+from napari_polarseg.engine.analysis.evaluation import (
     STATISTICS_COLUMNS,
     adjusted_rand_index,
     block_accuracy,
@@ -15,6 +14,7 @@ from napari_polarseg.engine.evaluation import (
     segment_iou,
     segment_statistics,
 )
+from napari_polarseg.engine.errors import PolarsegError
 
 # three materials: 0 top-left, 1 right half, 2 bottom-left
 THREE = np.array(

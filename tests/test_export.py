@@ -15,8 +15,8 @@ from test_cli import CONTRACT
 from napari_polarseg import cli
 from napari_polarseg import io as pio
 from napari_polarseg.engine import Pipeline, PolarsegError, SegmentParams
-from napari_polarseg.engine.evaluation import evaluate
-from napari_polarseg.engine.synthetic import make_scene
+from napari_polarseg.engine.analysis.evaluation import evaluate
+from napari_polarseg.engine.synthetic.scenes import make_scene
 from napari_polarseg.export import OutputError, write_result_folder
 from napari_polarseg.io import read_params_dict
 

@@ -11,7 +11,8 @@ from napari_polarseg.engine import (
     mahalanobis_sq,
     pca_features,
 )
-from napari_polarseg.engine.features import harmonic_features, spatial_kernel
+from napari_polarseg.engine.features.pca import harmonic_features
+from napari_polarseg.engine.graph.affinity import spatial_kernel
 
 
 def test_mahalanobis_uses_inverse_covariance_eq_427():
@@ -79,7 +80,7 @@ def test_spatial_kernel():
 def test_affinity_from_kept_distances_and_float32():
     """exp(−D/s) from distances computed once equals the affinity built from scratch, in
     either mode; a float32 matrix holds the float64 values rounded."""
-    from napari_polarseg.engine.features import (
+    from napari_polarseg.engine.graph.affinity import (
         affinity_from_distances,
         effective_scale,
         median_offdiagonal,

@@ -172,7 +172,7 @@ def test_chunked_and_threaded_evaluation_equals_small_calls():
 @pytest.mark.parametrize("shape", [(40, 30), (43, 37)])  # whole blocks only / with strips
 def test_reconstruction_shortcut_equals_ridge_expansion(shape):
     """Î − λ'α (dual form, no weights) is Y a of the ridge coefficients, strips included."""
-    from napari_polarseg.engine.harmonics import pixel_block_index
+    from napari_polarseg.engine.features.harmonics import pixel_block_index
 
     theta, phi = random_normals(shape, seed=6)
     rng = np.random.default_rng(7)

@@ -37,5 +37,5 @@ def test_engine_sources_never_import_gui():
     import napari_polarseg.engine as eng
 
     pattern = re.compile(rf"^\s*(import|from)\s+({'|'.join(GUI_ROOTS)})\b(?!_)", re.M)
-    for path in Path(eng.__file__).parent.glob("*.py"):
+    for path in Path(eng.__file__).parent.rglob("*.py"):
         assert not pattern.search(path.read_text()), path

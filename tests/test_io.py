@@ -16,8 +16,8 @@ from skimage import io as skio
 
 from napari_polarseg import io as pio
 from napari_polarseg.engine import PolarsegError, polarisation_image
-from napari_polarseg.engine.mosaic import demosaic_superpixel, mosaic_superpixel
-from napari_polarseg.engine.registration import estimate_shift, register_stack
+from napari_polarseg.engine.physics.mosaic import demosaic_superpixel, mosaic_superpixel
+from napari_polarseg.engine.physics.registration import estimate_shift, register_stack
 
 ANGLES = np.array([0.0, 30.0, 60.0, 90.0, 120.0, 150.0])
 

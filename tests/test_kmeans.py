@@ -1,4 +1,4 @@
-"""The hand-written weighted k-means (engine/kmeans.py) against known answers and
+"""The hand-written weighted k-means (engine/unsupervised/kmeans.py) against known answers and
 against scikit-learn's KMeans."""
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ from sklearn.cluster import KMeans
 from sklearn.metrics import adjusted_rand_score
 
 from napari_polarseg.engine.errors import PolarsegError
-from napari_polarseg.engine.kmeans import weighted_kmeans
+from napari_polarseg.engine.unsupervised.kmeans import weighted_kmeans
 
 
 def blobs(seed: int, k: int = 3, n: int = 600, d: int = 3, spread: float = 0.3):

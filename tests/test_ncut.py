@@ -105,7 +105,7 @@ def fallen_apart(n=700, seed=0):
 
 
 def test_block_lobpcg_finds_the_smallest_eigenpair_on_a_clustered_spectrum():
-    from napari_polarseg.engine import ncut
+    from napari_polarseg.engine.graph import ncut
 
     W, group = fallen_apart()
     assert W.shape[0] > ncut.DENSE_EIGH_MAX  # the iterative path
@@ -165,19 +165,20 @@ def test_warm_started_tree_equals_cold_tree():
 @pytest.mark.parametrize("order", ["C", "F"])
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])
 def test_symmetric_product_takes_either_memory_order(order, dtype):
-    from napari_polarseg.engine.ncut import _symmetric_product
+    from napari_polarseg.engine.graph.dense_graph import symmetric_product
 
     rng = np.random.default_rng(0)
     A = rng.random((50, 50))
     A = np.asarray(A + A.T, dtype=dtype, order=order)
     X = rng.random((50, 3))
-    got = _symmetric_product(A)(np.asfortranarray(X, dtype=dtype))
+    got = symmetric_product(A)(np.asfortranarray(X, dtype=dtype))
     np.testing.assert_allclose(got, A @ X, rtol=1e-5 if dtype == np.float32 else 1e-12)
 
 
 @pytest.mark.parametrize("kept", [2400, 1000])  # through the whole matrix / own copy
 def test_dense_segment_products_degrees_and_split_sums(kept):
-    from napari_polarseg.engine.ncut import _DenseGraph, _lower_prefix_sums
+    from napari_polarseg.engine.graph.dense_graph import DenseGraph
+    from napari_polarseg.engine.graph.ncut import lower_prefix_sums
 
     rng = np.random.default_rng(1)
     n = 2500  # float32 products from FLOAT32_MIN_NODES
@@ -185,7 +186,7 @@ def test_dense_segment_products_degrees_and_split_sums(kept):
     W = (W + W.T) / 2
     idx = np.sort(rng.choice(n, kept, replace=False))
     sub = W[np.ix_(idx, idx)]
-    seg = _DenseGraph(W).segment(idx)
+    seg = DenseGraph(W).segment(idx)
     np.testing.assert_allclose(seg.d, sub.sum(1), rtol=1e-12)
     np.testing.assert_array_equal(seg.diag, np.diagonal(sub))
     X = rng.random((kept, 2))
@@ -194,14 +195,15 @@ def test_dense_segment_products_degrees_and_split_sums(kept):
     rank = np.empty(kept, dtype=int)
     rank[order] = np.arange(kept)
     want = np.where(rank[None, :] < rank[:, None], sub, 0.0).sum(1)[order]
-    np.testing.assert_allclose(_lower_prefix_sums(W, order, idx), want, rtol=1e-12)
+    np.testing.assert_allclose(lower_prefix_sums(W, order, idx), want, rtol=1e-12)
 
 
 @pytest.mark.parametrize("kept", [2400, 1000])  # the whole matrix minus outsiders / a copy
 def test_float32_affinity_is_used_as_is_with_float64_degrees(kept):
     """A float32 W of FLOAT32_MIN_NODES nodes or more (the pipeline's affinity) is the
     product matrix itself; degrees and prefix sums are accumulated in float64."""
-    from napari_polarseg.engine.ncut import FLOAT32_MIN_NODES, _DenseGraph, _lower_prefix_sums
+    from napari_polarseg.engine.graph.dense_graph import FLOAT32_MIN_NODES, DenseGraph
+    from napari_polarseg.engine.graph.ncut import lower_prefix_sums
 
     rng = np.random.default_rng(2)
     n = 2500
@@ -210,7 +212,7 @@ def test_float32_affinity_is_used_as_is_with_float64_degrees(kept):
     W64 = (W64 + W64.T) / 2
     W = W64.astype(np.float32)
     exact = W.astype(np.float64)  # the float32 values, summed exactly in float64
-    graph = _DenseGraph(W)
+    graph = DenseGraph(W)
     assert graph.W is W and graph.Wop is W  # no copy of the n² matrix
     np.testing.assert_allclose(graph.d, exact.sum(1), rtol=1e-12)
     idx = np.sort(rng.choice(n, kept, replace=False))
@@ -222,7 +224,7 @@ def test_float32_affinity_is_used_as_is_with_float64_degrees(kept):
     rank = np.empty(kept, dtype=int)
     rank[order] = np.arange(kept)
     want = np.where(rank[None, :] < rank[:, None], sub, 0.0).sum(1)[order]
-    got = _lower_prefix_sums(W, order, idx)
+    got = lower_prefix_sums(W, order, idx)
     assert got.dtype == np.float64
     np.testing.assert_allclose(got, want, rtol=1e-9)
 
@@ -246,7 +248,7 @@ def test_float32_tree_gives_the_float64_labels():
 
 
 def test_prefetch_solves_what_the_next_split_needs():
-    from napari_polarseg.engine import ncut
+    from napari_polarseg.engine.graph import ncut
 
     W, _ = fallen_apart(seed=0)
     tree = CutTree(W)
@@ -255,17 +257,17 @@ def test_prefetch_solves_what_the_next_split_needs():
     assert solved and set(solved) <= {0, 1, 2}  # the segments not solved yet
     assert list(tree.prefetch()) == []  # nothing left to solve
     calls = []
-    original = ncut._segment_vectors
+    original = ncut.segment_vectors
 
     def counting(*args, **kwargs):
         calls.append(1)
         return original(*args, **kwargs)
 
-    ncut._segment_vectors = counting
+    ncut.segment_vectors = counting
     try:
         four = tree.labels(4)
     finally:
-        ncut._segment_vectors = original
+        ncut.segment_vectors = original
     assert calls == []  # the 4th cut only compared the prefetched candidates
     np.testing.assert_array_equal(four, CutTree(W).labels(4))
 
@@ -292,7 +294,7 @@ def chain_of_groups(n_groups=200, size=5, eps=1e-2, seed=0):
 
 
 def test_cut_on_a_fallen_apart_graph_stops_at_its_product_cap():
-    from napari_polarseg.engine import ncut
+    from napari_polarseg.engine.graph import ncut
 
     size, cap = 5, 300
     W = chain_of_groups(size=size)
@@ -339,7 +341,7 @@ def isolated_graph(n=700, isolated=(42, 500), seed=0):
 
 
 def test_isolated_blocks_are_peeled_off_without_an_eigensolve():
-    from napari_polarseg.engine import ncut
+    from napari_polarseg.engine.graph import ncut
 
     W = isolated_graph()
     tree = CutTree(W)
@@ -362,14 +364,14 @@ def test_sparse_graph_that_fell_apart_is_solved_by_the_block_solver():
     """A kNN graph of 12-dimensional features at the thesis scale (s = 1): the most
     isolated node keeps all but 1e-5 of its degree. Lanczos alone made 161,000 products
     (4 minutes) at 8,000 nodes; the preconditioned block solver needs a few dozen."""
-    from napari_polarseg.engine import features as feat
-    from napari_polarseg.engine import ncut
+    from napari_polarseg.engine.graph import affinity as feat
+    from napari_polarseg.engine.graph import eigensolver, ncut
 
     x = np.random.default_rng(0).standard_normal((3000, 12))
     W = feat.knn_affinity(x, 1.0)
     d = np.asarray(W.sum(axis=1)).ravel()
     share = 1.0 - W.diagonal() / d
-    assert ncut.ISOLATED_NCUT < share.min() < ncut.FALLEN_APART
+    assert ncut.ISOLATED_NCUT < share.min() < eigensolver.FALLEN_APART
     tree = CutTree(W)
     labels = tree.labels(2)
     limits = tree.cut_limits(2)

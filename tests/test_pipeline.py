@@ -147,7 +147,10 @@ def test_intensity_baseline_full_size():
 
 def test_known_normals_come_back_through_the_pipeline():
     """A dome rendered with known normals and n gives its zenith and azimuth back."""
-    from napari_polarseg.engine.synthetic import diffuse_dop_from_transmission, render_stack
+    from napari_polarseg.engine.synthetic.optics import (
+        diffuse_dop_from_transmission,
+        render_stack,
+    )
 
     h = w = 96
     yy, xx = np.mgrid[:h, :w] - 47.5
@@ -224,12 +227,12 @@ def test_masked_out_blocks_are_no_graph_nodes_and_take_their_neighbours_label():
 
 def test_scale_change_reuses_the_distances_and_large_graphs_are_float32():
     """The squared distances are kept with the block features: a change of the affinity
-    scale recomputes only the exponential. From ncut.FLOAT32_MIN_NODES blocks the
+    scale recomputes only the exponential. From dense_graph.FLOAT32_MIN_NODES blocks the
     distances and the affinity are float32, and the labels equal those of the float64
     affinity (the issue's condition for float32)."""
-    from napari_polarseg.engine import features as feat
-    from napari_polarseg.engine import ncut
-    from napari_polarseg.engine.synthetic import make_scene
+    from napari_polarseg.engine.graph import affinity as feat
+    from napari_polarseg.engine.graph import dense_graph, ncut
+    from napari_polarseg.engine.synthetic.scenes import make_scene
 
     scene = make_scene("camouflage", shape=(200, 208), angles_deg=np.arange(0, 180, 30))
     p = SegmentParams(window=4, degree=4, n_segments=3, scale=2.0, scale_mode="median")
@@ -237,7 +240,7 @@ def test_scale_change_reuses_the_distances_and_large_graphs_are_float32():
     pipe.run(reconstruction=False)
     W = pipe.get("affinity")
     n = W.shape[0]
-    assert n >= ncut.FLOAT32_MIN_NODES and W.dtype == np.float32
+    assert n >= dense_graph.FLOAT32_MIN_NODES and W.dtype == np.float32
     D = pipe._distances[1]
     assert D.dtype == np.float32
     features = pipe.get("pca").features.reshape(n, -1)
@@ -258,7 +261,7 @@ def test_scale_change_reuses_the_distances_and_large_graphs_are_float32():
 
 
 def test_prefetch_makes_one_more_segment_free():
-    from napari_polarseg.engine import ncut
+    from napari_polarseg.engine.graph import ncut
 
     stack, _ = two_material_stack(shape=(96, 100))
     pipe = Pipeline(stack, ANGLES, SegmentParams(window=4, degree=4, n_segments=2))

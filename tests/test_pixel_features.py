@@ -1,11 +1,13 @@
 """Pixel feature stacks: names, the Stokes-averaged DoLP, the coarse-grid smoothing, filters."""
 
+import math
+
 import numpy as np
 import pytest
 from scipy import ndimage
 
 from napari_polarseg.engine.errors import PolarsegError
-from napari_polarseg.engine.pixel_features import (
+from napari_polarseg.engine.features.pixel_features import (
     GROUPS,
     PixelFeatureParams,
     gaussian_smooth,
@@ -14,7 +16,7 @@ from napari_polarseg.engine.pixel_features import (
     pyramid_factor,
     upsample,
 )
-from napari_polarseg.engine.superpixels import region_count, superpixels
+from napari_polarseg.engine.unsupervised.superpixels import REGION_AREA, superpixels
 
 
 def _image(shape=(96, 104), seed=0):
@@ -163,3 +165,8 @@ def test_bad_parameters_and_maps_raise():
         PixelFeatureParams.from_dict({"scales": [1], "colour": 1})
     p = PixelFeatureParams(scales=(1.0, 3.0), groups=("intensity",))
     assert PixelFeatureParams.from_dict(p.to_dict()) == p
+
+
+def region_count(shape: tuple[int, int], region_area: int = REGION_AREA) -> int:
+    """Number of seeds :func:`superpixels` places on an image of ``shape``."""
+    return max(1, int(round(math.prod(shape) / region_area)))

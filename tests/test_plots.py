@@ -1,13 +1,15 @@
-"""Plot data of the analyst's bench (engine/plots.py) and the PNGs of figures.save_plots."""
+"""Plot data of the analyst's bench (engine/analysis/plots.py), PNGs of figures.save_plots."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from napari_polarseg.engine import Pipeline, PolarsegError, SegmentParams, harmonics, plots
-from napari_polarseg.engine.harmonics import coefficient_index, degree_order
-from napari_polarseg.engine.synthetic import make_scene
+from napari_polarseg.engine import Pipeline, PolarsegError, SegmentParams
+from napari_polarseg.engine.analysis import plots
+from napari_polarseg.engine.features import harmonics
+from napari_polarseg.engine.features.harmonics import coefficient_index, degree_order
+from napari_polarseg.engine.synthetic.scenes import make_scene
 
 
 @pytest.fixture(scope="module")

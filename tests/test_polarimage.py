@@ -133,7 +133,7 @@ def test_integer_stack_is_fitted_without_a_float64_copy():
     chunk by chunk and gives the float fit's numbers, duplicate angles (0° and 180°)
     averaged, in the fast path and the robust one."""
     from napari_polarseg.engine import Pipeline, SegmentParams
-    from napari_polarseg.engine.polarimage import check_stack
+    from napari_polarseg.engine.physics.polarimage import check_stack
 
     rng = np.random.default_rng(4)
     angles = np.deg2rad(np.arange(0, 181, 20))  # 0 and 180: one state, two frames

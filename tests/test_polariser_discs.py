@@ -31,7 +31,7 @@ from skimage.filters import threshold_otsu
 from skimage.measure import label, regionprops
 
 from napari_polarseg.engine import polarisation_image, validity_mask
-from napari_polarseg.engine.mosaic import IMX250MZR_LAYOUT, demosaic_superpixel
+from napari_polarseg.engine.physics.mosaic import IMX250MZR_LAYOUT, demosaic_superpixel
 
 REPO = Path(__file__).resolve().parents[1]
 RELATIVE_DIR = "../shared/data/polanalyser"

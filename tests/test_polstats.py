@@ -1,11 +1,12 @@
-"""Block polarisation statistics (engine/polstats.py) against hand-computed blocks."""
+"""Block polarisation statistics (engine/features/polstats.py) against hand-computed blocks."""
 
 import numpy as np
 import pytest
 
-from napari_polarseg.engine import Pipeline, SegmentParams, polstats
+from napari_polarseg.engine import Pipeline, SegmentParams
 from napari_polarseg.engine.errors import PolarsegError
-from napari_polarseg.engine.synthetic import make_scene
+from napari_polarseg.engine.features import polstats
+from napari_polarseg.engine.synthetic.scenes import make_scene
 
 IDX = {name: i for i, name in enumerate(polstats.STAT_NAMES)}
 

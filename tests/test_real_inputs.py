@@ -32,7 +32,7 @@ from napari_polarseg.engine.limits import (
     memory_limit,
     parse_bytes,
 )
-from napari_polarseg.engine.mosaic import (
+from napari_polarseg.engine.physics.mosaic import (
     demosaic,
     demosaic_interpolated,
     demosaic_superpixel,
@@ -40,16 +40,15 @@ from napari_polarseg.engine.mosaic import (
     spread_flags_interpolated,
     subtract_dark,
 )
-from napari_polarseg.engine.polarimage import (
-    PixelMask,
+from napari_polarseg.engine.physics.pixel_mask import PixelMask, auto_saturation_level
+from napari_polarseg.engine.physics.polarimage import (
     angle_groups,
-    auto_saturation_level,
     average_duplicate_angles,
     duplicate_angle_frames,
     validity_mask,
 )
-from napari_polarseg.engine.registration import register_stack
-from napari_polarseg.engine.synthetic import make_scene
+from napari_polarseg.engine.physics.registration import register_stack
+from napari_polarseg.engine.synthetic.scenes import make_scene
 
 REPO = Path(__file__).resolve().parents[1]
 REAL_DIR = (REPO / ".." / "shared" / "data" / "polanalyser").resolve()

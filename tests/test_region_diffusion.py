@@ -1,11 +1,11 @@
-"""Edge-aware diffusion over the region graph (engine/region_diffusion.py)."""
+"""Edge-aware diffusion over the region graph (engine/unsupervised/region_diffusion.py)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from napari_polarseg.engine.region_diffusion import (
+from napari_polarseg.engine.unsupervised.region_diffusion import (
     MAX_STEPS,
     border_strength,
     diffuse,

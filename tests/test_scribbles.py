@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 
 from napari_polarseg.engine import Pipeline
+from napari_polarseg.engine.analysis.evaluation import adjusted_rand_index
+from napari_polarseg.engine.analysis.scribbles import classify_blocks, training_blocks
 from napari_polarseg.engine.errors import PolarsegError
-from napari_polarseg.engine.evaluation import adjusted_rand_index
 from napari_polarseg.engine.params import RECOMMENDED
-from napari_polarseg.engine.scribbles import classify_blocks, training_blocks
-from napari_polarseg.engine.synthetic import make_scene, scribble_strokes
+from napari_polarseg.engine.synthetic.scenes import make_scene, scribble_strokes
 
 #: Block side of the scribble mode on the 120 x 130 scenes: more, smaller blocks give
 #: the classifier more training examples from the same strokes (w = 12: ARI ~0.2).

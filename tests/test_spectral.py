@@ -1,4 +1,4 @@
-"""k-way spectral clustering (engine/spectral.py) against planted partitions and by hand."""
+"""k-way spectral clustering (engine/graph/spectral.py) against planted partitions and by hand."""
 
 import numpy as np
 import pytest
@@ -6,9 +6,10 @@ import scipy.linalg
 import scipy.sparse as sps
 from sklearn.metrics import adjusted_rand_score
 
-from napari_polarseg.engine import Pipeline, SegmentParams, spectral
+from napari_polarseg.engine import Pipeline, SegmentParams
 from napari_polarseg.engine.errors import PolarsegError
-from napari_polarseg.engine.synthetic import make_scene
+from napari_polarseg.engine.graph import spectral
+from napari_polarseg.engine.synthetic.scenes import make_scene
 
 
 def planted(sizes, p_in=0.9, p_out=0.05, noise=0.04, seed=0):

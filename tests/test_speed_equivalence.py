@@ -18,10 +18,10 @@ from napari_polarseg.engine import (
     Pipeline,
     SegmentParams,
     block_coefficients,
-    ncut,
     reconstruct_intensity,
 )
-from napari_polarseg.engine import features as feat
+from napari_polarseg.engine.graph import affinity as feat
+from napari_polarseg.engine.graph import ncut
 from napari_polarseg.engine.params import RECOMMENDED
 
 ROOT = Path(__file__).resolve().parents[1]

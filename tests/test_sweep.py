@@ -1,9 +1,12 @@
-"""Parameter sweep (engine/sweep.py): scores, best cell, cache reuse, cancel, tables."""
+"""Parameter sweep (engine/analysis/sweep.py): scores, best cell, cache reuse, cancel, tables."""
 
 from __future__ import annotations
 
+import csv
+import io as io_module
 import json
 import math
+from typing import Any
 
 import numpy as np
 import pytest
@@ -11,21 +14,23 @@ from sklearn.metrics import adjusted_rand_score, silhouette_score
 
 from napari_polarseg import io as pio
 from napari_polarseg.engine import Cancelled, PolarsegError, SegmentParams, diffuse_dop
-from napari_polarseg.engine.features import whiten
-from napari_polarseg.engine.params import RECOMMENDED
-from napari_polarseg.engine.sweep import (
-    COLUMNS,
-    SCORE_COLUMNS,
-    SCORES,
-    SweepResult,
+from napari_polarseg.engine.analysis.sweep import (
     block_silhouette,
     combined_score,
     iter_sweep,
     neighbour_stability,
-    read_csv_rows,
     sweep,
 )
-from napari_polarseg.engine.synthetic import make_scene
+from napari_polarseg.engine.analysis.sweep_result import (
+    COLUMNS,
+    SCORE_COLUMNS,
+    SCORES,
+    SweepCell,
+    SweepResult,
+)
+from napari_polarseg.engine.features.pca import whiten
+from napari_polarseg.engine.params import RECOMMENDED
+from napari_polarseg.engine.synthetic.scenes import make_scene
 
 ANGLES = np.deg2rad(np.arange(0.0, 180.0, 30.0))
 BASE = SegmentParams(n_segments=2)
@@ -302,3 +307,12 @@ def test_synthetic_leaves_small_grid():
     assert max(c.ari for c in res.cells if c.window == 30) < min(
         c.ari for c in res.cells if c.window != 30
     )
+
+
+def read_csv_rows(text: str) -> list[dict[str, Any]]:
+    """Rows of a :meth:`SweepResult.to_csv` table with their types (empty → NaN/None)."""
+    rows = []
+    for raw in csv.DictReader(io_module.StringIO(text)):
+        cell = SweepCell.from_dict(raw)
+        rows.append(cell.row())
+    return rows

@@ -9,18 +9,13 @@ import pytest
 from scipy import ndimage
 
 from napari_polarseg.engine.errors import PolarsegError
-from napari_polarseg.engine.synthetic import (
-    DEFAULT_ANGLES_DEG,
-    MATERIALS,
-    SCENES,
-    Material,
+from napari_polarseg.engine.synthetic.optics import (
     diffuse_dop_from_transmission,
     fresnel_transmission_amplitudes,
-    fresnel_transmittances,
-    make_scene,
     render_stack,
-    render_surface,
 )
+from napari_polarseg.engine.synthetic.scenes import DEFAULT_ANGLES_DEG, SCENES, make_scene
+from napari_polarseg.engine.synthetic.surface import MATERIALS, Material, render_surface
 
 SAMPLE_DIR = Path(__file__).resolve().parents[1] / "napari_polarseg" / "sample_data"
 
@@ -506,3 +501,31 @@ def test_sample_data_files(name):
     sc = make_scene(name)
     np.testing.assert_array_equal(labels, sc.labels)
     np.testing.assert_array_equal(stack, sc.stack)
+
+
+def fresnel_transmittances(zenith, n) -> tuple[np.ndarray, np.ndarray]:
+    """Fresnel power transmittances for light leaving a dielectric into air.
+
+    Parameters
+    ----------
+    zenith : array_like
+        Exit angle θ in radians, in [0, π/2].
+    n : array_like
+        Refractive index of the material relative to air (dimensionless, >= 1).
+
+    Returns
+    -------
+    T_s, T_p : ndarray
+        ``T = (cos θ / (n cos θ_i)) |t|²`` for the s and p components (fractions of the
+        power incident from inside). Both are 0 at grazing exit (θ = π/2).
+
+    See Also
+    --------
+    fresnel_transmission_amplitudes
+    """
+    theta, n = np.asarray(zenith, dtype=float), np.asarray(n, dtype=float)
+    t_s, t_p = fresnel_transmission_amplitudes(theta, n)
+    sin_i = np.sin(theta) / n
+    cos_i = np.sqrt(np.clip(1.0 - sin_i**2, 0.0, None))
+    factor = np.cos(theta) / (n * cos_i)
+    return factor * t_s**2, factor * t_p**2

@@ -11,15 +11,14 @@ from scipy import ndimage
 from sklearn.metrics import roc_auc_score
 
 from napari_polarseg import cli
-from napari_polarseg.engine import PolarsegError, harmonics, polarimage
-from napari_polarseg.engine import synthetic as syn
+from napari_polarseg.engine import PolarsegError
+from napari_polarseg.engine.analysis.change_test import change_statistics
+from napari_polarseg.engine.analysis.timeseries import METHODS, segment_timeseries
+from napari_polarseg.engine.features import harmonics
 from napari_polarseg.engine.params import RECOMMENDED
-from napari_polarseg.engine.timeseries import (
-    METHODS,
-    change_map,
-    change_statistics,
-    segment_timeseries,
-)
+from napari_polarseg.engine.physics import polarimage
+from napari_polarseg.engine.synthetic import geometry, optics, surface
+from napari_polarseg.engine.synthetic import scenes as syn
 
 #: RECOMMENDED with two segments (fruit, bruise) and a smaller minimum segment.
 PARAMS = RECOMMENDED.replace(n_segments=2, min_segment_blocks=2)
@@ -33,41 +32,41 @@ def render_fruit_days(
     Same geometry, texture and micro-facets every day (the same view of the same fruit);
     on each day the bruise is the day-1 bruise grown by ``grow_px[t]`` pixels (a
     distance threshold on the supersampled grid) and the sensor noise is new. Built
-    from the generator's own pieces (``_fruit_geometry``, ``render_surface``,
-    ``render_stack``), replaying :func:`~napari_polarseg.engine.synthetic.make_scene`.
+    from the generator's own pieces (``fruit_geometry``, ``render_surface``,
+    ``render_stack``), replaying :func:`~napari_polarseg.engine.synthetic.scenes.make_scene`.
 
     Returns angles (radians), the uint16 stacks and the ground-truth labels per day.
     """
     geo_seq, tex_seq, rough_seq, noise_seq = np.random.SeedSequence(seed).spawn(4)
-    grid = syn._Grid(shape, syn._SUPERSAMPLE)
-    p, q, mat, materials, groups = syn._fruit_geometry(np.random.default_rng(geo_seq), grid)
-    field = syn._unit_field(np.random.default_rng(tex_seq), grid, syn._TEXTURE_SIGMA_PX)
-    texture = np.clip(1.0 + syn._TEXTURE_STD * field, 0.5, None)
-    distance = ndimage.distance_transform_edt(mat != 1) / syn._SUPERSAMPLE  # pixels
+    grid = geometry.Grid(shape, syn.SUPERSAMPLE)
+    p, q, mat, materials, groups = geometry.fruit_geometry(np.random.default_rng(geo_seq), grid)
+    field = geometry.unit_field(np.random.default_rng(tex_seq), grid, syn.TEXTURE_SIGMA_PX)
+    texture = np.clip(1.0 + syn.TEXTURE_STD * field, 0.5, None)
+    distance = ndimage.distance_transform_edt(mat != 1) / syn.SUPERSAMPLE  # pixels
     angles = np.deg2rad(syn.DEFAULT_ANGLES_DEG)
     noise = noise_seq.spawn(len(grow_px))
     stacks, truths = [], []
-    surfaces: dict[float, syn.SurfaceRender] = {}
+    surfaces: dict[float, surface.SurfaceRender] = {}
     for day, grow in enumerate(grow_px):
         day_mat = (distance <= grow).astype(np.intp) if grow > 0 else mat
-        surf = surfaces.get(grow) or syn.render_surface(
+        surf = surfaces.get(grow) or surface.render_surface(
             p,
             q,
             day_mat,
             materials,
-            supersample=syn._SUPERSAMPLE,
+            supersample=syn.SUPERSAMPLE,
             texture=texture,
-            light_zenith_deg=syn._LIGHT_ZENITH_DEG,
-            light_azimuth_deg=syn._LIGHT_AZIMUTH_DEG,
-            ambient=syn._AMBIENT,
-            target_intensity=syn._TARGET_INTENSITY,
+            light_zenith_deg=syn.LIGHT_ZENITH_DEG,
+            light_azimuth_deg=syn.LIGHT_AZIMUTH_DEG,
+            ambient=syn.AMBIENT,
+            target_intensity=syn.TARGET_INTENSITY,
             albedo_groups=groups,
-            facets=syn._FACETS,
+            facets=syn.FACETS,
             rng=np.random.default_rng(rough_seq),
         )
         surfaces[grow] = surf
         stacks.append(
-            syn.render_stack(
+            optics.render_stack(
                 surf.intensity,
                 surf.dop,
                 surf.phase,
@@ -97,9 +96,9 @@ def figures(result, truths) -> dict[str, float]:
     unchanged = before == after
     grown = (before == 0) & (after == 1)
     w = result.change_window
-    block_grown = harmonics._blockify(grown.astype(float), w).mean(-1)
-    touched = harmonics._blockify((~unchanged).astype(float), w).mean(-1)
-    in_map = harmonics._blockify(result.changes[0].astype(float), w).mean(-1) > 0.5
+    block_grown = harmonics.blockify(grown.astype(float), w).mean(-1)
+    touched = harmonics.blockify((~unchanged).astype(float), w).mean(-1)
+    in_map = harmonics.blockify(result.changes[0].astype(float), w).mean(-1) > 0.5
     blocks = ((block_grown > 0.5) | (touched == 0)).ravel()
     sel = unchanged | grown
     return {
@@ -234,7 +233,7 @@ def test_labels_share_one_numbering_and_a_growing_change_stays_one_segment() -> 
     for t in range(2):
         np.testing.assert_array_equal(res.changes[t], change_map(res.labels[t], res.labels[t + 1]))
         # only significant change blocks move
-        moved = harmonics._blockify(res.changes[t].astype(float), 6).mean(-1) > 0
+        moved = harmonics.blockify(res.changes[t].astype(float), 6).mean(-1) > 0
         assert not (moved & ~res.change_significant[t]).any()
     # the growth on both days went into the same changed segment
     main = max(res.changed_segments, key=lambda s: s["blocks"])
@@ -269,10 +268,10 @@ def test_change_statistics_of_a_known_change() -> None:
     patch[12:24, 18:36] = True
     dop = np.where(patch, 0.7 * scene.dop, scene.dop)
     inten = np.where(patch, 0.99 * scene.intensity, scene.intensity) * 1.05  # + exposure
-    stack = syn.render_stack(inten, dop, scene.phase, scene.angles, noise_sigma=0.001, rng=0)
+    stack = optics.render_stack(inten, dop, scene.phase, scene.angles, noise_sigma=0.001, rng=0)
     after = polarimage.polarisation_image(stack, scene.angles)
     st = change_statistics(pol, after, 6)
-    expected = harmonics._blockify(patch.astype(float), 6).mean(-1) > 0
+    expected = harmonics.blockify(patch.astype(float), 6).mean(-1) > 0
     np.testing.assert_array_equal(st.significant, expected)
     assert st.gain == pytest.approx(1.05, rel=1e-3)
     assert np.all(st.mean[expected][:, 0] < -0.005)  # Î 1 % lower (after the gain)
@@ -378,7 +377,8 @@ def test_cli_timeseries_needs_two_inputs(tmp_path, capsys) -> None:
 def test_polarisation_statistics_share_one_standardisation_over_the_days():
     # two days of the same scene, the second uniformly brighter: per-day z-scores would
     # erase that difference; the shared basis must keep it
-    from napari_polarseg.engine import Pipeline, polstats
+    from napari_polarseg.engine import Pipeline
+    from napari_polarseg.engine.features import polstats
 
     sc = syn.make_scene("leaves", shape=(64, 72), seed=3)
     params = RECOMMENDED.replace(window=8, features="polstats", n_segments=2)
@@ -398,7 +398,7 @@ def test_cli_timeseries_with_a_saved_classifier(tmp_path, capsys) -> None:
     """--classifier labels every day with the same classes."""
     inputs, truths = _fruit_day_files(tmp_path)
     strokes = tmp_path / "strokes.npy"
-    from napari_polarseg.engine.synthetic import scribble_strokes
+    from napari_polarseg.engine.synthetic.scenes import scribble_strokes
 
     np.save(strokes, scribble_strokes(truths[0], per_material=8, length=10))
     clf = tmp_path / "fruit.polarseg-clf"
@@ -422,3 +422,24 @@ def test_cli_timeseries_with_a_saved_classifier(tmp_path, capsys) -> None:
         ["timeseries", *inputs, "--out", str(tmp_path / "s2"), "--classifier", str(bad)]
     )
     assert code == 2 and "bad.polarseg-clf" in capsys.readouterr().err
+
+
+def change_map(before: np.ndarray, after: np.ndarray) -> np.ndarray:
+    """Where two labellings of the same view disagree (True = the segment changed).
+
+    Moved here from the engine (only the tests used it): ``TimeSeriesResult.changes``
+    must equal it for consecutive days.
+
+    Parameters
+    ----------
+    before, after : array (H, W) of int
+        Labels of two consecutive days.
+
+    Returns
+    -------
+    ndarray (H, W) bool
+    """
+    a, b = np.asarray(before), np.asarray(after)
+    if a.shape != b.shape:
+        raise PolarsegError(f"labels of {a.shape} and {b.shape} cannot be compared")
+    return a != b

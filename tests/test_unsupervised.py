@@ -1,4 +1,4 @@
-"""Unsupervised segmentation on superpixels (engine/unsupervised.py)."""
+"""Unsupervised segmentation on superpixels (engine/unsupervised/segmenter.py)."""
 
 from __future__ import annotations
 
@@ -7,10 +7,12 @@ import pytest
 from sklearn.metrics import adjusted_rand_score
 
 from napari_polarseg.engine.errors import PolarsegError
-from napari_polarseg.engine.unsupervised import (
+from napari_polarseg.engine.unsupervised.params import (
     CLUSTERINGS,
     NODE_FEATURES,
     UnsupervisedParams,
+)
+from napari_polarseg.engine.unsupervised.segmenter import (
     dop_given_intensity,
     node_features,
     polarisation_superpixels,

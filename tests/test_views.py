@@ -13,13 +13,17 @@ import pytest
 from skimage.color import rgb2hsv
 
 from napari_polarseg.engine import PolarsegError, polarisation_image
-from napari_polarseg.engine.stokes import STOKES_COMPONENTS, STOKES_CONVENTION, stokes_components
-from napari_polarseg.engine.views import (
+from napari_polarseg.engine.analysis.views import (
     CompositeParams,
     aolp_dolp_composite,
     auto_dolp_max,
     hsv_planes,
     intensity_value,
+)
+from napari_polarseg.engine.physics.stokes import (
+    STOKES_COMPONENTS,
+    STOKES_CONVENTION,
+    stokes_components,
 )
 
 RNG = np.random.default_rng(14)

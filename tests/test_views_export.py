@@ -18,9 +18,13 @@ from test_cli import CONTRACT, run, two_material_scene
 
 from napari_polarseg import cli, export
 from napari_polarseg.engine import Pipeline, PolarsegError, SegmentParams
-from napari_polarseg.engine.evaluation import adjusted_rand_index
-from napari_polarseg.engine.synthetic import make_scene
-from napari_polarseg.engine.views import CompositeParams, aolp_dolp_composite, auto_dolp_max
+from napari_polarseg.engine.analysis.evaluation import adjusted_rand_index
+from napari_polarseg.engine.analysis.views import (
+    CompositeParams,
+    aolp_dolp_composite,
+    auto_dolp_max,
+)
+from napari_polarseg.engine.synthetic.scenes import make_scene
 from napari_polarseg.export import (
     COMPOSITE_FILE,
     STOKES_FILE,

@@ -11,10 +11,36 @@ Beside the cut: :func:`pixel_features` (multi-scale per-pixel features) →
 pipeline's polarisation image by :class:`PixelSegmenter`.
 """
 
-from .colour_mosaic import demosaic_colour, luminance
+from .analysis.pixel_classifier import (
+    ClassifierParams,
+    PixelClassifier,
+    PixelPrediction,
+    predict_pixels,
+    train_pixel_classifier,
+)
+from .analysis.pixel_segmentation import PixelSegmentation, PixelSegmenter
+from .analysis.sweep_result import SweepCell, SweepResult  # sweep(): analysis.sweep.sweep
 from .errors import Cancelled, PolarsegError
-from .features import PCAResult, affinity_matrix, mahalanobis_sq, pca_features, whiten
-from .fresnel import (
+from .features.harmonics import (
+    block_coefficients,
+    block_grid,
+    coefficient_index,
+    degree_order,
+    n_coefficients,
+    pixel_block_index,
+    real_sph_harm,
+    reconstruct_intensity,
+    upsample_block_labels,
+)
+from .features.pca import PCAResult, mahalanobis_sq, pca_features, whiten
+from .features.pixel_features import FeatureStack, PixelFeatureParams, pixel_features
+from .graph.affinity import affinity_matrix
+from .graph.eigensolver import fiedler_vector
+from .graph.ncut import CutTree, best_split, bipartition, recursive_ncut
+from .limits import check_pipeline_memory, estimate_pipeline_bytes
+from .params import SegmentParams
+from .physics.colour_mosaic import demosaic_colour, luminance
+from .physics.fresnel import (
     ZenithEstimate,
     azimuth_from_phase,
     brewster_angle,
@@ -28,42 +54,18 @@ from .fresnel import (
     zenith_from_dop,
     zenith_from_specular_dop,
 )
-from .harmonics import (
-    block_coefficients,
-    block_grid,
-    coefficient_index,
-    degree_order,
-    n_coefficients,
-    pixel_block_index,
-    real_sph_harm,
-    reconstruct_intensity,
-    upsample_block_labels,
-)
-from .limits import check_pipeline_memory, estimate_pipeline_bytes
-from .mosaic import demosaic, demosaic_interpolated, demosaic_superpixel, subtract_dark
-from .ncut import CutTree, best_split, bipartition, fiedler_vector, recursive_ncut
-from .params import SegmentParams
-from .pipeline import STAGES, Pipeline, SegmentationResult, intensity_baseline, segment
-from .pixel_classifier import (
-    ClassifierParams,
-    PixelClassifier,
-    PixelPrediction,
-    predict_pixels,
-    train_pixel_classifier,
-)
-from .pixel_features import FeatureStack, PixelFeatureParams, pixel_features
-from .pixel_segmentation import PixelSegmentation, PixelSegmenter
-from .polarimage import (
-    PixelMask,
+from .physics.mosaic import demosaic, demosaic_interpolated, demosaic_superpixel, subtract_dark
+from .physics.pixel_mask import PixelMask
+from .physics.polarimage import (
     PolarisationImage,
     average_duplicate_angles,
     distinct_angle_count,
     polarisation_image,
     validity_mask,
 )
-from .registration import register_stack
-from .superpixels import region_means, superpixels
-from .sweep import SweepCell, SweepResult  # the function: engine.sweep.sweep
+from .physics.registration import register_stack
+from .pipeline import STAGES, Pipeline, SegmentationResult, intensity_baseline, segment
+from .unsupervised.superpixels import region_means, superpixels
 
 __all__ = [
     "STAGES",

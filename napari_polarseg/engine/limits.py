@@ -16,6 +16,7 @@ from __future__ import annotations
 import os
 import re
 
+from .chunks import CHUNK_BYTES
 from .errors import PolarsegError
 from .params import SegmentParams
 
@@ -23,8 +24,6 @@ from .params import SegmentParams
 DEFAULT_MAX_BYTES = 8 * 2**30
 #: Environment variable overriding :data:`DEFAULT_MAX_BYTES`.
 ENV_VAR = "POLARSEG_MAX_BYTES"
-#: Harmonics evaluation chunk assumed by the estimate (engine/harmonics.py).
-HARMONICS_CHUNK_BYTES = 64 * 2**20
 
 _UNITS = {"": 1, "B": 1, "K": 2**10, "M": 2**20, "G": 2**30, "T": 2**40}
 
@@ -99,10 +98,8 @@ def check_bytes(needed: float, what: str, limit: int | float | None = None) -> N
 
 def _graph_kind(blocks: int, params: SegmentParams) -> str:
     """How the pipeline will store the block graph ("dense", "knn" or "spatial")."""
-    try:
-        from .pipeline import affinity_graph_kind
-    except ImportError:  # pragma: no cover - older pipeline: always dense
-        return "dense"
+    from .pipeline import affinity_graph_kind
+
     return affinity_graph_kind(blocks, params)
 
 
@@ -126,11 +123,11 @@ def estimate_pipeline_bytes(shape: tuple[int, int, int], params: SegmentParams) 
     if kind == "dense":
         graph = 5 * blocks * blocks
     else:
-        radius = float(getattr(params, "spatial_radius", 0.0))
+        radius = float(params.spatial_radius)
         neighbours = 30 if kind == "knn" else int(3.2 * (radius + 1) ** 2)
         graph = 6 * blocks * neighbours + 40 * blocks
     total = 8 * (6 * n * pixels + 24 * pixels + 4 * blocks * k + graph)
-    return int(total + 2 * HARMONICS_CHUNK_BYTES)
+    return int(total + 2 * CHUNK_BYTES)
 
 
 def check_pipeline_memory(

@@ -28,11 +28,14 @@ from typing import Any, NamedTuple
 import numpy as np
 from scipy import ndimage
 
-from . import features as feat
-from . import fresnel, harmonics, ncut, polarimage, polstats, spectral, unsupervised
-from .degenerate import DegenerateCheck, degenerate_result
+from .analysis.degenerate import DegenerateCheck, degenerate_result
 from .errors import Cancelled, PolarsegError
+from .features import harmonics, polstats
+from .features import pca as feat
+from .graph import affinity, dense_graph, ncut, spectral
 from .params import SegmentParams
+from .physics import fresnel, polarimage
+from .unsupervised import segmenter as unsupervised
 
 #: Stage names in execution order.
 STAGES = (
@@ -84,7 +87,7 @@ def valid_blocks(valid: np.ndarray, window: int) -> np.ndarray:
     if valid.all():
         grid = harmonics.block_grid(valid.shape, window)
         return np.ones(grid[0] * grid[1], dtype=bool)
-    used = harmonics._blockify(valid.astype(np.float64), window).mean(axis=-1)
+    used = harmonics.blockify(valid.astype(np.float64), window).mean(axis=-1)
     return (used >= MIN_VALID_BLOCK_FRACTION).ravel()
 
 
@@ -489,9 +492,9 @@ class Pipeline:
             kind = affinity_graph_kind(n, p)
             grid = self.get("harmonics").shape[:2]
             if kind == "knn":
-                return feat.knn_affinity(features, p.scale, p.scale_mode)
+                return affinity.knn_affinity(features, p.scale, p.scale_mode)
             if kind == "spatial":
-                W = feat.spatial_affinity(
+                W = affinity.spatial_affinity(
                     pca.features, grid, p.spatial_radius, p.spatial_sigma, p.scale, p.scale_mode
                 )
                 return W if valid.all() else W.tocsr()[valid][:, valid]
@@ -502,7 +505,7 @@ class Pipeline:
                 )
             W = self._dense_affinity(features, p)
             if p.spatial_radius > 0:
-                W *= feat.spatial_kernel(grid, p.spatial_radius, p.spatial_sigma)[
+                W *= affinity.spatial_kernel(grid, p.spatial_radius, p.spatial_sigma)[
                     np.ix_(valid, valid)
                 ]
             return W
@@ -581,16 +584,16 @@ class Pipeline:
         if self._distances is None or self._distances[0] != key:
             self._distances = None  # free the old matrix before building the new one
             n = features.shape[0]
-            dtype = np.float32 if n >= ncut.FLOAT32_MIN_NODES else np.float64
+            dtype = np.float32 if n >= dense_graph.FLOAT32_MIN_NODES else np.float64
             D = feat.mahalanobis_sq(features, dtype, out=self._matrices.take((n, n), dtype))
             self._distances = [key, D, None]
         cached = self._distances
         D = cached[1]
         mode = p.scale_mode if D.shape[0] >= 2 else "absolute"
         if mode == "median" and cached[2] is None:
-            cached[2] = feat.median_offdiagonal(D)
-        scale = feat.effective_scale(p.scale, mode, cached[2])
-        return feat.affinity_from_distances(D, scale, out=self._matrices.take(D.shape, D.dtype))
+            cached[2] = affinity.median_offdiagonal(D)
+        scale = affinity.effective_scale(p.scale, mode, cached[2])
+        return affinity.affinity_from_distances(D, scale, out=self._matrices.take(D.shape, D.dtype))
 
     def block_vectors(self, standardise: bool = True) -> np.ndarray:
         """Feature vector of every block (rows·cols, F) for the current ``features`` kind.
@@ -853,7 +856,7 @@ class Pipeline:
         self, scribbles: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]:
         """(block labels, pixel labels, probability maps, classes, training blocks)."""
-        from .scribbles import classify_blocks, training_blocks
+        from .analysis.scribbles import classify_blocks, training_blocks
 
         scribbles = np.asarray(scribbles)
         shape = self.stack.shape[1:]
@@ -900,10 +903,10 @@ def intensity_baseline(
     Returns pixel labels (H, W) covering the whole image.
     """
     nby, nbx = harmonics.block_grid(intensity.shape, window)
-    blocks = harmonics._blockify(intensity, window)  # (nby, nbx, w*w)
+    blocks = harmonics.blockify(intensity, window)  # (nby, nbx, w*w)
     x = np.stack([blocks.mean(-1), blocks.std(-1)], axis=-1).reshape(-1, 2)
     if not np.all(x.var(axis=0) > 0):
         x = x + 1e-12 * np.arange(x.shape[0])[:, None]
-    W = feat.affinity_matrix(x, scale)
+    W = affinity.affinity_matrix(x, scale)
     block = ncut.recursive_ncut(W, n_segments, min_size=min_segment_blocks).reshape(nby, nbx)
     return harmonics.upsample_block_labels(block, intensity.shape, window)

@@ -49,12 +49,12 @@ from napari.utils.notifications import show_error
 from qtpy.QtCore import QCoreApplication, QTimer
 
 from ..engine import Pipeline, PolarsegError, SegmentationResult, SegmentParams, validity_mask
+from ..engine.analysis.pixel_segmentation import PixelSegmenter
 from ..engine.errors import Cancelled
-from ..engine.pixel_segmentation import PixelSegmenter
 
 if TYPE_CHECKING:
-    from ..engine.pixel_classifier import PixelClassifier, PixelPrediction
-    from ..engine.pixel_segmentation import PixelSegmentation
+    from ..engine.analysis.pixel_classifier import PixelClassifier, PixelPrediction
+    from ..engine.analysis.pixel_segmentation import PixelSegmentation
 
 Stage = tuple[str, int, int]
 Job = Callable[..., Generator[Any, None, Any]]

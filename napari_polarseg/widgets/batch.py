@@ -37,13 +37,10 @@ from napari.utils.notifications import show_error
 
 from .. import batch as batch_engine
 from ..engine import PolarsegError, SegmentParams
+from ..engine.analysis.change_test import DEFAULT_FALSE_ALARM
+from ..engine.analysis.timeseries import METHODS, segment_timeseries
+from ..engine.analysis.timeseries_result import TimeSeriesResult
 from ..engine.params import AUTO, RECOMMENDED
-from ..engine.timeseries import (
-    DEFAULT_FALSE_ALARM,
-    METHODS,
-    TimeSeriesResult,
-    segment_timeseries,
-)
 from ._base import ScrollingContainer, is_angle_stack
 from ._layers import ANGLES_KEY, label_colormap
 from ._runner import WorkerSlot, parse_angles

@@ -14,7 +14,8 @@ import numpy as np
 from magicgui.widgets import ComboBox, PushButton
 
 from .. import figures
-from ..engine import STAGES, Pipeline, PolarsegError, SegmentParams, plots, validity_mask
+from ..engine import STAGES, Pipeline, PolarsegError, SegmentParams, validity_mask
+from ..engine.analysis import plots
 from ._base import StackWidget
 from ._layers import TAG, find_output, fitted_limits, source_key
 from ._runner import CLASSIFIER_STAGES, ClassifierOutput, classifier_stages, content_digest
@@ -23,8 +24,8 @@ if TYPE_CHECKING:
     import napari
     from napari.layers import Layer
 
+    from ..engine.analysis.pixel_classifier import PixelClassifier
     from ..engine.pipeline import SegmentationResult
-    from ..engine.pixel_classifier import PixelClassifier
 
 #: Plot menu: text shown → key.
 PLOTS = (
@@ -68,7 +69,7 @@ def segment_job(
     Returns the result, or for the classifier the
     :class:`~napari_polarseg.widgets._runner.ClassifierOutput` (result and classifier).
     """
-    from ..engine.pixel_segmentation import PixelSegmenter
+    from ..engine.analysis.pixel_segmentation import PixelSegmenter
 
     stack = np.asarray(data)
     mask = validity_mask(stack, saturation="auto", dark_level=0, region=region)

@@ -13,9 +13,9 @@ from ..engine import (
     polarisation_image,
     zenith_from_dop,
 )
+from ..engine.analysis.views import CompositeParams, aolp_dolp_composite, auto_dolp_max
 from ..engine.params import MODELS, SPECULAR_BRANCHES
-from ..engine.stokes import stokes_components
-from ..engine.views import CompositeParams, aolp_dolp_composite, auto_dolp_max
+from ..engine.physics.stokes import stokes_components
 from ._base import StackWidget
 from ._layers import find_output, show_output, source_key
 

@@ -26,7 +26,7 @@ from ..engine.params import (
     SCALE_MODES,
     SPECULAR_BRANCHES,
 )
-from ..engine.stokes import stokes_components
+from ..engine.physics.stokes import stokes_components
 from ..io import read_params_file
 from ._base import StackWidget
 from ._layers import find_output, label_colormap, remove_output, show_output, source_key
@@ -47,7 +47,7 @@ if TYPE_CHECKING:
     import napari
     from napari.layers import Layer
 
-    from ..engine.pixel_classifier import PixelClassifier
+    from ..engine.analysis.pixel_classifier import PixelClassifier
 
 #: Milliseconds the live update waits after the last change before it reruns.
 LIVE_DELAY_MS = 150

@@ -22,7 +22,8 @@ from magicgui.widgets import ComboBox, Container, LineEdit, PushButton, SpinBox,
 from .. import figures
 from .. import io as pio
 from ..engine import PolarsegError, SegmentParams, validity_mask
-from ..engine.sweep import DEFAULT_SCORE, SCORES, SweepResult, check_grid, iter_sweep
+from ..engine.analysis.sweep import check_grid, iter_sweep
+from ..engine.analysis.sweep_result import DEFAULT_SCORE, SCORES, SweepResult
 from ._base import StackWidget
 from .batch import params_from
 from .plots import napari_theme

@@ -8,9 +8,10 @@ from _gui_helpers import click
 from scipy import ndimage
 
 from napari_polarseg import batch, cli
+from napari_polarseg.engine.analysis.timeseries import segment_timeseries
 from napari_polarseg.engine.params import RECOMMENDED
-from napari_polarseg.engine.synthetic import DEFAULT_NOISE_SIGMA, make_scene, render_stack
-from napari_polarseg.engine.timeseries import segment_timeseries
+from napari_polarseg.engine.synthetic.optics import render_stack
+from napari_polarseg.engine.synthetic.scenes import DEFAULT_NOISE_SIGMA, make_scene
 from napari_polarseg.widgets.batch import (
     BatchWidget,
     TimeSeriesWidget,

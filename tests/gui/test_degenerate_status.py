@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 from _gui_helpers import click, engine_result, error_messages, run_and_wait, wait_idle
 
-from napari_polarseg.engine import Cancelled, SegmentParams, ncut
+from napari_polarseg.engine import Cancelled, SegmentParams
+from napari_polarseg.engine.graph import ncut
 from napari_polarseg.engine.params import RECOMMENDED
 
 pytestmark = pytest.mark.gui
@@ -52,7 +53,7 @@ def slow_products(monkeypatch):
     """Every product of the cut's eigensolvers takes until ``release`` (at most 30 s),
     checking the run's cancel request every 5 ms as the solvers do between products."""
     entered, release = threading.Event(), threading.Event()
-    original = ncut._Budget.take
+    original = ncut.Budget.take
 
     def take(self, columns, stop=None):
         entered.set()
@@ -63,7 +64,7 @@ def slow_products(monkeypatch):
             time.sleep(0.005)
         return original(self, columns, stop)
 
-    monkeypatch.setattr(ncut._Budget, "take", take)
+    monkeypatch.setattr(ncut.Budget, "take", take)
     yield entered, release
     release.set()
 

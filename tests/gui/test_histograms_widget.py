@@ -8,8 +8,8 @@ import numpy as np
 from _gui_helpers import run_and_wait, wait_idle
 from matplotlib.colors import to_rgba
 
-from napari_polarseg.engine import plots
-from napari_polarseg.engine.harmonics import reconstruct_intensity
+from napari_polarseg.engine.analysis import plots
+from napari_polarseg.engine.features.harmonics import reconstruct_intensity
 from napari_polarseg.widgets.plots import HISTOGRAM_BLOCKS, HISTOGRAM_DEGREES
 
 

@@ -9,7 +9,7 @@ from napari.layers import Image, Labels
 
 from napari_polarseg.engine import Pipeline, SegmentParams, validity_mask
 from napari_polarseg.engine.params import RECOMMENDED
-from napari_polarseg.engine.synthetic import make_scene
+from napari_polarseg.engine.synthetic.scenes import make_scene
 from napari_polarseg.widgets._layers import TAG
 
 pytestmark = pytest.mark.gui

@@ -13,7 +13,7 @@ from _gui_helpers import run_and_wait
 from skimage import io as skio
 
 from napari_polarseg import _reader
-from napari_polarseg.engine.mosaic import mosaic_superpixel
+from napari_polarseg.engine.physics.mosaic import mosaic_superpixel
 
 
 def _two_materials(h: int = 24, w: int = 32) -> np.ndarray:

@@ -12,12 +12,12 @@ from _gui_helpers import Gate, click, error_messages, run_and_wait, wait_idle
 from napari.layers import Image
 from napari.utils.notifications import notification_manager
 
-import napari_polarseg.engine.pixel_segmentation as pixel_segmentation_module
+import napari_polarseg.engine.analysis.pixel_segmentation as pixel_segmentation_module
 from napari_polarseg.classifier_file import SUFFIX, load_pixel_classifier
 from napari_polarseg.engine import Pipeline, validity_mask
+from napari_polarseg.engine.analysis.pixel_segmentation import PixelSegmenter
 from napari_polarseg.engine.errors import Cancelled
-from napari_polarseg.engine.pixel_segmentation import PixelSegmenter
-from napari_polarseg.engine.synthetic import scribble_strokes
+from napari_polarseg.engine.synthetic.scenes import scribble_strokes
 from napari_polarseg.widgets._layers import source_key
 from napari_polarseg.widgets.plots import TOP_FEATURES
 from napari_polarseg.widgets.segment import CUT_ONLY, SegmentWidget

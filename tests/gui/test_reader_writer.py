@@ -191,7 +191,7 @@ def test_raw_polarisation_camera_frames_open_as_four_angle_stacks(tmp_path):
 def _colour_scene(h: int = 32, w: int = 40) -> tuple[np.ndarray, np.ndarray]:
     """Raw IMX250MYR-like frame (4h x 4w, uint16) of two halves with one luminance but
     R polarised on the left and B on the right; and the truth (h x w)."""
-    from napari_polarseg.engine.colour_mosaic import LUMINANCE_WEIGHTS, colour_mosaic
+    from napari_polarseg.engine.physics.colour_mosaic import LUMINANCE_WEIGHTS, colour_mosaic
 
     truth = np.zeros((h, w), dtype=np.uint8)
     truth[:, w // 2 :] = 1
@@ -213,7 +213,7 @@ def test_a_colour_polarisation_frame_opens_as_colour_and_scribbles_use_every_col
     from _gui_helpers import run_and_wait
     from skimage import io as skio
 
-    from napari_polarseg.engine.colour_mosaic import demosaic_colour_superpixel, luminance
+    from napari_polarseg.engine.physics.colour_mosaic import demosaic_colour_superpixel, luminance
     from napari_polarseg.widgets._layers import source_key
 
     raw, truth = _colour_scene()

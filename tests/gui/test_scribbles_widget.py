@@ -9,10 +9,10 @@ from _gui_helpers import click, error_messages, run_and_wait, wait_idle
 from napari.layers import Image, Labels
 
 from napari_polarseg.engine import Pipeline, validity_mask
-from napari_polarseg.engine.evaluation import adjusted_rand_index
+from napari_polarseg.engine.analysis.evaluation import adjusted_rand_index
+from napari_polarseg.engine.analysis.pixel_segmentation import PixelSegmenter
 from napari_polarseg.engine.params import RECOMMENDED
-from napari_polarseg.engine.pixel_segmentation import PixelSegmenter
-from napari_polarseg.engine.synthetic import scribble_strokes
+from napari_polarseg.engine.synthetic.scenes import scribble_strokes
 from napari_polarseg.widgets._layers import TAG
 from napari_polarseg.widgets.segment import CUT_ONLY, NO_SCRIBBLES
 

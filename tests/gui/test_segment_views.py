@@ -7,8 +7,12 @@ import numpy as np
 from _gui_helpers import error_messages, run_and_wait
 
 from napari_polarseg.engine import polarisation_image
-from napari_polarseg.engine.stokes import stokes_components
-from napari_polarseg.engine.views import CompositeParams, aolp_dolp_composite, auto_dolp_max
+from napari_polarseg.engine.analysis.views import (
+    CompositeParams,
+    aolp_dolp_composite,
+    auto_dolp_max,
+)
+from napari_polarseg.engine.physics.stokes import stokes_components
 from napari_polarseg.widgets._layers import TAG
 
 FAST = {"window": 10, "degree": 5, "n_segments": 3}

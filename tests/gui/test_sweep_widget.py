@@ -8,8 +8,8 @@ import numpy as np
 from _gui_helpers import click, error_messages, run_and_wait, wait_idle
 
 from napari_polarseg.engine import SegmentParams
+from napari_polarseg.engine.analysis.sweep import sweep
 from napari_polarseg.engine.params import RECOMMENDED
-from napari_polarseg.engine.sweep import sweep
 from napari_polarseg.widgets.segment import SegmentWidget
 from napari_polarseg.widgets.sweep import SweepWidget
 

@@ -26,7 +26,7 @@ def test_run_and_cancel_buttons_have_tooltips(viewer, add_widget, name):
 
 
 def test_time_series_offers_no_superpixel_preset(viewer, add_widget):
-    # the time series cuts one block graph of all days (engine.timeseries refuses
+    # the time series cuts one block graph of all days (engine.analysis.timeseries refuses
     # clustering="superpixels"), so its parameter menu has no preset auto
     widget = add_widget("Time series change map")
     assert "auto" not in widget.source.choices

@@ -12,8 +12,12 @@ import pytest
 from _gui_helpers import SAMPLES, error_messages, run_and_wait
 
 from napari_polarseg.engine import polarisation_image
-from napari_polarseg.engine.stokes import stokes_components
-from napari_polarseg.engine.views import CompositeParams, aolp_dolp_composite, auto_dolp_max
+from napari_polarseg.engine.analysis.views import (
+    CompositeParams,
+    aolp_dolp_composite,
+    auto_dolp_max,
+)
+from napari_polarseg.engine.physics.stokes import stokes_components
 from napari_polarseg.widgets import polarisation as polarisation_module
 from napari_polarseg.widgets._layers import TAG
 

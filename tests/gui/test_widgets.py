@@ -117,7 +117,7 @@ def test_thesis_defaults_run_off_the_gui_thread(
     """Thesis defaults (w = 10, L = 12): Run returns at once; the event loop keeps turning."""
     from threadpoolctl import threadpool_info
 
-    from napari_polarseg.engine.synthetic import make_scene
+    from napari_polarseg.engine.synthetic.scenes import make_scene
 
     blas_threads = {pool["filepath"]: pool["num_threads"] for pool in threadpool_info()}
     # large enough that the computation takes a while even with the fast engine

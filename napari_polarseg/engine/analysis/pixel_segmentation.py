@@ -1,0 +1,222 @@
+"""Scribble-guided segmentation of a pipeline's image by the pixel classifier.
+
+:class:`PixelSegmenter` sits beside a :class:`~.pipeline.Pipeline`: it takes the
+pipeline's polarisation image (Î, ρ, φ; thesis eq. 3.14), keeps the pixel feature stack
+(:mod:`.pixel_features`) while the feature parameters stay the same, trains the pixel
+classifier (:mod:`.pixel_classifier`) on scribbles or applies a trained one, and
+assembles a :class:`~.pipeline.SegmentationResult` whose labels are the classifier's —
+the thesis stages (harmonics, PCA, reconstruction) still give the maps and the error map
+of the segmentation contract; affinity and cut are not computed.
+
+For a colour-polarisation camera (:mod:`.colour_mosaic`) the pipeline runs on the
+luminance stack and the segmenter is also given the (colour, angle, H, W) stack: the
+features are then those of the luminance image (plain names, as for a mono camera)
+followed by those of every colour's own polarisation image (names prefixed ``"R:"``,
+``"G:"``, ``"B:"``; :func:`~.pixel_features.multichannel_features`), so the classifier
+can tell materials apart by the colour of their polarised reflection as well.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from ..features.harmonics import top_left_block_labels
+from ..features.pixel_features import (
+    EPS_INTENSITY,
+    FeatureStack,
+    PixelFeatureParams,
+    multichannel_features,
+    pixel_features,
+)
+from ..physics.colour_mosaic import COLOURS, colour_polarisation_images
+from ..pipeline import Pipeline, SegmentationResult
+from .pixel_classifier import (
+    ClassifierParams,
+    PixelClassifier,
+    PixelPrediction,
+    predict_pixels,
+    train_pixel_classifier,
+)
+
+
+@dataclass(frozen=True)
+class PixelSegmentation:
+    """What :meth:`PixelSegmenter.segment` returns.
+
+    Attributes
+    ----------
+    result : SegmentationResult
+        Labels = class index 0..K−1 at pixel resolution (block labels: the label at each
+        block's top-left pixel); no Ncut values.
+    prediction : PixelPrediction
+        Probabilities (K, H, W), uncertainty (H, W), classes.
+    classifier : PixelClassifier
+        The classifier that was trained or applied.
+    seconds : dict
+        ``features``, ``train`` (0 when applied), ``predict``.
+    """
+
+    result: SegmentationResult
+    prediction: PixelPrediction
+    classifier: PixelClassifier
+    seconds: dict[str, float] = field(default_factory=dict)
+
+
+@dataclass
+class PixelSegmenter:
+    """Pixel features and the pixel classifier on a pipeline's polarisation image.
+
+    Parameters
+    ----------
+    pipeline : Pipeline
+        Its ``polarisation`` stage gives Î, ρ, φ and the invalid pixels (which do not
+        train the classifier).
+    colour_stack : array (C, N, H, W), optional
+        Per-colour stacks of a colour-polarisation camera whose luminance is the
+        pipeline's stack (same angles, size and alignment); their polarisation images
+        (fitted like the pipeline's, with its sample weights) add features.
+    colours : tuple of str
+        Names of the colours of ``colour_stack`` (feature-name prefixes).
+    """
+
+    pipeline: Pipeline
+    colour_stack: np.ndarray | None = None
+    colours: tuple[str, ...] = COLOURS
+    _features: tuple[Any, FeatureStack] | None = field(default=None, init=False, repr=False)
+    _colour_images: tuple[int, list] | None = field(default=None, init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        if self.colour_stack is not None:
+            shape = np.shape(self.colour_stack)
+            if len(shape) != 4 or shape[1:] != self.pipeline.stack.shape:
+                raise ValueError(
+                    f"a colour stack {shape} does not match the pipeline's stack "
+                    f"{self.pipeline.stack.shape}"
+                )
+            if len(self.colours) != shape[0]:
+                raise ValueError(f"{shape[0]} colours but names {self.colours}")
+
+    def colour_images(self) -> list:
+        """Polarisation images of every colour (empty without a colour stack), fitted
+        like the pipeline's (its robust setting and sample weights) and kept."""
+        if self.colour_stack is None:
+            return []
+        pol = self.pipeline.get("polarisation")
+        if self._colour_images is None or self._colour_images[0] != id(pol):
+            mask = self.pipeline.mask
+            weights = mask.sample_weights if bool(np.any(mask.flags)) else None
+            images = colour_polarisation_images(
+                self.colour_stack,
+                self.pipeline.angles,
+                robust=self.pipeline.params.fit == "robust",
+                weights=weights,
+            )
+            self._colour_images = (id(pol), images)
+        return self._colour_images[1]
+
+    def features(
+        self, params: PixelFeatureParams | None = None, colour: bool = True
+    ) -> FeatureStack:
+        """The feature stack for ``params`` (kept while the image and params stay):
+        the luminance image's features and, with ``colour`` and a colour stack, every
+        colour's."""
+        params = params or PixelFeatureParams()
+        pol = self.pipeline.get("polarisation")
+        colour = colour and self.colour_stack is not None
+        key = (id(pol), params, colour)
+        if self._features is None or self._features[0] != key:
+            if colour:
+                images = [(pol.intensity, pol.dop, pol.phase)]
+                images += [(c.intensity, c.dop, c.phase) for c in self.colour_images()]
+                feats = multichannel_features(images, params, channels=["", *self.colours])
+            else:
+                feats = pixel_features(pol.intensity, pol.dop, pol.phase, params)
+            self._features = (key, feats)
+        return self._features[1]
+
+    @property
+    def cached_features(self) -> FeatureStack | None:
+        """The feature stack kept from the last :meth:`features` call (None before).
+
+        The same object until the polarisation image or the feature parameters change:
+        retraining on new scribbles does not recompute it.
+        """
+        return None if self._features is None else self._features[1]
+
+    def guide(self) -> np.ndarray:
+        """Guide image of the edge-aware smoothing: log Î."""
+        pol = self.pipeline.get("polarisation")
+        return np.log(np.maximum(pol.intensity, EPS_INTENSITY)).astype(np.float32)
+
+    def train(
+        self,
+        scribbles: np.ndarray,
+        feature_params: PixelFeatureParams | None = None,
+        params: ClassifierParams | None = None,
+    ) -> PixelClassifier:
+        """Fit the classifier on the scribbled valid pixels."""
+        feats = self.features(feature_params)
+        valid = ~self.pipeline.get("polarisation").invalid
+        return train_pixel_classifier(feats, scribbles, params, valid=valid)
+
+    def segment(
+        self,
+        scribbles: np.ndarray | None = None,
+        classifier: PixelClassifier | None = None,
+        *,
+        feature_params: PixelFeatureParams | None = None,
+        params: ClassifierParams | None = None,
+        reconstruction: bool = True,
+        cancel: Any = None,
+    ) -> PixelSegmentation:
+        """Train on ``scribbles`` (or apply ``classifier``) and label every pixel.
+
+        Exactly one of ``scribbles`` and ``classifier`` is given. A given classifier
+        brings its own feature parameters (``feature_params`` is then ignored).
+        """
+        if (scribbles is None) == (classifier is None):
+            raise ValueError("give scribbles or a classifier, not both or neither")
+        seconds: dict[str, float] = {}
+        t0 = time.perf_counter()
+        fparams = classifier.feature_params if classifier is not None else feature_params
+        colour = classifier is None or any(
+            name.split(":", 1)[0] in self.colours for name in classifier.feature_names
+        )
+        feats = self.features(fparams, colour)
+        seconds["features"] = time.perf_counter() - t0
+        seconds["train"] = 0.0  # an applied classifier is not retrained
+        if classifier is None:
+            t0 = time.perf_counter()
+            classifier = self.train(scribbles, feats.params, params)
+            seconds["train"] = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        guide = self.guide() if classifier.params.smoothing > 0 else None
+        prediction = predict_pixels(classifier, feats, guide=guide, cancel=cancel)
+        seconds["predict"] = time.perf_counter() - t0
+        result = self.result(prediction.labels, reconstruction, seconds)
+        return PixelSegmentation(result, prediction, classifier, seconds)
+
+    def result(
+        self, labels: np.ndarray, reconstruction: bool, seconds: dict[str, float]
+    ) -> SegmentationResult:
+        """A :class:`SegmentationResult` of the pipeline's maps and these pixel labels."""
+        pipe = self.pipeline
+        block = top_left_block_labels(labels, pipe.params.window)
+        names = ["polarisation", "normals", "harmonics", "pca"]
+        names += ["reconstruction"] if reconstruction else []
+        for name in names:
+            pipe.get(name)
+        timings = {s: pipe.stage_seconds(s) for s in names}
+        timings["pixel_classifier"] = float(sum(seconds.values()))
+        return pipe.assemble_result(
+            block,
+            labels.astype(np.int64),
+            [],
+            reconstruction,
+            timings=timings,
+            recomputed=names + ["pixel_classifier"],
+        )

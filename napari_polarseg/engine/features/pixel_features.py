@@ -1,0 +1,497 @@
+"""Per-pixel feature stacks from the polarisation image, at several scales.
+
+The thesis segments w × w blocks. A pixel classifier (ilastik, napari-apoc, convpaint)
+instead describes every pixel by filters of the image at a few scales, so its labels
+follow the material boundaries rather than the block grid. This module computes such a
+stack from the polarisation image (Î, ρ, φ) of :func:`~.polarimage.polarisation_image`.
+
+The linear Stokes components of eq. 3.14, I(α) = Î (1 + ρ cos(2α − 2φ)), are
+``S0 = Î``, ``S1 = Î ρ cos 2φ``, ``S2 = Î ρ sin 2φ`` (units of the input; the S0 of
+this module is the *mean* intensity, half the usual total-intensity S0). Smoothing the
+Stokes components before taking the degree of linear polarisation,
+
+    DoLP_σ = |(G_σ * S1, G_σ * S2)| / (G_σ * S0),
+
+averages the noise out of the vector before its length is taken, so it carries no
+upward noise bias (unlike G_σ * ρ); the two together measure how coherent the
+polarisation is inside the window. Feature groups (:data:`GROUPS`), each at every
+scale σ (pixels):
+
+- ``intensity``: log(G_σ * Î) and its local contrast √(G_σ(log² Î) − (G_σ log Î)²);
+- ``polarisation``: DoLP_σ (above), G_σ * ρ, the local spread of ρ and the AoLP
+  coherence |G_σ * e^{2iφ}|;
+- ``zenith``: θ, the diffuse zenith (eq. 3.13, radians) of DoLP_σ at the assumed n —
+  a monotonic function of DoLP_σ, so it adds nothing to a tree classifier; kept for
+  linear models and for reading importances in physical terms;
+- ``filters``: the ilastik / APOC filter set on log Î and on ρ — difference of
+  Gaussians (G_σ − G_1.6σ), gradient magnitude, Laplacian, the two eigenvalues of the
+  structure tensor and of the Hessian;
+- ``regions``: the mean of every other feature of σ ≤ 4 over the pixel's superpixel
+  (:mod:`.superpixels`: edge-following regions of ``region_area`` px), named
+  ``"region:<feature>@<σ>"`` — what the whole patch of surface looks like, not only the
+  pixel's neighbourhood, so one material's shades share a description;
+- ``invariant``: features that do not change with the shading level — DoLP_σ / G_σ ρ
+  (polarisation coherence), spread of ρ / G_σ ρ, the slope and correlation of ρ
+  against log Î in the window (within one material the two vary together with the
+  zenith, thesis section 6.2), and ρ relative to its surround (G_σ ρ / G_2σ ρ).
+
+At σ ≥ 4 every local mean is taken on a block-averaged grid (factor 2 at σ = 4 and 8,
+4 at σ = 16, :func:`pyramid_factor`) and the finished features are interpolated back
+(:func:`gaussian_smooth`, :func:`upsample`): 4–16× fewer pixels to filter, within
+0.5 % of the feature's range of full-resolution filtering (tested). Every feature is
+float32; names are ``"<feature>@<σ>"`` with an optional ``"<channel>:"`` prefix for
+multi-channel inputs.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import numpy as np
+from scipy import ndimage
+
+from ..errors import PolarsegError
+from ..physics.fresnel import zenith_from_diffuse_dop
+from ..unsupervised.superpixels import auto_region_area, region_means, superpixels
+
+#: Feature groups (module docstring), in the order their features appear.
+GROUPS = ("intensity", "polarisation", "zenith", "filters", "invariant", "regions")
+#: Automatic superpixel area: the image's pixels / this, within the two bounds below
+#: (a 1224 × 1024 frame: ~420 px regions; a 120 × 130 scene: 64 px).
+PIXELS_PER_REGION_SEED = 3000
+MIN_REGION_AREA = 64
+MAX_REGION_AREA = 1024
+#: Scales (σ ≤ this, pixels) whose features the ``regions`` group averages.
+REGION_MAX_SIGMA = 4.0
+#: Below this σ (pixels) a map is filtered at full resolution.
+PYRAMID_MIN_SIGMA = 4.0
+#: Floor added to ρ and DoLP before a ratio (ρ of a pixel is rarely exactly 0).
+EPS_DOP = 1e-4
+#: Floor of Î before its logarithm (units of the input).
+EPS_INTENSITY = 1e-6
+
+
+@dataclass(frozen=True)
+class PixelFeatureParams:
+    """What the pixel feature stack holds.
+
+    Attributes
+    ----------
+    scales : tuple of float
+        Gaussian σ of every scale, pixels (> 0).
+    groups : tuple of str
+        Feature groups from :data:`GROUPS`. The default is the set that measured best
+        on the rendered scenes and the hand-labelled real frames together
+        (``benchmarks/evaluate.py``); ``filters`` helped a real frame and hurt the
+        rendered scenes, ``zenith`` is redundant for trees.
+    refractive_index : float
+        n of the diffuse Fresnel model (eq. 3.13) for the zenith feature θ.
+    region_area : int
+        Mean superpixel area of the ``regions`` group, pixels; 0 = one region per
+        :data:`PIXELS_PER_REGION_SEED`-th of the image, within
+        [:data:`MIN_REGION_AREA`, :data:`MAX_REGION_AREA`].
+    """
+
+    scales: tuple[float, ...] = (1.0, 2.0, 4.0, 8.0, 16.0)
+    groups: tuple[str, ...] = ("intensity", "polarisation", "invariant", "regions")
+    refractive_index: float = 1.45
+    region_area: int = 0
+
+    def __post_init__(self) -> None:
+        scales = tuple(float(s) for s in self.scales)
+        if not scales or not all(math.isfinite(s) and s > 0 for s in scales):
+            raise PolarsegError(f"feature scales must be positive numbers, got {self.scales!r}")
+        groups = tuple(str(g) for g in self.groups)
+        unknown = [g for g in groups if g not in GROUPS]
+        if not groups or unknown:
+            raise PolarsegError(
+                f"feature groups must be some of {', '.join(GROUPS)}; got {self.groups!r}"
+            )
+        if not (math.isfinite(self.refractive_index) and self.refractive_index > 1):
+            raise PolarsegError(f"refractive_index must be > 1, got {self.refractive_index}")
+        object.__setattr__(self, "scales", scales)
+        object.__setattr__(self, "groups", groups)
+        object.__setattr__(self, "refractive_index", float(self.refractive_index))
+        if int(self.region_area) < 0 or (0 < int(self.region_area) < 4):
+            raise PolarsegError(f"region_area must be 0 (auto) or >= 4, got {self.region_area}")
+        object.__setattr__(self, "region_area", int(self.region_area))
+
+    def regions_of(self, shape: tuple[int, int]) -> int:
+        """Superpixel area (pixels) used on an image of ``shape``."""
+        if self.region_area:
+            return self.region_area
+        return auto_region_area(shape, PIXELS_PER_REGION_SEED, MIN_REGION_AREA, MAX_REGION_AREA)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready form (lists for tuples)."""
+        d = asdict(self)
+        return {k: list(v) if isinstance(v, tuple) else v for k, v in d.items()}
+
+    @classmethod
+    def from_dict(cls, values: dict[str, Any]) -> PixelFeatureParams:
+        """Inverse of :meth:`to_dict`; unknown keys raise :class:`PolarsegError`."""
+        known = {"scales", "groups", "refractive_index", "region_area"}
+        extra = sorted(set(values) - known)
+        if extra:
+            raise PolarsegError(f"unknown pixel feature parameters: {', '.join(extra)}")
+        try:
+            return cls(
+                scales=tuple(values.get("scales", cls.scales)),
+                groups=tuple(values.get("groups", cls.groups)),
+                refractive_index=float(values.get("refractive_index", cls.refractive_index)),
+                region_area=int(values.get("region_area", cls.region_area)),
+            )
+        except (TypeError, ValueError) as exc:
+            raise PolarsegError(f"bad pixel feature parameters ({exc})") from None
+
+
+@dataclass(frozen=True)
+class FeatureStack:
+    """A float32 feature stack and the name of every feature.
+
+    Attributes
+    ----------
+    planes : ndarray (F, H, W) float32
+        One image per feature (the layout the filters write; interleaving them into
+        (H, W, F) would copy the whole stack once more, which at 200 features of a
+        camera frame costs more than the chunked copies :meth:`rows` makes).
+    names : tuple of str
+        ``names[f]`` describes ``planes[f]``.
+    params : PixelFeatureParams
+    """
+
+    planes: np.ndarray
+    names: tuple[str, ...]
+    params: PixelFeatureParams = field(default_factory=PixelFeatureParams)
+
+    @property
+    def data(self) -> np.ndarray:
+        """(H, W, F) view of the features (no copy)."""
+        return np.moveaxis(self.planes, 0, -1)
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """(H, W)."""
+        return self.planes.shape[1:]
+
+    @property
+    def n_features(self) -> int:
+        return self.planes.shape[0]
+
+    def pixels(self, where: np.ndarray) -> np.ndarray:
+        """(n, F) C-contiguous float32 rows of the pixels where ``where`` (H, W) is True."""
+        return np.ascontiguousarray(self.planes[:, where].T)
+
+    def take(self, index: np.ndarray) -> np.ndarray:
+        """(n, F) C-contiguous float32 rows of the pixels at flat (row-major) ``index``."""
+        return np.ascontiguousarray(self.planes.reshape(self.n_features, -1)[:, index].T)
+
+    def rows(self, start: int, stop: int) -> np.ndarray:
+        """(n, F) C-contiguous float32 rows of image rows ``start:stop``, row-major."""
+        block = self.planes[:, start:stop].reshape(self.n_features, -1)
+        return np.ascontiguousarray(block.T)
+
+
+def _block_mean(a: np.ndarray, f: int) -> np.ndarray:
+    """Mean of f × f blocks; the edge blocks repeat their last row/column."""
+    h, w = a.shape
+    hh, ww = -(-h // f) * f, -(-w // f) * f
+    padded = np.pad(a, ((0, hh - h), (0, ww - w)), mode="edge")
+    return padded.reshape(hh // f, f, ww // f, f).mean(axis=(1, 3), dtype=np.float32)
+
+
+def _upsample_axis(x: np.ndarray, f: int, axis: int) -> np.ndarray:
+    """Linear interpolation by an integer factor f along one axis (pixel-area grid).
+
+    Block k covers fine pixels k·f … k·f + f − 1, so fine pixel k·f + a sits at
+    u = (a + ½)/f − ½ blocks from block k's centre: the same as ``scipy.ndimage.zoom(…,
+    order=1, grid_mode=True, mode="nearest")`` (tested), written out because zoom costs
+    4× as much (it evaluates a general spline per output pixel).
+    """
+    x = np.moveaxis(x, axis, 0)
+    padded = np.concatenate([x[:1], x, x[-1:]])  # padded[k + 1] = x[k]
+    n = x.shape[0]
+    out = np.empty((n, f) + x.shape[1:], dtype=np.float32)
+    for a in range(f):
+        u = (a + 0.5) / f - 0.5
+        if u < 0:
+            out[:, a] = padded[:n] * (-u) + padded[1 : n + 1] * (1 + u)
+        else:
+            out[:, a] = padded[1 : n + 1] * (1 - u) + padded[2 : n + 2] * u
+    return np.moveaxis(out.reshape((n * f,) + x.shape[1:]), 0, axis)
+
+
+def upsample(small: np.ndarray, f: int, shape: tuple[int, int]) -> np.ndarray:
+    """A map of the f-times coarser grid interpolated back to ``shape`` (H, W)."""
+    if f == 1:
+        return small
+    return _upsample_axis(_upsample_axis(small, f, 0), f, 1)[: shape[0], : shape[1]]
+
+
+def pyramid_factor(sigma: float) -> int:
+    """Grid coarsening used at scale ``sigma``: 1 below σ = 4, 2 up to σ = 16, then
+    2^⌊log2(σ/4)⌋ (keeps the filter at ≥ 2 coarse pixels, error ≤ 0.2 % of the range)."""
+    if sigma < PYRAMID_MIN_SIGMA:
+        return 1
+    return max(2, 2 ** int(math.floor(math.log2(sigma / 4))))
+
+
+def level_sigma(sigma: float, f: int) -> float:
+    """σ to filter with on the f-times coarser grid for an effective σ on the fine one.
+
+    Block averaging and linear interpolation back each blur by about f²/8 px²
+    (variance), so the coarse filter supplies the rest: √(σ² − f²/4) / f.
+    """
+    if f == 1:
+        return float(sigma)
+    return math.sqrt(max(sigma**2 - f**2 / 4.0, 0.25)) / f
+
+
+def gaussian_smooth(a: np.ndarray, sigma: float) -> np.ndarray:
+    """G_σ * a (float32), through a coarser grid for σ ≥ 8 (module docstring)."""
+    f = pyramid_factor(sigma)
+    a = np.asarray(a, dtype=np.float32)
+    small = a if f == 1 else _block_mean(a, f)
+    out = ndimage.gaussian_filter(small, level_sigma(sigma, f), truncate=3.0)
+    return upsample(out, f, a.shape)
+
+
+def _smooth(a: np.ndarray, s: float) -> np.ndarray:
+    return ndimage.gaussian_filter(a, s, truncate=3.0)
+
+
+def _filters(x: np.ndarray, s: float, f: int) -> dict[str, np.ndarray]:
+    """The ilastik/APOC filter set of ``x`` at grid scale s, in fine-pixel units.
+
+    Difference of Gaussians (G_σ − G_1.6σ), gradient magnitude |∇G_σ x|, Laplacian
+    ∇²G_σ x, the larger and smaller eigenvalues of the structure tensor G_σ(∇x ∇xᵀ)
+    (gradients at the inner scale σ/2) and of the Hessian of G_σ x. Derivatives on a
+    grid f times coarser are divided by f (first) or f² (second order).
+    """
+    g = _smooth(x, s)
+    gr, gc = np.gradient(g)
+    rr, rc = np.gradient(gr)
+    cc = np.gradient(gc, axis=1)
+    inner = _smooth(x, max(s / 2, 0.5))
+    ir, ic = np.gradient(inner)
+    jrr, jcc, jrc = (_smooth(v, s) for v in (ir * ir, ic * ic, ir * ic))
+    st_mean, st_half = (jrr + jcc) / 2, np.hypot((jrr - jcc) / 2, jrc)
+    h_mean, h_half = (rr + cc) / 2, np.hypot((rr - cc) / 2, rc)
+    f1, f2 = float(f), float(f * f)
+    return {
+        "dog": g - _smooth(x, 1.6 * s),
+        "gradient": np.hypot(gr, gc) / f1,
+        "laplacian": (rr + cc) / f2,
+        "structure_max": (st_mean + st_half) / f2,
+        "structure_min": (st_mean - st_half) / f2,
+        "hessian_max": (h_mean + h_half) / f2,
+        "hessian_min": (h_mean - h_half) / f2,
+    }
+
+
+def _ratio(num: np.ndarray, den: np.ndarray) -> np.ndarray:
+    return num / (den + EPS_DOP)
+
+
+def _spread(mean_sq: np.ndarray, mean: np.ndarray) -> np.ndarray:
+    return np.sqrt(np.maximum(mean_sq - mean * mean, 0))
+
+
+#: Per-pixel products whose local means the features need (names used below).
+MOMENTS = ("s0", "s1", "s2", "dop", "dop2", "cos2", "sin2", "logi", "logi2", "logi_dop")
+
+
+#: Moments each group needs.
+GROUP_MOMENTS = {
+    "intensity": ("s0", "logi", "logi2"),
+    "polarisation": ("s0", "s1", "s2", "dop", "dop2", "cos2", "sin2"),
+    "zenith": ("s0", "s1", "s2"),
+    "filters": ("logi", "dop"),
+    "invariant": ("s0", "s1", "s2", "dop", "dop2", "logi", "logi2", "logi_dop"),
+    "regions": (),
+}
+
+
+def _moments(
+    intensity: np.ndarray, dop: np.ndarray, phase: np.ndarray, groups: Sequence[str]
+) -> dict[str, np.ndarray]:
+    """The per-pixel products (:data:`MOMENTS`) the chosen groups need."""
+    need = {m for g in groups for m in GROUP_MOMENTS[g]}
+    log_i = np.log(np.maximum(intensity, EPS_INTENSITY))
+    # centred on the image's median: local variances and covariances of log Î are
+    # differences of means, which lose float32 digits when log Î is far from 0
+    log_i -= np.float32(np.median(log_i))
+    c, s = np.cos(2 * phase), np.sin(2 * phase)
+    make = {
+        "s0": lambda: intensity,
+        "s1": lambda: intensity * dop * c,
+        "s2": lambda: intensity * dop * s,
+        "dop": lambda: dop,
+        "dop2": lambda: dop * dop,
+        "cos2": lambda: c,
+        "sin2": lambda: s,
+        "logi": lambda: log_i,
+        "logi2": lambda: log_i * log_i,
+        "logi_dop": lambda: log_i * dop,
+    }
+    return {k: make[k]() for k in MOMENTS if k in need}
+
+
+def _level_features(
+    m: dict[str, np.ndarray], sigma: float, f: int, params: PixelFeatureParams
+) -> dict[str, np.ndarray]:
+    """Every feature of the chosen groups at scale σ from the moments on grid level f."""
+    s = level_sigma(sigma, f)
+    groups = params.groups
+    smoothed = {m for g in groups if g != "filters" for m in GROUP_MOMENTS[g]}
+    g = {k: _smooth(v, s) for k, v in m.items() if k in smoothed}
+    if {"s1", "s2"} <= g.keys():
+        dolp = np.hypot(g["s1"], g["s2"]) / np.maximum(g["s0"], EPS_INTENSITY)
+    if "logi2" in g:
+        var_log = np.maximum(g["logi2"] - g["logi"] ** 2, 0)
+    if "dop2" in g:
+        rho = g["dop"]
+        var_rho = np.maximum(g["dop2"] - rho * rho, 0)
+    out: dict[str, np.ndarray] = {}
+    if "intensity" in groups:
+        out["log_intensity"] = np.log(np.maximum(g["s0"], EPS_INTENSITY))
+        out["intensity_contrast"] = np.sqrt(var_log)
+    if "polarisation" in groups:
+        out["dolp"] = dolp
+        out["dop"] = rho
+        out["dop_spread"] = np.sqrt(var_rho)
+        out["aolp_coherence"] = np.hypot(g["cos2"], g["sin2"])
+    if "zenith" in groups:
+        out["zenith"] = zenith_from_diffuse_dop(dolp, params.refractive_index).zenith
+    if "filters" in groups:
+        for source in ("logi", "dop"):
+            name = "log_intensity" if source == "logi" else "dop"
+            for filt, v in _filters(m[source], s, f).items():
+                out[f"{name}_{filt}"] = v
+    if "invariant" in groups:
+        cov = g["logi_dop"] - g["logi"] * rho
+        out["dolp_over_dop"] = _ratio(dolp, rho)
+        out["dop_spread_over_dop"] = _ratio(np.sqrt(var_rho), rho)
+        out["dop_vs_log_intensity_slope"] = cov / (var_log + 1e-6)
+        out["dop_vs_log_intensity_corr"] = cov / np.sqrt(var_log * var_rho + 1e-12)
+        out["dop_over_surround"] = _ratio(rho, _smooth(m["dop"], 2 * s))
+    return out
+
+
+def check_maps(intensity: Any, dop: Any, phase: Any) -> tuple[np.ndarray, ...]:
+    """Î, ρ, φ as float32 (H, W) of one shape, non-finite values set to 0 (raises
+    PolarsegError on other shapes)."""
+    maps = [np.asarray(a, dtype=np.float32) for a in (intensity, dop, phase)]
+    if maps[0].ndim != 2 or any(m.shape != maps[0].shape for m in maps):
+        shapes = ", ".join(str(m.shape) for m in maps)
+        raise PolarsegError(f"intensity, dop and phase must be 2-D of one shape, got {shapes}")
+    return tuple(np.where(np.isfinite(m), m, 0).astype(np.float32) for m in maps)
+
+
+def pixel_features(
+    intensity: np.ndarray,
+    dop: np.ndarray,
+    phase: np.ndarray,
+    params: PixelFeatureParams | None = None,
+    *,
+    channel: str = "",
+) -> FeatureStack:
+    """The feature stack (H, W, F) of one polarisation image.
+
+    Parameters
+    ----------
+    intensity, dop, phase : array (H, W)
+        Î (units of the input), ρ in [0, 1], φ radians (thesis eq. 3.14).
+    params : PixelFeatureParams, optional
+        Scales and groups (default :class:`PixelFeatureParams()`).
+    channel : str, optional
+        Prefix of every name (``"<channel>:"``) for multi-channel inputs.
+
+    Returns
+    -------
+    FeatureStack
+        float32 features, ``names[f] = "<feature>@<σ>"``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> f = pixel_features(np.ones((16, 16)), np.full((16, 16), 0.1), np.zeros((16, 16)),
+    ...                    PixelFeatureParams(scales=(1.0,), groups=("polarisation",)))
+    >>> f.names[:2], round(float(f.planes[0, 8, 8]), 4)
+    (('dolp@1', 'dop@1'), 0.1)
+    """
+    params = params or PixelFeatureParams()
+    i, d, p = check_maps(intensity, dop, phase)
+    prefix = f"{channel}:" if channel else ""
+    names = feature_names(params)
+    # one allocation for the whole stack, each feature written into it as it is made
+    # (fresh pages are costly on small VMs: a list of planes + np.stack touched twice)
+    out = np.empty((len(names),) + i.shape, dtype=np.float32)
+    levels = {1: _moments(i, d, p, params.groups)}
+    k = 0
+    for sigma in params.scales:
+        f = pyramid_factor(sigma)
+        if f not in levels:
+            # coarsen from the finest level already built that divides f
+            base = max(q for q in levels if f % q == 0)
+            levels[f] = {q: _block_mean(v, f // base) for q, v in levels[base].items()}
+        for v in _level_features(levels[f], sigma, f, params).values():
+            out[k] = upsample(v.astype(np.float32, copy=False), f, i.shape)
+            k += 1
+    local = [q for q in range(k) if _scale_of(names[q]) <= REGION_MAX_SIGMA]
+    if "regions" in params.groups and local:
+        regions = superpixels(i, params.regions_of(i.shape))
+        means = region_means([out[q] for q in local], regions)
+        for m in means:
+            np.take(m, regions, out=out[k])
+            k += 1
+    return FeatureStack(out, tuple(f"{prefix}{n}" for n in names), params)
+
+
+def _scale_of(name: str) -> float:
+    return float(name.rsplit("@", 1)[1])
+
+
+def feature_names(params: PixelFeatureParams) -> tuple[str, ...]:
+    """Names of the features :func:`pixel_features` computes for ``params`` (no prefix),
+    in order (found by running the groups on a tiny image)."""
+    tiny = np.ones((8, 8), dtype=np.float32)
+    m = _moments(tiny, 0.1 * tiny, 0 * tiny, params.groups)
+    names = [
+        f"{name}@{sigma:g}"
+        for sigma in params.scales
+        for name in _level_features(m, sigma, 1, params)
+    ]
+    if "regions" in params.groups:
+        names += [f"region:{n}" for n in names if _scale_of(n) <= REGION_MAX_SIGMA]
+    return tuple(names)
+
+
+def multichannel_features(
+    images: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]],
+    params: PixelFeatureParams | None = None,
+    channels: Sequence[str] | None = None,
+) -> FeatureStack:
+    """Features of every channel's polarisation image side by side.
+
+    ``images[c] = (Î, ρ, φ)`` of channel c (e.g. each colour of a colour-polarisation
+    sensor); names carry the channel name (``channels[c]``, default ``"c0"``, ``"c1"``…).
+    """
+    if not images:
+        raise PolarsegError("no channels to compute features of")
+    if channels is None:
+        channels = [""] if len(images) == 1 else [f"c{k}" for k in range(len(images))]
+    channels = list(channels)
+    if len(channels) != len(images):
+        raise PolarsegError(f"{len(images)} channels but {len(channels)} channel names")
+    if len(images) == 1:
+        return pixel_features(*images[0], params, channel=channels[0])
+    stacks = [
+        pixel_features(*im, params, channel=c) for im, c in zip(images, channels, strict=True)
+    ]
+    planes = np.concatenate([s.planes for s in stacks], axis=0)
+    names = tuple(n for s in stacks for n in s.names)
+    return FeatureStack(planes, names, stacks[0].params)

@@ -1,0 +1,1 @@
+"""Synthetic polarisation scenes rendered from physics, with their ground truth."""

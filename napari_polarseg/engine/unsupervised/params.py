@@ -1,0 +1,241 @@
+"""Parameters and result of the unsupervised segmenter (:mod:`.segmenter`)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import numpy as np
+
+from ..errors import PolarsegError
+from .superpixels import auto_region_area
+
+#: Automatic superpixel area: the image's pixels / this, within the bounds below.
+REGIONS_PER_IMAGE = 3000
+MIN_REGION_AREA = 32
+MAX_REGION_AREA = 1024
+
+#: Projections of the standardised node features (:func:`maf_features`, PCA).
+PROJECTIONS = ("pca", "maf")
+
+
+#: Clustering methods (module docstring, step 3).
+CLUSTERINGS = ("gmm", "kmeans", "ncut", "kway")
+
+
+#: Per-region features of :func:`node_features`, in order.
+NODE_FEATURES = (
+    "log_intensity",  # mean of log Î over the region
+    "intensity_spread",  # standard deviation of log Î over the region
+    "dop",  # mean ρ
+    "dop_spread",  # standard deviation of ρ
+    "dolp",  # |(ΣS1, ΣS2)| / ΣS0: DoLP of the region's summed Stokes vector
+    "aolp_coherence",  # |mean e^{2iφ}|
+    "dolp_over_dop",  # DoLP / mean ρ: polarisation coherence, shading-free
+    "dop_vs_log_intensity_slope",  # least-squares slope of ρ against log Î
+    "dop_vs_log_intensity_corr",  # correlation of ρ and log Î
+    "log_dop_given_intensity",  # log mean ρ less its image-wide fit on mean log Î
+)
+
+
+#: The physical material cue (module docstring): the ρ–shading relation.
+MATERIAL_CUE = ("dop_vs_log_intensity_slope", "dop_vs_log_intensity_corr")
+
+
+@dataclass(frozen=True)
+class UnsupervisedParams:
+    """Parameters of :func:`segment_unsupervised`.
+
+    Attributes
+    ----------
+    region_area : int
+        Mean superpixel area, pixels; 0 = the image's pixels / :data:`REGIONS_PER_IMAGE`,
+        within [:data:`MIN_REGION_AREA`, :data:`MAX_REGION_AREA`].
+    boundary : {"polarisation", "intensity"}
+        Edges the superpixels follow: log Î and the normalised Stokes components, or
+        log Î alone (:func:`.superpixels.superpixels`).
+    polarisation_edge_weight : float
+        Weight of the Stokes edge map against the log Î one (``boundary="polarisation"``).
+    features : tuple of str
+        Node features, names from :data:`NODE_FEATURES` (the default: the measured
+        best of the module docstring).
+    pixel_scales : tuple of float
+        σ (pixels) of the :mod:`.pixel_features` stack averaged per region and added to
+        the node features; () = none.
+    pixel_groups : tuple of str
+        Groups of that stack (:data:`.pixel_features.GROUPS`, without ``regions``).
+    variance : float
+        Share of the variance the PCA of the standardised node features keeps, (0, 1].
+    clustering : {"gmm", "kmeans", "ncut", "kway"}
+        Module docstring, step 3.
+    covariance : {"full", "tied", "diag", "spherical"}
+        Covariance type of the Gaussian mixture (scikit-learn ``covariance_type``).
+    smoothing : float
+        λ of the posterior smoothing over the region adjacency, [0, 1) (gmm, kmeans).
+    smoothing_iterations : int
+        Iterations of that smoothing.
+    scale : float
+        s of the affinity exp(−D / s) in units of the median D over the graph's edges
+        (ncut, kway).
+    refine_boundaries : bool
+        Relabel the pixels on segment borders (:func:`refine_boundaries`): a watershed
+        border on a straight edge is a pixel off on one side.
+    diffusion : float
+        λ of the edge-aware diffusion of the standardised node features over the region
+        graph (:mod:`.region_diffusion`), [0, 1]; 0 = none.
+    diffusion_range : float
+        Reach of that diffusion as a share of the image's side √(H·W): after t steps a
+        feature has spread over about √(λ t) regions of side √area, so
+        t = ⌈range² · n / λ⌉ for n superpixels (:func:`diffusion_steps`), the same
+        share of the frame whatever its resolution.
+    diffusion_tau : float
+        τ of its border weights exp(−(e / τ)²), in units of the median border strength.
+    clip : float
+        Winsorise the standardised node features at ± ``clip`` standard deviations
+        before the projection (0 = not at all): a superpixel straddling two materials
+        has a large spread of ρ and would otherwise pull a cluster of its own.
+    seed : int
+        Seed of every random step (k-means and mixture initialisations).
+    """
+
+    region_area: int = 0
+    boundary: str = "polarisation"
+    polarisation_edge_weight: float = 1.0
+    features: tuple[str, ...] = (
+        "log_intensity",
+        "dop",
+        "dop_spread",
+        "dop_vs_log_intensity_slope",
+    )
+    pixel_scales: tuple[float, ...] = ()
+    pixel_groups: tuple[str, ...] = ("intensity", "polarisation", "invariant")
+    variance: float = 0.95
+    projection: str = "pca"
+    components: int = 4
+    clustering: str = "kmeans"
+    covariance: str = "full"
+    smoothing: float = 0.3
+    smoothing_iterations: int = 5
+    scale: float = 1.0
+    refine_boundaries: bool = True
+    diffusion: float = 0.5
+    diffusion_range: float = 0.07
+    diffusion_tau: float = 0.75
+    clip: float = 2.0
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if int(self.region_area) < 0 or 0 < int(self.region_area) < 4:
+            raise PolarsegError(f"region_area must be 0 (auto) or >= 4, got {self.region_area}")
+        if self.boundary not in ("polarisation", "intensity"):
+            raise PolarsegError(
+                f"boundary must be 'polarisation' or 'intensity', got {self.boundary!r}"
+            )
+        if not (
+            math.isfinite(self.polarisation_edge_weight) and self.polarisation_edge_weight >= 0
+        ):
+            raise PolarsegError(
+                f"polarisation_edge_weight must be >= 0, got {self.polarisation_edge_weight}"
+            )
+        features = tuple(str(f) for f in self.features)
+        unknown = [f for f in features if f not in NODE_FEATURES]
+        if unknown or (not features and not self.pixel_scales):
+            raise PolarsegError(
+                f"features must be some of {', '.join(NODE_FEATURES)}; got {self.features!r}"
+            )
+        scales = tuple(float(s) for s in self.pixel_scales)
+        if not all(math.isfinite(s) and s > 0 for s in scales):
+            raise PolarsegError(f"pixel_scales must be positive, got {self.pixel_scales!r}")
+        if not (0 < self.variance <= 1):
+            raise PolarsegError(f"variance must be in (0, 1], got {self.variance}")
+        if self.projection not in PROJECTIONS:
+            raise PolarsegError(
+                f"projection must be one of {', '.join(PROJECTIONS)}, got {self.projection!r}"
+            )
+        if int(self.components) < 1:
+            raise PolarsegError(f"components must be >= 1, got {self.components}")
+        if self.clustering not in CLUSTERINGS:
+            raise PolarsegError(
+                f"clustering must be one of {', '.join(CLUSTERINGS)}, got {self.clustering!r}"
+            )
+        if self.covariance not in ("full", "tied", "diag", "spherical"):
+            raise PolarsegError(
+                f"covariance must be full, tied, diag or spherical, got {self.covariance!r}"
+            )
+        if not (0 <= self.smoothing < 1):
+            raise PolarsegError(f"smoothing must be in [0, 1), got {self.smoothing}")
+        if int(self.smoothing_iterations) < 0:
+            raise PolarsegError(
+                f"smoothing_iterations must be >= 0, got {self.smoothing_iterations}"
+            )
+        if not (math.isfinite(self.scale) and self.scale > 0):
+            raise PolarsegError(f"scale must be positive, got {self.scale}")
+        if not (0 <= self.diffusion <= 1):
+            raise PolarsegError(f"diffusion must be in [0, 1], got {self.diffusion}")
+        if not (math.isfinite(self.diffusion_range) and 0 <= self.diffusion_range <= 1):
+            raise PolarsegError(f"diffusion_range must be in [0, 1], got {self.diffusion_range}")
+        if not (math.isfinite(self.diffusion_tau) and self.diffusion_tau > 0):
+            raise PolarsegError(f"diffusion_tau must be positive, got {self.diffusion_tau}")
+        if not (math.isfinite(self.clip) and self.clip >= 0):
+            raise PolarsegError(f"clip must be >= 0, got {self.clip}")
+        object.__setattr__(self, "features", features)
+        groups = tuple(str(g) for g in self.pixel_groups)
+        allowed = ("intensity", "polarisation", "zenith", "filters", "invariant")
+        if scales and (not groups or any(g not in allowed for g in groups)):
+            raise PolarsegError(
+                f"pixel_groups must be some of {', '.join(allowed)}; got {self.pixel_groups!r}"
+            )
+        object.__setattr__(self, "pixel_groups", groups)
+        object.__setattr__(self, "pixel_scales", scales)
+        object.__setattr__(self, "region_area", int(self.region_area))
+        object.__setattr__(self, "smoothing_iterations", int(self.smoothing_iterations))
+        object.__setattr__(self, "seed", int(self.seed))
+
+    def area_of(self, shape: tuple[int, int]) -> int:
+        """Superpixel area (pixels) used on an image of ``shape``."""
+        if self.region_area:
+            return self.region_area
+        return auto_region_area(shape, REGIONS_PER_IMAGE, MIN_REGION_AREA, MAX_REGION_AREA)
+
+    def replace(self, **changes: Any) -> UnsupervisedParams:
+        """A copy with some attributes changed (validated again)."""
+        return UnsupervisedParams(**{**asdict(self), **changes})
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready form (lists for tuples)."""
+        return {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(self).items()}
+
+
+@dataclass(frozen=True)
+class UnsupervisedResult:
+    """What :func:`segment_unsupervised` returns.
+
+    Attributes
+    ----------
+    labels : ndarray (H, W) int32
+        Segment of every pixel (its superpixel's), 0 … k' − 1 in order of first
+        appearance (row-major).
+    node_labels : ndarray (n,) int32
+        Segment of every superpixel.
+    regions : ndarray (H, W) int32
+        Superpixel of every pixel, 0 … n − 1.
+    node_features : ndarray (n, c) float64
+        The PCA components the clustering saw.
+    feature_names : tuple of str
+        Names of the node features before the PCA.
+    seconds : float
+        Wall time of the whole segmentation.
+    degenerate : bool
+        One segment holds ≥ 95 % of the pixels (:func:`.degenerate.degenerate_result`).
+    params : UnsupervisedParams
+    """
+
+    labels: np.ndarray
+    node_labels: np.ndarray
+    regions: np.ndarray
+    node_features: np.ndarray
+    feature_names: tuple[str, ...]
+    seconds: float
+    degenerate: bool
+    params: UnsupervisedParams
