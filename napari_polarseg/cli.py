@@ -121,6 +121,7 @@ import numpy as np
 
 from . import __version__
 from . import io as pio
+from .engine import STAGES, Pipeline, SegmentationResult
 from .engine.colour_mosaic import BAYER_ORDERS
 from .engine.errors import PolarsegError
 from .engine.evaluation import adjusted_rand_index, evaluate
@@ -137,7 +138,6 @@ from .engine.params import (
     SPECULAR_BRANCHES,
     SegmentParams,
 )
-from .engine.pipeline import STAGES, Pipeline, SegmentationResult
 from .engine.polarimage import PixelMask, validity_mask
 from .engine.registration import register_stack, shift_frames
 from .export import FLOAT_OUTPUTS as FLOAT_OUTPUTS  # the output contract (batch.py reads it)

@@ -29,9 +29,9 @@ import numpy as np
 
 from . import __version__
 from . import io as pio
+from .engine import SegmentationResult, valid_blocks
 from .engine.errors import PolarsegError
 from .engine.evaluation import STATISTICS_COLUMNS, segment_statistics
-from .engine.pipeline import SegmentationResult, valid_blocks
 from .engine.polarimage import PixelMask, duplicate_angle_frames
 from .engine.stokes import STOKES_CONVENTION, stokes_components
 from .engine.views import CompositeParams, aolp_dolp_composite, auto_dolp_max

@@ -26,7 +26,7 @@ from .engine.errors import PolarsegError
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
-    from .engine.pipeline import SegmentationResult
+    from .engine import SegmentationResult
     from .engine.sweep import SweepResult
 
 #: Colours of the light default theme: figure background, text/axes, accent.

@@ -43,7 +43,7 @@ from .limits import check_pipeline_memory, estimate_pipeline_bytes
 from .mosaic import demosaic, demosaic_interpolated, demosaic_superpixel, subtract_dark
 from .ncut import CutTree, best_split, bipartition, fiedler_vector, recursive_ncut
 from .params import SegmentParams
-from .pipeline import STAGES, Pipeline, SegmentationResult, intensity_baseline, segment
+from .pipeline import Pipeline, intensity_baseline, segment
 from .pixel_classifier import (
     ClassifierParams,
     PixelClassifier,
@@ -62,6 +62,8 @@ from .polarimage import (
     validity_mask,
 )
 from .registration import register_stack
+from .result import SegmentationResult
+from .stages import STAGES, valid_blocks
 from .superpixels import region_means, superpixels
 from .sweep import SweepCell, SweepResult  # the function: engine.sweep.sweep
 
@@ -134,4 +136,5 @@ __all__ = [
     "zenith_from_diffuse_dop",
     "zenith_from_dop",
     "zenith_from_specular_dop",
+    "valid_blocks",
 ]

@@ -100,7 +100,7 @@ def check_bytes(needed: float, what: str, limit: int | float | None = None) -> N
 def _graph_kind(blocks: int, params: SegmentParams) -> str:
     """How the pipeline will store the block graph ("dense", "knn" or "spatial")."""
     try:
-        from .pipeline import affinity_graph_kind
+        from .stages import affinity_graph_kind
     except ImportError:  # pragma: no cover - older pipeline: always dense
         return "dense"
     return affinity_graph_kind(blocks, params)

@@ -103,7 +103,8 @@ from . import features as feat
 from . import harmonics, ncut, polstats
 from .errors import Cancelled, PolarsegError
 from .params import SegmentParams
-from .pipeline import MAX_DENSE_BLOCKS, POLSTATS_KINDS, Pipeline
+from .pipeline import Pipeline
+from .stages import MAX_DENSE_BLOCKS, POLSTATS_KINDS
 
 #: Ways to segment the days (see the module docstring); the first is the default.
 METHODS = ("tracked", "reference", "joint")

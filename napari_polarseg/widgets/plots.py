@@ -23,7 +23,7 @@ if TYPE_CHECKING:
     import napari
     from napari.layers import Layer
 
-    from ..engine.pipeline import SegmentationResult
+    from ..engine import SegmentationResult
     from ..engine.pixel_classifier import PixelClassifier
 
 #: Plot menu: text shown → key.
@@ -85,8 +85,8 @@ def segment_job(
             where = "scribbles" if out.trained else "classifier"
             raise PolarsegError(f"{where}: {out.problem}")
         return out
-    yield from pipe.run_iter(reconstruction=True)
-    return pipe.result(reconstruction=True, params=params)
+    yield from pipe.run_iter(params, reconstruction=True)
+    return pipe.result(params, reconstruction=True)
 
 
 def histogram_job(
