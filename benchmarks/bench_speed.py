@@ -654,12 +654,12 @@ def main(argv: list[str] | None = None) -> int:
                 k: (v[0], copy.deepcopy(v[1]) if k == "cut" else v[1])
                 for k, v in base._cache.items()
             }
-            p._distances = base._distances
+            p.distances = base.distances
             if prefetch:
                 list(p.prefetch())
-            p.update(**kw)
+            params = p.params.replace(**kw)
             t0 = time.perf_counter()
-            result = p.run()
+            result = p.run(params)
             times.append(time.perf_counter() - t0)
             splits.append({k: result.timings[k] for k in result.recomputed})
         label = f"{base.params.features} w{base.params.window} " + ", ".join(
@@ -735,7 +735,7 @@ def main(argv: list[str] | None = None) -> int:
     straightforward_ncut(W_sf, 4, history=steps)
     (labels_sf, b_cut), (labels_sf4, b_cut4) = steps[1], steps[2]
     b_cut4 -= b_cut
-    b_total = b_h12 + b_aff + b_cut + b_rec + pipe._seconds["polarisation"]
+    b_total = b_h12 + b_aff + b_cut + b_rec + pipe.stage_seconds("polarisation")
     b_scale = b_aff + b_cut
 
     # other normalized-cut / spectral implementations on the same affinity
@@ -772,7 +772,7 @@ def main(argv: list[str] | None = None) -> int:
             t_n,
             None,
             sf + " (loops extrapolated)",
-            b_total - pipe._seconds["polarisation"],
+            b_total - pipe.stage_seconds("polarisation"),
             1.0,
         ),
         Row("  change window 10 -> 12", t_w, None, "", None, 1.0),

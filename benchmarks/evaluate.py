@@ -133,11 +133,9 @@ def evaluate(name: str, seed: int, sweep: bool) -> dict:
     pipe = Pipeline(stack, angles, SegmentParams(n_segments=k))
     for column, params in OPTIONS.items():
         if params is not None:
-            pipe.params = params.replace(n_segments=k)
-            row[column] = ari(truth, pipe.run(reconstruction=False).labels)
+            row[column] = ari(truth, pipe.run(params.replace(n_segments=k), False).labels)
     strokes = scribble_strokes(truth, seed=0)
-    pipe.params = RECOMMENDED.replace(window=SCRIBBLE_WINDOW)
-    labels, _ = pipe.scribble_result(strokes)
+    labels, _ = pipe.scribble_result(strokes, RECOMMENDED.replace(window=SCRIBBLE_WINDOW))
     row["block scribbles"] = ari(truth, labels)
     pol = pipe.get("polarisation")
     row["plain baseline"] = ari(truth, plain_baseline(pol.intensity, pol.dop, pol.phase, strokes))
@@ -146,8 +144,8 @@ def evaluate(name: str, seed: int, sweep: bool) -> dict:
         row["grid"] = {}
         for values in itertools.product(*GRID.values()):
             change = dict(zip(GRID, values, strict=True))
-            pipe.params = SegmentParams(n_segments=k, **change)
-            row["grid"][values] = ari(truth, pipe.run(reconstruction=False).labels)
+            params = SegmentParams(n_segments=k, **change)
+            row["grid"][values] = ari(truth, pipe.run(params, False).labels)
         best = max(row["grid"], key=row["grid"].get)
         row["best of grid"] = row["grid"][best]
         row["best params"] = dict(zip(GRID, best, strict=True))
@@ -226,8 +224,7 @@ def evaluate_real(folder: Path) -> list[dict]:
         )
         for column, params in presets:
             t0 = time.perf_counter()
-            pipe.params = params.replace(n_segments=k)
-            labels = pipe.run(reconstruction=False).labels
+            labels = pipe.run(params.replace(n_segments=k), False).labels
             row[column] = ari_where(truth, labels, where)
             row[f"{column} seconds"] = time.perf_counter() - t0
             if largest_share(labels) >= DEGENERATE_SHARE:

@@ -183,8 +183,7 @@ def baselines(synthetic: list, real: list, thesis_real: bool) -> dict[str, dict]
             km["degenerate"].add(frame)
         if thesis_real:
             t0 = time.perf_counter()
-            pipe.params = RECOMMENDED.replace(n_segments=k)
-            labels = pipe.run(reconstruction=False).labels
+            labels = pipe.run(RECOMMENDED.replace(n_segments=k), False).labels
             rec["seconds"] = max(rec["seconds"], time.perf_counter() - t0)
             rec[frame] = ari_where(truth, labels, truth > 0)
             if largest_share(labels) >= DEGENERATE_SHARE:

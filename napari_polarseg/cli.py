@@ -121,6 +121,7 @@ import numpy as np
 
 from . import __version__
 from . import io as pio
+from .engine import STAGES, Pipeline, SegmentationResult
 from .engine.analysis.evaluation import adjusted_rand_index, evaluate
 from .engine.errors import PolarsegError
 from .engine.limits import check_pipeline_memory, memory_limit
@@ -140,7 +141,6 @@ from .engine.physics.mosaic import DEMOSAIC_METHODS
 from .engine.physics.pixel_mask import PixelMask
 from .engine.physics.polarimage import validity_mask
 from .engine.physics.registration import register_stack, shift_frames
-from .engine.pipeline import STAGES, Pipeline, SegmentationResult
 from .export import FLOAT_OUTPUTS as FLOAT_OUTPUTS  # the output contract (batch.py reads it)
 from .export import OutputError, classifier_summary, write_result_folder
 from .export import labels_image as _labels_image

@@ -29,13 +29,13 @@ import numpy as np
 
 from . import __version__
 from . import io as pio
+from .engine import SegmentationResult, valid_blocks
 from .engine.analysis.evaluation import STATISTICS_COLUMNS, segment_statistics
 from .engine.analysis.views import CompositeParams, aolp_dolp_composite, auto_dolp_max
 from .engine.errors import PolarsegError
 from .engine.physics.pixel_mask import PixelMask
 from .engine.physics.polarimage import duplicate_angle_frames
 from .engine.physics.stokes import STOKES_CONVENTION, stokes_components
-from .engine.pipeline import SegmentationResult, valid_blocks
 
 #: The polarisation views every result folder holds beside the contract files.
 STOKES_FILE = "stokes.tif"

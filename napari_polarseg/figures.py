@@ -26,8 +26,8 @@ from .engine.errors import PolarsegError
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
+    from .engine import SegmentationResult
     from .engine.analysis.sweep_result import SweepResult
-    from .engine.pipeline import SegmentationResult
 
 #: Colours of the light default theme: figure background, text/axes, accent.
 LIGHT = {"background": "#ffffff", "foreground": "#000000", "accent": "#1f77b4"}

@@ -70,11 +70,9 @@ def test_changing_the_clustering_switches_between_cut_and_superpixels():
     stack, truth = planted_stack(3)
     pipe = Pipeline(stack, ANGLES, AUTO)
     first = pipe.run(reconstruction=False).labels
-    pipe.update(clustering="recursive")
-    pipe.run(reconstruction=False)
+    pipe.run(pipe.params.replace(clustering="recursive"), reconstruction=False)
     assert pipe.calls["cut"] == 1 and pipe.calls["labels"] == 2
-    pipe.update(clustering="superpixels")
-    again = pipe.run(reconstruction=False).labels
+    again = pipe.run(pipe.params.replace(clustering="superpixels"), False).labels
     assert pipe.calls["harmonics"] == 1  # the block stages are shared
     np.testing.assert_array_equal(first, again)
 

@@ -17,7 +17,7 @@ from test_cli_sweep import ANGLES_DEG, domes_stack
 
 from napari_polarseg import cli
 from napari_polarseg import io as pio
-from napari_polarseg.engine.pipeline import STAGES
+from napari_polarseg.engine import STAGES
 from napari_polarseg.status_line import ERASE, StatusLine
 
 # the thesis pipeline runs every stage of STAGES (preset auto skips affinity and cut);

@@ -62,9 +62,9 @@ def test_changing_segments_reuses_everything_upstream():
     pipe = Pipeline(stack, ANGLES, SegmentParams(window=10, degree=4, n_segments=2))
     pipe.run()
     assert all(pipe.calls[s] == 1 for s in STAGES)
-    pipe.update(n_segments=3)
-    assert pipe.stale_stages() == ["labels"]
-    res = pipe.run()
+    three = pipe.params.replace(n_segments=3)
+    assert pipe.stale_stages(params=three) == ["labels"]
+    res = pipe.run(three)
     assert pipe.calls["harmonics"] == 1 and pipe.calls["cut"] == 1
     assert pipe.calls["reconstruction"] == 1 and pipe.calls["labels"] == 2
     assert res.n_segments == 3
@@ -85,8 +85,7 @@ def test_stale_stages_follow_dependencies(change, stale):
     stack, _ = two_material_stack()
     pipe = Pipeline(stack, ANGLES, SegmentParams(window=10, degree=3))
     pipe.run()
-    pipe.update(**change)
-    assert pipe.stale_stages() == stale
+    assert pipe.stale_stages(params=pipe.params.replace(**change)) == stale
 
 
 def test_cancel_between_stages_keeps_cache_valid():
@@ -182,30 +181,72 @@ def test_summary_separates_recomputed_stages_from_cached_ones():
     pipe = Pipeline(stack, ANGLES, SegmentParams(window=10, degree=3, n_segments=2))
     first = pipe.run().summary()
     assert first["recomputed_stages"] == list(STAGES)
-    pipe.update(n_segments=3)
-    again = pipe.run().summary()
+    again = pipe.run(pipe.params.replace(n_segments=3)).summary()
     assert again["recomputed_stages"] == ["labels"]
     assert again["total_seconds"] == pytest.approx(again["stage_seconds"]["labels"], abs=1e-6)
     assert again["total_seconds"] < first["total_seconds"]
 
 
-def test_parameters_are_read_once_per_stage():
-    """A change made while a stage computes (another thread) cannot poison the cache."""
+def test_params_are_read_only_and_each_run_takes_its_own():
     stack, _ = two_material_stack()
-    pipe = Pipeline(stack, ANGLES, SegmentParams(window=10, degree=3))
-    original = pipe._compute
+    base = SegmentParams(window=10, degree=3)
+    pipe = Pipeline(stack, ANGLES, base)
+    assert pipe.params is base
+    with pytest.raises(AttributeError):
+        pipe.params = base.replace(degree=5)
+    assert not hasattr(pipe, "update")
+    other = base.replace(n_segments=3)
+    assert pipe.run(other).params is other and pipe.params is other  # the last run's
 
-    def compute_and_meddle(stage):
-        value = original(stage)
-        if stage == "harmonics":
-            pipe.params = pipe.params.replace(degree=5)  # as a GUI thread might
-        return value
 
-    pipe._compute = compute_and_meddle
-    coef = pipe.get("harmonics")
-    assert coef.shape[-1] == 16  # computed with degree 3 ...
-    pipe._compute = original
-    assert pipe.get("harmonics").shape[-1] == 36  # ... and not served for degree 5
+def test_runs_a_then_b_then_a_reuse_the_upstream_stages():
+    """Params A, then B (another number of segments), then A again: A's labels again,
+    and no stage upstream of the labels recomputed after the first run."""
+    stack, _ = two_material_stack()
+    a = SegmentParams(window=10, degree=4, n_segments=2)
+    b = a.replace(n_segments=3)
+    pipe = Pipeline(stack, ANGLES, a)
+    first = pipe.run(a)
+    second = pipe.run(b)
+    again = pipe.run(a)
+    assert first.n_segments == 2 and second.n_segments == 3
+    np.testing.assert_array_equal(again.labels, first.labels)
+    upstream = [s for s in STAGES if s != "labels"]
+    assert all(pipe.calls[s] == 1 for s in upstream), dict(pipe.calls)
+    assert pipe.calls["labels"] == 3
+    assert again.recomputed == ["labels"] and again.params is a
+
+
+def test_two_threads_with_different_params_get_their_own_results():
+    import threading
+
+    stack, _ = two_material_stack()
+    a = SegmentParams(window=10, degree=3, n_segments=2)
+    b = SegmentParams(window=8, degree=5, n_segments=3)
+    ref = {p: Pipeline(stack, ANGLES, p).run() for p in (a, b)}
+    pipe = Pipeline(stack, ANGLES, a)
+    results: dict[SegmentParams, list] = {a: [], b: []}
+    errors: list[BaseException] = []
+
+    def work(p: SegmentParams) -> None:
+        try:
+            for _ in range(3):
+                results[p].append(pipe.run(p))
+        except BaseException as exc:  # noqa: BLE001 - reported below
+            errors.append(exc)
+
+    threads = [threading.Thread(target=work, args=(p,)) for p in (a, b)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert not errors
+    for p in (a, b):
+        assert len(results[p]) == 3
+        for res in results[p]:
+            assert res.params is p
+            assert res.coefficients.shape == ref[p].coefficients.shape
+            np.testing.assert_array_equal(res.labels, ref[p].labels)
 
 
 def test_masked_out_blocks_are_no_graph_nodes_and_take_their_neighbours_label():
@@ -241,7 +282,7 @@ def test_scale_change_reuses_the_distances_and_large_graphs_are_float32():
     W = pipe.get("affinity")
     n = W.shape[0]
     assert n >= dense_graph.FLOAT32_MIN_NODES and W.dtype == np.float32
-    D = pipe._distances[1]
+    D = pipe.distances.matrix
     assert D.dtype == np.float32
     features = pipe.get("pca").features.reshape(n, -1)
     W64 = feat.affinity_matrix(features, 2.0, "median")
@@ -249,15 +290,13 @@ def test_scale_change_reuses_the_distances_and_large_graphs_are_float32():
     want = ncut.CutTree(W64, min_size=p.min_segment_blocks).labels(3)
     np.testing.assert_array_equal(pipe.get("labels")[0].ravel(), want)
 
-    pipe.update(scale=3.0)
-    pipe.run(reconstruction=False)
-    assert pipe._distances[1] is D  # kept: only exp(−D/s) was recomputed
+    pipe.run(pipe.params.replace(scale=3.0), reconstruction=False)
+    assert pipe.distances.matrix is D  # kept: only exp(−D/s) was recomputed
     np.testing.assert_allclose(
         pipe.get("affinity"), feat.affinity_matrix(features, 3.0, "median"), rtol=2e-5, atol=1e-7
     )
-    pipe.update(variance=0.9)  # other features: other distances
-    pipe.run(reconstruction=False)
-    assert pipe._distances[1] is not D
+    pipe.run(pipe.params.replace(variance=0.9), reconstruction=False)  # other distances
+    assert pipe.distances.matrix is not D
 
 
 def test_prefetch_makes_one_more_segment_free():
@@ -269,35 +308,31 @@ def test_prefetch_makes_one_more_segment_free():
     assert list(pipe.prefetch())  # the two segments' candidate splits
     tree = pipe.get("cut")
     assert set(tree._candidates) == set(tree._ids)
-    pipe.update(n_segments=3)
-    pipe.run()
+    pipe.run(pipe.params.replace(n_segments=3))
     assert pipe.get("labels")[0].max() == 2
     fresh = Pipeline(stack, ANGLES, pipe.params).run()
     np.testing.assert_array_equal(pipe.get("labels")[0], fresh.block_labels)
     # the prefetch also left a touched buffer for the next affinity: a scale change
     # writes into it
-    pool = pipe._matrices
+    pool = pipe.matrices
     size = pipe.get("affinity").size
     spare = [id(b) for b in pool._buffers if b.size == size and pool._free(b)]
     assert len(spare) == 1
-    pipe.update(scale=1.5)
-    pipe.run(reconstruction=False)
+    pipe.run(pipe.params.replace(scale=1.5), reconstruction=False)
     assert id(pipe.get("affinity").base) == spare[0]
     # nothing to do: stale labels, a tree already deeper than k, or k-way clustering
-    pipe.update(scale=2.0)
-    assert list(pipe.prefetch()) == []
-    pipe.run()
-    pipe.update(n_segments=2)
-    pipe.run()
+    scale2 = pipe.params.replace(scale=2.0)
+    assert list(pipe.prefetch(scale2)) == []
+    pipe.run(scale2)
+    pipe.run(pipe.params.replace(n_segments=2))
     assert [pos for pos in pipe.prefetch() if pos >= 0] == []  # no eigensolve
-    pipe.update(clustering="kway")
-    pipe.run()
+    pipe.run(pipe.params.replace(clustering="kway"))
     assert not isinstance(pipe.get("cut"), ncut.CutTree)
     assert list(pipe.prefetch()) == []
 
 
 def test_matrix_pool_reuses_memory_but_never_an_array_still_held():
-    from napari_polarseg.engine.pipeline import MatrixPool
+    from napari_polarseg.engine.matrix_pool import MatrixPool
 
     pool = MatrixPool(keep=3)
     a = pool.take((6, 6), np.float32)
@@ -319,19 +354,17 @@ def test_matrix_pool_reuses_memory_but_never_an_array_still_held():
     held = pipe.get("affinity")
     kept = held.copy()
     for s in (2.0, 3.0, 4.0, 5.0):
-        pipe.update(scale=s)
-        pipe.run(reconstruction=False)
+        pipe.run(pipe.params.replace(scale=s), reconstruction=False)
         assert pipe.get("affinity").base is not held.base
     np.testing.assert_array_equal(held, kept)
     del held
     used = []  # ids only: a reference to a buffer would keep it from being reused
     for s in (6.0, 7.0, 8.0, 9.0):
-        pipe.update(scale=s)
-        pipe.run(reconstruction=False)
+        pipe.run(pipe.params.replace(scale=s), reconstruction=False)
         used.append(id(pipe.get("affinity").base))
     # nothing held any more: two pooled buffers take turns (one holds the affinity in
     # use while the next is written)
-    pooled = {id(b) for b in pipe._matrices._buffers}
+    pooled = {id(b) for b in pipe.matrices._buffers}
     assert set(used) <= pooled and used[0] == used[2] != used[1] == used[3]
     fresh = Pipeline(stack, ANGLES, pipe.params)
     fresh.run(reconstruction=False)
@@ -365,7 +398,7 @@ def test_run_iter_reports_progress_within_the_chunked_stages(coefficients):
     # get(stage, progress): only that stage reports, not one computed on the way to it
     fresh = Pipeline(stack, ANGLES, params)
     shares: list[float] = []
-    fresh.get("pca", shares.append)  # computes the (chunked) harmonics first
+    fresh.get("pca", progress=shares.append)  # computes the (chunked) harmonics first
     assert fresh.is_fresh("harmonics") and shares == []
-    fresh.get("reconstruction", shares.append)
+    fresh.get("reconstruction", progress=shares.append)
     assert len(shares) >= 2 and shares[-1] == 1 and all(0 < s <= 1 for s in shares)

@@ -429,9 +429,10 @@ def test_fit_parameter_reaches_the_pipeline_and_its_cache():
     pipe = Pipeline(bad, np.deg2rad(ANGLES7), SegmentParams(window=6, degree=2, n_segments=2))
     lsq = pipe.run()
     assert pipe.stale_stages() == []
-    pipe.update(fit="robust")
-    assert "polarisation" in pipe.stale_stages() and "normals" in pipe.stale_stages()
-    robust = pipe.run()
+    robust_params = pipe.params.replace(fit="robust")
+    stale = pipe.stale_stages(params=robust_params)
+    assert "polarisation" in stale and "normals" in stale
+    robust = pipe.run(robust_params)
     assert robust.summary()["fit"] == "robust"
     assert np.median(np.abs(robust.dop - rho)[:15]) < np.median(np.abs(lsq.dop - rho)[:15]) / 5
     with pytest.raises(PolarsegError, match="fit must be one of lsq, robust"):

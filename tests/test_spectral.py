@@ -101,12 +101,10 @@ def test_pipeline_kway_only_reruns_labels_when_k_changes():
     assert res.labels.shape == sc.labels.shape and res.labels.max() == 2
     assert len(res.ncut_values) == 3 and all(0 <= v <= 2 for v in res.ncut_values)
     before = dict(pipe.calls)
-    pipe.update(n_segments=4)
-    res4 = pipe.run(reconstruction=False)
+    res4 = pipe.run(pipe.params.replace(n_segments=4), reconstruction=False)
     assert res4.labels.max() == 3
     changed = {s for s in pipe.calls if pipe.calls[s] != before.get(s, 0)}
     assert changed == {"labels"}
     # switching back to recursive cuts recomputes the cut stage only
-    pipe.update(clustering="recursive")
-    pipe.run(reconstruction=False)
+    pipe.run(pipe.params.replace(clustering="recursive"), reconstruction=False)
     assert pipe.calls["cut"] == before["cut"] + 1 and pipe.calls["affinity"] == before["affinity"]

@@ -160,11 +160,11 @@ def test_knn_affinity_holds_the_dense_values_of_the_nearest_pairs():
 
 
 def test_dense_block_limit_switches_to_sparse(monkeypatch):
-    from napari_polarseg.engine import pipeline
+    from napari_polarseg.engine import stages
 
     stack, angles = load("fruit")
-    monkeypatch.setattr(pipeline, "DENSE_MAX_BLOCKS", 100)
+    monkeypatch.setattr(stages, "DENSE_MAX_BLOCKS", 100)
     pipe = Pipeline(stack, angles, SegmentParams(window=10, degree=3))
-    assert pipeline.affinity_graph_kind(156, pipe.params) == "knn"
+    assert stages.affinity_graph_kind(156, pipe.params) == "knn"
     assert not isinstance(pipe.get("affinity"), np.ndarray)
     assert pipe.run().labels.shape == (120, 130)

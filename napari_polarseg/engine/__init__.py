@@ -64,7 +64,9 @@ from .physics.polarimage import (
     validity_mask,
 )
 from .physics.registration import register_stack
-from .pipeline import STAGES, Pipeline, SegmentationResult, intensity_baseline, segment
+from .pipeline import Pipeline, intensity_baseline, segment
+from .result import SegmentationResult
+from .stages import STAGES, valid_blocks
 from .unsupervised.superpixels import region_means, superpixels
 
 __all__ = [
@@ -136,4 +138,5 @@ __all__ = [
     "zenith_from_diffuse_dop",
     "zenith_from_dop",
     "zenith_from_specular_dop",
+    "valid_blocks",
 ]

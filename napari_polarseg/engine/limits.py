@@ -98,7 +98,7 @@ def check_bytes(needed: float, what: str, limit: int | float | None = None) -> N
 
 def _graph_kind(blocks: int, params: SegmentParams) -> str:
     """How the pipeline will store the block graph ("dense", "knn" or "spatial")."""
-    from .pipeline import affinity_graph_kind
+    from .stages import affinity_graph_kind
 
     return affinity_graph_kind(blocks, params)
 

@@ -317,12 +317,12 @@ def classifier_stages(
     total = len(names)
     timings: dict[str, float] = {}
     recomputed: list[str] = []
-    partial = reconstruction and not pipe.is_fresh("reconstruction")
+    partial = reconstruction and not pipe.is_fresh("reconstruction", params)
 
     def run_stage(i: int, name: str) -> Stage:
         before = pipe.calls[name]
         t0 = time.perf_counter()
-        pipe.get(name)
+        pipe.get(name, params)
         if pipe.calls[name] != before:
             timings[name] = time.perf_counter() - t0
             recomputed.append(name)
@@ -333,13 +333,11 @@ def classifier_stages(
     fparams = None if classifier is None else classifier.feature_params
     before = segmenter.cached_features
     t0 = time.perf_counter()
-    segmenter.features(fparams)
+    segmenter.features(fparams, segment_params=params)
     if segmenter.cached_features is not before:
         timings["pixel features"] = time.perf_counter() - t0
         recomputed.append("pixel features")
     yield "pixel features", len(PIPELINE_STAGES) + 1, total
-    if params != pipe.params:
-        raise PolarsegError("parameters changed while the pipeline was running")
     try:
         seg = segmenter.segment(
             scribbles,
@@ -347,6 +345,7 @@ def classifier_stages(
             feature_params=fparams,
             reconstruction=reconstruction and not partial,
             cancel=cancel,
+            segment_params=params,
         )
     except PolarsegError as exc:
         return ClassifierOutput(None, classifier is None, problem=str(exc))
@@ -368,7 +367,7 @@ def classifier_stages(
         return output(seg, reconstruction)
     yield Partial(output(seg, False))
     yield run_stage(total - 1, names[-1])
-    result = segmenter.result(seg.prediction.labels, True, seg.seconds)
+    result = segmenter.result(seg.prediction.labels, True, seg.seconds, params)
     return output(replace(seg, result=result), True)
 
 
@@ -422,7 +421,7 @@ class PipelineStore:
         region: np.ndarray | None = None,
         mask_key: str | None = None,
     ) -> Pipeline:
-        """The pipeline for ``key`` set to ``params``, built if missing or out of date.
+        """The pipeline for ``key`` (made with ``params``), built if missing or out of date.
 
         ``region`` (H, W) bool (True = use the pixel) or None restricts the segmentation;
         a new pipeline gets the mask :func:`~napari_polarseg.engine.validity_mask` builds
@@ -442,7 +441,6 @@ class PipelineStore:
             entry = _Entry(data, angles, mask_key, region, pipeline)
             with self._lock:
                 self._entries[key] = entry
-        entry.pipeline.params = params
         return entry.pipeline
 
     def segmenter(self, key: str, colour_stack: np.ndarray | None = None) -> PixelSegmenter | None:

@@ -24,8 +24,8 @@ if TYPE_CHECKING:
     import napari
     from napari.layers import Layer
 
+    from ..engine import SegmentationResult
     from ..engine.analysis.pixel_classifier import PixelClassifier
-    from ..engine.pipeline import SegmentationResult
 
 #: Plot menu: text shown → key.
 PLOTS = (
@@ -86,8 +86,8 @@ def segment_job(
             where = "scribbles" if out.trained else "classifier"
             raise PolarsegError(f"{where}: {out.problem}")
         return out
-    yield from pipe.run_iter(reconstruction=True)
-    return pipe.result(reconstruction=True, params=params)
+    yield from pipe.run_iter(params, reconstruction=True)
+    return pipe.result(params, reconstruction=True)
 
 
 def histogram_job(

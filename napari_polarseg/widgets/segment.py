@@ -149,8 +149,8 @@ def segment_job(
     """
     pipe = store.obtain(key, data, angles_rad, params, region=region, mask_key=mask_key)
     total = len(STAGES)
-    if pipe.is_fresh("reconstruction"):
-        yield from pipe.run_iter(reconstruction=True, cancel=cancel, progress=report)
+    if pipe.is_fresh("reconstruction", params):
+        yield from pipe.run_iter(params, reconstruction=True, cancel=cancel, progress=report)
     else:
         within = None
         if report is not None:
@@ -159,22 +159,22 @@ def segment_job(
                 report(stage, index, total)
 
         last = 0
-        for stage, index, _ in pipe.run_iter(False, cancel=cancel, progress=within):
+        for stage, index, _ in pipe.run_iter(params, False, cancel=cancel, progress=within):
             last = index
             yield stage, index, total
-        yield Partial(pipe.result(reconstruction=False, params=params))
+        yield Partial(pipe.result(params, reconstruction=False))
         share = None
         if report is not None:
 
             def share(done: float) -> None:
                 report(STAGES[-1], last + done * (total - last), total)
 
-        pipe.get("reconstruction", share)
+        pipe.get("reconstruction", params, share)
         yield STAGES[-1], total, total
-    result = pipe.result(reconstruction=True, params=params)
+    result = pipe.result(params, reconstruction=True)
     if prefetch:
         yield Result(result)
-        for _ in pipe.prefetch(cancel):
+        for _ in pipe.prefetch(params, cancel):
             yield "prefetch", total, total
     return result
 

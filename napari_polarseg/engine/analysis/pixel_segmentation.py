@@ -32,8 +32,10 @@ from ..features.pixel_features import (
     multichannel_features,
     pixel_features,
 )
+from ..params import SegmentParams
 from ..physics.colour_mosaic import COLOURS, colour_polarisation_images
-from ..pipeline import Pipeline, SegmentationResult
+from ..pipeline import Pipeline
+from ..result import SegmentationResult
 from .pixel_classifier import (
     ClassifierParams,
     PixelClassifier,
@@ -100,38 +102,45 @@ class PixelSegmenter:
             if len(self.colours) != shape[0]:
                 raise ValueError(f"{shape[0]} colours but names {self.colours}")
 
-    def colour_images(self) -> list:
+    def colour_images(self, segment_params: SegmentParams | None = None) -> list:
         """Polarisation images of every colour (empty without a colour stack), fitted
-        like the pipeline's (its robust setting and sample weights) and kept."""
+        like the pipeline's for ``segment_params`` (default: the pipeline's last run's;
+        its robust setting and sample weights) and kept."""
         if self.colour_stack is None:
             return []
-        pol = self.pipeline.get("polarisation")
+        segment_params = segment_params or self.pipeline.params
+        pol = self.pipeline.get("polarisation", segment_params)
         if self._colour_images is None or self._colour_images[0] != id(pol):
             mask = self.pipeline.mask
             weights = mask.sample_weights if bool(np.any(mask.flags)) else None
             images = colour_polarisation_images(
                 self.colour_stack,
                 self.pipeline.angles,
-                robust=self.pipeline.params.fit == "robust",
+                robust=segment_params.fit == "robust",
                 weights=weights,
             )
             self._colour_images = (id(pol), images)
         return self._colour_images[1]
 
     def features(
-        self, params: PixelFeatureParams | None = None, colour: bool = True
+        self,
+        params: PixelFeatureParams | None = None,
+        colour: bool = True,
+        segment_params: SegmentParams | None = None,
     ) -> FeatureStack:
         """The feature stack for ``params`` (kept while the image and params stay):
         the luminance image's features and, with ``colour`` and a colour stack, every
-        colour's."""
+        colour's. ``segment_params``: the pipeline parameters of the polarisation image
+        (default: the pipeline's last run's)."""
         params = params or PixelFeatureParams()
-        pol = self.pipeline.get("polarisation")
+        pol = self.pipeline.get("polarisation", segment_params)
         colour = colour and self.colour_stack is not None
         key = (id(pol), params, colour)
         if self._features is None or self._features[0] != key:
             if colour:
                 images = [(pol.intensity, pol.dop, pol.phase)]
-                images += [(c.intensity, c.dop, c.phase) for c in self.colour_images()]
+                colours = self.colour_images(segment_params)
+                images += [(c.intensity, c.dop, c.phase) for c in colours]
                 feats = multichannel_features(images, params, channels=["", *self.colours])
             else:
                 feats = pixel_features(pol.intensity, pol.dop, pol.phase, params)
@@ -147,9 +156,9 @@ class PixelSegmenter:
         """
         return None if self._features is None else self._features[1]
 
-    def guide(self) -> np.ndarray:
+    def guide(self, segment_params: SegmentParams | None = None) -> np.ndarray:
         """Guide image of the edge-aware smoothing: log Î."""
-        pol = self.pipeline.get("polarisation")
+        pol = self.pipeline.get("polarisation", segment_params)
         return np.log(np.maximum(pol.intensity, EPS_INTENSITY)).astype(np.float32)
 
     def train(
@@ -157,10 +166,11 @@ class PixelSegmenter:
         scribbles: np.ndarray,
         feature_params: PixelFeatureParams | None = None,
         params: ClassifierParams | None = None,
+        segment_params: SegmentParams | None = None,
     ) -> PixelClassifier:
         """Fit the classifier on the scribbled valid pixels."""
-        feats = self.features(feature_params)
-        valid = ~self.pipeline.get("polarisation").invalid
+        feats = self.features(feature_params, segment_params=segment_params)
+        valid = ~self.pipeline.get("polarisation", segment_params).invalid
         return train_pixel_classifier(feats, scribbles, params, valid=valid)
 
     def segment(
@@ -172,12 +182,16 @@ class PixelSegmenter:
         params: ClassifierParams | None = None,
         reconstruction: bool = True,
         cancel: Any = None,
+        segment_params: SegmentParams | None = None,
     ) -> PixelSegmentation:
         """Train on ``scribbles`` (or apply ``classifier``) and label every pixel.
 
         Exactly one of ``scribbles`` and ``classifier`` is given. A given classifier
         brings its own feature parameters (``feature_params`` is then ignored).
+        ``segment_params``: the pipeline parameters of the run (default: the pipeline's
+        last run's).
         """
+        segment_params = segment_params or self.pipeline.params
         if (scribbles is None) == (classifier is None):
             raise ValueError("give scribbles or a classifier, not both or neither")
         seconds: dict[str, float] = {}
@@ -186,30 +200,36 @@ class PixelSegmenter:
         colour = classifier is None or any(
             name.split(":", 1)[0] in self.colours for name in classifier.feature_names
         )
-        feats = self.features(fparams, colour)
+        feats = self.features(fparams, colour, segment_params)
         seconds["features"] = time.perf_counter() - t0
         seconds["train"] = 0.0  # an applied classifier is not retrained
         if classifier is None:
             t0 = time.perf_counter()
-            classifier = self.train(scribbles, feats.params, params)
+            classifier = self.train(scribbles, feats.params, params, segment_params)
             seconds["train"] = time.perf_counter() - t0
         t0 = time.perf_counter()
-        guide = self.guide() if classifier.params.smoothing > 0 else None
+        guide = self.guide(segment_params) if classifier.params.smoothing > 0 else None
         prediction = predict_pixels(classifier, feats, guide=guide, cancel=cancel)
         seconds["predict"] = time.perf_counter() - t0
-        result = self.result(prediction.labels, reconstruction, seconds)
+        result = self.result(prediction.labels, reconstruction, seconds, segment_params)
         return PixelSegmentation(result, prediction, classifier, seconds)
 
     def result(
-        self, labels: np.ndarray, reconstruction: bool, seconds: dict[str, float]
+        self,
+        labels: np.ndarray,
+        reconstruction: bool,
+        seconds: dict[str, float],
+        segment_params: SegmentParams | None = None,
     ) -> SegmentationResult:
-        """A :class:`SegmentationResult` of the pipeline's maps and these pixel labels."""
+        """A :class:`SegmentationResult` of the pipeline's maps for ``segment_params``
+        (default: the pipeline's last run's) and these pixel labels."""
         pipe = self.pipeline
-        block = top_left_block_labels(labels, pipe.params.window)
+        segment_params = segment_params or pipe.params
+        block = top_left_block_labels(labels, segment_params.window)
         names = ["polarisation", "normals", "harmonics", "pca"]
         names += ["reconstruction"] if reconstruction else []
         for name in names:
-            pipe.get(name)
+            pipe.get(name, segment_params)
         timings = {s: pipe.stage_seconds(s) for s in names}
         timings["pixel_classifier"] = float(sum(seconds.values()))
         return pipe.assemble_result(
@@ -219,4 +239,5 @@ class PixelSegmenter:
             reconstruction,
             timings=timings,
             recomputed=names + ["pixel_classifier"],
+            params=segment_params,
         )

@@ -29,7 +29,7 @@ from ..errors import PolarsegError
 from ..features import harmonics
 
 if TYPE_CHECKING:
-    from ..pipeline import SegmentationResult
+    from ..result import SegmentationResult
 
 #: Default (l, m) pairs of :func:`coefficient_maps` (thesis figures 5.2/5.11).
 DEFAULT_PAIRS: tuple[tuple[int, int], ...] = ((0, 0), (1, 0), (1, 1), (2, 0), (2, 1), (2, 2))

@@ -326,14 +326,14 @@ def _run_cell(
     cell = SweepCell(index=index, refractive_index=n, window=w, degree=d)
     t0 = time.perf_counter()
     try:
-        params = pipe.update(window=w, degree=d, refractive_index=n)
+        params = pipe.params.replace(window=w, degree=d, refractive_index=n)
         if max_bytes is not None:
             check_pipeline_memory(pipe.stack.shape, params, max_bytes)
-        for stage, index_, count in pipe.run_iter(reconstruction=False):
+        for stage, index_, count in pipe.run_iter(params, reconstruction=False):
             if cancel is not None and cancel() and index_ < count:
                 raise Cancelled(f"sweep cancelled at w={w}, L={d}, n={n:g} ({stage})")
-        result = pipe.result(reconstruction=False, params=params)
-        valid = pipe.block_valid()
+        result = pipe.result(params, reconstruction=False)
+        valid = pipe.block_valid(params)
         blocks = result.block_labels.ravel()
         cell.n_segments = result.n_segments
         cell.n_blocks = int(valid.sum())

@@ -103,7 +103,8 @@ from ..features import harmonics, polstats
 from ..features import pca as feat
 from ..graph import affinity, ncut, spectral
 from ..params import SegmentParams
-from ..pipeline import MAX_DENSE_BLOCKS, POLSTATS_KINDS, Pipeline
+from ..pipeline import Pipeline
+from ..stages import MAX_DENSE_BLOCKS, POLSTATS_KINDS
 from .change_test import (
     CHANGE_SOURCES,
     DEFAULT_FALSE_ALARM,

@@ -1,0 +1,147 @@
+"""What a pipeline run produces: the stage values and the assembled result.
+
+:class:`Normals` and :class:`Reconstruction` are the values of the ``normals`` and
+``reconstruction`` stages (:mod:`.stages`); :class:`SegmentationResult` is everything one
+run produced (:meth:`.pipeline.Pipeline.result`); :class:`ScribbleSegmentation` what
+:meth:`.pipeline.Pipeline.scribble_segmentation` returns.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, NamedTuple
+
+import numpy as np
+
+from .analysis.degenerate import DegenerateCheck, degenerate_result
+from .params import SegmentParams
+
+
+@dataclass
+class Normals:
+    """Value of the ``normals`` stage: zenith and azimuth (radians, H × W) and the pixels
+    whose degree of polarisation was clamped to the model's range."""
+
+    zenith: np.ndarray
+    azimuth: np.ndarray
+    clamped: np.ndarray
+
+
+@dataclass
+class Reconstruction:
+    """Value of the ``reconstruction`` stage: Î rebuilt from the harmonics and its
+    absolute error |Î_rec − Î| (H × W, intensity units)."""
+
+    intensity: np.ndarray
+    error: np.ndarray
+
+    @property
+    def mean_error(self) -> float:
+        return float(np.mean(self.error))
+
+
+@dataclass
+class SegmentationResult:
+    """Everything one pipeline run produced (arrays are H × W unless noted).
+
+    ``labels`` covers every input pixel (remainder strips take their nearest block's
+    label); ``block_labels`` is (H // w, W // w). Angles are radians. ``residual`` is the
+    RMS residual of the sinusoid fit. ``valid`` marks the pixels the block features and
+    the reconstruction fit used (inside the pixel mask and with Î > 0); ``mask_counts``
+    holds the pixel counts per exclusion reason
+    (:meth:`~napari_polarseg.engine.polarimage.PixelMask.counts`);
+    ``duplicate_angle_frames`` lists the frames taken at a repeated polariser angle
+    (modulo π), which were averaged before the fit. ``cut_limits`` holds the cut's
+    work counts (:meth:`~napari_polarseg.engine.ncut.CutTree.cut_limits`: eigensolves
+    capped, segments with an isolated block not solved, products); empty when labels
+    came from elsewhere (scribbles).
+    """
+
+    params: SegmentParams
+    intensity: np.ndarray
+    dop: np.ndarray
+    phase: np.ndarray
+    residual: np.ndarray
+    zenith: np.ndarray
+    azimuth: np.ndarray
+    clamped: np.ndarray
+    coefficients: np.ndarray
+    features: np.ndarray
+    explained_variance_ratio: np.ndarray
+    block_labels: np.ndarray
+    labels: np.ndarray
+    ncut_values: list[float]
+    timings: dict[str, float]
+    recomputed: list[str] = field(default_factory=list)
+    reconstruction: np.ndarray | None = None
+    reconstruction_error: np.ndarray | None = None
+    valid: np.ndarray | None = None
+    mask_counts: dict[str, Any] = field(default_factory=dict)
+    duplicate_angle_frames: list[list[int]] = field(default_factory=list)
+    cut_limits: dict[str, int] = field(default_factory=dict)
+
+    @property
+    def n_segments(self) -> int:
+        return int(self.block_labels.max()) + 1
+
+    @property
+    def n_clamped(self) -> int:
+        return int(np.count_nonzero(self.clamped))
+
+    @property
+    def mean_reconstruction_error(self) -> float | None:
+        """Mean absolute reconstruction error over the used pixels (``valid``)."""
+        if self.reconstruction_error is None:
+            return None
+        if self.valid is not None and not self.valid.all():
+            return float(np.mean(self.reconstruction_error[self.valid]))
+        return float(np.mean(self.reconstruction_error))
+
+    def degenerate(self) -> DegenerateCheck:
+        """Whether (nearly) every pixel is in one segment
+        (:func:`~napari_polarseg.engine.degenerate.degenerate_result`, minimum segment size
+        ``min_segment_blocks`` · w² pixels)."""
+        p = self.params
+        return degenerate_result(
+            self.labels, p.min_segment_blocks * p.window**2, requested=p.n_segments
+        )
+
+    def summary(self) -> dict[str, Any]:
+        """JSON-ready figures of the run (stage seconds, segments, variance, error).
+
+        ``degenerate`` (with ``largest_segment_share`` and ``degenerate_reason``): see
+        :meth:`degenerate`; ``cut_limits``: see the class docstring.
+        """
+        check = self.degenerate()
+        return {
+            "stage_seconds": {k: round(v, 6) for k, v in self.timings.items()},
+            # stages this run computed (the others came from the cache) and their time
+            "recomputed_stages": list(self.recomputed),
+            "total_seconds": round(sum(self.timings[s] for s in self.recomputed), 6),
+            "n_segments": self.n_segments,
+            "segment_pixels": np.bincount(self.labels.ravel()).tolist(),
+            "degenerate": check.degenerate,
+            "largest_segment_share": round(check.largest_share, 6),
+            "degenerate_reason": check.reason,
+            "n_blocks": int(self.block_labels.size),
+            "block_grid": list(self.block_labels.shape),
+            "n_components": int(self.features.shape[1]),
+            "explained_variance": float(np.sum(self.explained_variance_ratio)),
+            "explained_variance_ratio": [float(v) for v in self.explained_variance_ratio],
+            "ncut_values": [float(v) for v in self.ncut_values],
+            "clamped_pixels": self.n_clamped,
+            "mean_reconstruction_error": self.mean_reconstruction_error,
+            "fit": self.params.fit,
+            "mask": dict(self.mask_counts),
+            "averaged_duplicate_angles": [list(g) for g in self.duplicate_angle_frames],
+            "cut_limits": dict(self.cut_limits),
+        }
+
+
+class ScribbleSegmentation(NamedTuple):
+    """What :meth:`Pipeline.scribble_segmentation` returns."""
+
+    result: SegmentationResult
+    probabilities: np.ndarray
+    classes: np.ndarray
+    training_blocks: int
