@@ -1219,6 +1219,67 @@ def read_mask(
     )
 
 
+def read_labels(path: PathLike, shape: Sequence[int], what: str) -> np.ndarray:
+    """Read a labels image (scribbles, ground truth) of the outputs' size as int64.
+
+    ``.tif``/``.tiff``/``.png`` (single channel, e.g. a napari Labels layer saved as an
+    image), ``.npy`` or ``.npz`` (the array ``labels``, ``scribbles`` or ``mask``, or its
+    only array). Raises :class:`PolarsegError` naming the file and the problem.
+    """
+    p = Path(path)
+    suffix = p.suffix.lower()
+    if suffix not in MASK_SUFFIXES:
+        kinds = ", ".join(MASK_SUFFIXES)
+        raise PolarsegError(f"{path}: unsupported {what} file type {suffix!r} ({kinds})")
+    if not p.is_file():
+        raise PolarsegError(f"{path}: no such file")
+    colour = False
+    if suffix in (".npy", ".npz"):
+        try:
+            loaded = np.load(p, allow_pickle=False)
+            if isinstance(loaded, np.ndarray):
+                data = loaded
+            else:
+                with loaded:
+                    names = loaded.files
+                    pick = [n for n in ("labels", "scribbles", "mask") if n in names]
+                    pick = pick or (names if len(names) == 1 else [])
+                    if not pick:
+                        raise PolarsegError(
+                            f"{path}: no array named 'labels' or 'scribbles' "
+                            f"(found: {', '.join(names)})"
+                        )
+                    data = loaded[pick[0]]
+        except PolarsegError:
+            raise
+        except Exception as exc:
+            first = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
+            raise PolarsegError(f"{path}: cannot read the {what} ({first})") from None
+    else:
+        data, colour, _ = _load_frame(p, memory_limit())
+    data = np.asarray(data)
+    if colour:
+        raise PolarsegError(f"{path}: the {what} must be a single-channel labels image")
+    while data.ndim > 2 and data.shape[0] == 1:
+        data = data[0]
+    if data.ndim != 2:
+        raise PolarsegError(f"{path}: the {what} must be one 2-D image, got shape {data.shape}")
+    if data.dtype == np.bool_:
+        data = data.astype(np.uint8)
+    if data.dtype.kind == "f":
+        if not np.all(np.isfinite(data)) or np.any(data != np.round(data)):
+            raise PolarsegError(f"{path}: the {what} must hold integer labels")
+    elif data.dtype.kind not in "iu":
+        raise PolarsegError(f"{path}: the {what} must hold integer labels, got {data.dtype}")
+    h, w = (int(v) for v in shape)
+    if data.shape != (h, w):
+        raise PolarsegError(
+            f"{path}: the {what} image is {data.shape[0]} x {data.shape[1]} pixels but the "
+            f"outputs are {h} x {w}"
+        )
+    return data.astype(np.int64)
+
+
 # -- writers --------------------------------------------------------------------------------
 
 
