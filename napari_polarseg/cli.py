@@ -111,6 +111,7 @@ import argparse
 import dataclasses
 import sys
 import time
+import typing
 import warnings
 from collections.abc import Sequence
 from dataclasses import fields
@@ -127,14 +128,10 @@ from .engine.evaluation import adjusted_rand_index
 from .engine.limits import check_pipeline_memory, memory_limit
 from .engine.mosaic import DEMOSAIC_METHODS
 from .engine.params import (
-    CLUSTERING_METHODS,
-    COEFFICIENT_METHODS,
-    FEATURE_KINDS,
-    FIT_METHODS,
-    MODELS,
+    PARAM_SPECS,
+    PRESET_HELP,
     PRESETS,
-    SCALE_MODES,
-    SPECULAR_BRANCHES,
+    ParamSpec,
     SegmentParams,
 )
 from .engine.pipeline import STAGES, Pipeline
@@ -222,96 +219,44 @@ def _threshold_arg(text: str) -> float | str:
         raise argparse.ArgumentTypeError(f"expected a number or 'none', got {text!r}") from None
 
 
-#: SegmentParams field -> (flag, argparse keywords).
-PARAM_OPTIONS: dict[str, tuple[str, dict[str, Any]]] = {
-    "window": ("--window", {"type": int, "metavar": "W", "help": "block side w, pixels"}),
-    "degree": ("--degree", {"type": int, "metavar": "L", "help": "spherical-harmonic degree"}),
-    "refractive_index": (
-        "--refractive-index",
-        {"type": float, "metavar": "N", "help": "assumed refractive index n > 1"},
-    ),
-    "n_segments": ("--segments", {"type": int, "metavar": "K", "help": "number of segments"}),
-    "model": ("--model", {"choices": MODELS, "help": "Fresnel model for the zenith"}),
-    "specular_branch": (
-        "--specular-branch",
-        {"choices": SPECULAR_BRANCHES, "help": "zenith solution of the specular model"},
-    ),
-    "coefficients": (
-        "--coefficients",
-        {"choices": COEFFICIENT_METHODS, "help": "block coefficient estimator"},
-    ),
-    "ridge": ("--ridge", {"type": float, "help": "ridge penalty of the 'ridge' estimator"}),
-    "features": (
-        "--features",
-        {"choices": FEATURE_KINDS, "help": "block features: all, zonal (m=0) or energies"},
-    ),
-    "variance": ("--variance", {"type": float, "help": "share of variance the PCA keeps"}),
-    "scale": ("--scale", {"type": float, "help": "affinity scale s in exp(-D/s)"}),
-    "scale_mode": (
-        "--scale-mode",
-        {"choices": SCALE_MODES, "help": "s as given, or relative to the median distance"},
-    ),
-    "spatial_radius": (
-        "--spatial-radius",
-        {"type": float, "metavar": "R", "help": "spatial term radius in blocks (0: off)"},
-    ),
-    "spatial_sigma": (
-        "--spatial-sigma",
-        {"type": float, "metavar": "S", "help": "spatial term width in blocks"},
-    ),
-    "ncut_threshold": (
-        "--ncut-threshold",
-        {"type": _threshold_arg, "metavar": "T", "help": "stop splitting above this Ncut"},
-    ),
-    "min_segment_blocks": (
-        "--min-segment-blocks",
-        {"type": int, "metavar": "B", "help": "smallest segment, in blocks"},
-    ),
-    "clustering": (
-        "--clustering",
-        {
-            "choices": CLUSTERING_METHODS,
-            "help": "recursive two-way normalized cuts (thesis) or k-way spectral clustering",
-        },
-    ),
-    "fit": (
-        "--fit",
-        {
-            "choices": FIT_METHODS,
-            "help": "polarisation-image fit: least squares, or robust IRLS that resists "
-            "outlying frames (needs 5 or more distinct angles to make a difference)",
-        },
-    ),
-    "affinity_graph": (
-        "--affinity-graph",
-        {
-            "choices": ("auto", "dense", "sparse"),
-            "help": "block affinity: every pair (dense), k nearest neighbours or the spatial "
-            "neighbourhood (sparse), or dense up to 6000 blocks (auto)",
-        },
-    ),
-}
+def _field_types() -> dict[str, Any]:
+    """The resolved type of every SegmentParams field."""
+    return typing.get_type_hints(SegmentParams)
 
 
-def _param_options() -> dict[str, tuple[str, dict[str, Any]]]:
-    """PARAM_OPTIONS plus a plain option for any SegmentParams field it does not know."""
-    options = dict(PARAM_OPTIONS)
-    for f in fields(SegmentParams):
-        if f.name not in options:
-            default = getattr(SegmentParams(), f.name)
-            kind = _threshold_arg if default is None else type(default)
-            flag = "--" + f.name.replace("_", "-")
-            options[f.name] = (flag, {"type": kind, "help": f.name.replace("_", " ")})
+def param_options(
+    specs: dict[str, ParamSpec] | None = None,
+) -> dict[str, tuple[str, dict[str, Any]]]:
+    """SegmentParams field -> (flag, argparse keywords), made from the parameter table.
+
+    The type comes from the field's type (int, float; str for a field the table has but
+    SegmentParams has not); an ``optional`` spec takes the ``none``-accepting threshold
+    parser; a spec with choices gets them instead of a type; the help is the spec's.
+    """
+    specs = PARAM_SPECS if specs is None else specs
+    types = _field_types()
+    options: dict[str, tuple[str, dict[str, Any]]] = {}
+    for name, spec in specs.items():
+        kwargs: dict[str, Any] = {}
+        if spec.choices:
+            kwargs["choices"] = spec.choices
+        elif spec.optional:
+            kwargs["type"] = _threshold_arg
+        else:
+            kind = types.get(name, str)
+            kwargs["type"] = kind if kind in (int, float, str) else str
+        if spec.metavar:
+            kwargs["metavar"] = spec.metavar
+        kwargs["help"] = spec.help
+        options[name] = (spec.flag, kwargs)
     return options
 
 
-#: What each preset is, for --help.
-PRESET_HELP = (
-    "auto: superpixels clustered by their polarisation, the best unsupervised method "
-    "measured on rendered and real frames; thesis: the thesis pipeline as published; "
-    "recommended: the thesis pipeline with the block parameters that score best on the "
-    "synthetic scenes (docs/quality.md)"
-)
+def _preset_help(presets: Sequence[str]) -> str:
+    """What each of ``presets`` is, for --help."""
+    return "; ".join(f"{name}: {PRESET_HELP[name]}" for name in presets)
+
+
 #: Presets of the commands whose own analysis cuts the block graph (sweep, timeseries).
 BLOCK_PRESETS = ("thesis", "recommended")
 
@@ -320,8 +265,9 @@ def _add_param_options(
     parser: argparse.ArgumentParser,
     preset: str = "auto",
     presets: tuple[str, ...] = tuple(PRESETS),
+    specs: dict[str, ParamSpec] | None = None,
 ) -> None:
-    defaults = SegmentParams()
+    defaults = {f.name: f.default for f in fields(SegmentParams)}
     group = parser.add_argument_group(
         "segmentation parameters",
         "start from --preset, then --params, then explicit flags; thesis defaults in brackets",
@@ -330,18 +276,16 @@ def _add_param_options(
         "--preset",
         choices=presets,
         default=preset,
-        help=f"starting parameters ({PRESET_HELP}) [{preset}]"
-        if "auto" in presets
-        else f"starting parameters ({PRESET_HELP.split('; ', 1)[1]}) [{preset}]",
+        help=f"starting parameters ({_preset_help(presets)}) [{preset}]",
     )
     group.add_argument(
         "--params",
         metavar="FILE.json",
         help="SegmentParams JSON (or a params.json written by polarseg)",
     )
-    for name, (flag, kwargs) in _param_options().items():
+    for name, (flag, kwargs) in param_options(specs).items():
         kwargs = dict(kwargs)
-        kwargs["help"] = f"{kwargs['help']} [{getattr(defaults, name)}]"
+        kwargs["help"] = f"{kwargs['help']} [{defaults.get(name)}]".replace("%", "%%")
         group.add_argument(flag, dest=name, default=None, **kwargs)
     parser.add_argument(
         "--overview", action="store_true", help="also write overview.png (matplotlib figure)"
@@ -408,8 +352,9 @@ def _add_plots_option(parser: argparse.ArgumentParser) -> None:
     )
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The argument parser of ``polarseg`` (errors raise :class:`UsageError`)."""
+def build_parser(specs: dict[str, ParamSpec] | None = None) -> argparse.ArgumentParser:
+    """The argument parser of ``polarseg`` (errors raise :class:`UsageError`); the
+    segmentation flags are made from ``specs`` (default: :data:`PARAM_SPECS`)."""
     parser = _Parser(
         prog=PROG,
         description="Material segmentation from polarisation images (thesis pipeline: "
@@ -532,7 +477,7 @@ def build_parser() -> argparse.ArgumentParser:
         "(adjusted Rand index, IoU per segment, block accuracy) and adds it to summary.json",
     )
     _add_plots_option(seg)
-    _add_param_options(seg)
+    _add_param_options(seg, specs=specs)
     seg.set_defaults(func=_cmd_segment)
 
     demo = sub.add_parser(
@@ -550,9 +495,9 @@ def build_parser() -> argparse.ArgumentParser:
         "--sample", metavar="FILE.npz", help="use this .npz (stack, angles, labels) instead"
     )
     _add_plots_option(demo)
-    _add_param_options(demo)
+    _add_param_options(demo, specs=specs)
     demo.set_defaults(func=_cmd_demo, overview=True)
-    _add_sweep_parser(sub)
+    _add_sweep_parser(sub, specs)
 
     bat = sub.add_parser(
         "batch",
@@ -601,7 +546,7 @@ def build_parser() -> argparse.ArgumentParser:
         "the normalized cut",
     )
     _add_input_options(bat, "scene")
-    _add_param_options(bat)
+    _add_param_options(bat, specs=specs)
     bat.set_defaults(func=_cmd_batch)
 
     ts = sub.add_parser(
@@ -659,7 +604,7 @@ def build_parser() -> argparse.ArgumentParser:
         "change scores and distances stay those of the change test",
     )
     _add_input_options(ts, "day")
-    _add_param_options(ts, preset="recommended", presets=BLOCK_PRESETS)
+    _add_param_options(ts, preset="recommended", presets=BLOCK_PRESETS, specs=specs)
     ts.set_defaults(func=_cmd_timeseries)
     return parser
 
@@ -683,7 +628,7 @@ def _params_from_args(
         raise PolarsegError(f"{source}: {exc}") from None
     except TypeError as exc:
         raise PolarsegError(f"{source}: a parameter has the wrong type ({exc})") from None
-    changes = {name: getattr(args, name) for name in _param_options()}
+    changes = {name: getattr(args, name) for name in PARAM_SPECS}
     changes = {k: (None if v == "none" else v) for k, v in changes.items() if v is not None}
     return params.replace(**changes)
 
@@ -877,7 +822,7 @@ def _number_list_arg(kind: type, what: str):
     return parse
 
 
-def _add_sweep_parser(sub: Any) -> None:
+def _add_sweep_parser(sub: Any, specs: dict[str, ParamSpec] | None = None) -> None:
     from .engine.sweep import DEFAULT_SCORE, SCORES
 
     sw = sub.add_parser(
@@ -940,7 +885,7 @@ def _add_sweep_parser(sub: Any) -> None:
     )
     _add_input_options(sw, "stack")
     _add_plots_option(sw)
-    _add_param_options(sw, preset="recommended", presets=BLOCK_PRESETS)
+    _add_param_options(sw, preset="recommended", presets=BLOCK_PRESETS, specs=specs)
     sw.set_defaults(func=_cmd_sweep)
 
 
