@@ -170,11 +170,7 @@ def folder_inputs(folder: str | os.PathLike[str], mosaic: bool = False) -> list[
         and (p.is_dir() or (p.is_file() and p.suffix.lower() in suffixes))
         and not (p.is_file() and p.name in (SUMMARY_CSV, SUMMARY_JSON, PARAMS_FILE))
     ]
-    return sorted(entries, key=lambda p: _natural_key(p.name))
-
-
-def _natural_key(name: str) -> list[Any]:
-    return [int(t) if t.isdigit() else t.lower() for t in re.split(r"(\d+)", name)]
+    return sorted(entries, key=lambda p: pio.natural_key(p.name))
 
 
 def scene_name(path: str | os.PathLike[str]) -> str:

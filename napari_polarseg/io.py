@@ -389,7 +389,8 @@ def single_frame_file(path: Path) -> bool:
         return False
 
 
-def _natural_key(name: str) -> list:
+def natural_key(name: str) -> list[Any]:
+    """Sort key of a file name with its digit runs as numbers (``f2`` before ``f10``)."""
     return [int(t) if t.isdigit() else t.lower() for t in re.split(r"(\d+)", name)]
 
 
@@ -781,7 +782,7 @@ def _folder_frames(folder: Path) -> list[Path]:
     ]
     if not files:
         raise _error(folder, f"no image frames ({', '.join(FRAME_SUFFIXES)}) in the folder")
-    return sorted(files, key=lambda f: _natural_key(f.name))
+    return sorted(files, key=lambda f: natural_key(f.name))
 
 
 def _read_frame_files(

@@ -44,6 +44,7 @@ from ..engine.timeseries import (
     TimeSeriesResult,
     segment_timeseries,
 )
+from ..io import read_params_file
 from ._base import ScrollingContainer, is_angle_stack
 from ._layers import ANGLES_KEY, label_colormap
 from ._runner import WorkerSlot, parse_angles
@@ -113,11 +114,10 @@ def params_from(viewer: napari.viewer.Viewer, source: str, path: Any = None) -> 
     if source == "thesis":
         return SegmentParams()
     if source == "JSON file":
-        try:
-            text = Path(path).read_text(encoding="utf-8")
-        except (OSError, TypeError) as exc:
-            raise PolarsegError(f"{path}: cannot read the parameters file ({exc})") from None
-        return SegmentParams.from_json(text)
+        if path is None:
+            raise PolarsegError("None: cannot read the parameters file (no file chosen)")
+        # a SegmentParams JSON or a params.json written by polarseg, as `segment --params`
+        return read_params_file(path)
     from .segment import SegmentWidget
 
     for widget in viewer.window.dock_widgets.values():
