@@ -45,10 +45,9 @@ class ReadOptions:
 
     Attributes
     ----------
-    angles_deg : tuple of float or None
-        Polariser angle of every frame, degrees, in frame order (overrides the file).
-    mosaic_deg : tuple of float or None
-        The input is one raw mosaic frame; its 2 x 2 super-pixel angles, degrees.
+    angles_deg, mosaic_deg : tuple of float or None
+        Polariser angle of every frame in frame order (overrides the file), or: the input
+        is one raw mosaic frame with these 2 x 2 super-pixel angles; degrees.
     demosaic : str
         Mosaic decoding (``superpixel`` or ``interpolated``).
     bayer : str or None
@@ -59,21 +58,19 @@ class ReadOptions:
         Dark frame file subtracted from every frame.
     offset : float or None
         Constant black level subtracted from every sample (input units).
-    saturation : float, "auto" or None
-        Samples at or above it are saturated (input units; "auto": the type's maximum;
-        None: no check).
-    dark_level : float or None
-        Samples at or below it (after subtraction) are black (None: no check).
+    saturation, dark_level : float, "auto" or None
+        Samples at or above ``saturation`` are saturated ("auto": the type's maximum),
+        those at or below ``dark_level`` (after subtraction) black; input units; None: no
+        check.
     mask : str or None
         Region file (labels image, non-zero = use).
     register : bool
         Align the frames to the first (sub-pixel phase correlation) first.
     max_memory_gib : float or None
         Memory limit of the read and the run, GiB (None: ``$POLARSEG_MAX_BYTES`` or 8).
-    scribbles : str or None
-        Strokes file: the labels come from a pixel classifier trained on them.
-    classifier : str or None
-        Saved pixel classifier (``.polarseg-clf``) that labels the pixels.
+    scribbles, classifier : str or None
+        Strokes file to train a pixel classifier on, or a saved one (``.polarseg-clf``):
+        it labels the pixels instead of the cut.
     ground_truth : str or None
         True materials (labels image): ``evaluation.json`` is written.
     """
@@ -106,10 +103,8 @@ class OutputOptions:
 
     Attributes
     ----------
-    overview : bool
-        ``overview.png`` (matplotlib figure).
-    plots : bool
-        The analyst's plots as PNGs in ``plots/``.
+    overview, plots : bool
+        ``overview.png`` (matplotlib figure); the analyst's plots as PNGs in ``plots/``.
     save_classifier : str or None
         With scribbles: also write the trained classifier to this file.
     """
