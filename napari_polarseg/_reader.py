@@ -15,7 +15,7 @@ Handles (the reading itself is :func:`napari_polarseg.io.read_stack`):
   ``IMX250MYR``, ``IMX253MYR``, decoded as a colour-polarisation mosaic (the same layout
   under an RGGB Bayer filter, 4 × 4 period) at a quarter of the resolution: the layer is
   the luminance stack, and ``metadata["colour_stack"]`` holds the (R, G, B) × angle
-  stacks (:mod:`napari_polarseg.engine.colour_mosaic`). Other single images are left to
+  stacks (:mod:`napari_polarseg.engine.physics.colour_mosaic`). Other single images are left to
   napari's own readers, since an ordinary photo cannot be told from a raw mosaic by its
   pixels.
 

@@ -1,20 +1,21 @@
 """npe2 writer: a labels layer (e.g. ``segments``) as an integer TIFF, written atomically.
 
-The file is written to a temporary file in the destination folder and moved into place
-with :func:`os.replace`, so a failed save never leaves a truncated file where a good one
-was. This module imports neither napari nor Qt.
+The file is written through :func:`napari_polarseg.io.atomic_output` (a temporary file in
+the destination folder, flushed to disk and moved into place with :func:`os.replace`), so a
+failed save never leaves a truncated file where a good one was. This module imports
+neither napari nor Qt.
 """
 
 from __future__ import annotations
 
-import contextlib
 import os
-import tempfile
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import tifffile
+
+from .io import atomic_output
 
 #: Extensions the writer produces; another extension gets ``.tif`` appended.
 EXTENSIONS = (".tif", ".tiff")
@@ -59,17 +60,10 @@ def labels_to_tiff(path: str | os.PathLike, data: Any, metadata: dict | None = N
         raise ValueError(f"labels must be integers, got dtype {labels.dtype}")
     labels = labels.astype(_label_dtype(labels), copy=False)
     out.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{out.name}.", suffix=".tmp.tif", dir=out.parent)
-    os.close(fd)
-    try:
+    with atomic_output(out) as tmp:
         tifffile.imwrite(
             tmp, labels, photometric="minisblack", compression="zlib", metadata=metadata or {}
         )
-        os.replace(tmp, out)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            os.unlink(tmp)
-        raise
     return str(out)
 
 

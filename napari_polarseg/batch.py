@@ -43,6 +43,7 @@ from __future__ import annotations
 
 import contextlib
 import csv
+import dataclasses
 import glob
 import io as _io
 import json
@@ -64,6 +65,8 @@ from . import __version__
 from . import io as pio
 from .engine.errors import Cancelled, PolarsegError
 from .engine.params import SegmentParams
+from .export import FLOAT_OUTPUTS, OutputError
+from .jobs import OutputOptions, ReadOptions, segment_args, segment_to_folder
 
 #: Name of the completion marker inside a finished scene folder.
 MARKER = ".polarseg-complete.json"
@@ -112,8 +115,6 @@ _GLOB_CHARS = re.compile(r"[*?\[]")
 
 def contract_files() -> tuple[str, ...]:
     """Files every complete scene folder must hold (the ``segment`` contract)."""
-    from .cli import FLOAT_OUTPUTS
-
     return ("labels.tif", *FLOAT_OUTPUTS, "params.json", "summary.json")
 
 
@@ -169,11 +170,7 @@ def folder_inputs(folder: str | os.PathLike[str], mosaic: bool = False) -> list[
         and (p.is_dir() or (p.is_file() and p.suffix.lower() in suffixes))
         and not (p.is_file() and p.name in (SUMMARY_CSV, SUMMARY_JSON, PARAMS_FILE))
     ]
-    return sorted(entries, key=lambda p: _natural_key(p.name))
-
-
-def _natural_key(name: str) -> list[Any]:
-    return [int(t) if t.isdigit() else t.lower() for t in re.split(r"(\d+)", name)]
+    return sorted(entries, key=lambda p: pio.natural_key(p.name))
 
 
 def scene_name(path: str | os.PathLike[str]) -> str:
@@ -326,46 +323,45 @@ def run_scene(job: dict[str, Any]) -> dict[str, Any]:
     """Segment one scene into its result folder, atomically; return its table row.
 
     The Dask task of a batch (also called directly by ``scheduler="inline"``). Runs the
-    ``polarseg segment`` command (its parser and its function) with the output set to a
-    temporary folder beside the final one, then writes the completion marker and renames
-    the folder into place. Bad input, unwritable output and errors of the engine are
-    returned as a ``"failed"`` row with the error's message; nothing is left behind
-    but the old state of the final folder.
+    job of ``polarseg segment`` (:func:`napari_polarseg.jobs.segment_to_folder`) with the
+    output set to a temporary folder beside the final one, then writes the completion
+    marker and renames the folder into place. Bad input, unwritable output and errors of
+    the engine are returned as a ``"failed"`` row with the error's message; nothing is
+    left behind but the old state of the final folder.
 
     Parameters
     ----------
     job : dict
-        ``name``, ``input``, ``output`` (the final folder), ``params_file`` (a
-        SegmentParams JSON), ``params`` (the same as a dict, for the marker) and
-        ``segment_args`` (extra ``segment`` options, e.g. ``["--angles", "0,45,90"]``).
+        ``name``, ``input``, ``output`` (the final folder), ``params`` (SegmentParams as
+        a dict), ``read`` (:class:`~napari_polarseg.jobs.ReadOptions`, with the memory
+        cap), ``outputs`` (:class:`~napari_polarseg.jobs.OutputOptions`) and
+        ``segment_args`` (the same options as ``segment`` flags, for the marker).
 
     Returns
     -------
     dict
-        The scene's row (keys :data:`COLUMNS`), plus ``log`` (what ``segment`` printed),
+        The scene's row (keys :data:`COLUMNS`), plus ``log`` (the job's messages),
         ``warnings`` and, for an unexpected error, ``traceback``.
     """
-    from . import cli
-
     t0 = time.perf_counter()
     final = Path(job["output"])
     record = _blank(job, "failed")
     record["worker"] = _worker_id()
     tmp = final.with_name(f".{final.name}.tmp-{uuid.uuid4().hex[:12]}")
-    argv = ["segment", str(job["input"]), "--out", str(tmp), "--params", str(job["params_file"])]
-    argv += [str(a) for a in job.get("run_args", job.get("segment_args", ()))]
-    printed = _io.StringIO()
+    log: list[str] = []
     try:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
-            args = cli.build_parser().parse_args(argv)
-            # what segment prints on either stream (e.g. its warning of a degenerate
-            # result) goes into the row's log; the batch reports per scene itself
-            with contextlib.redirect_stdout(printed), contextlib.redirect_stderr(printed):
-                args.func(args)
+            params = SegmentParams.from_dict(job["params"])
+            done = segment_to_folder(
+                str(job["input"]), tmp, params, job.get("read"), job.get("outputs")
+            )
+            # what segment says (e.g. its warning of a degenerate result) goes into the
+            # row's log; the batch reports per scene itself
+            log = [message.text for message in done.messages]
         missing = [f for f in contract_files() if not (tmp / f).is_file()]
         if missing:
-            raise cli.OutputError(f"segment did not write {', '.join(missing)}")
+            raise OutputError(f"segment did not write {', '.join(missing)}")
         files = {p.name: p.stat().st_size for p in sorted(tmp.iterdir()) if p.is_file()}
         marker = {
             "polarseg_version": __version__,
@@ -382,7 +378,7 @@ def run_scene(job: dict[str, Any]) -> dict[str, Any]:
         record["warnings"] = list(
             dict.fromkeys((str(w.message).splitlines() or [""])[0] for w in caught)
         )
-    except (PolarsegError, cli.OutputError, OSError) as exc:
+    except (PolarsegError, OutputError, OSError) as exc:
         record["error"] = " ".join(str(exc).split()) or type(exc).__name__
     except Exception as exc:  # an engine bug must not stop the batch
         record["error"] = f"{type(exc).__name__}: {' '.join(str(exc).split())}"
@@ -390,7 +386,7 @@ def run_scene(job: dict[str, Any]) -> dict[str, Any]:
     finally:
         if tmp.exists():
             _remove_tree(tmp)
-    record["log"] = printed.getvalue()
+    record["log"] = "".join(f"{line}\n" for line in log)
     record["task_seconds"] = round(time.perf_counter() - t0, 6)
     return record
 
@@ -527,14 +523,16 @@ def _clean_leftovers(out: Path) -> None:
             _remove_tree(entry)
 
 
-def _max_memory_args(segment_args: list[str], worker_limits: list[float]) -> list[str]:
-    if "--max-memory" in segment_args:
-        return segment_args
+def _memory_capped(read: ReadOptions, worker_limits: list[float]) -> ReadOptions:
+    """``read`` with the memory limit of the smallest worker (share :data:`MEMORY_SHARE`,
+    GiB to 3 decimals) unless it has its own."""
+    if read.max_memory_gib is not None:
+        return read
     limits = [v for v in worker_limits if v and v > 0]
     if not limits:
-        return segment_args
+        return read
     gib = MEMORY_SHARE * min(limits) / 2**30
-    return [*segment_args, "--max-memory", f"{gib:.3f}"]
+    return dataclasses.replace(read, max_memory_gib=float(f"{gib:.3f}"))
 
 
 class _Inline:
@@ -668,7 +666,7 @@ def _warm_up() -> None:
     """Import what a scene needs (about a second), on each worker before the first scene."""
     from sklearn.decomposition import PCA  # noqa: F401
 
-    from . import cli  # noqa: F401
+    from . import jobs  # noqa: F401
 
 
 def _error_text(exc: BaseException) -> str:
@@ -684,7 +682,8 @@ def iter_batch(
     out: str | os.PathLike[str],
     params: SegmentParams,
     *,
-    segment_args: Sequence[str] = (),
+    read: ReadOptions | None = None,
+    outputs: OutputOptions | None = None,
     scheduler: str | None = None,
     n_workers: int | None = None,
     memory_limit: str | float | int | None = None,
@@ -709,9 +708,11 @@ def iter_batch(
         Output folder (created); one sub-folder per scene.
     params : SegmentParams
         Parameters for every scene.
-    segment_args : sequence of str
-        Extra ``polarseg segment`` options for every scene (``--angles``, ``--mosaic``,
-        ``--register``, ``--channel``, ``--overview``, ``--max-memory``, …).
+    read : ReadOptions, optional
+        How every scene is read (angles, mosaic, channel, registration, memory limit,
+        classifier, …; default: as ``polarseg segment`` without options).
+    outputs : OutputOptions, optional
+        The optional files of every scene folder (``overview.png``, …).
     scheduler : str, optional
         None: start a local cluster of worker processes; ``"inline"``: no Dask, one
         scene after the other here; otherwise the address of a running
@@ -762,8 +763,9 @@ def iter_batch(
         reason = exc.strerror or str(exc)
         raise PolarsegError(f"{out_dir}: cannot create the output folder ({reason})") from None
     params_dict = params.to_dict()
-    user_args = [str(a) for a in segment_args]
-    args = list(user_args)
+    read = read or ReadOptions()
+    outputs = outputs or OutputOptions()
+    user_args = segment_args(read, outputs)
     records: dict[str, dict[str, Any]] = {}
     result = BatchResult(out_dir, [], scheduler or "local", 0, 0.0, 0.0, params_dict, user_args)
 
@@ -791,7 +793,7 @@ def iter_batch(
                     n = n_workers or max(1, min(os.cpu_count() or 1, len(todo)))
                     runner = _Dask(task, scheduler, n, memory_limit, allowed_failures, timeout)
                     result.n_workers, label = runner.n_workers, runner.label
-                    args = _max_memory_args(args, runner.memory_limits)
+                    read = _memory_capped(read, runner.memory_limits)
             else:
                 label = "nothing to run"
             result.scheduler = scheduler or ("local" if todo else "none")
@@ -806,10 +808,10 @@ def iter_batch(
                     "name": s.name,
                     "input": s.input,
                     "output": str(s.output),
-                    "params_file": str(out_dir / PARAMS_FILE),
                     "params": params_dict,
+                    "read": read,  # with the derived memory cap
+                    "outputs": outputs,
                     "segment_args": list(user_args),  # as recorded in the marker
-                    "run_args": list(args),  # plus the derived memory cap
                 }
                 for s in todo
             ]

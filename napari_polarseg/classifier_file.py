@@ -935,9 +935,9 @@ def _short_list(names: list[str]) -> str:
 
 
 def save_pixel_classifier(path: PathLike, classifier: PixelClassifier) -> None:
-    """Write a trained :class:`~napari_polarseg.engine.pixel_classifier.PixelClassifier`.
+    """Write a trained :class:`~napari_polarseg.engine.analysis.pixel_classifier.PixelClassifier`.
 
-    Its :meth:`~napari_polarseg.engine.pixel_classifier.PixelClassifier.metadata`
+    Its :meth:`~napari_polarseg.engine.analysis.pixel_classifier.PixelClassifier.metadata`
     (classes, feature names and parameters, training summary) is the file's metadata,
     with the package and format versions of :func:`classifier_metadata`.
     """

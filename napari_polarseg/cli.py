@@ -75,7 +75,7 @@ The folder is written by :func:`napari_polarseg.export.write_result_folder`, as 
 plugin's *Export results…* does.
 
 ``sweep`` segments one stack for every w, L (and n) of a grid with one cached pipeline
-(:mod:`napari_polarseg.engine.sweep`) and writes ``sweep.csv`` (one row per cell: the
+(:mod:`napari_polarseg.engine.analysis.sweep`) and writes ``sweep.csv`` (one row per cell: the
 setting, segments reached, stability, silhouette, mean Ncut, combined score, ARI with a
 ground truth, seconds, error), ``sweep.json`` (the same, the best cell and its parameters,
 the total seconds), ``sweep_heatmap.png`` and ``best_params.json`` (SegmentParams JSON for
@@ -111,29 +111,26 @@ import argparse
 import dataclasses
 import sys
 import time
+import typing
 import warnings
 from collections.abc import Sequence
-from dataclasses import dataclass, field, fields
+from dataclasses import fields
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from . import __version__
+from . import __version__, jobs
 from . import io as pio
-from .engine import STAGES, Pipeline, SegmentationResult
-from .engine.analysis.evaluation import adjusted_rand_index, evaluate
+from .engine import STAGES, Pipeline
+from .engine.analysis.evaluation import adjusted_rand_index
 from .engine.errors import PolarsegError
 from .engine.limits import check_pipeline_memory, memory_limit
 from .engine.params import (
-    CLUSTERING_METHODS,
-    COEFFICIENT_METHODS,
-    FEATURE_KINDS,
-    FIT_METHODS,
-    MODELS,
+    PARAM_SPECS,
+    PRESET_HELP,
     PRESETS,
-    SCALE_MODES,
-    SPECULAR_BRANCHES,
+    ParamSpec,
     SegmentParams,
 )
 from .engine.physics.colour_mosaic import BAYER_ORDERS
@@ -141,8 +138,7 @@ from .engine.physics.mosaic import DEMOSAIC_METHODS
 from .engine.physics.pixel_mask import PixelMask
 from .engine.physics.polarimage import validity_mask
 from .engine.physics.registration import register_stack, shift_frames
-from .export import FLOAT_OUTPUTS as FLOAT_OUTPUTS  # the output contract (batch.py reads it)
-from .export import OutputError, classifier_summary, write_result_folder
+from .export import OutputError
 from .export import labels_image as _labels_image
 from .status_line import StatusLine
 
@@ -224,96 +220,44 @@ def _threshold_arg(text: str) -> float | str:
         raise argparse.ArgumentTypeError(f"expected a number or 'none', got {text!r}") from None
 
 
-#: SegmentParams field -> (flag, argparse keywords).
-PARAM_OPTIONS: dict[str, tuple[str, dict[str, Any]]] = {
-    "window": ("--window", {"type": int, "metavar": "W", "help": "block side w, pixels"}),
-    "degree": ("--degree", {"type": int, "metavar": "L", "help": "spherical-harmonic degree"}),
-    "refractive_index": (
-        "--refractive-index",
-        {"type": float, "metavar": "N", "help": "assumed refractive index n > 1"},
-    ),
-    "n_segments": ("--segments", {"type": int, "metavar": "K", "help": "number of segments"}),
-    "model": ("--model", {"choices": MODELS, "help": "Fresnel model for the zenith"}),
-    "specular_branch": (
-        "--specular-branch",
-        {"choices": SPECULAR_BRANCHES, "help": "zenith solution of the specular model"},
-    ),
-    "coefficients": (
-        "--coefficients",
-        {"choices": COEFFICIENT_METHODS, "help": "block coefficient estimator"},
-    ),
-    "ridge": ("--ridge", {"type": float, "help": "ridge penalty of the 'ridge' estimator"}),
-    "features": (
-        "--features",
-        {"choices": FEATURE_KINDS, "help": "block features: all, zonal (m=0) or energies"},
-    ),
-    "variance": ("--variance", {"type": float, "help": "share of variance the PCA keeps"}),
-    "scale": ("--scale", {"type": float, "help": "affinity scale s in exp(-D/s)"}),
-    "scale_mode": (
-        "--scale-mode",
-        {"choices": SCALE_MODES, "help": "s as given, or relative to the median distance"},
-    ),
-    "spatial_radius": (
-        "--spatial-radius",
-        {"type": float, "metavar": "R", "help": "spatial term radius in blocks (0: off)"},
-    ),
-    "spatial_sigma": (
-        "--spatial-sigma",
-        {"type": float, "metavar": "S", "help": "spatial term width in blocks"},
-    ),
-    "ncut_threshold": (
-        "--ncut-threshold",
-        {"type": _threshold_arg, "metavar": "T", "help": "stop splitting above this Ncut"},
-    ),
-    "min_segment_blocks": (
-        "--min-segment-blocks",
-        {"type": int, "metavar": "B", "help": "smallest segment, in blocks"},
-    ),
-    "clustering": (
-        "--clustering",
-        {
-            "choices": CLUSTERING_METHODS,
-            "help": "recursive two-way normalized cuts (thesis) or k-way spectral clustering",
-        },
-    ),
-    "fit": (
-        "--fit",
-        {
-            "choices": FIT_METHODS,
-            "help": "polarisation-image fit: least squares, or robust IRLS that resists "
-            "outlying frames (needs 5 or more distinct angles to make a difference)",
-        },
-    ),
-    "affinity_graph": (
-        "--affinity-graph",
-        {
-            "choices": ("auto", "dense", "sparse"),
-            "help": "block affinity: every pair (dense), k nearest neighbours or the spatial "
-            "neighbourhood (sparse), or dense up to 6000 blocks (auto)",
-        },
-    ),
-}
+def _field_types() -> dict[str, Any]:
+    """The resolved type of every SegmentParams field."""
+    return typing.get_type_hints(SegmentParams)
 
 
-def _param_options() -> dict[str, tuple[str, dict[str, Any]]]:
-    """PARAM_OPTIONS plus a plain option for any SegmentParams field it does not know."""
-    options = dict(PARAM_OPTIONS)
-    for f in fields(SegmentParams):
-        if f.name not in options:
-            default = getattr(SegmentParams(), f.name)
-            kind = _threshold_arg if default is None else type(default)
-            flag = "--" + f.name.replace("_", "-")
-            options[f.name] = (flag, {"type": kind, "help": f.name.replace("_", " ")})
+def param_options(
+    specs: dict[str, ParamSpec] | None = None,
+) -> dict[str, tuple[str, dict[str, Any]]]:
+    """SegmentParams field -> (flag, argparse keywords), made from the parameter table.
+
+    The type comes from the field's type (int, float; str for a field the table has but
+    SegmentParams has not); an ``optional`` spec takes the ``none``-accepting threshold
+    parser; a spec with choices gets them instead of a type; the help is the spec's.
+    """
+    specs = PARAM_SPECS if specs is None else specs
+    types = _field_types()
+    options: dict[str, tuple[str, dict[str, Any]]] = {}
+    for name, spec in specs.items():
+        kwargs: dict[str, Any] = {}
+        if spec.choices:
+            kwargs["choices"] = spec.choices
+        elif spec.optional:
+            kwargs["type"] = _threshold_arg
+        else:
+            kind = types.get(name, str)
+            kwargs["type"] = kind if kind in (int, float, str) else str
+        if spec.metavar:
+            kwargs["metavar"] = spec.metavar
+        kwargs["help"] = spec.help
+        options[name] = (spec.flag, kwargs)
     return options
 
 
-#: What each preset is, for --help.
-PRESET_HELP = (
-    "auto: superpixels clustered by their polarisation, the best unsupervised method "
-    "measured on rendered and real frames; thesis: the thesis pipeline as published; "
-    "recommended: the thesis pipeline with the block parameters that score best on the "
-    "synthetic scenes (docs/quality.md)"
-)
+def _preset_help(presets: Sequence[str]) -> str:
+    """What each of ``presets`` is, for --help."""
+    return "; ".join(f"{name}: {PRESET_HELP[name]}" for name in presets)
+
+
 #: Presets of the commands whose own analysis cuts the block graph (sweep, timeseries).
 BLOCK_PRESETS = ("thesis", "recommended")
 
@@ -322,8 +266,9 @@ def _add_param_options(
     parser: argparse.ArgumentParser,
     preset: str = "auto",
     presets: tuple[str, ...] = tuple(PRESETS),
+    specs: dict[str, ParamSpec] | None = None,
 ) -> None:
-    defaults = SegmentParams()
+    defaults = {f.name: f.default for f in fields(SegmentParams)}
     group = parser.add_argument_group(
         "segmentation parameters",
         "start from --preset, then --params, then explicit flags; thesis defaults in brackets",
@@ -332,18 +277,16 @@ def _add_param_options(
         "--preset",
         choices=presets,
         default=preset,
-        help=f"starting parameters ({PRESET_HELP}) [{preset}]"
-        if "auto" in presets
-        else f"starting parameters ({PRESET_HELP.split('; ', 1)[1]}) [{preset}]",
+        help=f"starting parameters ({_preset_help(presets)}) [{preset}]",
     )
     group.add_argument(
         "--params",
         metavar="FILE.json",
         help="SegmentParams JSON (or a params.json written by polarseg)",
     )
-    for name, (flag, kwargs) in _param_options().items():
+    for name, (flag, kwargs) in param_options(specs).items():
         kwargs = dict(kwargs)
-        kwargs["help"] = f"{kwargs['help']} [{getattr(defaults, name)}]"
+        kwargs["help"] = f"{kwargs['help']} [{defaults.get(name)}]".replace("%", "%%")
         group.add_argument(flag, dest=name, default=None, **kwargs)
     parser.add_argument(
         "--overview", action="store_true", help="also write overview.png (matplotlib figure)"
@@ -410,8 +353,9 @@ def _add_plots_option(parser: argparse.ArgumentParser) -> None:
     )
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The argument parser of ``polarseg`` (errors raise :class:`UsageError`)."""
+def build_parser(specs: dict[str, ParamSpec] | None = None) -> argparse.ArgumentParser:
+    """The argument parser of ``polarseg`` (errors raise :class:`UsageError`); the
+    segmentation flags are made from ``specs`` (default: :data:`PARAM_SPECS`)."""
     parser = _Parser(
         prog=PROG,
         description="Material segmentation from polarisation images (thesis pipeline: "
@@ -534,7 +478,7 @@ def build_parser() -> argparse.ArgumentParser:
         "(adjusted Rand index, IoU per segment, block accuracy) and adds it to summary.json",
     )
     _add_plots_option(seg)
-    _add_param_options(seg)
+    _add_param_options(seg, specs=specs)
     seg.set_defaults(func=_cmd_segment)
 
     demo = sub.add_parser(
@@ -552,9 +496,9 @@ def build_parser() -> argparse.ArgumentParser:
         "--sample", metavar="FILE.npz", help="use this .npz (stack, angles, labels) instead"
     )
     _add_plots_option(demo)
-    _add_param_options(demo)
+    _add_param_options(demo, specs=specs)
     demo.set_defaults(func=_cmd_demo, overview=True)
-    _add_sweep_parser(sub)
+    _add_sweep_parser(sub, specs)
 
     bat = sub.add_parser(
         "batch",
@@ -603,7 +547,7 @@ def build_parser() -> argparse.ArgumentParser:
         "the normalized cut",
     )
     _add_input_options(bat, "scene")
-    _add_param_options(bat)
+    _add_param_options(bat, specs=specs)
     bat.set_defaults(func=_cmd_batch)
 
     ts = sub.add_parser(
@@ -661,7 +605,7 @@ def build_parser() -> argparse.ArgumentParser:
         "change scores and distances stay those of the change test",
     )
     _add_input_options(ts, "day")
-    _add_param_options(ts, preset="recommended", presets=BLOCK_PRESETS)
+    _add_param_options(ts, preset="recommended", presets=BLOCK_PRESETS, specs=specs)
     ts.set_defaults(func=_cmd_timeseries)
     return parser
 
@@ -685,7 +629,7 @@ def _params_from_args(
         raise PolarsegError(f"{source}: {exc}") from None
     except TypeError as exc:
         raise PolarsegError(f"{source}: a parameter has the wrong type ({exc})") from None
-    changes = {name: getattr(args, name) for name in _param_options()}
+    changes = {name: getattr(args, name) for name in PARAM_SPECS}
     changes = {k: (None if v == "none" else v) for k, v in changes.items() if v is not None}
     return params.replace(**changes)
 
@@ -693,22 +637,7 @@ def _params_from_args(
 # -- running --------------------------------------------------------------------------------
 
 
-@dataclass
-class Run:
-    """One segmentation job, everything computed in memory."""
-
-    data: pio.StackData
-    params: SegmentParams
-    stack: np.ndarray
-    result: SegmentationResult
-    shifts: np.ndarray | None
-    seconds: dict[str, float] = field(default_factory=dict)
-    mask: PixelMask | None = None
-    pipeline: Pipeline | None = None
-    colour_stack: np.ndarray | None = None
-
-
-def _progress(verbose: bool, status: StatusLine | None = None):
+def _progress(verbose: bool, status: StatusLine | None = None) -> jobs.Progress | None:
     """Pipeline progress callback: permanent lines with ``verbose``, else the status line
     (which names the stage now running), else None."""
     if verbose:
@@ -738,269 +667,49 @@ def _max_bytes(args: argparse.Namespace) -> int:
     return memory_limit(None if gib is None else gib * 2**30)
 
 
-def _pixel_mask(data: pio.StackData, args: argparse.Namespace) -> PixelMask:
-    """Validity mask: the reader's saturated samples, black samples, the user's region."""
-    region = None
-    if getattr(args, "mask", None):
-        superpixel = data.metadata.get("demosaic") == "superpixel"
-        raw_shape = data.metadata.get("raw_shape") if superpixel else None
-        region = pio.read_mask(args.mask, data.stack.shape[1:], raw_shape)
+def _angles(values: np.ndarray | None) -> tuple[float, ...] | None:
+    return None if values is None else tuple(float(v) for v in values)
+
+
+def _read_options(args: argparse.Namespace) -> jobs.ReadOptions:
+    """The reading options of a command line (a command without an option: its default)."""
+    saturation = getattr(args, "saturation", "auto")
     dark_level = getattr(args, "dark_level", 0.0)
-    return validity_mask(
-        data.stack,
-        saturation=data.metadata.get("saturation_level"),
+    return jobs.ReadOptions(
+        angles_deg=_angles(getattr(args, "angles", None)),
+        mosaic_deg=_angles(getattr(args, "mosaic", None)),
+        demosaic=getattr(args, "demosaic", "superpixel"),
+        bayer=getattr(args, "bayer", None),
+        channel=getattr(args, "channel", None),
+        dark_frame=getattr(args, "dark_frame", None),
+        offset=getattr(args, "offset", None),
+        saturation=None if saturation == "none" else saturation,
         dark_level=None if dark_level == "none" else dark_level,
-        region=region,
-        saturated=data.saturated,
+        mask=getattr(args, "mask", None),
+        register=bool(getattr(args, "register", False)),
+        max_memory_gib=getattr(args, "max_memory", None),
+        scribbles=getattr(args, "scribbles", None),
+        classifier=getattr(args, "classifier", None),
+        ground_truth=getattr(args, "ground_truth", None),
     )
 
 
-def _segment(
-    data: pio.StackData,
-    params: SegmentParams,
-    register: bool,
-    verbose: bool,
-    mask: PixelMask | None = None,
-    max_bytes: int | None = None,
-    labels_by: LabelSource | None = None,
-    status: StatusLine | None = None,
-) -> Run:
-    status = status or StatusLine(False, PROG)
-    seconds: dict[str, float] = {}
-    stack, shifts = data.stack, None
-    check_pipeline_memory(stack.shape, params, max_bytes)
-    if mask is None:
-        mask = validity_mask(
-            stack, saturation=data.metadata.get("saturation_level"), saturated=data.saturated
-        )
-    colour_stack = data.colour_stack
-    if register:
-        status.show("registering the frames")
-        t0 = time.perf_counter()
-        stack, shifts = register_stack(stack)
-        mask = mask.shifted(shifts)
-        if colour_stack is not None:
-            colour_stack = shift_frames(colour_stack, shifts)
-        seconds["register"] = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    pipe = Pipeline(stack, data.angles_rad, params, mask=mask)
-    run = Run(data, params, stack, None, shifts, seconds, mask, pipe)  # type: ignore[arg-type]
-    run.colour_stack = colour_stack
-    if labels_by is None:
-        status.stage(STAGES[0], 1, len(STAGES), "segmenting:")
-        run.result = pipe.run(progress=_progress(verbose, status))
-    else:
-        status.show("pixel classifier: features, training and prediction")
-        labels_by.label(run)
-    seconds["segment"] = time.perf_counter() - t0
-    return run
-
-
-def _resolved(name: str | None) -> str | None:
-    return None if name in (None, "array") else str(Path(name).resolve())
-
-
-def _input_info(data: pio.StackData, args: argparse.Namespace) -> dict[str, Any]:
-    """What ``params.json`` records of the reading, beyond :func:`export.run_info`."""
-    meta = data.metadata
-    return {
-        "input_format": meta.get("format"),
-        "input_files": meta.get("files"),
-        "angles_from": meta.get("angles_from"),
-        "mosaic_layout_deg": meta.get("mosaic_layout_deg"),
-        "raw_shape": meta.get("raw_shape"),
-        "channel": getattr(args, "channel", None),
-        "demosaic": meta.get("demosaic"),
-        "bayer": meta.get("bayer"),
-        "sensor": meta.get("sensor"),
-        "dark_frame": _resolved(meta.get("dark_frame")),
-        "offset": meta.get("offset"),
-        "bits_per_sample": meta.get("bits_per_sample"),
-        "mask_file": _resolved(getattr(args, "mask", None)),
-    }
-
-
-def _summary(run: Run, read_seconds: float) -> dict[str, Any]:
-    """The CLI's items of ``summary.json`` (beyond ``result.summary()``): seconds."""
-    return {
-        "io_seconds": {
-            "read": round(read_seconds, 6),
-            "register": round(run.seconds.get("register", 0.0), 6),
-        },
-        "segment_seconds": round(run.seconds["segment"], 6),
-    }
-
-
-def degenerate_warning(run: Run) -> str | None:
-    """The one-line warning of a degenerate result (``SegmentationResult.degenerate``:
-    one segment holds >= 95 % of the pixels, or every other is below the minimum size),
-    with what to try; None when the result is not degenerate."""
-    check = run.result.degenerate()
-    if not check.degenerate:
-        return None
-    if "classifier" in run.seconds:  # labels from a pixel classifier, not the cut
-        advice = "paint strokes on every material (--scribbles) or retrain the classifier"
-    else:
-        tries = ["fewer or more segments (--segments)", "a larger window (--window)"]
-        recommended = PRESETS["recommended"].replace(n_segments=run.params.n_segments)
-        if run.params != recommended:
-            tries.insert(0, "--preset recommended")
-        advice = f"try {', '.join(tries)}, or scribbles (--scribbles)"
-    return f"{PROG}: warning: degenerate result: {check.reason}; {advice}"
-
-
-def _report(out: Path, run: Run, written: list[str], note_repeated: bool = True) -> None:
-    """The run's lines on stdout; ``note_repeated=False`` leaves out the information that
-    frames at a repeated angle were averaged (the bundled samples, made that way; it stays
-    in params.json and summary.json)."""
-    result = run.result
-    err = result.mean_reconstruction_error
-    err_text = "n/a" if err is None else f"{err:.4g}"
-    h, w = result.labels.shape
-    print(
-        f"{PROG}: {result.n_segments} segments over {h} x {w} pixels, "
-        f"mean reconstruction error {err_text}"
+def _output_options(args: argparse.Namespace) -> jobs.OutputOptions:
+    return jobs.OutputOptions(
+        overview=bool(args.overview),
+        plots=bool(getattr(args, "plots", False)),
+        save_classifier=getattr(args, "save_classifier", None),
     )
-    warning = degenerate_warning(run)
-    if warning is not None:
-        sys.stdout.flush()  # keep the order of the two streams on a terminal
-        print(warning, file=sys.stderr, flush=True)
-    limits = result.cut_limits
-    done = []
-    if limits.get("eigensolver_capped"):
-        done.append(
-            f"stopped {limits['eigensolver_capped']} eigensolve(s) at their cap of "
-            f"{limits.get('max_products')} products"
-        )
-    if limits.get("isolated_skipped"):
-        done.append(f"peeled {limits['isolated_skipped']} isolated block(s) off unsolved")
-    if done:
-        print(f"{PROG}: the cut {' and '.join(done)} (cut_limits in summary.json)")
-    if run.shifts is not None:
-        biggest = float(np.max(np.hypot(run.shifts[:, 0], run.shifts[:, 1])))
-        print(
-            f"{PROG}: registered {len(run.shifts)} frames to frame 0, largest shift "
-            f"{biggest:.2f} px (rows, columns per frame in params.json)"
-        )
-    counts = result.mask_counts
-    if counts.get("masked_pixels"):
-        reasons = [
-            f"{counts[key]} {label}"
-            for key, label in (
-                ("saturated_pixels", "saturated"),
-                ("dark_pixels", "black"),
-                ("nonfinite_pixels", "not finite"),
-                ("outside_region_pixels", "outside the mask"),
-            )
-            if counts.get(key)
-        ]
-        print(
-            f"{PROG}: left out {counts['masked_pixels']} of {h * w} pixels "
-            f"({', '.join(reasons)}; see mask.tif)"
-        )
-    for frames in result.duplicate_angle_frames if note_repeated else ():
-        print(
-            f"{PROG}: frames {', '.join(map(str, frames))} share a polariser angle "
-            f"(modulo 180 degrees) and were averaged before the fit"
-        )
-    plots = [name for name in written if name.startswith("plots/")]
-    listed = [name for name in written if name not in plots]
-    if plots:
-        listed.insert(-2, f"plots/ ({len(plots)} PNGs)")  # before params.json, summary.json
-    print(f"{PROG}: wrote {', '.join(listed)} to {out}")
 
 
-def read_labels_image(path: str, shape: Sequence[int], what: str) -> np.ndarray:
-    """Read a labels image (scribbles, ground truth) of the outputs' size as int64.
-
-    ``.tif``/``.tiff``/``.png`` (single channel, e.g. a napari Labels layer saved as an
-    image), ``.npy`` or ``.npz`` (the array ``labels``, ``scribbles`` or ``mask``, or its
-    only array). Raises :class:`PolarsegError` naming the file and the problem.
-    """
-    p = Path(path)
-    suffix = p.suffix.lower()
-    if suffix not in pio.MASK_SUFFIXES:
-        kinds = ", ".join(pio.MASK_SUFFIXES)
-        raise PolarsegError(f"{path}: unsupported {what} file type {suffix!r} ({kinds})")
-    if not p.is_file():
-        raise PolarsegError(f"{path}: no such file")
-    colour = False
-    if suffix in (".npy", ".npz"):
-        try:
-            loaded = np.load(p, allow_pickle=False)
-            if isinstance(loaded, np.ndarray):
-                data = loaded
-            else:
-                with loaded:
-                    names = loaded.files
-                    pick = [n for n in ("labels", "scribbles", "mask") if n in names]
-                    pick = pick or (names if len(names) == 1 else [])
-                    if not pick:
-                        raise PolarsegError(
-                            f"{path}: no array named 'labels' or 'scribbles' "
-                            f"(found: {', '.join(names)})"
-                        )
-                    data = loaded[pick[0]]
-        except PolarsegError:
-            raise
-        except Exception as exc:
-            first = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
-            raise PolarsegError(f"{path}: cannot read the {what} ({first})") from None
-    else:
-        data, colour, _ = pio._load_frame(p, memory_limit())
-    data = np.asarray(data)
-    if colour:
-        raise PolarsegError(f"{path}: the {what} must be a single-channel labels image")
-    while data.ndim > 2 and data.shape[0] == 1:
-        data = data[0]
-    if data.ndim != 2:
-        raise PolarsegError(f"{path}: the {what} must be one 2-D image, got shape {data.shape}")
-    if data.dtype == np.bool_:
-        data = data.astype(np.uint8)
-    if data.dtype.kind == "f":
-        if not np.all(np.isfinite(data)) or np.any(data != np.round(data)):
-            raise PolarsegError(f"{path}: the {what} must hold integer labels")
-    elif data.dtype.kind not in "iu":
-        raise PolarsegError(f"{path}: the {what} must hold integer labels, got {data.dtype}")
-    h, w = (int(v) for v in shape)
-    if data.shape != (h, w):
-        raise PolarsegError(
-            f"{path}: the {what} image is {data.shape[0]} x {data.shape[1]} pixels but the "
-            f"outputs are {h} x {w}"
-        )
-    return data.astype(np.int64)
-
-
-@dataclass
-class LabelSource:
-    """Labels from the pixel classifier instead of the cut: trained on ``scribbles`` or
-    the classifier saved in ``classifier_file``; what it produced is kept here."""
-
-    scribbles: np.ndarray | None = None
-    scribbles_file: str | None = None
-    classifier_file: str | None = None
-    segmentation: Any = None
-
-    def label(self, run: Run) -> None:
-        from .classifier_file import load_pixel_classifier
-        from .engine.analysis.pixel_segmentation import PixelSegmenter
-
-        classifier = None
-        if self.classifier_file:
-            classifier = load_pixel_classifier(self.classifier_file)
-        try:
-            segmenter = PixelSegmenter(run.pipeline, colour_stack=run.colour_stack)
-            out = segmenter.segment(self.scribbles, classifier)
-        except PolarsegError as exc:
-            where = self.scribbles_file or self.classifier_file
-            raise PolarsegError(f"{where}: {exc}") from None
-        self.segmentation = out
-        run.result = out.result
-        run.seconds["classifier"] = float(sum(out.seconds.values()))
-
-    def summary(self) -> dict[str, Any]:
-        labels_from = "scribbles" if self.scribbles is not None else "classifier"
-        return classifier_summary(self.segmentation, labels_from)
+def print_messages(messages: Sequence[jobs.Message]) -> None:
+    """Print a job's messages, each on its stream, in order."""
+    for message in messages:
+        if message.stream == "stderr":
+            sys.stdout.flush()  # keep the order of the two streams on a terminal
+            print(message.text, file=sys.stderr, flush=True)
+        else:
+            print(message.text)
 
 
 def _job(
@@ -1009,92 +718,26 @@ def _job(
     data: pio.StackData,
     read_seconds: float,
     params: SegmentParams,
-    register: bool,
     extra: dict[str, Any] | None = None,
     note_repeated: bool = True,
-) -> tuple[Run, dict[str, Any]]:
-    """Segment, render and write: everything is computed before the first file is written."""
-    mask = _pixel_mask(data, args)
-    shape = data.stack.shape[1:]
-    scribble_file = getattr(args, "scribbles", None)
-    truth_file = getattr(args, "ground_truth", None)
-    scribbles = read_labels_image(scribble_file, shape, "scribbles") if scribble_file else None
-    truth = read_labels_image(truth_file, shape, "ground truth") if truth_file else None
-    classifier_file = getattr(args, "classifier", None)
-    save_file = getattr(args, "save_classifier", None)
-    if save_file and scribbles is None:
-        raise PolarsegError("--save-classifier needs --scribbles (a classifier to train)")
-    source = None
-    if scribbles is not None or classifier_file:
-        source = LabelSource(scribbles, scribble_file, classifier_file)
+) -> jobs.FolderResult:
+    """Segment already-read data into ``args.out`` and print what the job says."""
     status = _status(args)
-    run = _segment(data, params, register, args.verbose, mask, _max_bytes(args), source, status)
-    probabilities = uncertainty = None
-    summary = {**_summary(run, read_seconds), **(extra or {})}
-    if source is not None:
-        probabilities = source.segmentation.prediction.probabilities
-        uncertainty = source.segmentation.prediction.uncertainty
-        summary.update(source.summary())
-        summary["classifier_seconds"] = round(run.seconds["classifier"], 6)
-    if data.ground_truth is not None:
-        summary["adjusted_rand_index"] = adjusted_rand_index(data.ground_truth, run.result.labels)
-    evaluation = None
-    if truth is not None:
-        evaluation = {
-            "ground_truth": str(Path(truth_file).resolve()),
-            **evaluate(truth, run.result.labels, run.params.window),
-        }
-    out = Path(args.out)
-    info = _input_info(data, args)
-    if scribble_file:
-        info["scribbles_file"] = str(Path(scribble_file).resolve())
-    if classifier_file:
-        info["classifier_file"] = str(Path(classifier_file).resolve())
-    if truth_file:
-        info["ground_truth_file"] = str(Path(truth_file).resolve())
-    status.show(f"writing the results to {out}")
-    written = write_result_folder(
-        out,
-        stack=run.stack,
-        angles_deg=data.angles_deg,
-        result=run.result,
-        mask=run.mask,
-        source=str(Path(data.source).resolve()),
+    done = jobs.data_to_folder(
+        data,
+        args.out,
+        params,
+        _read_options(args),
+        _output_options(args),
+        read_seconds=read_seconds,
         command=command,
-        overview=bool(args.overview),
-        plots=bool(getattr(args, "plots", False)),
-        probabilities=probabilities,
-        uncertainty=uncertainty,
-        evaluation=evaluation,
-        shifts=run.shifts,
-        info=info,
-        summary=summary,
-        truth=truth if truth is not None else data.ground_truth,
+        extra=extra,
+        note_repeated=note_repeated,
+        status=status,
+        progress=_progress(args.verbose, status),
     )
-    status.clear()
-    _report(out, run, written, note_repeated)
-    if source is not None:
-        clf = source.segmentation.classifier
-        if source.classifier_file:
-            print(f"{PROG}: applied the classifier {source.classifier_file} (not retrained)")
-        else:
-            print(
-                f"{PROG}: pixel classifier trained on {clf.n_training_pixels} scribbled "
-                f"pixels of {clf.classes.size} materials, {len(clf.feature_names)} features"
-            )
-        if save_file:
-            from .classifier_file import save_pixel_classifier
-
-            save_pixel_classifier(save_file, clf)
-            print(f"{PROG}: wrote the classifier to {save_file}")
-    if evaluation is not None:
-        print(
-            f"{PROG}: against the ground truth: adjusted Rand index "
-            f"{evaluation['adjusted_rand_index']:.3f}, mean IoU {evaluation['mean_iou']:.3f}, "
-            f"block accuracy {evaluation['block_accuracy_worst']:.3f} (worst) .. "
-            f"{evaluation['block_accuracy_optimistic']:.3f} (optimistic)"
-        )
-    return run, summary
+    print_messages(done.messages)
+    return done
 
 
 def _check_demosaic_args(args: argparse.Namespace) -> None:
@@ -1110,22 +753,17 @@ def _check_demosaic_args(args: argparse.Namespace) -> None:
 def _cmd_segment(args: argparse.Namespace) -> int:
     params = _params_from_args(args)
     _check_demosaic_args(args)
-    saturation = {"auto": "auto", "none": None}.get(args.saturation, args.saturation)
-    _status(args).show(f"reading {Path(args.input[0]).name}")
-    t0 = time.perf_counter()
-    data = pio.read_stack(
+    status = _status(args)
+    done = jobs.segment_to_folder(
         args.input[0] if len(args.input) == 1 else args.input,
-        angles_deg=args.angles,
-        mosaic=args.mosaic,
-        channel=args.channel,
-        demosaic=args.demosaic,
-        bayer=args.bayer,
-        dark=args.dark_frame,
-        offset=args.offset,
-        saturation=saturation,
-        max_bytes=_max_bytes(args),
+        args.out,
+        params,
+        _read_options(args),
+        _output_options(args),
+        status=status,
+        progress=_progress(args.verbose, status),
     )
-    _job(args, "segment", data, time.perf_counter() - t0, params, args.register)
+    print_messages(done.messages)
     return 0
 
 
@@ -1158,11 +796,9 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     # The bundled scenes are rendered at 0..180 degrees (0 and 180 both, as the thesis
     # captures): saying they were averaged would be a notice about our data, not the
     # user's, on the first command a user runs. A --sample file is the user's: said.
-    _, summary = _job(
-        args, "demo", data, read_seconds, params, False, {"scene": path.stem}, bool(args.sample)
-    )
-    if "adjusted_rand_index" in summary:
-        ari = summary["adjusted_rand_index"]
+    done = _job(args, "demo", data, read_seconds, params, {"scene": path.stem}, bool(args.sample))
+    if "adjusted_rand_index" in done.summary:
+        ari = done.summary["adjusted_rand_index"]
         print(f"{PROG}: adjusted Rand index against the ground truth: {ari:.3f}")
     return 0
 
@@ -1187,7 +823,7 @@ def _number_list_arg(kind: type, what: str):
     return parse
 
 
-def _add_sweep_parser(sub: Any) -> None:
+def _add_sweep_parser(sub: Any, specs: dict[str, ParamSpec] | None = None) -> None:
     from .engine.analysis.sweep_result import DEFAULT_SCORE, SCORES
 
     sw = sub.add_parser(
@@ -1250,7 +886,7 @@ def _add_sweep_parser(sub: Any) -> None:
     )
     _add_input_options(sw, "stack")
     _add_plots_option(sw)
-    _add_param_options(sw, preset="recommended", presets=BLOCK_PRESETS)
+    _add_param_options(sw, preset="recommended", presets=BLOCK_PRESETS, specs=specs)
     sw.set_defaults(func=_cmd_sweep)
 
 
@@ -1314,13 +950,13 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
     shape = data.stack.shape[1:]
     truth, truth_from = None, None
     if args.ground_truth:
-        truth = read_labels_image(args.ground_truth, shape, "ground truth")
+        truth = pio.read_labels(args.ground_truth, shape, "ground truth")
         truth_from = str(Path(args.ground_truth).resolve())
     elif data.ground_truth is not None:
         truth, truth_from = np.asarray(data.ground_truth), "input"
     if args.score == "ari" and truth is None:
         raise PolarsegError("--score ari needs --ground-truth (or an input with its labels)")
-    mask = _pixel_mask(data, args)
+    mask = jobs.pixel_mask(data, _read_options(args))
     stack, shifts = data.stack, None
     if args.register:
         status.show("registering the frames")
@@ -1401,7 +1037,7 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
     print(f"{PROG}: to use it: {PROG} segment INPUT --params {out / 'best_params.json'} --out DIR")
     if args.apply_best:
         best_args = argparse.Namespace(**{**vars(args), "out": str(out / "best")})
-        _job(best_args, "segment", data, read_seconds, best, args.register)
+        _job(best_args, "segment", data, read_seconds, best)
     return 0
 
 
@@ -1449,35 +1085,20 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 # -- batch and time series ------------------------------------------------------------------
 
-#: ``batch`` options passed on to ``segment`` for every scene: dest -> flag.
-BATCH_FORWARD = {
-    "angles": "--angles",
-    "mosaic": "--mosaic",
-    "demosaic": "--demosaic",
-    "bayer": "--bayer",
-    "channel": "--channel",
-    "max_memory": "--max-memory",
-    "classifier": "--classifier",
-}
 
-
-def _batch_segment_args(args: argparse.Namespace) -> list[str]:
-    """The ``segment`` options a ``batch`` command line gives every scene."""
-    out: list[str] = []
-    for dest, flag in BATCH_FORWARD.items():
-        value = getattr(args, dest, None)
-        if value is None or (dest == "demosaic" and value == "superpixel"):
-            continue
-        if isinstance(value, np.ndarray):
-            value = ",".join(f"{v:g}" for v in value)
-        if dest == "classifier":
-            value = Path(value).resolve()
-        out += [flag, str(value)]
-    if args.register:
-        out.append("--register")
-    if args.overview:
-        out.append("--overview")
-    return out
+def _batch_options(args: argparse.Namespace) -> tuple[jobs.ReadOptions, jobs.OutputOptions]:
+    """The reading and output options a ``batch`` command line gives every scene."""
+    read = jobs.ReadOptions(
+        angles_deg=_angles(args.angles),
+        mosaic_deg=_angles(args.mosaic),
+        demosaic=args.demosaic,
+        bayer=args.bayer,
+        channel=args.channel,
+        register=bool(args.register),
+        max_memory_gib=args.max_memory,
+        classifier=None if args.classifier is None else str(Path(args.classifier).resolve()),
+    )
+    return read, jobs.OutputOptions(overview=bool(args.overview))
 
 
 def _cmd_batch(args: argparse.Namespace) -> int:
@@ -1490,6 +1111,7 @@ def _cmd_batch(args: argparse.Namespace) -> int:
         from .classifier_file import load_pixel_classifier
 
         load_pixel_classifier(args.classifier)  # a bad file stops here, not in every scene
+    read, outputs = _batch_options(args)
     scenes = batch.plan(args.input, args.out)
     if not scenes:
         raise PolarsegError("no input scenes (every INPUT is inside --out)")
@@ -1533,7 +1155,8 @@ def _cmd_batch(args: argparse.Namespace) -> int:
         scenes,
         args.out,
         params,
-        segment_args=_batch_segment_args(args),
+        read=read,
+        outputs=outputs,
         scheduler=args.scheduler,
         n_workers=args.workers,
         memory_limit=args.memory_limit,

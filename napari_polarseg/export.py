@@ -114,7 +114,7 @@ def segment_rows(result: SegmentationResult) -> list[dict[str, Any]]:
     """Per-segment statistics of ``result`` (the rows of ``segments.csv``).
 
     Means over the used pixels (``result.valid``) and, for the PCA features, over the
-    blocks that entered the graph (:func:`~napari_polarseg.engine.pipeline.valid_blocks`).
+    blocks that entered the graph (:func:`~napari_polarseg.engine.stages.valid_blocks`).
     """
     valid = result.valid
     block_valid = None if valid is None else valid_blocks(valid, result.params.window)
@@ -198,9 +198,10 @@ def overview_figure(
         The true materials: drawn beside the segments, in the colours of the segments
         they are matched to, and the segments' title gives the adjusted Rand index.
     composite : array (H, W, 3) uint8, optional
-        The AoLP/DoLP HSV composite (:func:`napari_polarseg.engine.views.aolp_dolp_composite`);
+        The AoLP/DoLP HSV composite
+        (:func:`napari_polarseg.engine.analysis.views.aolp_dolp_composite`);
         computed with ρ_max = ``dolp_max`` (default
-        :func:`~napari_polarseg.engine.views.auto_dolp_max`) when not given.
+        :func:`~napari_polarseg.engine.analysis.views.auto_dolp_max`) when not given.
     dolp_max : float, optional
         The composite's ρ_max, for its title.
 
@@ -383,7 +384,8 @@ def evaluation_summary(evaluation: dict[str, Any]) -> dict[str, Any]:
 def classifier_summary(segmentation: Any, labels_from: str) -> dict[str, Any]:
     """What ``summary.json`` says of labels from the pixel classifier.
 
-    ``segmentation`` is a :class:`~napari_polarseg.engine.pixel_segmentation.PixelSegmentation`;
+    ``segmentation`` is a
+    :class:`~napari_polarseg.engine.analysis.pixel_segmentation.PixelSegmentation`;
     ``labels_from`` is ``"scribbles"`` (trained on them) or ``"classifier"`` (a saved
     classifier applied). Shared by ``polarseg segment`` and the plugin's export.
     """
@@ -552,7 +554,7 @@ def write_result_folder(
     uncertainty : array (H, W), optional
         The pixel classifier's uncertainty: ``uncertainty.tif``.
     evaluation : dict, optional
-        :func:`~napari_polarseg.engine.evaluation.evaluate` figures (plus e.g. the ground
+        :func:`~napari_polarseg.engine.analysis.evaluation.evaluate` figures (plus e.g. the ground
         truth's file): ``evaluation.json``, repeated in ``summary.json``.
     shifts : array (N, 2), optional
         Registration shifts (rows, columns) in pixels, if the frames were registered.
@@ -564,11 +566,12 @@ def write_result_folder(
         and gives the adjusted Rand index in the segments' title.
     views : bool
         Also write the Stokes components S0, S1, S2 (``stokes.tif``,
-        :func:`~napari_polarseg.engine.stokes.stokes_components`) and the AoLP/DoLP HSV
-        composite (``aolp_dolp.png``, :func:`~napari_polarseg.engine.views.aolp_dolp_composite`).
+        :func:`~napari_polarseg.engine.physics.stokes.stokes_components`) and the AoLP/DoLP HSV
+        composite (``aolp_dolp.png``,
+        :func:`~napari_polarseg.engine.analysis.views.aolp_dolp_composite`).
     composite_params : CompositeParams, optional
         Settings of the composite (default: ρ_max from
-        :func:`~napari_polarseg.engine.views.auto_dolp_max`, value from Î); recorded in
+        :func:`~napari_polarseg.engine.analysis.views.auto_dolp_max`, value from Î); recorded in
         ``params.json`` under ``"aolp_dolp"``.
 
     Returns

@@ -2,9 +2,9 @@
 
 :func:`render_plots` gives the same PNGs as bytes in memory (for writers that compute
 everything first); :func:`sweep_heatmap_figure` draws a parameter sweep
-(:mod:`napari_polarseg.engine.sweep`) as heatmaps.
+(:mod:`napari_polarseg.engine.analysis.sweep`) as heatmaps.
 
-Every ``*_figure`` function draws the data of :mod:`napari_polarseg.engine.plots` into a
+Every ``*_figure`` function draws the data of :mod:`napari_polarseg.engine.analysis.plots` into a
 :class:`matplotlib.figure.Figure` (a new one, or ``fig`` cleared first, e.g. the figure
 of a Qt canvas) with the object-oriented API only: no pyplot, so no global state.
 matplotlib is imported lazily, when a figure is drawn.
@@ -202,7 +202,7 @@ def histograms_figure(
     """Histogram of Î and of its reconstructions on shared bins (thesis figure 5.17), as
     small multiples: one panel per degree L, each with the original Î (grey, filled)
     behind that reconstruction (a coloured step line, its own colour), on one x-axis (the
-    robust range of :func:`~napari_polarseg.engine.plots.reconstruction_histograms`).
+    robust range of :func:`~napari_polarseg.engine.analysis.plots.reconstruction_histograms`).
     Heights are shares of the counted pixels, so a sample of blocks reads as the whole."""
     n = max(1, len(data.reconstructed))
     fig = _figure(fig, (5.5, 1.6 + 1.3 * n), theme)
@@ -339,7 +339,7 @@ def render_plots(
     For callers that compute everything before writing anything (``polarseg segment
     --plots``); :func:`save_plots` writes them. ``windows`` and ``table_degrees`` of the
     error table default to the result's window and (4, 8, 12, 16, 20); ``pairs`` (l, m)
-    of the coefficient maps to :data:`~napari_polarseg.engine.plots.DEFAULT_PAIRS` up to
+    of the coefficient maps to :data:`~napari_polarseg.engine.analysis.plots.DEFAULT_PAIRS` up to
     the result's degree. Each figure is drawn and turned into bytes before the next
     (bounded memory).
     """
@@ -381,7 +381,8 @@ def sweep_heatmap_figure(
     """Heatmaps of a parameter sweep: one row per metric, one column per refractive index.
 
     Each panel is the w × L grid (rows: window size w, columns: degree L) of one metric
-    for one n (:meth:`~napari_polarseg.engine.sweep.SweepResult.grid`), on one colour
+    for one n (:meth:`~napari_polarseg.engine.analysis.sweep_result.SweepResult.grid`), on one
+    colour
     scale per metric, brighter = better (reversed for the mean Ncut), with the values
     written in the cells; failed cells are blank and marked ×. The best cell by the
     sweep's criterion (``result.score``) is outlined in every row.

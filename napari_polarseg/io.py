@@ -29,12 +29,12 @@ Inputs :func:`read_stack` understands
   the four polariser angles of the 2 × 2 super-pixel in row-major order (Sony IMX250MZR:
   90, 45, 135, 0). It is split into four frames at **half resolution**
   (``demosaic="superpixel"``) or interpolated to **full resolution**
-  (``demosaic="interpolated"``, bilinear), see :mod:`napari_polarseg.engine.mosaic`.
+  (``demosaic="interpolated"``, bilinear), see :mod:`napari_polarseg.engine.physics.mosaic`.
 - **A raw colour-polarisation frame** with ``mosaic`` and ``bayer`` set (the Bayer order
   of the 2 × 2 polariser super-pixels, ``"RGGB"`` for the Sony IMX250MYR/IMX253MYR): a
   4 × 4 period decoded to a (colour, angle) stack at a quarter of the resolution or, with
   ``demosaic="interpolated"``, at full resolution
-  (:mod:`napari_polarseg.engine.colour_mosaic`). :attr:`StackData.stack` is then the
+  (:mod:`napari_polarseg.engine.physics.colour_mosaic`). :attr:`StackData.stack` is then the
   luminance stack (Rec. 601: 0.299 R + 0.587 G + 0.114 B), which is segmented, and
   :attr:`StackData.colour_stack` the R, G, B stacks, which feed the pixel classifier.
 - **A file named after a Sony polarisation sensor** (:func:`sensor_from_name`): a single
@@ -53,7 +53,7 @@ and float data are read as they are. Saturated samples are found on the data as
 recorded, before any conversion: at or above ``saturation`` — by default (``"auto"``)
 the integer dtype's maximum, or 2**bits − 1 when a TIFF declares fewer bits per sample
 (12-bit TIFFs), and none for float data — and returned as :attr:`StackData.saturated`
-for :func:`~napari_polarseg.engine.polarimage.validity_mask`. A dark frame (``dark``: an
+for :func:`~napari_polarseg.engine.physics.polarimage.validity_mask`. A dark frame (``dark``: an
 image of the same size as the raw frames, or an array) and/or a constant ``offset`` are
 then subtracted and negative results set to 0 (the stack becomes float64).
 
@@ -390,7 +390,8 @@ def single_frame_file(path: Path) -> bool:
         return False
 
 
-def _natural_key(name: str) -> list:
+def natural_key(name: str) -> list[Any]:
+    """Sort key of a file name with its digit runs as numbers (``f2`` before ``f10``)."""
     return [int(t) if t.isdigit() else t.lower() for t in re.split(r"(\d+)", name)]
 
 
@@ -782,7 +783,7 @@ def _folder_frames(folder: Path) -> list[Path]:
     ]
     if not files:
         raise _error(folder, f"no image frames ({', '.join(FRAME_SUFFIXES)}) in the folder")
-    return sorted(files, key=lambda f: _natural_key(f.name))
+    return sorted(files, key=lambda f: natural_key(f.name))
 
 
 def _read_frame_files(
@@ -1218,6 +1219,67 @@ def read_mask(
         p,
         f"the mask is {keep.shape[0]} x {keep.shape[1]} pixels but the frames are {h} x {w}",
     )
+
+
+def read_labels(path: PathLike, shape: Sequence[int], what: str) -> np.ndarray:
+    """Read a labels image (scribbles, ground truth) of the outputs' size as int64.
+
+    ``.tif``/``.tiff``/``.png`` (single channel, e.g. a napari Labels layer saved as an
+    image), ``.npy`` or ``.npz`` (the array ``labels``, ``scribbles`` or ``mask``, or its
+    only array). Raises :class:`PolarsegError` naming the file and the problem.
+    """
+    p = Path(path)
+    suffix = p.suffix.lower()
+    if suffix not in MASK_SUFFIXES:
+        kinds = ", ".join(MASK_SUFFIXES)
+        raise PolarsegError(f"{path}: unsupported {what} file type {suffix!r} ({kinds})")
+    if not p.is_file():
+        raise PolarsegError(f"{path}: no such file")
+    colour = False
+    if suffix in (".npy", ".npz"):
+        try:
+            loaded = np.load(p, allow_pickle=False)
+            if isinstance(loaded, np.ndarray):
+                data = loaded
+            else:
+                with loaded:
+                    names = loaded.files
+                    pick = [n for n in ("labels", "scribbles", "mask") if n in names]
+                    pick = pick or (names if len(names) == 1 else [])
+                    if not pick:
+                        raise PolarsegError(
+                            f"{path}: no array named 'labels' or 'scribbles' "
+                            f"(found: {', '.join(names)})"
+                        )
+                    data = loaded[pick[0]]
+        except PolarsegError:
+            raise
+        except Exception as exc:
+            first = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
+            raise PolarsegError(f"{path}: cannot read the {what} ({first})") from None
+    else:
+        data, colour, _ = _load_frame(p, memory_limit())
+    data = np.asarray(data)
+    if colour:
+        raise PolarsegError(f"{path}: the {what} must be a single-channel labels image")
+    while data.ndim > 2 and data.shape[0] == 1:
+        data = data[0]
+    if data.ndim != 2:
+        raise PolarsegError(f"{path}: the {what} must be one 2-D image, got shape {data.shape}")
+    if data.dtype == np.bool_:
+        data = data.astype(np.uint8)
+    if data.dtype.kind == "f":
+        if not np.all(np.isfinite(data)) or np.any(data != np.round(data)):
+            raise PolarsegError(f"{path}: the {what} must hold integer labels")
+    elif data.dtype.kind not in "iu":
+        raise PolarsegError(f"{path}: the {what} must hold integer labels, got {data.dtype}")
+    h, w = (int(v) for v in shape)
+    if data.shape != (h, w):
+        raise PolarsegError(
+            f"{path}: the {what} image is {data.shape[0]} x {data.shape[1]} pixels but the "
+            f"outputs are {h} x {w}"
+        )
+    return data.astype(np.int64)
 
 
 # -- writers --------------------------------------------------------------------------------

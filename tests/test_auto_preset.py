@@ -1,7 +1,7 @@
 """The default preset ``auto`` (issue 13 item 4): superpixel clustering in the pipeline.
 
 ``auto`` is the recommended block parameters with ``clustering="superpixels"``: the
-labels come from :func:`~napari_polarseg.engine.unsupervised.segment_unsupervised`, no
+labels come from :func:`~napari_polarseg.engine.unsupervised.segmenter.segment_unsupervised`, no
 affinity or cut is computed, and the contract files are written as for every preset.
 """
 

@@ -199,8 +199,8 @@ def test_segment_all_parameter_flags_reach_params_json(tmp_path, capsys, scene_t
 
 def test_every_segment_parameter_has_a_named_option():
     names = {f.name for f in dataclasses.fields(SegmentParams)}
-    assert set(cli.PARAM_OPTIONS) == names
-    flags = [flag for flag, _ in cli.PARAM_OPTIONS.values()]
+    assert set(cli.param_options()) == names
+    flags = [flag for flag, _ in cli.param_options().values()]
     help_text = cli.build_parser()._subparsers._group_actions[0].choices["segment"].format_help()
     assert all(flag in help_text for flag in flags)
 

@@ -13,6 +13,7 @@ from skimage import io as skio
 from napari_polarseg import cli
 from napari_polarseg import io as pio
 from napari_polarseg.engine import SegmentParams, diffuse_dop
+from napari_polarseg.export import FLOAT_OUTPUTS
 from napari_polarseg.figures import PLOT_FILES
 
 ANGLES_DEG = np.arange(0.0, 180.0, 30.0)
@@ -142,7 +143,7 @@ def test_sweep_apply_best_and_scores(scene, tmp_path, capsys):
     assert summary["best"]["by"] == "ari" and summary["best"]["cell"]["ari"] == pytest.approx(1)
     best = SegmentParams.from_json((out / "best_params.json").read_text())
     # --apply-best: the segment contract in OUT/best/
-    for name in cli.FLOAT_OUTPUTS:
+    for name in FLOAT_OUTPUTS:
         assert (out / "best" / name).is_file()
     info = json.loads((out / "best" / "params.json").read_text())
     assert info["command"] == "segment"

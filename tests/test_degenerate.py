@@ -11,7 +11,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from napari_polarseg import cli
+from napari_polarseg import cli, jobs
 from napari_polarseg.engine import Pipeline, SegmentParams
 from napari_polarseg.engine.analysis.degenerate import DEGENERATE_SHARE, degenerate_result
 from napari_polarseg.engine.params import RECOMMENDED
@@ -132,14 +132,14 @@ def test_demo_warns_and_the_advice_leaves_out_the_preset_in_use(tmp_path, capsys
     fake = SimpleNamespace(
         result=dataclasses.replace(result, labels=labels), params=RECOMMENDED, seconds={}
     )
-    line = cli.degenerate_warning(fake)
+    line = jobs.degenerate_warning(fake)
     assert line.startswith("polarseg: warning: degenerate result: one segment holds 99.84 %")
     assert "--preset recommended" not in line and "--segments" in line
     # labels from a pixel classifier: another advice
     fake.seconds["classifier"] = 0.1
-    assert "strokes on every material" in cli.degenerate_warning(fake)
+    assert "strokes on every material" in jobs.degenerate_warning(fake)
     fake.result = result
-    assert cli.degenerate_warning(fake) is None
+    assert jobs.degenerate_warning(fake) is None
 
 
 def test_batch_warns_per_scene_and_lists_the_flag(tmp_path, capsys):

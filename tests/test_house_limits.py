@@ -34,7 +34,6 @@ FUNCTION_ALLOWLIST = {
     # outside engine/: other parts of issue 15
     "batch.py:iter_batch",
     "cli.py:build_parser",
-    "cli.py:_job",
     "cli.py:_cmd_sweep",
     "cli.py:_cmd_timeseries",
     "export.py:overview_figure",

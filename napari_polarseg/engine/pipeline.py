@@ -63,7 +63,7 @@ class Pipeline:
     mask : array (H, W) or PixelMask, optional
         Which pixels the fit and the block features use. An (H, W) array is the user's
         region (non-zero = segment here), combined with the samples flagged by
-        :func:`~napari_polarseg.engine.polarimage.validity_mask` with its defaults
+        :func:`~napari_polarseg.engine.physics.polarimage.validity_mask` with its defaults
         (saturated at the integer dtype's maximum, black at or below 0, not finite). A
         :class:`~napari_polarseg.engine.PixelMask` is used as it is (e.g. with
         another saturation level, or found by the reader before dark subtraction). None:
@@ -443,7 +443,7 @@ class Pipeline:
         """Labels from a classifier trained on user strokes instead of the normalized cut.
 
         The block features of the ``pca`` stage (thesis section 4.3.3) of the blocks the
-        strokes cover train :func:`~napari_polarseg.engine.scribbles.classify_blocks`,
+        strokes cover train :func:`~napari_polarseg.engine.analysis.scribbles.classify_blocks`,
         which labels every block; affinity and cut are not needed.
 
         Parameters

@@ -49,10 +49,10 @@ class SegmentationResult:
     RMS residual of the sinusoid fit. ``valid`` marks the pixels the block features and
     the reconstruction fit used (inside the pixel mask and with Î > 0); ``mask_counts``
     holds the pixel counts per exclusion reason
-    (:meth:`~napari_polarseg.engine.polarimage.PixelMask.counts`);
+    (:meth:`~napari_polarseg.engine.physics.pixel_mask.PixelMask.counts`);
     ``duplicate_angle_frames`` lists the frames taken at a repeated polariser angle
     (modulo π), which were averaged before the fit. ``cut_limits`` holds the cut's
-    work counts (:meth:`~napari_polarseg.engine.ncut.CutTree.cut_limits`: eigensolves
+    work counts (:meth:`~napari_polarseg.engine.graph.ncut.CutTree.cut_limits`: eigensolves
     capped, segments with an isolated block not solved, products); empty when labels
     came from elsewhere (scribbles).
     """
@@ -99,7 +99,7 @@ class SegmentationResult:
 
     def degenerate(self) -> DegenerateCheck:
         """Whether (nearly) every pixel is in one segment
-        (:func:`~napari_polarseg.engine.degenerate.degenerate_result`, minimum segment size
+        (:func:`~napari_polarseg.engine.analysis.degenerate.degenerate_result`, minimum segment size
         ``min_segment_blocks`` · w² pixels)."""
         p = self.params
         return degenerate_result(

@@ -4,7 +4,7 @@ Run/Cancel, status."""
 from __future__ import annotations
 
 import contextlib
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
 import numpy as np
 from magicgui.widgets import ComboBox, Container, Label, LineEdit, ProgressBar, PushButton
@@ -31,6 +31,16 @@ def is_angle_stack(layer: Layer) -> bool:
         and layer.ndim == 3
         and layer_tag(layer) is None
     )
+
+
+@runtime_checkable
+class ClassifierListener(Protocol):
+    """A docked widget that wants each new pixel classifier of a stack (the
+    *Polarisation plots* widget shows its feature importances). The Segment widget hands
+    it over without importing the listener's module, so the two do not import each
+    other."""
+
+    def set_classifier(self, layer: Any, classifier: Any) -> None: ...
 
 
 class WidthFollower(QObject):

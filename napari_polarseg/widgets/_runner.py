@@ -23,7 +23,7 @@ stale; a different mask (another region, an edited one, or none) builds a new on
 
 :func:`classifier_stages` is the scribble mode's job body: the pipeline's stages up to the
 block features, the pixel feature stack (kept by a
-:class:`~napari_polarseg.engine.pixel_segmentation.PixelSegmenter` per pipeline), then the
+:class:`~napari_polarseg.engine.analysis.pixel_segmentation.PixelSegmenter` per pipeline), then the
 pixel classifier trained on the user's strokes (or a loaded one) instead of affinity and
 cut, assembled into a :class:`~napari_polarseg.engine.SegmentationResult` like the cut's.
 A job that accepts it gets a ``cancel`` callable (``WorkerSlot.submit(...,
@@ -263,7 +263,7 @@ class ClassifierOutput:
     """What a scribble-mode job returns (or yields as a :class:`Partial`).
 
     ``segmentation`` is the engine's
-    :class:`~napari_polarseg.engine.pixel_segmentation.PixelSegmentation`: its
+    :class:`~napari_polarseg.engine.analysis.pixel_segmentation.PixelSegmentation`: its
     ``result.labels`` hold the class index 0..K-1, ``prediction.classes[k]`` is the
     scribble value (label) of class k, ``prediction.probabilities`` is (K, H, W) and
     sums to 1 over K, ``prediction.uncertainty`` is (H, W) in [0, 1]. ``trained`` is
@@ -396,7 +396,7 @@ class PipelineStore:
     The pipeline is rebuilt when the layer's data object, the angles or the mask (its
     ``mask_key`` or the content of its ``region``) change; otherwise the same object is
     reused so cached stages survive parameter changes. Beside each pipeline it keeps one
-    :class:`~napari_polarseg.engine.pixel_segmentation.PixelSegmenter`
+    :class:`~napari_polarseg.engine.analysis.pixel_segmentation.PixelSegmenter`
     (:meth:`segmenter`), so the scribble mode computes the pixel features once per
     stack and a new stroke only retrains and predicts. Safe to call from a worker thread
     (the slot runs one worker at a time; a lock guards the dict).

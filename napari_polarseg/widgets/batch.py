@@ -7,7 +7,7 @@
   progress bar and *Cancel*, and shows the summary as a table.
 - :class:`TimeSeriesWidget` ("Time series change map"): segments several angle-stack
   layers (days, in the chosen order) in one shared basis
-  (:func:`napari_polarseg.engine.timeseries.segment_timeseries`) and adds the per-day
+  (:func:`napari_polarseg.engine.analysis.timeseries.segment_timeseries`) and adds the per-day
   segments and the change maps as Labels layers and the graded change score as an Image
   layer (:func:`add_timeseries_layers`).
 
@@ -41,6 +41,7 @@ from ..engine.analysis.change_test import DEFAULT_FALSE_ALARM
 from ..engine.analysis.timeseries import METHODS, segment_timeseries
 from ..engine.analysis.timeseries_result import TimeSeriesResult
 from ..engine.params import AUTO, RECOMMENDED
+from ..io import read_params_file
 from ._base import ScrollingContainer, is_angle_stack
 from ._layers import ANGLES_KEY, label_colormap
 from ._runner import WorkerSlot, parse_angles
@@ -110,11 +111,10 @@ def params_from(viewer: napari.viewer.Viewer, source: str, path: Any = None) -> 
     if source == "thesis":
         return SegmentParams()
     if source == "JSON file":
-        try:
-            text = Path(path).read_text(encoding="utf-8")
-        except (OSError, TypeError) as exc:
-            raise PolarsegError(f"{path}: cannot read the parameters file ({exc})") from None
-        return SegmentParams.from_json(text)
+        if path is None:
+            raise PolarsegError("None: cannot read the parameters file (no file chosen)")
+        # a SegmentParams JSON or a params.json written by polarseg, as `segment --params`
+        return read_params_file(path)
     from .segment import SegmentWidget
 
     for widget in viewer.window.dock_widgets.values():

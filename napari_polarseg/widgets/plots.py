@@ -1,6 +1,6 @@
 """The "Polarisation plots" widget: the analyst's plots of a stack's last segmentation.
 
-Thin: the data come from :mod:`napari_polarseg.engine.plots`, the drawing from
+Thin: the data come from :mod:`napari_polarseg.engine.analysis.plots`, the drawing from
 :mod:`napari_polarseg.figures`; this module only finds the segmentation, runs the engine
 in a worker when needed and shows a matplotlib canvas themed like napari.
 """

@@ -52,7 +52,7 @@ def composite_for(
     mode: str = "intensity",
 ) -> tuple[np.ndarray, float]:
     """The HSV composite with ρ_max = ``dolp_max``, or automatic (0), in the ``mode`` of
-    :data:`VIEW_MODES` (:func:`~napari_polarseg.engine.views.aolp_dolp_composite`; "dark":
+    :data:`VIEW_MODES` (:func:`~napari_polarseg.engine.analysis.views.aolp_dolp_composite`; "dark":
     value from ρ on black): (RGB, ρ_max used)."""
     rho_max = auto_dolp_max(dop) if dolp_max <= 0 else float(dolp_max)
     params = CompositeParams(dolp_max=rho_max, mode=mode)

@@ -28,7 +28,7 @@ from ..engine.params import (
 )
 from ..engine.physics.stokes import stokes_components
 from ..io import read_params_file
-from ._base import StackWidget
+from ._base import ClassifierListener, StackWidget
 from ._layers import find_output, label_colormap, remove_output, show_output, source_key
 from ._runner import (
     CLASSIFIER_STAGES,
@@ -373,7 +373,7 @@ class SegmentWidget(StackWidget):
     One :class:`~napari_polarseg.engine.Pipeline` is kept per stack layer, so a rerun
     computes only the stages a change made stale (changing the number of segments
     recomputes only the labels). Beside it a
-    :class:`~napari_polarseg.engine.pixel_segmentation.PixelSegmenter` keeps the stack's
+    :class:`~napari_polarseg.engine.analysis.pixel_segmentation.PixelSegmenter` keeps the stack's
     pixel features, so a painted stroke only retrains the pixel classifier and predicts
     again; a new stroke (or any change) during a retraining stops its prediction between
     chunks and starts the newest request. A loaded classifier is applied to the chosen
@@ -1010,15 +1010,14 @@ class SegmentWidget(StackWidget):
             pass
 
     def _notify_plots(self, layer: Layer, classifier: PixelClassifier | None) -> None:
-        """Hand a docked *Polarisation plots* widget the stack's new classifier."""
-        from .plots import PlotsWidget
-
+        """Hand every docked :class:`ClassifierListener` (the *Polarisation plots*
+        widget) the stack's new classifier."""
         try:
             docked = list(self._viewer.window.dock_widgets.values())
         except (AttributeError, RuntimeError):  # no window (headless viewer) or closing
             return
         for widget in docked:
-            if isinstance(widget, PlotsWidget):
+            if isinstance(widget, ClassifierListener):
                 widget.set_classifier(layer, classifier)
 
     # -- exporting --------------------------------------------------------------------

@@ -1,6 +1,6 @@
 """The "Parameter sweep" widget: score a grid of w, L and n on the chosen angle stack.
 
-Thin: the sweep is :func:`napari_polarseg.engine.sweep.iter_sweep` run in a napari
+Thin: the sweep is :func:`napari_polarseg.engine.analysis.sweep.iter_sweep` run in a napari
 worker (progress bar per cell, *Cancel* stops after the running cell), the heatmaps are
 :func:`napari_polarseg.figures.sweep_heatmap_figure` on a matplotlib canvas themed like
 napari, the table is the sweep's rows. *Use best* hands the best cell's parameters to the

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 import tifffile
 from _gui_helpers import click
 from scipy import ndimage
@@ -156,3 +157,21 @@ def test_add_timeseries_layers_from_a_cli_folder(viewer, tmp_path):
     (out / "score_01.tif").unlink()
     names = [layer.name for layer in add_timeseries_layers(viewer, out, name="old")]
     assert names == ["old segments", "old change", "old feature distance"]
+
+
+def test_batch_params_json_file_accepts_a_polarseg_params_json(viewer, tmp_path):
+    """The batch widget reads a parameters file as `segment --params` does: a SegmentParams
+    JSON, or the params.json that polarseg writes into a result folder."""
+    from napari_polarseg.engine import PolarsegError
+    from napari_polarseg.widgets.batch import params_from
+
+    plain = tmp_path / "plain.json"
+    plain.write_text(RECOMMENDED.replace(n_segments=4).to_json(), encoding="utf-8")
+    assert params_from(viewer, "JSON file", plain) == RECOMMENDED.replace(n_segments=4)
+    folder = tmp_path / "out"
+    assert cli.main(["demo", "--out", str(folder), "--preset", "recommended"]) == 0
+    from_folder = params_from(viewer, "JSON file", folder / "params.json")
+    assert from_folder.window == RECOMMENDED.window
+    (tmp_path / "bad.json").write_text("[1]", encoding="utf-8")
+    with pytest.raises(PolarsegError, match="must hold a JSON object"):
+        params_from(viewer, "JSON file", tmp_path / "bad.json")

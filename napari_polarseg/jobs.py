@@ -1,0 +1,600 @@
+"""Segment one input into a result folder: the job behind ``polarseg segment`` and batch.
+
+:func:`segment_to_folder` reads an input with :class:`ReadOptions`, segments it (normalized
+cut, or a pixel classifier trained on scribbles or loaded from a file), and writes the
+``segment`` result folder (:func:`napari_polarseg.export.write_result_folder`) with the
+optional files of :class:`OutputOptions`. Everything is computed before the first file is
+written. What a command line would say about the run (its summary line, the warning of a
+degenerate result, the classifier and evaluation lines) comes back as
+:class:`Message` data in the :class:`FolderResult`; nothing is printed here. This module
+never imports napari, Qt or the command line.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from . import io as pio
+from .engine import STAGES, Pipeline, SegmentationResult
+from .engine.analysis.evaluation import adjusted_rand_index, evaluate
+from .engine.errors import PolarsegError
+from .engine.limits import check_pipeline_memory, memory_limit
+from .engine.params import PRESETS, SegmentParams
+from .engine.physics.pixel_mask import PixelMask
+from .engine.physics.polarimage import validity_mask
+from .engine.physics.registration import register_stack, shift_frames
+from .export import classifier_summary, write_result_folder
+from .status_line import StatusLine
+
+#: Prefix of every message line (the command's name).
+PROG = "polarseg"
+
+#: Pipeline progress callback: (stage, index, total).
+Progress = Callable[[str, int, int], None]
+
+
+@dataclass(frozen=True)
+class ReadOptions:
+    """How ``segment`` reads an input and what else it reads with it.
+
+    Attributes
+    ----------
+    angles_deg, mosaic_deg : tuple of float or None
+        Polariser angle of every frame in frame order (overrides the file), or: the input
+        is one raw mosaic frame with these 2 x 2 super-pixel angles; degrees.
+    demosaic : str
+        Mosaic decoding (``superpixel`` or ``interpolated``).
+    bayer : str or None
+        Bayer colour order of a colour-polarisation mosaic.
+    channel : int or None
+        Colour channel to use (None: BT.601 luma).
+    dark_frame : str or None
+        Dark frame file subtracted from every frame.
+    offset : float or None
+        Constant black level subtracted from every sample (input units).
+    saturation, dark_level : float, "auto" or None
+        Samples at or above ``saturation`` are saturated ("auto": the type's maximum),
+        those at or below ``dark_level`` (after subtraction) black; input units; None: no
+        check.
+    mask : str or None
+        Region file (labels image, non-zero = use).
+    register : bool
+        Align the frames to the first (sub-pixel phase correlation) first.
+    max_memory_gib : float or None
+        Memory limit of the read and the run, GiB (None: ``$POLARSEG_MAX_BYTES`` or 8).
+    scribbles, classifier : str or None
+        Strokes file to train a pixel classifier on, or a saved one (``.polarseg-clf``):
+        it labels the pixels instead of the cut.
+    ground_truth : str or None
+        True materials (labels image): ``evaluation.json`` is written.
+    """
+
+    angles_deg: tuple[float, ...] | None = None
+    mosaic_deg: tuple[float, ...] | None = None
+    demosaic: str = "superpixel"
+    bayer: str | None = None
+    channel: int | None = None
+    dark_frame: str | None = None
+    offset: float | None = None
+    saturation: float | str | None = "auto"
+    dark_level: float | None = 0.0
+    mask: str | None = None
+    register: bool = False
+    max_memory_gib: float | None = None
+    scribbles: str | None = None
+    classifier: str | None = None
+    ground_truth: str | None = None
+
+    def max_bytes(self) -> int:
+        """The memory limit in bytes (:func:`napari_polarseg.engine.limits.memory_limit`)."""
+        gib = self.max_memory_gib
+        return memory_limit(None if gib is None else gib * 2**30)
+
+
+@dataclass(frozen=True)
+class OutputOptions:
+    """Which optional files a result folder gets.
+
+    Attributes
+    ----------
+    overview, plots : bool
+        ``overview.png`` (matplotlib figure); the analyst's plots as PNGs in ``plots/``.
+    save_classifier : str or None
+        With scribbles: also write the trained classifier to this file.
+    """
+
+    overview: bool = False
+    plots: bool = False
+    save_classifier: str | None = None
+
+
+def _angles_text(values: Sequence[float]) -> str:
+    return ",".join(f"{v:g}" for v in values)
+
+
+def _level_text(value: float | str | None, default: float | str) -> str | None:
+    """A level option's text: None when it is the default, ``none`` for no check."""
+    if value is None:
+        return "none"
+    return None if value == default else str(value)
+
+
+def segment_args(read: ReadOptions, outputs: OutputOptions) -> list[str]:
+    """The ``polarseg segment`` options that ask for ``read`` and ``outputs`` (the record
+    a batch keeps in each scene's completion marker; defaults are left out)."""
+    out: list[str] = []
+    values: list[tuple[str, Any]] = [
+        ("--angles", None if read.angles_deg is None else _angles_text(read.angles_deg)),
+        ("--mosaic", None if read.mosaic_deg is None else _angles_text(read.mosaic_deg)),
+        ("--demosaic", None if read.demosaic == "superpixel" else read.demosaic),
+        ("--bayer", read.bayer),
+        ("--channel", read.channel),
+        ("--max-memory", read.max_memory_gib),
+        ("--classifier", read.classifier),
+        ("--dark-frame", read.dark_frame),
+        ("--offset", read.offset),
+        ("--saturation", _level_text(read.saturation, "auto")),
+        ("--dark-level", _level_text(read.dark_level, 0.0)),
+        ("--mask", read.mask),
+        ("--scribbles", read.scribbles),
+        ("--ground-truth", read.ground_truth),
+    ]
+    for flag, value in values:
+        if value is not None:
+            out += [flag, str(value)]
+    flags = [
+        ("--register", read.register),
+        ("--overview", outputs.overview),
+        ("--plots", outputs.plots),
+    ]
+    out += [flag for flag, on in flags if on]
+    if outputs.save_classifier:
+        out += ["--save-classifier", outputs.save_classifier]
+    return out
+
+
+@dataclass(frozen=True)
+class Message:
+    """One line a command line shows about a run, and its stream (stdout or stderr)."""
+
+    text: str
+    stream: str = "stdout"
+
+
+@dataclass
+class Run:
+    """One segmentation job, everything computed in memory."""
+
+    data: pio.StackData
+    params: SegmentParams
+    stack: np.ndarray
+    result: SegmentationResult
+    shifts: np.ndarray | None
+    seconds: dict[str, float] = field(default_factory=dict)
+    mask: PixelMask | None = None
+    pipeline: Pipeline | None = None
+    colour_stack: np.ndarray | None = None
+
+
+@dataclass
+class FolderResult:
+    """What :func:`segment_to_folder` did: the folder, its files, the run and the messages.
+
+    Attributes
+    ----------
+    out : Path
+        The result folder.
+    written : list of str
+        The files written, relative to ``out``.
+    run : Run
+        The run (stack, parameters, result, mask, seconds).
+    summary : dict
+        The job's items of ``summary.json`` (seconds, classifier, adjusted Rand index).
+    messages : list of Message
+        The lines a command line prints about the run, in order.
+    degenerate : str or None
+        The warning line of a degenerate result (also among ``messages``), or None.
+    evaluation : dict or None
+        ``evaluation.json`` against a ground-truth file.
+    """
+
+    out: Path
+    written: list[str]
+    run: Run
+    summary: dict[str, Any]
+    messages: list[Message]
+    degenerate: str | None = None
+    evaluation: dict[str, Any] | None = None
+
+
+def pixel_mask(data: pio.StackData, read: ReadOptions) -> PixelMask:
+    """Validity mask: the reader's saturated samples, black samples, the user's region."""
+    region = None
+    if read.mask:
+        superpixel = data.metadata.get("demosaic") == "superpixel"
+        raw_shape = data.metadata.get("raw_shape") if superpixel else None
+        region = pio.read_mask(read.mask, data.stack.shape[1:], raw_shape)
+    return validity_mask(
+        data.stack,
+        saturation=data.metadata.get("saturation_level"),
+        dark_level=read.dark_level,
+        region=region,
+        saturated=data.saturated,
+    )
+
+
+@dataclass
+class LabelSource:
+    """Labels from the pixel classifier instead of the cut: trained on ``scribbles`` or
+    the classifier saved in ``classifier_file``; what it produced is kept here."""
+
+    scribbles: np.ndarray | None = None
+    scribbles_file: str | None = None
+    classifier_file: str | None = None
+    segmentation: Any = None
+
+    def label(self, run: Run) -> None:
+        """Label ``run`` with the pixel classifier (sets ``run.result``)."""
+        from .classifier_file import load_pixel_classifier
+        from .engine.analysis.pixel_segmentation import PixelSegmenter
+
+        classifier = None
+        if self.classifier_file:
+            classifier = load_pixel_classifier(self.classifier_file)
+        try:
+            segmenter = PixelSegmenter(run.pipeline, colour_stack=run.colour_stack)
+            out = segmenter.segment(self.scribbles, classifier)
+        except PolarsegError as exc:
+            where = self.scribbles_file or self.classifier_file
+            raise PolarsegError(f"{where}: {exc}") from None
+        self.segmentation = out
+        run.result = out.result
+        run.seconds["classifier"] = float(sum(out.seconds.values()))
+
+    def summary(self) -> dict[str, Any]:
+        """The classifier's items of ``summary.json``."""
+        labels_from = "scribbles" if self.scribbles is not None else "classifier"
+        return classifier_summary(self.segmentation, labels_from)
+
+
+def segment_data(
+    data: pio.StackData,
+    params: SegmentParams,
+    register: bool,
+    mask: PixelMask | None = None,
+    max_bytes: int | None = None,
+    labels_by: LabelSource | None = None,
+    status: StatusLine | None = None,
+    progress: Progress | None = None,
+) -> Run:
+    """Register (optionally) and segment an angle stack in memory; seconds per step."""
+    status = status or StatusLine(False, PROG)
+    seconds: dict[str, float] = {}
+    stack, shifts = data.stack, None
+    check_pipeline_memory(stack.shape, params, max_bytes)
+    if mask is None:
+        mask = validity_mask(
+            stack, saturation=data.metadata.get("saturation_level"), saturated=data.saturated
+        )
+    colour_stack = data.colour_stack
+    if register:
+        status.show("registering the frames")
+        t0 = time.perf_counter()
+        stack, shifts = register_stack(stack)
+        mask = mask.shifted(shifts)
+        if colour_stack is not None:
+            colour_stack = shift_frames(colour_stack, shifts)
+        seconds["register"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    pipe = Pipeline(stack, data.angles_rad, params, mask=mask)
+    run = Run(data, params, stack, None, shifts, seconds, mask, pipe)  # type: ignore[arg-type]
+    run.colour_stack = colour_stack
+    if labels_by is None:
+        status.stage(STAGES[0], 1, len(STAGES), "segmenting:")
+        run.result = pipe.run(progress=progress)
+    else:
+        status.show("pixel classifier: features, training and prediction")
+        labels_by.label(run)
+    seconds["segment"] = time.perf_counter() - t0
+    return run
+
+
+def _resolved(name: str | None) -> str | None:
+    return None if name in (None, "array") else str(Path(name).resolve())
+
+
+def input_info(data: pio.StackData, read: ReadOptions) -> dict[str, Any]:
+    """What ``params.json`` records of the reading, beyond :func:`export.run_info`."""
+    meta = data.metadata
+    return {
+        "input_format": meta.get("format"),
+        "input_files": meta.get("files"),
+        "angles_from": meta.get("angles_from"),
+        "mosaic_layout_deg": meta.get("mosaic_layout_deg"),
+        "raw_shape": meta.get("raw_shape"),
+        "channel": read.channel,
+        "demosaic": meta.get("demosaic"),
+        "bayer": meta.get("bayer"),
+        "sensor": meta.get("sensor"),
+        "dark_frame": _resolved(meta.get("dark_frame")),
+        "offset": meta.get("offset"),
+        "bits_per_sample": meta.get("bits_per_sample"),
+        "mask_file": _resolved(read.mask),
+    }
+
+
+def _seconds_summary(run: Run, read_seconds: float) -> dict[str, Any]:
+    """The job's items of ``summary.json`` (beyond ``result.summary()``): seconds."""
+    return {
+        "io_seconds": {
+            "read": round(read_seconds, 6),
+            "register": round(run.seconds.get("register", 0.0), 6),
+        },
+        "segment_seconds": round(run.seconds["segment"], 6),
+    }
+
+
+def degenerate_warning(run: Run) -> str | None:
+    """The one-line warning of a degenerate result (``SegmentationResult.degenerate``:
+    one segment holds >= 95 % of the pixels, or every other is below the minimum size),
+    with what to try; None when the result is not degenerate."""
+    check = run.result.degenerate()
+    if not check.degenerate:
+        return None
+    if "classifier" in run.seconds:  # labels from a pixel classifier, not the cut
+        advice = "paint strokes on every material (--scribbles) or retrain the classifier"
+    else:
+        tries = ["fewer or more segments (--segments)", "a larger window (--window)"]
+        recommended = PRESETS["recommended"].replace(n_segments=run.params.n_segments)
+        if run.params != recommended:
+            tries.insert(0, "--preset recommended")
+        advice = f"try {', '.join(tries)}, or scribbles (--scribbles)"
+    return f"{PROG}: warning: degenerate result: {check.reason}; {advice}"
+
+
+def _limit_lines(run: Run) -> list[str]:
+    """What the cut gave up on, and the registration shifts."""
+    lines = []
+    limits = run.result.cut_limits
+    done = []
+    if limits.get("eigensolver_capped"):
+        done.append(
+            f"stopped {limits['eigensolver_capped']} eigensolve(s) at their cap of "
+            f"{limits.get('max_products')} products"
+        )
+    if limits.get("isolated_skipped"):
+        done.append(f"peeled {limits['isolated_skipped']} isolated block(s) off unsolved")
+    if done:
+        lines.append(f"{PROG}: the cut {' and '.join(done)} (cut_limits in summary.json)")
+    if run.shifts is not None:
+        biggest = float(np.max(np.hypot(run.shifts[:, 0], run.shifts[:, 1])))
+        lines.append(
+            f"{PROG}: registered {len(run.shifts)} frames to frame 0, largest shift "
+            f"{biggest:.2f} px (rows, columns per frame in params.json)"
+        )
+    return lines
+
+
+def report_messages(
+    out: Path, run: Run, written: list[str], note_repeated: bool = True
+) -> list[Message]:
+    """The run's lines; ``note_repeated=False`` leaves out the information that frames at
+    a repeated angle were averaged (the bundled samples, made that way; it stays in
+    params.json and summary.json)."""
+    result = run.result
+    err = result.mean_reconstruction_error
+    err_text = "n/a" if err is None else f"{err:.4g}"
+    h, w = result.labels.shape
+    messages = [
+        Message(
+            f"{PROG}: {result.n_segments} segments over {h} x {w} pixels, "
+            f"mean reconstruction error {err_text}"
+        )
+    ]
+    warning = degenerate_warning(run)
+    if warning is not None:
+        messages.append(Message(warning, "stderr"))
+    lines = _limit_lines(run)
+    counts = result.mask_counts
+    if counts.get("masked_pixels"):
+        reasons = [
+            f"{counts[key]} {label}"
+            for key, label in (
+                ("saturated_pixels", "saturated"),
+                ("dark_pixels", "black"),
+                ("nonfinite_pixels", "not finite"),
+                ("outside_region_pixels", "outside the mask"),
+            )
+            if counts.get(key)
+        ]
+        lines.append(
+            f"{PROG}: left out {counts['masked_pixels']} of {h * w} pixels "
+            f"({', '.join(reasons)}; see mask.tif)"
+        )
+    for frames in result.duplicate_angle_frames if note_repeated else ():
+        lines.append(
+            f"{PROG}: frames {', '.join(map(str, frames))} share a polariser angle "
+            f"(modulo 180 degrees) and were averaged before the fit"
+        )
+    plots = [name for name in written if name.startswith("plots/")]
+    listed = [name for name in written if name not in plots]
+    if plots:
+        listed.insert(-2, f"plots/ ({len(plots)} PNGs)")  # before params.json, summary.json
+    lines.append(f"{PROG}: wrote {', '.join(listed)} to {out}")
+    return messages + [Message(line) for line in lines]
+
+
+def segment_to_folder(
+    input: pio.PathLike | Sequence[pio.PathLike],
+    out: pio.PathLike,
+    params: SegmentParams,
+    read: ReadOptions | None = None,
+    outputs: OutputOptions | None = None,
+    *,
+    command: str = "segment",
+    status: StatusLine | None = None,
+    progress: Progress | None = None,
+) -> FolderResult:
+    """Read ``input`` (a stack file, folder, raw frame, or one file per frame), segment it
+    with ``params`` and write the ``segment`` result folder ``out``.
+
+    Raises :class:`PolarsegError` for bad input and
+    :class:`napari_polarseg.export.OutputError` when the folder cannot be written.
+    """
+    read = read or ReadOptions()
+    status = status or StatusLine(False, PROG)
+    first = input if isinstance(input, (str, Path)) else list(input)[0]
+    status.show(f"reading {Path(first).name}")
+    t0 = time.perf_counter()
+    data = pio.read_stack(
+        input,
+        angles_deg=None if read.angles_deg is None else np.asarray(read.angles_deg, float),
+        mosaic=None if read.mosaic_deg is None else np.asarray(read.mosaic_deg, float),
+        channel=read.channel,
+        demosaic=read.demosaic,
+        bayer=read.bayer,
+        dark=read.dark_frame,
+        offset=read.offset,
+        saturation=read.saturation,
+        max_bytes=read.max_bytes(),
+    )
+    return data_to_folder(
+        data,
+        out,
+        params,
+        read,
+        outputs,
+        read_seconds=time.perf_counter() - t0,
+        command=command,
+        status=status,
+        progress=progress,
+    )
+
+
+def _label_source(
+    read: ReadOptions, outputs: OutputOptions, scribbles: np.ndarray | None
+) -> LabelSource | None:
+    """The pixel classifier that labels the run (scribbles or a saved one), or None."""
+    if outputs.save_classifier and scribbles is None:
+        raise PolarsegError("--save-classifier needs --scribbles (a classifier to train)")
+    if scribbles is None and not read.classifier:
+        return None
+    return LabelSource(scribbles, read.scribbles, read.classifier)
+
+
+def _files_info(read: ReadOptions) -> dict[str, Any]:
+    """The label and truth files ``params.json`` records, resolved."""
+    info = {}
+    for key, name in (
+        ("scribbles_file", read.scribbles),
+        ("classifier_file", read.classifier),
+        ("ground_truth_file", read.ground_truth),
+    ):
+        if name:
+            info[key] = str(Path(name).resolve())
+    return info
+
+
+def _classifier_messages(source: LabelSource, save_file: str | None) -> list[Message]:
+    """Say what the classifier did; write it to ``save_file`` if asked."""
+    clf = source.segmentation.classifier
+    if source.classifier_file:
+        lines = [f"{PROG}: applied the classifier {source.classifier_file} (not retrained)"]
+    else:
+        lines = [
+            f"{PROG}: pixel classifier trained on {clf.n_training_pixels} scribbled "
+            f"pixels of {clf.classes.size} materials, {len(clf.feature_names)} features"
+        ]
+    if save_file:
+        from .classifier_file import save_pixel_classifier
+
+        save_pixel_classifier(save_file, clf)
+        lines.append(f"{PROG}: wrote the classifier to {save_file}")
+    return [Message(line) for line in lines]
+
+
+def _evaluation_message(evaluation: dict[str, Any]) -> Message:
+    return Message(
+        f"{PROG}: against the ground truth: adjusted Rand index "
+        f"{evaluation['adjusted_rand_index']:.3f}, mean IoU {evaluation['mean_iou']:.3f}, "
+        f"block accuracy {evaluation['block_accuracy_worst']:.3f} (worst) .. "
+        f"{evaluation['block_accuracy_optimistic']:.3f} (optimistic)"
+    )
+
+
+def data_to_folder(
+    data: pio.StackData,
+    out: pio.PathLike,
+    params: SegmentParams,
+    read: ReadOptions | None = None,
+    outputs: OutputOptions | None = None,
+    *,
+    read_seconds: float = 0.0,
+    command: str = "segment",
+    extra: dict[str, Any] | None = None,
+    note_repeated: bool = True,
+    status: StatusLine | None = None,
+    progress: Progress | None = None,
+) -> FolderResult:
+    """:func:`segment_to_folder` of already-read data (``read`` still gives the mask,
+    registration, label files and memory limit; ``extra`` goes into ``summary.json``)."""
+    read = read or ReadOptions()
+    outputs = outputs or OutputOptions()
+    status = status or StatusLine(False, PROG)
+    mask = pixel_mask(data, read)
+    shape = data.stack.shape[1:]
+    scribbles = pio.read_labels(read.scribbles, shape, "scribbles") if read.scribbles else None
+    truth_file = read.ground_truth
+    truth = pio.read_labels(truth_file, shape, "ground truth") if truth_file else None
+    source = _label_source(read, outputs, scribbles)
+    run = segment_data(
+        data, params, read.register, mask, read.max_bytes(), source, status, progress
+    )
+    probabilities = uncertainty = None
+    summary = {**_seconds_summary(run, read_seconds), **(extra or {})}
+    if source is not None:
+        probabilities = source.segmentation.prediction.probabilities
+        uncertainty = source.segmentation.prediction.uncertainty
+        summary.update(source.summary())
+        summary["classifier_seconds"] = round(run.seconds["classifier"], 6)
+    if data.ground_truth is not None:
+        summary["adjusted_rand_index"] = adjusted_rand_index(data.ground_truth, run.result.labels)
+    evaluation = None
+    if truth is not None:
+        evaluation = {
+            "ground_truth": str(Path(truth_file).resolve()),
+            **evaluate(truth, run.result.labels, run.params.window),
+        }
+    out = Path(out)
+    status.show(f"writing the results to {out}")
+    written = write_result_folder(
+        out,
+        stack=run.stack,
+        angles_deg=data.angles_deg,
+        result=run.result,
+        mask=run.mask,
+        source=str(Path(data.source).resolve()),
+        command=command,
+        overview=outputs.overview,
+        plots=outputs.plots,
+        probabilities=probabilities,
+        uncertainty=uncertainty,
+        evaluation=evaluation,
+        shifts=run.shifts,
+        info={**input_info(data, read), **_files_info(read)},
+        summary=summary,
+        truth=truth if truth is not None else data.ground_truth,
+    )
+    status.clear()
+    messages = report_messages(out, run, written, note_repeated)
+    if source is not None:
+        messages += _classifier_messages(source, outputs.save_classifier)
+    if evaluation is not None:
+        messages.append(_evaluation_message(evaluation))
+    return FolderResult(out, written, run, summary, messages, degenerate_warning(run), evaluation)
