@@ -26,7 +26,7 @@ from .engine.analysis.evaluation import adjusted_rand_index, evaluate
 from .engine.errors import PolarsegError
 from .engine.limits import check_pipeline_memory, memory_limit
 from .engine.params import PRESETS, SegmentParams
-from .engine.physics.pixel_mask import PixelMask
+from .engine.physics.pixel_mask import PixelMask, mask_reasons
 from .engine.physics.polarimage import validity_mask
 from .engine.physics.registration import register_stack, shift_frames
 from .export import classifier_summary, write_result_folder
@@ -403,16 +403,7 @@ def report_messages(
     lines = _limit_lines(run)
     counts = result.mask_counts
     if counts.get("masked_pixels"):
-        reasons = [
-            f"{counts[key]} {label}"
-            for key, label in (
-                ("saturated_pixels", "saturated"),
-                ("dark_pixels", "black"),
-                ("nonfinite_pixels", "not finite"),
-                ("outside_region_pixels", "outside the mask"),
-            )
-            if counts.get(key)
-        ]
+        reasons = mask_reasons(counts)
         lines.append(
             f"{PROG}: left out {counts['masked_pixels']} of {h * w} pixels "
             f"({', '.join(reasons)}; see mask.tif)"

@@ -154,3 +154,12 @@ def test_integer_stack_is_fitted_without_a_float64_copy():
         pipe.run().labels,
         Pipeline(stack.astype(np.float64), angles, pipe.params).run().labels,
     )
+
+
+def test_mask_reasons_name_the_nonzero_counts_in_order():
+    from napari_polarseg.engine.physics.pixel_mask import mask_reasons
+
+    counts = {"saturated_pixels": 2, "dark_pixels": 0, "nonfinite_pixels": 1}
+    assert mask_reasons(counts) == ["2 saturated", "1 not finite"]
+    assert mask_reasons({"dark_pixels": 3}, dark="dark") == ["3 dark"]
+    assert mask_reasons({}) == []

@@ -26,6 +26,7 @@ from ..engine.params import (
     SCALE_MODES,
     SPECULAR_BRANCHES,
 )
+from ..engine.physics.pixel_mask import mask_reasons
 from ..engine.physics.stokes import stokes_components
 from ..io import read_params_file
 from ._base import ClassifierListener, StackWidget
@@ -73,13 +74,6 @@ NO_SCRIBBLES = "none (unsupervised)"
 #: (``paint``), new data (``data``), undo/redo and other refreshes (``set_data``).
 EDIT_EVENTS = ("paint", "data", "set_data")
 
-#: Words of the status line for the masked-pixel counts of ``result.mask_counts``.
-MASK_REASONS = (
-    ("saturated_pixels", "saturated"),
-    ("dark_pixels", "black"),
-    ("nonfinite_pixels", "not finite"),
-    ("outside_region_pixels", "outside the mask"),
-)
 
 #: SegmentParams fields that have a control in the widget (the others come from the preset).
 CONTROLLED = (
@@ -336,7 +330,7 @@ def degenerate_text(summary: dict[str, Any]) -> str:
 
 def mask_text(counts: dict[str, Any]) -> str:
     """``"masked: 120 saturated, 3 black"`` from ``result.mask_counts`` ("" if none)."""
-    parts = [f"{int(counts[k])} {word}" for k, word in MASK_REASONS if counts.get(k)]
+    parts = mask_reasons(counts)
     return f"masked: {', '.join(parts)}" if parts else ""
 
 

@@ -14,6 +14,23 @@ import numpy as np
 
 from ..errors import PolarsegError
 
+#: The word for each excluded-pixel count of :meth:`PixelMask.counts` (and of a result's
+#: ``mask_counts``), in the order messages list them.
+MASK_REASONS: tuple[tuple[str, str], ...] = (
+    ("saturated_pixels", "saturated"),
+    ("dark_pixels", "black"),
+    ("nonfinite_pixels", "not finite"),
+    ("outside_region_pixels", "outside the mask"),
+)
+
+
+def mask_reasons(counts: dict[str, Any], dark: str = "black") -> list[str]:
+    """``["12 saturated", "3 black", ...]``: the non-zero counts of ``counts`` with their
+    words (:data:`MASK_REASONS`); ``dark`` is the word for the dark pixels."""
+    words = {**dict(MASK_REASONS), "dark_pixels": dark}
+    return [f"{int(counts[key])} {words[key]}" for key, _ in MASK_REASONS if counts.get(key)]
+
+
 #: Bits of :attr:`PixelMask.flags` (per sample).
 SATURATED, DARK, NONFINITE = 1, 2, 4
 

@@ -45,7 +45,15 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import PolarsegError
-from .pixel_mask import DARK, NONFINITE, SATURATED, PixelMask, auto_saturation_level, finite_level
+from .pixel_mask import (
+    DARK,
+    NONFINITE,
+    SATURATED,
+    PixelMask,
+    auto_saturation_level,
+    finite_level,
+    mask_reasons,
+)
 from .sinusoid_fit import ROBUST_LOSSES, irls, sinusoid_design, unweighted_fit, weighted_fit
 
 #: Two polariser angles closer than this (radians, modulo π) are the same state.
@@ -556,16 +564,7 @@ def check_usable(stack: np.ndarray, mask: PixelMask) -> None:
     valid = mask.valid
     if not valid.any():
         c = mask.counts()
-        reasons = [
-            f"{c[key]} {label}"
-            for key, label in (
-                ("saturated_pixels", "saturated"),
-                ("dark_pixels", "black (at or below the dark level)"),
-                ("nonfinite_pixels", "not finite"),
-                ("outside_region_pixels", "outside the mask"),
-            )
-            if c[key]
-        ]
+        reasons = mask_reasons(c, dark="black (at or below the dark level)")
         raise PolarsegError(
             f"no usable pixel: all {valid.size} pixels are excluded ({', '.join(reasons)})"
         )
