@@ -14,10 +14,11 @@ from ..engine import (
     zenith_from_dop,
 )
 from ..engine.analysis.views import CompositeParams, aolp_dolp_composite, auto_dolp_max
-from ..engine.params import MODELS, SPECULAR_BRANCHES
+from ..engine.params import SegmentParams
 from ..engine.physics.stokes import stokes_components
 from ._base import StackWidget
 from ._layers import find_output, show_output, source_key
+from .param_controls import param_controls
 
 if TYPE_CHECKING:
     import napari
@@ -144,27 +145,14 @@ class PolarisationWidget(StackWidget):
 
     def __init__(self, viewer: napari.viewer.Viewer) -> None:
         super().__init__(viewer)
-        self.refractive_index = FloatSpinBox(
-            label="refractive index",
-            value=1.45,
-            min=1.01,
-            max=3.0,
-            step=0.01,
-            tooltip="Assumed refractive index n for zenith from ρ (thesis: 1.45)",
+        # the controls of the Fresnel parameters, from the parameter table
+        controls = param_controls(
+            SegmentParams().to_dict(), names=("refractive_index", "model", "specular_branch")
         )
-        self.model = ComboBox(
-            label="model",
-            choices=list(MODELS),
-            value="diffuse",
-            tooltip="Fresnel model for the zenith: diffuse (eq. 3.13) or specular (eq. 3.11)",
-        )
-        self.specular_branch = ComboBox(
-            label="specular branch",
-            choices=list(SPECULAR_BRANCHES),
-            value="below-brewster",
-            visible=False,
-            tooltip="Specular ρ takes each value twice: zenith below or above Brewster's angle",
-        )
+        self.refractive_index = controls["refractive_index"]
+        self.model = controls["model"]
+        self.specular_branch = controls["specular_branch"]
+        self.specular_branch.visible = False
         self.dolp_max = FloatSpinBox(
             label="DoLP maximum",
             value=0.0,

@@ -10,22 +10,12 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from magicgui.widgets import CheckBox, ComboBox, Container, FloatSpinBox, PushButton, SpinBox
+from magicgui.widgets import CheckBox, ComboBox, Container, FloatSpinBox, PushButton
 from napari.layers import Labels
 from qtpy.QtCore import QTimer
 
 from ..engine import STAGES, Pipeline, PolarsegError, SegmentationResult, SegmentParams
-from ..engine.params import (
-    CLUSTERING_METHODS,
-    COEFFICIENT_METHODS,
-    FEATURE_KINDS,
-    FIT_METHODS,
-    MAX_DEGREE,
-    MODELS,
-    PRESETS,
-    SCALE_MODES,
-    SPECULAR_BRANCHES,
-)
+from ..engine.params import PARAM_SPECS, PRESET_HELP, PRESETS, ParamSpec
 from ..engine.physics.pixel_mask import mask_reasons
 from ..engine.physics.stokes import stokes_components
 from ..io import read_params_file
@@ -42,6 +32,7 @@ from ._runner import (
     content_digest,
     scribble_problem,
 )
+from .param_controls import controlled_names, param_controls
 from .polarisation import VIEW_OUTPUTS, composite_for, view_mode_box
 
 if TYPE_CHECKING:
@@ -54,16 +45,6 @@ if TYPE_CHECKING:
 LIVE_DELAY_MS = 150
 
 
-#: Text shown for each sinusoid-fit method of the "fit" menu.
-FIT_NAMES = {"lsq": "least squares", "robust": "robust"}
-
-#: Text shown for each clustering method of the "clustering" menu.
-CLUSTERING_NAMES = {
-    "recursive": "recursive two-way",
-    "kway": "k-way spectral",
-    "superpixels": "superpixels (unsupervised)",
-}
-
 #: Text of the "mask" menu entry that segments every pixel.
 NO_MASK = "none"
 
@@ -75,33 +56,16 @@ NO_SCRIBBLES = "none (unsupervised)"
 EDIT_EVENTS = ("paint", "data", "set_data")
 
 
-#: SegmentParams fields that have a control in the widget (the others come from the preset).
-CONTROLLED = (
-    "window",
-    "degree",
-    "refractive_index",
-    "fit",
-    "model",
-    "specular_branch",
-    "coefficients",
-    "features",
-    "variance",
-    "scale",
-    "scale_mode",
-    "clustering",
-    "min_segment_blocks",
-    "n_segments",
-)
+#: SegmentParams fields that have a control in the widget (the labelled specs of the
+#: table, :func:`~napari_polarseg.widgets.param_controls.controlled_names`); the others
+#: come from the preset.
+CONTROLLED = controlled_names(PARAM_SPECS)
 
 #: Parameter controls shown above the collapsed *advanced settings* section.
 FIRST_CONTROLS = ("n_segments",)
 
 #: Controls of the normalized cut only: disabled while scribbles replace the cut.
 CUT_ONLY = ("scale", "scale_mode", "clustering", "min_segment_blocks", "n_segments")
-
-#: Decimals the float controls show. A value with more (e.g. loaded from a file) is kept
-#: exactly as long as the control shows it rounded (see ``SegmentWidget.params``).
-FLOAT_DECIMALS = {"refractive_index": 3, "variance": 3, "scale": 3}
 
 
 def segment_job(
@@ -412,7 +376,9 @@ class SegmentWidget(StackWidget):
     )
     progress_desc = "Segment by material"
 
-    def __init__(self, viewer: napari.viewer.Viewer) -> None:
+    def __init__(
+        self, viewer: napari.viewer.Viewer, specs: dict[str, ParamSpec] | None = None
+    ) -> None:
         super().__init__(viewer)
         d = PRESETS["auto"]
         self._base = d  # values of the fields without a control
@@ -445,10 +411,7 @@ class SegmentWidget(StackWidget):
             label="preset",
             choices=list(PRESETS),
             value="auto",
-            tooltip="auto: superpixels clustered by their polarisation (the best "
-            "unsupervised method measured on rendered and real frames); thesis: the "
-            "published pipeline; recommended: its block parameters that score best on "
-            "the synthetic scenes (docs/quality.md)",
+            tooltip="; ".join(f"{name}: {text}" for name, text in PRESET_HELP.items()),
         )
         self.load_button = PushButton(
             text="Load parameters…",
@@ -466,112 +429,12 @@ class SegmentWidget(StackWidget):
             label="",
         )
         self.params_file.margins = (0, 0, 0, 0)
-        self.window = SpinBox(
-            label="window size",
-            value=d.window,
-            min=2,
-            max=4096,
-            tooltip="Side w of the square pixel blocks (thesis: 10)",
-        )
-        self.degree = SpinBox(
-            label="harmonic degree",
-            value=d.degree,
-            min=0,
-            max=MAX_DEGREE,
-            tooltip="Highest spherical-harmonic degree L: (L+1)² coefficients (thesis: 12)",
-        )
-        self.refractive_index = float_box(
-            FLOAT_DECIMALS["refractive_index"],
-            label="refractive index",
-            value=d.refractive_index,
-            min=1.01,
-            max=3.0,
-            step=0.01,
-            tooltip="Assumed refractive index n for zenith from ρ (thesis: 1.45)",
-        )
-        self.fit = ComboBox(
-            label="fit",
-            choices=[(FIT_NAMES.get(m, m), m) for m in FIT_METHODS],
-            value=d.fit,
-            tooltip="Per-pixel sinusoid fit: least squares, or robust (Tukey-weighted; "
-            "resists one outlying frame, needs at least 5 distinct angles)",
-        )
-        self.model = ComboBox(
-            label="model",
-            choices=list(MODELS),
-            value=d.model,
-            tooltip="Fresnel model for the zenith: diffuse (eq. 3.13) or specular (eq. 3.11)",
-        )
-        self.specular_branch = ComboBox(
-            label="specular branch",
-            choices=list(SPECULAR_BRANCHES),
-            value=d.specular_branch,
-            visible=False,
-            tooltip="Specular ρ takes each value twice: zenith below or above Brewster's angle",
-        )
-        self.coefficients = ComboBox(
-            label="coefficients",
-            choices=list(COEFFICIENT_METHODS),
-            value=d.coefficients,
-            tooltip="Block coefficients: thesis mean estimator (eq. 4.21) or ridge least squares",
-        )
-        self.features = ComboBox(
-            label="features",
-            choices=list(FEATURE_KINDS),
-            value=d.features,
-            tooltip="Block features for the PCA: every coefficient (thesis), the "
-            "azimuth-invariant m = 0 coefficients (zonal), the energy per degree (energy), "
-            "polarisation statistics of the block: the distributions of ρ, θ and Î and "
-            "their relation (polstats), or the zonal coefficients and the statistics "
-            "together (zonal+polstats)",
-        )
-        self.variance = float_box(
-            FLOAT_DECIMALS["variance"],
-            label="PCA variance",
-            value=d.variance,
-            min=0.05,
-            max=1.0,
-            step=0.01,
-            tooltip="Share of the variance the PCA keeps (thesis: 0.95)",
-        )
-        self.scale = float_box(
-            FLOAT_DECIMALS["scale"],
-            label="affinity scale",
-            value=d.scale,
-            min=0.001,
-            max=1e6,
-            step=0.1,
-            tooltip="s in the affinity S = exp(-D / s) (thesis: 1)",
-        )
-        self.scale_mode = ComboBox(
-            label="scale mode",
-            choices=list(SCALE_MODES),
-            value=d.scale_mode,
-            tooltip="absolute: s as given (thesis); median: s relative to the median "
-            "squared Mahalanobis distance between blocks",
-        )
-        self.clustering = ComboBox(
-            label="clustering",
-            choices=[(CLUSTERING_NAMES.get(m, m), m) for m in CLUSTERING_METHODS],
-            value=d.clustering,
-            tooltip="How the affinity graph is split into segments: recursive two-way "
-            "normalized cuts (thesis) or k-way spectral clustering (the first k "
-            "eigenvectors at once, then k-means)",
-        )
-        self.min_segment_blocks = SpinBox(
-            label="min segment (blocks)",
-            value=d.min_segment_blocks,
-            min=1,
-            max=100_000,
-            tooltip="Smallest segment, in blocks, a cut may produce",
-        )
-        self.n_segments = SpinBox(
-            label="segments",
-            value=d.n_segments,
-            min=1,
-            max=256,
-            tooltip="Number of segments the normalized cut stops at (k of the k-way clustering)",
-        )
+        #: The parameter table the controls are made from (one control per labelled spec).
+        self.param_specs = dict(specs or PARAM_SPECS)
+        self.controlled = controlled_names(self.param_specs)
+        for name, control in param_controls(d.to_dict(), self.param_specs).items():
+            setattr(self, name, control)
+        self.specular_branch.visible = False
         self.live = CheckBox(
             text="live update",
             value=False,
@@ -652,13 +515,13 @@ class SegmentWidget(StackWidget):
             "(hidden) of each result, as the Polarisation image widget does",
         )
         self.view_mode = view_mode_box()
-        self.parameter_widgets = [getattr(self, name) for name in CONTROLLED]
+        self.parameter_widgets = [getattr(self, name) for name in self.controlled]
         # the few controls a user touches first stay in view; the rest (every parameter
         # the preset sets, the mask, the files) sit in the collapsed "advanced" section
         self.advanced = Container(
             widgets=[
                 self.params_file,
-                *(getattr(self, name) for name in CONTROLLED if name not in FIRST_CONTROLS),
+                *(getattr(self, name) for name in self.controlled if name not in FIRST_CONTROLS),
                 self.mask_layer,
                 self.classifier_file,
                 self.views,
@@ -733,16 +596,17 @@ class SegmentWidget(StackWidget):
         ``refractive_index`` 1.4537 from a file, shown as 1.454) is kept exactly until the
         control is changed.
         """
-        values = {name: getattr(self, name).value for name in CONTROLLED}
-        values["fit"] = str(values["fit"])
-        values["clustering"] = str(values["clustering"])
-        for name in ("window", "degree", "min_segment_blocks", "n_segments"):
-            values[name] = int(values[name])
-        for name in ("refractive_index", "variance", "scale"):
-            shown = float(values[name])
-            exact = float(getattr(self._base, name))
-            tolerance = 0.5 * 10.0 ** -FLOAT_DECIMALS[name] + 1e-12
-            values[name] = exact if abs(exact - shown) <= tolerance else shown
+        values: dict[str, Any] = {}
+        for name in self.controlled:
+            spec, shown = self.param_specs[name], getattr(self, name).value
+            if spec.choices is not None:
+                values[name] = str(shown)
+            elif spec.decimals is None:
+                values[name] = int(shown)
+            else:  # the control shows spec.decimals decimals of the exact value
+                exact = float(getattr(self._base, name))
+                tolerance = 0.5 * 10.0**-spec.decimals + 1e-12
+                values[name] = exact if abs(exact - float(shown)) <= tolerance else float(shown)
         return self._base.replace(**values)
 
     def set_params(self, params: SegmentParams | None = None, **changes: Any) -> None:
@@ -754,12 +618,12 @@ class SegmentWidget(StackWidget):
         values = (params or self.params()).replace(**changes)
         self._check_controls(values)
         self._base = values
-        for name in CONTROLLED:
+        for name in self.controlled:
             getattr(self, name).value = getattr(values, name)
 
     def _check_controls(self, values: SegmentParams) -> None:
         """Raise PolarsegError if a value does not fit its control (range, menu)."""
-        for name in CONTROLLED:
+        for name in self.controlled:
             control, value = getattr(self, name), getattr(values, name)
             if isinstance(control, ComboBox):
                 if value not in control.choices:

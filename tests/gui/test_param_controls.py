@@ -1,0 +1,35 @@
+"""The plugin's parameter controls are made from the parameter table (PARAM_SPECS)."""
+
+from __future__ import annotations
+
+from napari_polarseg.engine.params import PARAM_SPECS, ParamSpec
+from napari_polarseg.widgets.segment import SegmentWidget
+
+
+def test_a_field_added_to_the_table_gets_a_control(viewer):
+    specs = {
+        **PARAM_SPECS,
+        "new_knob": ParamSpec(
+            help="a new knob", flag="--new-knob", label="new knob", minimum=2, maximum=9
+        ),
+    }
+    widget = SegmentWidget(viewer, specs=specs)
+    viewer.window.add_dock_widget(widget, name="Segment with a new knob")
+    knob = widget.new_knob
+    assert widget.controlled[-1] == "new_knob"
+    assert knob.label == "new knob" and (knob.min, knob.max, knob.value) == (2, 9, 2)
+    assert knob.tooltip.startswith("a new knob")
+    assert knob in widget.advanced  # every parameter but the first few is "advanced"
+
+
+def test_the_controls_show_the_table(add_widget):
+    widget = add_widget("Segment by material", preset=None)
+    for name in widget.controlled:
+        spec, control = PARAM_SPECS[name], getattr(widget, name)
+        assert control.label == spec.label and control.tooltip.startswith(spec.help)
+        if spec.choices is not None:
+            assert [v for _, v in spec.menu()] == list(control.choices)
+        else:
+            assert (control.min, control.max) == (spec.minimum, spec.maximum)
+    assert widget.fit.native.currentText() == "least squares"
+    assert widget.refractive_index.native.decimals() == 3
