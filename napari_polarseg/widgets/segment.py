@@ -10,7 +10,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from magicgui.widgets import CheckBox, ComboBox, Container, FloatSpinBox, PushButton
+from magicgui.widgets import CheckBox, ComboBox, Container, PushButton
 from napari.layers import Labels
 from qtpy.QtCore import QTimer
 
@@ -135,17 +135,6 @@ def segment_job(
         for _ in pipe.prefetch(params, cancel):
             yield "prefetch", total, total
     return result
-
-
-def float_box(decimals: int, **kwargs: Any) -> FloatSpinBox:
-    """A FloatSpinBox showing ``decimals`` decimals (Qt's default, 2, would round the
-    range and the values, e.g. a minimum of 0.001 to 0)."""
-    box = FloatSpinBox(**kwargs)
-    box.native.setDecimals(decimals)
-    for name in ("min", "max", "value"):
-        if name in kwargs:
-            setattr(box, name, kwargs[name])
-    return box
 
 
 def colour_stack_of(layer: Layer) -> np.ndarray | None:
