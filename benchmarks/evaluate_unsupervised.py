@@ -72,6 +72,11 @@ VARIANTS: dict[str, UnsupervisedParams] = {
     "previous-default-gmm3": D.replace(
         features=F3, clustering="gmm", smoothing=0.5, polarisation_edge_weight=1.0, clip=0.0
     ),
+    "default-no-close-up": D.replace(close_up_share=1.0),
+    "close-up-reach-8%": D.replace(trend_reach=0.08),
+    "close-up-reach-12%": D.replace(trend_reach=0.12),
+    "close-up-no-refit": D.replace(trend_iterations=0),
+    "close-up-degree-3": D.replace(trend_degree=3),
     "default-no-refine": D.replace(refine_boundaries=False),
     "default-intensity-edges": D.replace(boundary="intensity"),
     "default-tied-covariance": D.replace(covariance="tied"),

@@ -347,7 +347,7 @@ class Pipeline:
         cache (stale stages are computed first)."""
         p = self.snapshot(params)
         with self._lock:
-            block, labels, ncut_values, limits = self.get("labels", p)
+            block, labels, ncut_values, limits, record = self.get("labels", p)
             names = self.stages(reconstruction, p)
             done = self.recomputed_stages(p)
             return self.assemble_result(
@@ -359,6 +359,7 @@ class Pipeline:
                 recomputed=[s for s in names if s in done],
                 cut_limits=limits,
                 params=p,
+                superpixels=record,
             )
 
     def assemble_result(
@@ -371,6 +372,7 @@ class Pipeline:
         recomputed: list[str],
         cut_limits: dict[str, int] | None = None,
         params: SegmentParams | None = None,
+        superpixels: dict[str, Any] | None = None,
     ) -> SegmentationResult:
         """A :class:`SegmentationResult` of the cached stages for ``params`` and the
         given labels.
@@ -407,6 +409,7 @@ class Pipeline:
             mask_counts=self.mask.counts(),
             duplicate_angle_frames=polarimage.duplicate_angle_frames(self.angles),
             cut_limits=dict(cut_limits or {}),
+            superpixels=dict(superpixels or {}),
         )
 
     def scribble_segmentation(

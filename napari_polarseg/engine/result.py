@@ -54,7 +54,10 @@ class SegmentationResult:
     (modulo π), which were averaged before the fit. ``cut_limits`` holds the cut's
     work counts (:meth:`~napari_polarseg.engine.graph.ncut.CutTree.cut_limits`: eigensolves
     capped, segments with an isolated block not solved, products); empty when labels
-    came from elsewhere (scribbles).
+    came from elsewhere (scribbles). ``superpixels`` is the record of the superpixel
+    clustering (``clustering="superpixels"``): ``surface_share`` and ``close_up``
+    (:class:`~napari_polarseg.engine.unsupervised.params.UnsupervisedResult`); empty
+    otherwise.
     """
 
     params: SegmentParams
@@ -79,6 +82,7 @@ class SegmentationResult:
     mask_counts: dict[str, Any] = field(default_factory=dict)
     duplicate_angle_frames: list[list[int]] = field(default_factory=list)
     cut_limits: dict[str, int] = field(default_factory=dict)
+    superpixels: dict[str, Any] = field(default_factory=dict)
 
     @property
     def n_segments(self) -> int:
@@ -110,7 +114,7 @@ class SegmentationResult:
         """JSON-ready figures of the run (stage seconds, segments, variance, error).
 
         ``degenerate`` (with ``largest_segment_share`` and ``degenerate_reason``): see
-        :meth:`degenerate`; ``cut_limits``: see the class docstring.
+        :meth:`degenerate`; ``cut_limits``, ``superpixels``: see the class docstring.
         """
         check = self.degenerate()
         return {
@@ -135,6 +139,7 @@ class SegmentationResult:
             "mask": dict(self.mask_counts),
             "averaged_duplicate_angles": [list(g) for g in self.duplicate_angle_frames],
             "cut_limits": dict(self.cut_limits),
+            "superpixels": dict(self.superpixels),
         }
 
 

@@ -313,7 +313,8 @@ def cut_stage(pipe: Pipeline, run: StageRun) -> Any:
 
 
 def labels_stage(pipe: Pipeline, run: StageRun) -> tuple:
-    """(block labels, pixel labels, Ncut values, cut limits) for ``n_segments``."""
+    """(block labels, pixel labels, Ncut values, cut limits, superpixel clustering
+    record) for ``n_segments``; the record is empty when a graph was cut."""
     p = run.params
     if p.clustering == "superpixels":
         return superpixel_labels(pipe, run)
@@ -329,15 +330,17 @@ def labels_stage(pipe: Pipeline, run: StageRun) -> tuple:
         block = block[ri, ci]
     shape = pipe.stack.shape[1:]
     labels = harmonics.upsample_block_labels(block, shape, p.window)
-    return block, labels, tree.ncut_values, limits
+    return block, labels, tree.ncut_values, limits, {}
 
 
 def superpixel_labels(pipe: Pipeline, run: StageRun) -> tuple:
-    """Labels stage of ``clustering="superpixels"``: (block, labels, [], None).
+    """Labels stage of ``clustering="superpixels"``: (block, labels, [], None, record).
 
     The pixel labels of :func:`.unsupervised.segment_unsupervised` (measured
     defaults) on the polarisation image; block labels are the label at each block's
-    top-left pixel. No graph is cut, so there are no Ncut values and no cut limits.
+    top-left pixel. No graph is cut, so there are no Ncut values and no cut limits;
+    the record says whether the frame was taken for a close-up of one smooth surface
+    (:attr:`.unsupervised.params.UnsupervisedResult.close_up`) and its surface share.
     """
     p = run.params
     pol = pipe.stage_value("polarisation", run)
@@ -345,7 +348,8 @@ def superpixel_labels(pipe: Pipeline, run: StageRun) -> tuple:
         raise Cancelled("cancelled before the superpixel clustering")
     seg = unsupervised.segment_unsupervised(pol.intensity, pol.dop, pol.phase, p.n_segments)
     block = harmonics.top_left_block_labels(seg.labels, p.window).astype(np.int32)
-    return block, seg.labels.astype(np.int64), [], None
+    record = {"surface_share": round(seg.surface_share, 6), "close_up": seg.close_up}
+    return block, seg.labels.astype(np.int64), [], None, record
 
 
 def reconstruction_stage(pipe: Pipeline, run: StageRun) -> Reconstruction:

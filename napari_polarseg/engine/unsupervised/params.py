@@ -36,7 +36,13 @@ NODE_FEATURES = (
     "dop_vs_log_intensity_slope",  # least-squares slope of ρ against log Î
     "dop_vs_log_intensity_corr",  # correlation of ρ and log Î
     "log_dop_given_intensity",  # log mean ρ less its image-wide fit on mean log Î
+    "dop_over_shape_trend",  # polarisation / the trend of one smooth surface (close-up)
 )
+
+#: Node features of a close-up of one smooth surface (:meth:`UnsupervisedParams.close_up_params`).
+CLOSE_UP_FEATURES = ("dop_over_shape_trend",)
+#: Default (degree, reach, iterations) of the surface trend (:mod:`.shape_trend`).
+TREND = (2, 0.10, 2)
 
 
 #: The physical material cue (module docstring): the ρ–shading relation.
@@ -97,6 +103,20 @@ class UnsupervisedParams:
         has a large spread of ρ and would otherwise pull a cluster of its own.
     seed : int
         Seed of every random step (k-means and mixture initialisations).
+    close_up_share : float
+        When the square of one linear field explains more than this share of the
+        variance of the superpixels' complex polarisation ρ e^{2iφ}
+        (:func:`.shape_trend.surface_trend_share`: ρ e^{2iφ} ≈ c g² with the surface
+        gradient g about linear over the frame), the frame is taken for a close-up of
+        one smooth surface and segmented with :meth:`close_up_params`; [0, 1],
+        1 = never.
+    trend_degree : int
+        Degree of the polynomial trend of ``dop_over_shape_trend`` in the image
+        coordinates.
+    trend_reach : float
+        σ of the Gaussian weights of ``dop_over_shape_trend`` as a share of √(H·W).
+    trend_iterations : int
+        Refits of the trend on the surface's main material (an Otsu split of the ratio).
     """
 
     region_area: int = 0
@@ -124,6 +144,10 @@ class UnsupervisedParams:
     diffusion_tau: float = 0.75
     clip: float = 2.0
     seed: int = 0
+    close_up_share: float = 0.8
+    trend_degree: int = TREND[0]
+    trend_reach: float = TREND[1]
+    trend_iterations: int = TREND[2]
 
     def __post_init__(self) -> None:
         if int(self.region_area) < 0 or 0 < int(self.region_area) < 4:
@@ -179,6 +203,15 @@ class UnsupervisedParams:
             raise PolarsegError(f"diffusion_tau must be positive, got {self.diffusion_tau}")
         if not (math.isfinite(self.clip) and self.clip >= 0):
             raise PolarsegError(f"clip must be >= 0, got {self.clip}")
+        if not (math.isfinite(self.close_up_share) and 0 <= self.close_up_share <= 1):
+            raise PolarsegError(f"close_up_share must be in [0, 1], got {self.close_up_share}")
+        if int(self.trend_degree) < 1 or int(self.trend_iterations) < 0:
+            raise PolarsegError(
+                "trend_degree must be >= 1 and trend_iterations >= 0, got "
+                f"{self.trend_degree} and {self.trend_iterations}"
+            )
+        if not (math.isfinite(self.trend_reach) and self.trend_reach > 0):
+            raise PolarsegError(f"trend_reach must be positive, got {self.trend_reach}")
         object.__setattr__(self, "features", features)
         groups = tuple(str(g) for g in self.pixel_groups)
         allowed = ("intensity", "polarisation", "zenith", "filters", "invariant")
@@ -191,12 +224,30 @@ class UnsupervisedParams:
         object.__setattr__(self, "region_area", int(self.region_area))
         object.__setattr__(self, "smoothing_iterations", int(self.smoothing_iterations))
         object.__setattr__(self, "seed", int(self.seed))
+        object.__setattr__(self, "trend_degree", int(self.trend_degree))
+        object.__setattr__(self, "trend_iterations", int(self.trend_iterations))
 
     def area_of(self, shape: tuple[int, int]) -> int:
         """Superpixel area (pixels) used on an image of ``shape``."""
         if self.region_area:
             return self.region_area
         return auto_region_area(shape, REGIONS_PER_IMAGE, MIN_REGION_AREA, MAX_REGION_AREA)
+
+    def close_up_params(self) -> UnsupervisedParams:
+        """The parameters used on a close-up of one smooth surface
+        (:mod:`.shape_trend`): the departure of the polarisation from the surface's
+        trend alone (:data:`CLOSE_UP_FEATURES`), not diffused (the ratio is already a
+        kernel average), not winsorised, no border refinement on (log Î, ρ), which
+        follow the tilt there, not the material. Measured in
+        ``benchmarks/evaluate_unsupervised.py`` (variants ``close-up-*``)."""
+        return self.replace(
+            features=CLOSE_UP_FEATURES,
+            pixel_scales=(),
+            diffusion=0.0,
+            clip=0.0,
+            refine_boundaries=False,
+            close_up_share=1.0,
+        )
 
     def replace(self, **changes: Any) -> UnsupervisedParams:
         """A copy with some attributes changed (validated again)."""
@@ -229,6 +280,12 @@ class UnsupervisedResult:
     degenerate : bool
         One segment holds ≥ 95 % of the pixels (:func:`.degenerate.degenerate_result`).
     params : UnsupervisedParams
+    surface_share : float
+        Share of the superpixels' complex polarisation explained by one smooth surface's
+        trend (:func:`.shape_trend.surface_trend_share`).
+    close_up : bool
+        The share was above ``params.close_up_share``: segmented with
+        ``params.close_up_params()``.
     """
 
     labels: np.ndarray
@@ -239,3 +296,5 @@ class UnsupervisedResult:
     seconds: float
     degenerate: bool
     params: UnsupervisedParams
+    surface_share: float = 0.0
+    close_up: bool = False

@@ -34,6 +34,14 @@ those few hundred to few thousand nodes:
    normalized cuts (:func:`.ncut.recursive_ncut`) or k-way spectral clustering
    (:class:`.spectral.SpectralClustering`).
 
+**Close-ups of one smooth surface** (:mod:`.shape_trend`): when the square of one
+linear field explains more than ``close_up_share`` of the superpixels' complex
+polarisation ρ e^{2iφ} — one curved surface fills the frame, as in a fruit inspection
+crop — mean ρ and shading follow the tilt, not the material, so the node feature is the
+departure of the polarisation from that surface's trend alone
+(``dop_over_shape_trend``, :meth:`.params.UnsupervisedParams.close_up_params`). The
+result says so (``UnsupervisedResult.close_up``, ``surface_share``).
+
 Every pixel takes its region's label; then the pixels on a segment border move to the
 neighbouring segment whose mean (log Î, ρ) they resemble most (:func:`refine_boundaries`,
 :data:`REFINE_PASSES` one-pixel passes: a watershed border on a straight edge can sit
@@ -74,8 +82,14 @@ from ..errors import PolarsegError
 from ..features.pca import pca_features, whiten
 from ..features.pixel_features import EPS_DOP, EPS_INTENSITY, check_maps
 from .kmeans import squared_distances, weighted_kmeans
-from .params import NODE_FEATURES, UnsupervisedParams, UnsupervisedResult
+from .params import NODE_FEATURES, TREND, UnsupervisedParams, UnsupervisedResult
 from .region_diffusion import diffuse, diffusion_steps, edge_aware_adjacency
+from .shape_trend import (
+    polarisation_over_trend,
+    region_centroids,
+    region_polarisation,
+    surface_trend_share,
+)
 from .superpixels import COMPACTNESS
 
 #: σ (pixels) of the smoothing before the edge maps of the superpixels are taken.
@@ -165,8 +179,11 @@ def node_features(
     phase: np.ndarray,
     regions: np.ndarray,
     names: tuple[str, ...] = NODE_FEATURES,
+    trend: tuple[int, float, int] = TREND,
 ) -> np.ndarray:
-    """Per-region features (n, len(names)) float64, each of :data:`NODE_FEATURES`.
+    """Per-region features (n, len(names)) float64, each of :data:`NODE_FEATURES`;
+    ``trend`` = (degree, reach, iterations) of ``dop_over_shape_trend``
+    (:func:`.shape_trend.polarisation_over_trend`).
 
     Computed from region sums of Î, S1, S2, log Î, (log Î)², ρ, ρ², ρ log Î, cos 2φ and
     sin 2φ (one ``np.bincount`` each); variances and covariances are differences of
@@ -211,8 +228,19 @@ def node_features(
         "dop_vs_log_intensity_slope": lambda: cov / (var_l + 1e-6),
         "dop_vs_log_intensity_corr": lambda: cov / np.sqrt(var_l * var_d + 1e-12),
         "log_dop_given_intensity": lambda: dop_given_intensity(m["l"], m["d"], count),
+        "dop_over_shape_trend": lambda: _over_trend(regions, sums, count, trend),
     }
     return np.stack([make[k]() for k in names], axis=1)
+
+
+def _over_trend(
+    regions: np.ndarray, sums: dict[str, np.ndarray], count: np.ndarray, trend: tuple
+) -> np.ndarray:
+    """:func:`.shape_trend.polarisation_over_trend` from the region sums; ``trend`` =
+    (degree, reach, iterations)."""
+    z = (sums["s1"] + 1j * sums["s2"]) / np.maximum(sums["s0"], EPS_INTENSITY)
+    centroid = region_centroids(regions, count)
+    return polarisation_over_trend(z, count, centroid, regions.shape, *trend)
 
 
 def dop_given_intensity(
@@ -383,7 +411,8 @@ def _region_features(
     """Node features (n, c) of the superpixels, non-finite values 0, and their names: the
     region features of :func:`node_features`, then the region means of pixel features."""
     names = list(p.features)
-    cols = [node_features(i, d, ph, regions, p.features)] if p.features else []
+    trend = (p.trend_degree, p.trend_reach, p.trend_iterations)
+    cols = [node_features(i, d, ph, regions, p.features, trend)] if p.features else []
     if p.pixel_scales:
         from ..features.pixel_features import PixelFeatureParams, pixel_features
         from .superpixels import region_means
@@ -438,6 +467,33 @@ def _refined(labels: np.ndarray, i: np.ndarray, d: np.ndarray, k: int) -> np.nda
     return labels.astype(np.int32)
 
 
+def _checked_k(shape: tuple[int, ...], n_segments: int) -> int:
+    """``n_segments`` as an int >= 1, or :class:`PolarsegError` (also for a tiny image)."""
+    if min(shape) < 2:
+        raise PolarsegError(f"image too small to segment: {shape}")
+    try:
+        k = int(n_segments)
+    except (TypeError, ValueError):
+        raise PolarsegError(f"n_segments must be an integer >= 1, got {n_segments!r}") from None
+    if k < 1 or k != n_segments:
+        raise PolarsegError(f"n_segments must be an integer >= 1, got {n_segments!r}")
+    return k
+
+
+def _superpixels(
+    i: np.ndarray, d: np.ndarray, ph: np.ndarray, p: UnsupervisedParams
+) -> tuple[np.ndarray, np.ndarray]:
+    """(superpixels, their edge map) of ``p.boundary`` (module docstring, step 1)."""
+    area = p.area_of(i.shape)
+    edge_weight = p.polarisation_edge_weight if p.boundary == "polarisation" else 0.0
+    edges = superpixel_edges(i, d, ph, edge_weight)
+    if p.boundary == "polarisation":
+        return polarisation_superpixels(i, d, ph, area, edges=edges), edges
+    from .superpixels import superpixels
+
+    return _relabel(superpixels(i, area)), edges
+
+
 def segment_unsupervised(
     intensity: np.ndarray,
     dop: np.ndarray,
@@ -469,42 +525,31 @@ def segment_unsupervised(
     t0 = time.perf_counter()
     p = params or UnsupervisedParams()
     i, d, ph = check_maps(intensity, dop, phase)
-    if min(i.shape) < 2:
-        raise PolarsegError(f"image too small to segment: {i.shape}")
-    try:
-        k = int(n_segments)
-    except (TypeError, ValueError):
-        raise PolarsegError(f"n_segments must be an integer >= 1, got {n_segments!r}") from None
-    if k < 1 or k != n_segments:
-        raise PolarsegError(f"n_segments must be an integer >= 1, got {n_segments!r}")
-    area = p.area_of(i.shape)
-    edge_weight = p.polarisation_edge_weight if p.boundary == "polarisation" else 0.0
-    edges = superpixel_edges(i, d, ph, edge_weight)
-    if p.boundary == "polarisation":
-        regions = polarisation_superpixels(i, d, ph, area, edges=edges)
-    else:
-        from .superpixels import superpixels
-
-        regions = _relabel(superpixels(i, area))
+    k = _checked_k(i.shape, n_segments)
+    regions, edges = _superpixels(i, d, ph, p)
     n = int(regions.max()) + 1
     if n < k:
+        area = p.area_of(i.shape)
         raise PolarsegError(
             f"only {n} superpixels for {k} segments: lower region_area (now {area} px)"
         )
-    x, names = _region_features(i, d, ph, regions, p)
+    z_region, count, centroid = region_polarisation(i, d, ph, regions)
+    share = surface_trend_share(z_region, count, centroid, i.shape)
+    close_up = share > p.close_up_share
+    q = p.close_up_params() if close_up else p
+    x, names = _region_features(i, d, ph, regions, q)
     weight = np.bincount(regions.ravel(), minlength=n).astype(float)
     adjacency = region_adjacency(regions)
     if k == 1:
         node_labels = np.zeros(n, dtype=np.int32)
         z = np.zeros((n, 0))
     else:
-        z, node_labels = _cluster_regions(x, weight, regions, edges, adjacency, k, p)
+        z, node_labels = _cluster_regions(x, weight, regions, edges, adjacency, k, q)
     node_labels = np.asarray(node_labels, dtype=np.int32)
     labels = node_labels[regions]
-    if p.refine_boundaries and k > 1:
+    if q.refine_boundaries and k > 1:
         labels = _refined(labels, i, d, int(node_labels.max()) + 1)
     labels, node_labels = _first_appearance(labels, node_labels)
-    check = degenerate_result(labels, requested=k)
     return UnsupervisedResult(
         labels=labels,
         node_labels=node_labels,
@@ -512,6 +557,8 @@ def segment_unsupervised(
         node_features=z,
         feature_names=tuple(names),
         seconds=time.perf_counter() - t0,
-        degenerate=bool(check.degenerate),
+        degenerate=bool(degenerate_result(labels, requested=k).degenerate),
         params=p,
+        surface_share=share,
+        close_up=close_up,
     )
