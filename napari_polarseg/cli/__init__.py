@@ -79,7 +79,9 @@ plugin's *Export results…* does.
 setting, segments reached, stability, silhouette, mean Ncut, combined score, ARI with a
 ground truth, seconds, error), ``sweep.json`` (the same, the best cell and its parameters,
 the total seconds), ``sweep_heatmap.png`` and ``best_params.json`` (SegmentParams JSON for
-``segment --params``); ``--apply-best`` also runs ``segment`` with them into ``DIR/best/``.
+``segment --params``), written by
+:func:`napari_polarseg.outputs.sweep_folder.write_sweep_folder`; ``--apply-best`` also
+runs ``segment`` with them into ``DIR/best/``.
 
 Real captures: saturated samples (at or above ``--saturation``, default the integer
 type's maximum) and black ones (at or below ``--dark-level``, default 0) are left out of
