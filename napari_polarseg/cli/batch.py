@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -81,7 +82,7 @@ def _batch_options(args: argparse.Namespace) -> tuple[jobs.ReadOptions, jobs.Out
     return read, jobs.OutputOptions(overview=bool(args.overview))
 
 
-def _scene_report(args: argparse.Namespace) -> Any:
+def _scene_report(args: argparse.Namespace) -> Callable[[int, int, dict[str, Any]], None]:
     """The per-scene progress callback: one stderr line per scene (only failures with
     --quiet), a warning for a degenerate result, the scene's log with --verbose."""
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -174,7 +175,9 @@ def _read_scene(args: argparse.Namespace, status: StatusLine) -> _Scene:
     return _Scene(data, read_seconds, stack, mask, shifts, truth, truth_from)
 
 
-def _cell_progress(args: argparse.Namespace, status: StatusLine) -> Any:
+def _cell_progress(
+    args: argparse.Namespace, status: StatusLine
+) -> Callable[[int, int], None] | None:
     """The sweep's progress callback: a line per cell with --verbose, else the status line
     with the time left (None when neither is shown)."""
     started = status.elapsed()
