@@ -19,7 +19,7 @@ from napari_polarseg import cli
 from napari_polarseg import io as pio
 from napari_polarseg.engine import Pipeline, PolarsegError, SegmentParams
 from napari_polarseg.engine.analysis.timeseries import segment_timeseries
-from napari_polarseg.engine.params import AUTO, RECOMMENDED
+from napari_polarseg.engine.params import AUTO, PRESETS, RECOMMENDED
 
 ANGLES = np.deg2rad([0.0, 45.0, 90.0, 135.0])
 
@@ -35,7 +35,7 @@ def planted_stack(k: int = 3, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
 def test_auto_is_the_recommended_blocks_with_superpixel_labels():
     assert AUTO.clustering == "superpixels"
     assert AUTO.replace(clustering=RECOMMENDED.clustering) == RECOMMENDED
-    assert cli.PRESETS["auto"] == AUTO
+    assert PRESETS["auto"] == AUTO
 
 
 @pytest.mark.parametrize("k", [2, 3])

@@ -18,6 +18,7 @@ from sklearn.metrics import adjusted_rand_score
 import napari_polarseg
 from napari_polarseg import cli
 from napari_polarseg import io as pio
+from napari_polarseg.cli import demo as cli_demo
 from napari_polarseg.engine import SegmentParams, diffuse_dop
 from napari_polarseg.engine.physics.mosaic import mosaic_superpixel
 
@@ -285,7 +286,7 @@ def toy_samples(tmp_path, monkeypatch):
     np.savez(
         folder / "toy.npz", stack=np.round(stack).astype(np.uint16), angles=ANGLES, labels=truth
     )
-    monkeypatch.setattr(cli, "SAMPLE_DIR", folder)
+    monkeypatch.setattr(cli_demo, "SAMPLE_DIR", folder)
     return folder
 
 
@@ -331,14 +332,14 @@ def test_demo_unknown_scene_lists_the_available_ones(tmp_path, capsys, toy_sampl
 
 
 @pytest.mark.skipif(
-    not (cli.SAMPLE_DIR / "leaves.npz").is_file(), reason="bundled sample data not installed"
+    not (cli_demo.SAMPLE_DIR / "leaves.npz").is_file(), reason="bundled sample data not installed"
 )
 def test_demo_on_the_bundled_leaves_scene(tmp_path, capsys):
     out = tmp_path / "demo"
     code, stdout, err = run(capsys, "demo", "--out", out, "--degree", "4")
     assert code == 0, err
     assert set(os.listdir(out)) == CONTRACT | {"overview.png"}
-    truth = np.load(cli.SAMPLE_DIR / "leaves.npz")["labels"]
+    truth = np.load(cli_demo.SAMPLE_DIR / "leaves.npz")["labels"]
     labels = read_tif(out / "labels.tif")
     assert labels.shape == truth.shape
     ari = json.loads((out / "summary.json").read_text())["adjusted_rand_index"]
@@ -350,7 +351,14 @@ def test_demo_on_the_bundled_leaves_scene(tmp_path, capsys):
     assert [d["frames"] for d in params["duplicate_angles"]] == [[0, 6]]
     # the same file given as the user's own sample is announced
     code, stdout, err = run(
-        capsys, "demo", "--out", out, "--degree", "4", "--sample", cli.SAMPLE_DIR / "leaves.npz"
+        capsys,
+        "demo",
+        "--out",
+        out,
+        "--degree",
+        "4",
+        "--sample",
+        cli_demo.SAMPLE_DIR / "leaves.npz",
     )
     assert code == 0, err
     assert "polarseg: frames 0, 6 share a polariser angle (modulo 180 degrees)" in stdout

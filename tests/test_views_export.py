@@ -16,7 +16,8 @@ import tifffile
 from skimage import io as skio
 from test_cli import CONTRACT, run, two_material_scene
 
-from napari_polarseg import cli, export
+from napari_polarseg import export
+from napari_polarseg.cli import demo as cli_demo
 from napari_polarseg.engine import Pipeline, PolarsegError, SegmentParams
 from napari_polarseg.engine.analysis.evaluation import adjusted_rand_index
 from napari_polarseg.engine.analysis.views import (
@@ -150,7 +151,7 @@ def toy_samples(tmp_path, monkeypatch):
     np.savez(
         folder / "toy.npz", stack=np.round(stack).astype(np.uint16), angles=angles, labels=truth
     )
-    monkeypatch.setattr(cli, "SAMPLE_DIR", folder)
+    monkeypatch.setattr(cli_demo, "SAMPLE_DIR", folder)
     return truth
 
 

@@ -1,0 +1,133 @@
+"""Argument parsing of ``polarseg``: the parser class, its usage error and the argument types.
+
+The argument types turn one command-line word into a value or raise
+:class:`argparse.ArgumentTypeError` (reported as ``polarseg: error: argument ...``).
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Callable
+
+import numpy as np
+
+from .. import io as pio
+from ..engine.errors import PolarsegError
+from ..engine.physics.colour_mosaic import BAYER_ORDERS
+
+#: The program name: the parser's ``prog`` and the head of every message line.
+PROG = "polarseg"
+
+
+class UsageError(PolarsegError):
+    """A command-line syntax error (reported like any bad input)."""
+
+
+class CommandParser(argparse.ArgumentParser):
+    """ArgumentParser that raises instead of printing usage and exiting."""
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        raise UsageError(message)
+
+
+def angles_arg(text: str) -> np.ndarray:
+    """Comma-separated polariser angles in degrees, e.g. ``0,45,90,135``."""
+    try:
+        return pio.parse_angles(text)
+    except PolarsegError:
+        raise argparse.ArgumentTypeError(
+            f"expected comma-separated numbers in degrees (e.g. 0,45,90,135), got {text!r}"
+        ) from None
+
+
+def _number_or_word(text: str, words: tuple[str, ...], expected: str) -> float | str:
+    """``text`` as one of ``words`` (any case, lower-cased) or a finite number; the error
+    says what was ``expected``."""
+    word = text.strip().lower()
+    if word in words:
+        return word
+    try:
+        return number_arg(text)
+    except argparse.ArgumentTypeError:
+        raise argparse.ArgumentTypeError(f"expected {expected}, got {text!r}") from None
+
+
+def level_arg(text: str) -> float | str:
+    """A finite number, or the words ``auto`` / ``none`` (lower case)."""
+    return _number_or_word(text, ("none", "auto"), "a number, 'auto' or 'none'")
+
+
+def dark_level_arg(text: str) -> float | str:
+    """A finite number, or the word ``none``."""
+    return _number_or_word(text, ("none",), "a number or 'none'")
+
+
+def number_arg(text: str) -> float:
+    """A finite number."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not np.isfinite(value):
+        raise argparse.ArgumentTypeError(f"expected a finite number, got {text!r}")
+    return value
+
+
+def gib_arg(text: str) -> float:
+    """A positive number of GiB."""
+    value = number_arg(text)
+    if value <= 0:
+        raise argparse.ArgumentTypeError(f"expected a positive number of GiB, got {text!r}")
+    return value
+
+
+def threshold_arg(text: str) -> float | str:
+    """A number, or the word ``none`` (no threshold)."""
+    if text.strip().lower() == "none":
+        return "none"
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number or 'none', got {text!r}") from None
+
+
+def bayer_arg(text: str) -> str:
+    """A Bayer colour order of :data:`BAYER_ORDERS` (any case)."""
+    order = text.strip().upper()
+    if order not in BAYER_ORDERS:
+        raise argparse.ArgumentTypeError(
+            f"a Bayer order is one of {', '.join(BAYER_ORDERS)}, got {text!r}"
+        )
+    return order
+
+
+def number_list_arg(kind: type, what: str) -> Callable[[str], tuple]:
+    """A parser of comma-separated finite numbers of ``kind`` (``what``: for the error).
+
+    Parameters
+    ----------
+    kind
+        ``int`` or ``float``.
+    what
+        What the numbers are, e.g. ``"window sizes in pixels"``.
+
+    Returns
+    -------
+    Callable[[str], tuple]
+        The argument type: text -> tuple of at least one number.
+    """
+
+    def parse(text: str) -> tuple:
+        parts = [p.strip() for p in text.split(",") if p.strip()]
+        try:
+            values = [kind(p) for p in parts]
+        except ValueError:
+            values = []
+        if not values or not all(np.isfinite(v) for v in values):
+            example = "8,10,12" if kind is int else "1.4,1.6"
+            raise argparse.ArgumentTypeError(
+                f"expected comma-separated {what} (e.g. {example}), got {text!r}"
+            )
+        return tuple(values)
+
+    return parse

@@ -1,0 +1,168 @@
+"""Options that several ``polarseg`` subcommands share.
+
+The segmentation flags are made from the parameter table
+(:data:`napari_polarseg.engine.params.PARAM_SPECS`); the reading, Bayer, plots and
+INPUT/--out options are added by one function each, so every subcommand spells them alike.
+"""
+
+from __future__ import annotations
+
+import argparse
+import typing
+from collections.abc import Sequence
+from dataclasses import fields
+from typing import Any
+
+from ..engine.params import PARAM_SPECS, PRESET_HELP, PRESETS, ParamSpec, SegmentParams
+from ..engine.physics.colour_mosaic import BAYER_ORDERS
+from ..engine.physics.mosaic import DEMOSAIC_METHODS
+from .arguments import angles_arg, bayer_arg, gib_arg, threshold_arg
+
+#: Presets of the commands whose own analysis cuts the block graph (sweep, timeseries).
+BLOCK_PRESETS = ("thesis", "recommended")
+
+#: Help of the INPUT of the commands that read one angle stack (segment, sweep).
+STACK_INPUT_HELP = "TIFF, .npz/.npy, folder, raw frame, or several frame files (one per angle)"
+
+
+def _field_types() -> dict[str, Any]:
+    """The resolved type of every SegmentParams field."""
+    return typing.get_type_hints(SegmentParams)
+
+
+def param_options(
+    specs: dict[str, ParamSpec] | None = None,
+) -> dict[str, tuple[str, dict[str, Any]]]:
+    """SegmentParams field -> (flag, argparse keywords), made from the parameter table.
+
+    The type comes from the field's type (int, float; str for a field the table has but
+    SegmentParams has not); an ``optional`` spec takes the ``none``-accepting threshold
+    parser; a spec with choices gets them instead of a type; the help is the spec's.
+    """
+    specs = PARAM_SPECS if specs is None else specs
+    types = _field_types()
+    options: dict[str, tuple[str, dict[str, Any]]] = {}
+    for name, spec in specs.items():
+        kwargs: dict[str, Any] = {}
+        if spec.choices:
+            kwargs["choices"] = spec.choices
+        elif spec.optional:
+            kwargs["type"] = threshold_arg
+        else:
+            kind = types.get(name, str)
+            kwargs["type"] = kind if kind in (int, float, str) else str
+        if spec.metavar:
+            kwargs["metavar"] = spec.metavar
+        kwargs["help"] = spec.help
+        options[name] = (spec.flag, kwargs)
+    return options
+
+
+def _preset_help(presets: Sequence[str]) -> str:
+    """What each of ``presets`` is, for --help."""
+    return "; ".join(f"{name}: {PRESET_HELP[name]}" for name in presets)
+
+
+def add_param_options(
+    parser: argparse.ArgumentParser,
+    preset: str = "auto",
+    presets: tuple[str, ...] = tuple(PRESETS),
+    specs: dict[str, ParamSpec] | None = None,
+) -> None:
+    """Add --preset, --params, the flags of ``specs``, --overview and -v/-q to ``parser``.
+
+    Parameters
+    ----------
+    parser
+        A subcommand's parser.
+    preset
+        The default of --preset.
+    presets
+        The choices of --preset.
+    specs
+        The parameter table (default: :data:`PARAM_SPECS`).
+    """
+    defaults = {f.name: f.default for f in fields(SegmentParams)}
+    group = parser.add_argument_group(
+        "segmentation parameters",
+        "start from --preset, then --params, then explicit flags; thesis defaults in brackets",
+    )
+    group.add_argument(
+        "--preset",
+        choices=presets,
+        default=preset,
+        help=f"starting parameters ({_preset_help(presets)}) [{preset}]",
+    )
+    group.add_argument(
+        "--params",
+        metavar="FILE.json",
+        help="SegmentParams JSON (or a params.json written by polarseg)",
+    )
+    for name, (flag, kwargs) in param_options(specs).items():
+        kwargs = dict(kwargs)
+        kwargs["help"] = f"{kwargs['help']} [{defaults.get(name)}]".replace("%", "%%")
+        group.add_argument(flag, dest=name, default=None, **kwargs)
+    parser.add_argument(
+        "--overview", action="store_true", help="also write overview.png (matplotlib figure)"
+    )
+    talk = parser.add_mutually_exclusive_group()
+    talk.add_argument(
+        "-v", "--verbose", action="store_true", help="report stages and warnings on stderr"
+    )
+    talk.add_argument(
+        "-q",
+        "--quiet",
+        action="store_true",
+        help="no progress on stderr (by default a terminal shows the running stage on one "
+        "line, erased at the end; never shown when stdout or stderr is not a terminal)",
+    )
+
+
+def add_inputs_and_out(parser: argparse.ArgumentParser, inputs_help: str) -> None:
+    """Add the positional INPUT (one or more, help ``inputs_help``) and the required
+    -o/--out folder, the first two arguments of every command that writes a folder."""
+    parser.add_argument("input", metavar="INPUT", nargs="+", help=inputs_help)
+    parser.add_argument("-o", "--out", required=True, metavar="DIR", help="output folder")
+
+
+def add_input_options(parser: argparse.ArgumentParser, unit: str) -> None:
+    """Reading options shared by ``sweep``, ``batch`` and ``timeseries`` (one INPUT per
+    ``unit``)."""
+    parser.add_argument(
+        "--angles", type=angles_arg, metavar="A,B,...", help=f"polariser angles of every {unit}"
+    )
+    parser.add_argument(
+        "--mosaic", type=angles_arg, metavar="A,B,C,D", help="every INPUT is a raw mosaic frame"
+    )
+    parser.add_argument("--demosaic", choices=DEMOSAIC_METHODS, default="superpixel")
+    add_bayer_option(parser)
+    parser.add_argument("--channel", type=int, metavar="C", help="colour channel to use")
+    parser.add_argument("--register", action="store_true", help=f"align the frames of each {unit}")
+    parser.add_argument(
+        "--max-memory", type=gib_arg, metavar="GIB", help=f"memory limit of one {unit}, GiB"
+    )
+
+
+def add_bayer_option(parser: argparse.ArgumentParser) -> None:
+    """Add --bayer (the Bayer order of a colour-polarisation mosaic)."""
+    parser.add_argument(
+        "--bayer",
+        type=bayer_arg,
+        metavar="ORDER",
+        help="with --mosaic: the raw frame is a colour-polarisation mosaic whose 2x2 "
+        "polariser super-pixels lie under this Bayer colour order, row-major "
+        f"({', '.join(BAYER_ORDERS)}; Sony IMX250MYR/IMX253MYR: RGGB). Outputs are then a "
+        "quarter of the raw frame's height and width (full size with --demosaic "
+        "interpolated); the luminance 0.299 R + 0.587 G + 0.114 B is segmented",
+    )
+
+
+def add_plots_option(parser: argparse.ArgumentParser) -> None:
+    """Add --plots (the analyst's plots as PNGs into OUT/plots/)."""
+    parser.add_argument(
+        "--plots",
+        action="store_true",
+        help="also write the analyst's plots as PNGs into OUT/plots/ (I-rho/phi scatter, "
+        "explained variance, coefficient and component maps, reconstruction histograms, "
+        "error table)",
+    )

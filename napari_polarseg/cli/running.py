@@ -1,0 +1,187 @@
+"""What the ``polarseg`` subcommands do alike once the command line is parsed.
+
+The parameters of a command line, its reading and output options, the memory limit, the
+progress reports (permanent lines or the terminal status line), the messages a job
+returns, and segmenting already-read data into ``--out``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from .. import io as pio
+from .. import jobs
+from ..engine import STAGES
+from ..engine.errors import PolarsegError
+from ..engine.limits import memory_limit
+from ..engine.params import PARAM_SPECS, PRESETS, SegmentParams
+from ..status_line import StatusLine
+from .arguments import PROG
+
+
+def params_from_args(args: argparse.Namespace, base: dict[str, Any] | None = None) -> SegmentParams:
+    """SegmentParams from ``base``, then ``--params``, then explicit flags (validated)."""
+    values: dict[str, Any] = PRESETS[getattr(args, "preset", "auto")].to_dict()
+    values.update(base or {})
+    source = "parameters"
+    if args.params:
+        source = args.params
+        values.update(pio.read_params_dict(args.params))
+    try:
+        params = SegmentParams.from_dict(values)
+    except PolarsegError as exc:
+        raise PolarsegError(f"{source}: {exc}") from None
+    except TypeError as exc:
+        raise PolarsegError(f"{source}: a parameter has the wrong type ({exc})") from None
+    changes = {name: getattr(args, name) for name in PARAM_SPECS}
+    changes = {k: (None if v == "none" else v) for k, v in changes.items() if v is not None}
+    return params.replace(**changes)
+
+
+def progress_report(verbose: bool, status: StatusLine | None = None) -> jobs.Progress | None:
+    """Pipeline progress callback: permanent lines with ``verbose``, else the status line
+    (which names the stage now running), else None."""
+    if verbose:
+
+        def report(stage: str, index: int, total: int) -> None:
+            print(f"{PROG}: [{index}/{total}] {stage}", file=sys.stderr, flush=True)
+
+        return report
+    if status is None or not status.enabled:
+        return None
+
+    def show(stage: str, index: int, total: int) -> None:
+        if index < total:
+            status.stage(STAGES[index], index + 1, total, "segmenting:")
+
+    return show
+
+
+def status_line(args: argparse.Namespace) -> StatusLine:
+    """The terminal status line of this command (disabled if not wanted or possible)."""
+    status = getattr(args, "status_line", None)
+    return status if isinstance(status, StatusLine) else StatusLine(False, PROG)
+
+
+def max_bytes(args: argparse.Namespace) -> int:
+    """The memory limit in bytes: ``--max-memory`` GiB, else ``$POLARSEG_MAX_BYTES`` or
+    the default (:func:`napari_polarseg.engine.limits.memory_limit`)."""
+    gib = getattr(args, "max_memory", None)
+    return memory_limit(None if gib is None else gib * 2**30)
+
+
+def angles_tuple(values: np.ndarray | None) -> tuple[float, ...] | None:
+    """Parsed angles as a tuple of floats (None stays None)."""
+    return None if values is None else tuple(float(v) for v in values)
+
+
+def read_input(source: str | Sequence[str], args: argparse.Namespace) -> pio.StackData:
+    """Read ``source`` with the reading options of :func:`add_input_options
+    <napari_polarseg.cli.options.add_input_options>` and the memory limit."""
+    return pio.read_stack(
+        source,
+        angles_deg=args.angles,
+        mosaic=args.mosaic,
+        channel=args.channel,
+        demosaic=args.demosaic,
+        bayer=args.bayer,
+        max_bytes=max_bytes(args),
+    )
+
+
+def read_options(args: argparse.Namespace) -> jobs.ReadOptions:
+    """The reading options of a command line (a command without an option: its default)."""
+    saturation = getattr(args, "saturation", "auto")
+    dark_level = getattr(args, "dark_level", 0.0)
+    return jobs.ReadOptions(
+        angles_deg=angles_tuple(getattr(args, "angles", None)),
+        mosaic_deg=angles_tuple(getattr(args, "mosaic", None)),
+        demosaic=getattr(args, "demosaic", "superpixel"),
+        bayer=getattr(args, "bayer", None),
+        channel=getattr(args, "channel", None),
+        dark_frame=getattr(args, "dark_frame", None),
+        offset=getattr(args, "offset", None),
+        saturation=None if saturation == "none" else saturation,
+        dark_level=None if dark_level == "none" else dark_level,
+        mask=getattr(args, "mask", None),
+        register=bool(getattr(args, "register", False)),
+        max_memory_gib=getattr(args, "max_memory", None),
+        scribbles=getattr(args, "scribbles", None),
+        classifier=getattr(args, "classifier", None),
+        ground_truth=getattr(args, "ground_truth", None),
+    )
+
+
+def output_options(args: argparse.Namespace) -> jobs.OutputOptions:
+    """The output options of a command line (--overview, --plots, --save-classifier)."""
+    return jobs.OutputOptions(
+        overview=bool(args.overview),
+        plots=bool(getattr(args, "plots", False)),
+        save_classifier=getattr(args, "save_classifier", None),
+    )
+
+
+def print_messages(messages: Sequence[jobs.Message]) -> None:
+    """Print a job's messages, each on its stream, in order."""
+    for message in messages:
+        if message.stream == "stderr":
+            sys.stdout.flush()  # keep the order of the two streams on a terminal
+            print(message.text, file=sys.stderr, flush=True)
+        else:
+            print(message.text)
+
+
+def segment_data(
+    args: argparse.Namespace,
+    command: str,
+    data: pio.StackData,
+    read_seconds: float,
+    params: SegmentParams,
+    extra: dict[str, Any] | None = None,
+    note_repeated: bool = True,
+) -> jobs.FolderResult:
+    """Segment already-read data into ``args.out`` and print what the job says.
+
+    Parameters
+    ----------
+    args
+        The parsed command line (its reading and output options, ``out``, ``verbose``).
+    command
+        The command named in ``params.json``.
+    data
+        The stack read.
+    read_seconds
+        Seconds spent reading it.
+    params
+        The segmentation parameters.
+    extra
+        More entries of ``params.json``.
+    note_repeated
+        Whether to say that frames at a repeated angle were averaged.
+
+    Returns
+    -------
+    jobs.FolderResult
+        What the job wrote and said.
+    """
+    status = status_line(args)
+    done = jobs.data_to_folder(
+        data,
+        args.out,
+        params,
+        read_options(args),
+        output_options(args),
+        read_seconds=read_seconds,
+        command=command,
+        extra=extra,
+        note_repeated=note_repeated,
+        status=status,
+        progress=progress_report(args.verbose, status),
+    )
+    print_messages(done.messages)
+    return done

@@ -1,0 +1,1 @@
+"""What the package writes: result folders and figures."""

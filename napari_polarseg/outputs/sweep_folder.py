@@ -1,0 +1,58 @@
+"""The folder ``polarseg sweep`` writes: ``sweep.csv``, ``sweep_heatmap.png``,
+``best_params.json`` and ``sweep.json``."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from .. import figures
+from .. import io as pio
+from ..export import OutputError
+
+if TYPE_CHECKING:
+    from ..engine.analysis.sweep_result import SweepResult
+    from ..engine.params import SegmentParams
+
+
+def write_sweep_folder(
+    folder: str | Path, result: SweepResult, best: SegmentParams, summary: dict[str, Any]
+) -> None:
+    """Write a sweep's files into ``folder`` (created if needed), each atomically.
+
+    The heatmap is drawn before the first file is written.
+
+    Parameters
+    ----------
+    folder
+        The output folder.
+    result
+        The sweep: ``sweep.csv`` (one row per cell) and ``sweep_heatmap.png``.
+    best
+        The best cell's parameters: ``best_params.json`` (for ``segment --params``).
+    summary
+        The content of ``sweep.json``.
+
+    Raises
+    ------
+    OutputError
+        If a file could not be written (its name in the message).
+    """
+    heatmap = figures.png_bytes(figures.sweep_heatmap_figure(result))
+    out = Path(folder)
+    name = str(out)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        name = str(out / "sweep.csv")
+        with pio.atomic_output(out / "sweep.csv") as tmp:
+            tmp.write_text(result.to_csv(), encoding="utf-8")
+        name = str(out / "sweep_heatmap.png")
+        with pio.atomic_output(out / "sweep_heatmap.png") as tmp:
+            tmp.write_bytes(heatmap)
+        name = str(out / "best_params.json")
+        with pio.atomic_output(out / "best_params.json") as tmp:
+            tmp.write_text(best.to_json() + "\n", encoding="utf-8")
+        name = str(out / "sweep.json")
+        pio.write_json(out / "sweep.json", summary)
+    except OSError as exc:
+        raise OutputError(f"cannot write {name}: {exc.strerror or exc}") from exc
