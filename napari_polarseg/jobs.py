@@ -359,7 +359,8 @@ def degenerate_warning(run: Run) -> str | None:
 
 
 def _limit_lines(run: Run) -> list[str]:
-    """What the cut gave up on, and the registration shifts."""
+    """What the cut gave up on, the close-up of one surface, and the registration
+    shifts."""
     lines = []
     limits = run.result.cut_limits
     done = []
@@ -372,6 +373,13 @@ def _limit_lines(run: Run) -> list[str]:
         done.append(f"peeled {limits['isolated_skipped']} isolated block(s) off unsolved")
     if done:
         lines.append(f"{PROG}: the cut {' and '.join(done)} (cut_limits in summary.json)")
+    record = run.result.superpixels
+    if record.get("close_up"):
+        lines.append(
+            f"{PROG}: one smooth surface fills the frame (it explains "
+            f"{record['surface_share']:.0%} of the polarisation): the segments follow where "
+            "the polarisation departs from that surface's trend (superpixels in summary.json)"
+        )
     if run.shifts is not None:
         biggest = float(np.max(np.hypot(run.shifts[:, 0], run.shifts[:, 1])))
         lines.append(

@@ -3,6 +3,8 @@ unsupervised default: ρ e^{2iφ} ≈ c g² on one smooth surface (eq. 1 of the 
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 from sklearn.metrics import adjusted_rand_score
@@ -108,3 +110,18 @@ def test_default_finds_the_patch_on_a_close_up():
 def test_bad_trend_parameters_refused(change):
     with pytest.raises(PolarsegError):
         UnsupervisedParams(**change)
+
+
+def test_cli_says_when_it_took_the_frame_for_a_close_up(tmp_path, capsys):
+    """The bundled fruit close-up (default preset) prints the close-up line and records
+    it in summary.json; the leaves scene, many surfaces, does neither."""
+    from napari_polarseg.cli import main
+
+    for scene, close in (("fruit", True), ("leaves", False)):
+        out = tmp_path / scene
+        assert main(["demo", "--scene", scene, "--out", str(out)]) == 0
+        stdout = capsys.readouterr().out
+        record = json.loads((out / "summary.json").read_text())["superpixels"]
+        assert record["close_up"] is close
+        assert (record["surface_share"] > 0.8) is close
+        assert ("one smooth surface fills the frame" in stdout) is close
