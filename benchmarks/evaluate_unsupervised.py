@@ -32,7 +32,12 @@ from evaluate import DEGENERATE_SHARE, REAL_DIR, ari, ari_where, largest_share, 
 from napari_polarseg.engine import Pipeline, SegmentParams
 from napari_polarseg.engine.params import RECOMMENDED
 from napari_polarseg.engine.synthetic.scenes import SCENES, make_scene, scribble_strokes
-from napari_polarseg.engine.unsupervised.params import MATERIAL_CUE, UnsupervisedParams
+from napari_polarseg.engine.unsupervised.params import (
+    CLOSE_UP_FEATURES,
+    MATERIAL_CUE,
+    NODE_FEATURES,
+    UnsupervisedParams,
+)
 from napari_polarseg.engine.unsupervised.segmenter import segment_unsupervised
 
 #: Today's best unsupervised option per synthetic scene (issue 13): the floor.
@@ -269,6 +274,42 @@ def truth_threshold(synthetic: list, feature: str = "dolp@4") -> list[str]:
     return lines
 
 
+def node_feature_bound(synthetic: list) -> list[str]:
+    """Lines: per render, what the superpixels and their node features allow *with the
+    truth*: every superpixel given its majority true class (the superpixels' own limit),
+    and a random forest (200 trees) on all node features but the close-up one, trained
+    on the truth of the same render's other superpixels (5-fold cross-validation) —
+    supervised and in-sample, so an optimistic figure for these features, not a fair
+    score."""
+    from sklearn.ensemble import RandomForestClassifier
+    from sklearn.model_selection import cross_val_predict
+
+    from napari_polarseg.engine.unsupervised.segmenter import (
+        node_features,
+        polarisation_superpixels,
+    )
+
+    names = tuple(n for n in NODE_FEATURES if n not in CLOSE_UP_FEATURES)
+    lines = []
+    for scene, seed, pol, truth, k, _stack, _angles in synthetic:
+        i, d, ph = pol.intensity, pol.dop, pol.phase
+        regions = polarisation_superpixels(i, d, ph, D.area_of(i.shape))
+        x = node_features(i, d, ph, regions, names)
+        x = np.where(np.isfinite(x), x, 0.0)
+        n = int(regions.max()) + 1
+        votes = np.zeros((n, k))
+        np.add.at(votes, (regions.ravel(), truth.ravel()), 1)
+        y = votes.argmax(axis=1)
+        forest = RandomForestClassifier(200, random_state=0, n_jobs=1)
+        pred = cross_val_predict(forest, x, y, cv=5)
+        lines.append(
+            f"- {scene} seed {seed}: superpixels with their true majority class "
+            f"{ari(truth, y[regions]):.3f}; forest on {len(names)} node features "
+            f"(5-fold, same render's truth) {ari(truth, pred[regions]):.3f}"
+        )
+    return lines
+
+
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", default="0,1,2", help="scene seeds (0 = bundled sample)")
@@ -278,6 +319,11 @@ def main(argv: list[str] | None = None) -> None:
     )
     parser.add_argument(
         "--real-dir", type=Path, default=REAL_DIR, help=f"the real frames [{REAL_DIR}]"
+    )
+    parser.add_argument(
+        "--feature-bound",
+        action="store_true",
+        help="also print what the superpixels and node features allow with the truth",
     )
     args = parser.parse_args(argv)
     t0 = time.perf_counter()
@@ -305,6 +351,9 @@ def main(argv: list[str] | None = None) -> None:
         print("\n".join(truth_threshold(synthetic)))
         print("\nspeed of the default:")
         print("\n".join(speed(D, real)))
+    if args.feature_bound:
+        print("\nwhat the superpixels and node features allow with the truth:")
+        print("\n".join(node_feature_bound(synthetic)))
     print(f"\n{time.perf_counter() - t0:.1f} s")
 
 
