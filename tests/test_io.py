@@ -57,9 +57,29 @@ def test_angle_from_name_takes_last_number_of_stem(name, angle):
 
 def test_parse_angles_good_and_bad():
     assert pio.parse_angles(" 0,45 , 90,135.5").tolist() == [0.0, 45.0, 90.0, 135.5]
-    for bad in ["0,,90", "0,x,90", "", "0,nan,90", "0;45;90"]:
+    for bad in ["0,,90", "0,x,90", "", "0,nan,90", "0,45,", "0:45:90"]:
         with pytest.raises(PolarsegError, match="comma-separated"):
             pio.parse_angles(bad)
+
+
+@pytest.mark.parametrize("text", ["0 45; 90 135", "0;45;90;135", "0 45 90 135", " 0, 45 ;90\t135 "])
+def test_parse_angles_takes_spaces_and_semicolons(text):
+    assert pio.parse_angles(text).tolist() == [0.0, 45.0, 90.0, 135.0]
+    assert pio.parse_angles(text, option=None).tolist() == [0.0, 45.0, 90.0, 135.0]
+
+
+def test_parse_angles_messages_name_the_option_or_none():
+    with pytest.raises(PolarsegError, match=r"^bad --mosaic value '0,x': .*\(problem at 'x'\)$"):
+        pio.parse_angles("0,x", option="--mosaic")
+    with pytest.raises(PolarsegError) as typed:
+        pio.parse_angles("0, 30, sixty", option=None)
+    assert str(typed.value) == "angles must be numbers in degrees, got 'sixty'"
+    for empty in ("", "  "):
+        with pytest.raises(PolarsegError) as typed:
+            pio.parse_angles(empty, option=None)
+        assert str(typed.value) == (
+            "give the polariser angles in degrees, one per frame (e.g. 0,45,90,135)"
+        )
 
 
 def test_to_grey_uses_bt601_luma_or_one_channel():

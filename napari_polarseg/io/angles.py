@@ -1,8 +1,8 @@
 """Polariser angles from text and file names, and the sensors named in raw file names.
 
 Angles are **degrees** here, as in files and on the command line (the engine takes
-radians). :func:`parse_angles` reads the command line's comma-separated angle lists
-(``--angles``/``--mosaic``); :func:`angle_from_name` reads
+radians). :func:`parse_angles` is the one parser of typed angle lists (the command line's
+``--angles``/``--mosaic`` and the plugin's *angles* boxes); :func:`angle_from_name` reads
 a frame's angle from its file name; :func:`sensor_from_name` recognises a Sony
 polarisation sensor in a raw frame's name.
 """
@@ -28,18 +28,42 @@ DEFAULT_MOSAIC = IMX250MZR_LAYOUT
 #: Sony polarisation sensors named in raw files: mono (``…MZR``) and colour (``…MYR``).
 SENSOR_NAMES = re.compile(r"IMX2(?:50|53|64)M[ZY]R", re.IGNORECASE)
 
+#: What separates the angles of a list: a comma or a semicolon (spaces around it
+#: allowed), or spaces alone.
+ANGLE_SEPARATOR = re.compile(r"\s*[,;]\s*|\s+")
+
 _NUMBER = re.compile(r"\d+(?:\.\d+)?")
 
 
-def parse_angles(text: str, option: str = "--angles") -> np.ndarray:
-    """Parse comma-separated angles in degrees, e.g. ``"0,30,60,90"``.
+def _bad_angle(text: str, part: str, option: str | None) -> PolarsegError:
+    """The error for entry ``part`` of an angle list, worded for ``option`` or a form."""
+    if option is not None:
+        return PolarsegError(
+            f"bad {option} value {text!r}: expected comma-separated numbers in degrees, "
+            f"e.g. 0,45,90,135 (problem at {part!r})"
+        )
+    if not text.strip():
+        return PolarsegError(
+            "give the polariser angles in degrees, one per frame (e.g. 0,45,90,135)"
+        )
+    return PolarsegError(f"angles must be numbers in degrees, got {part!r}")
+
+
+def parse_angles(text: str, option: str | None = "--angles") -> np.ndarray:
+    """Parse a list of angles in degrees, e.g. ``"0,30,60,90"`` or ``"0 45; 90 135"``.
 
     Parameters
     ----------
     text : str
-        Numbers separated by commas (spaces allowed).
-    option : str
-        Name used in the error message.
+        Numbers separated by commas, semicolons or spaces (:data:`ANGLE_SEPARATOR`);
+        spaces around a comma or semicolon and at either end are allowed, an empty entry
+        (two commas in a row, a comma at either end) is not.
+    option : str or None
+        The command-line option the text came from, named in the error message
+        (``"bad --angles value '0,x': expected comma-separated numbers in degrees, …"``);
+        None for text typed into a form, whose messages name no option
+        (``"angles must be numbers in degrees, got 'x'"``; for empty text: ``"give the
+        polariser angles in degrees, one per frame (e.g. 0,45,90,135)"``).
 
     Returns
     -------
@@ -49,25 +73,23 @@ def parse_angles(text: str, option: str = "--angles") -> np.ndarray:
     Raises
     ------
     PolarsegError
-        If a value is empty, not a number, or not finite.
+        If the text is empty, or an entry is empty, not a number, or not finite.
 
     Examples
     --------
     >>> parse_angles("0, 45,90,135").tolist()
     [0.0, 45.0, 90.0, 135.0]
+    >>> parse_angles("0 45; 90 135", option=None).tolist()
+    [0.0, 45.0, 90.0, 135.0]
     """
-    parts = [p.strip() for p in str(text).split(",")]
     values = []
-    for part in parts:
+    for part in ANGLE_SEPARATOR.split(str(text).strip()):
         try:
             value = float(part)
         except ValueError:
             value = math.nan
         if not part or not math.isfinite(value):
-            raise PolarsegError(
-                f"bad {option} value {text!r}: expected comma-separated numbers in degrees, "
-                f"e.g. 0,45,90,135 (problem at {part!r})"
-            )
+            raise _bad_angle(str(text), part, option)
         values.append(value)
     return np.array(values, dtype=np.float64)
 
