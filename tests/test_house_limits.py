@@ -39,7 +39,6 @@ FUNCTION_ALLOWLIST = {
     "export.py:write_outputs",
     "export.py:write_result_folder",
     "figures.py:sweep_heatmap_figure",
-    "truth.py:read_truth_file",
     "widgets/_runner.py:WorkerSlot._launch",
     "widgets/segment.py:SegmentWidget.__init__",
     "widgets/segment.py:SegmentWidget._show",
