@@ -55,12 +55,12 @@ def read_params_file(path: PathLike) -> SegmentParams:
     Parameters
     ----------
     path : str or path
-        The JSON file.
+        A SegmentParams object or a ``params.json`` written by ``polarseg``.
 
     Returns
     -------
     SegmentParams
-        The parameters, checked.
+        The parameters, checked (:meth:`SegmentParams.from_dict`).
     """
     data = read_params_dict(path)
     try:
