@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from os import PathLike
 from pathlib import Path
@@ -211,6 +211,10 @@ def frame_polarisation_image(truth: TruthFile, folder: str | PathLike[str]) -> P
     return polarisation_image(data.stack, data.angles_rad, weights=mask.sample_weights)
 
 
+#: A function that makes the one-line error about a truth file from a problem.
+Fail = Callable[[str], PolarsegError]
+
+
 def read_truth_file(
     path: str | PathLike[str], expected_shape: Sequence[int] | None = None
 ) -> TruthFile:
@@ -242,11 +246,39 @@ def read_truth_file(
     """
     path = Path(path)
     doc = _load_json(path)
-    where = str(path)
 
     def fail(problem: str) -> PolarsegError:
-        return PolarsegError(f"truth file {where}: {problem}")
+        return PolarsegError(f"truth file {path}: {problem}")
 
+    frame = _read_header(doc, fail)
+    mosaic = doc["mosaic"]
+    shape = _read_shape(doc["shape"], expected_shape, fail)
+    height, width = shape
+    check_bytes(3.0 * 4 * height * width, f"rasterising truth file {path} ({height} x {width})")
+    classes = _read_classes(doc["classes"], fail)
+    regions = _read_shapes(doc["regions"], "regions", 3, classes, shape, fail)
+    stroke_paths = _read_shapes(doc["strokes"], "strokes", 2, classes, shape, fail)
+    regions = {name: regions.get(name, ()) for name in classes}
+    stroke_paths = {name: stroke_paths.get(name, ()) for name in classes}
+    truth = _fill_regions(regions, classes, shape, fail)
+    strokes = _draw_strokes(stroke_paths, classes, truth, fail)
+    truth.setflags(write=False)
+    strokes.setflags(write=False)
+    return TruthFile(
+        path=path,
+        frame=frame,
+        mosaic=tuple(float(a) for a in mosaic),
+        shape=shape,
+        classes=tuple(classes),
+        regions=regions,
+        stroke_paths=stroke_paths,
+        truth=truth,
+        strokes=strokes,
+    )
+
+
+def _read_header(doc: Any, fail: Fail) -> str:
+    """Check the keys, ``frame``, ``coordinates`` and ``mosaic``; the frame's name."""
     if not isinstance(doc, dict):
         raise fail(f"the top level must be a JSON object, not {_json_type(doc)}")
     missing = [key for key in REQUIRED_KEYS if key not in doc]
@@ -255,21 +287,21 @@ def read_truth_file(
     unknown = sorted(set(doc) - set(REQUIRED_KEYS) - set(OPTIONAL_KEYS))
     if unknown:
         raise fail(f"unknown key(s) {', '.join(map(repr, unknown))}")
-
     frame = doc["frame"]
     if not isinstance(frame, str) or not frame.strip() or not frame.isprintable():
         raise fail("'frame' must be a non-empty file name")
     if "/" in frame or "\\" in frame or frame in (".", ".."):
         raise fail(f"'frame' must be a file name without folders, not {_short(frame)}")
-
     if "coordinates" in doc and doc["coordinates"] != COORDINATES:
         raise fail(f"'coordinates' must be {COORDINATES!r}, not {_short(doc['coordinates'])}")
-
     mosaic = doc["mosaic"]
     if not isinstance(mosaic, list) or len(mosaic) != 4 or not all(_is_number(a) for a in mosaic):
         raise fail("'mosaic' must be a list of 4 angles in degrees")
+    return frame
 
-    shape = doc["shape"]
+
+def _read_shape(shape: Any, expected_shape: Sequence[int] | None, fail: Fail) -> tuple[int, int]:
+    """``shape`` as (rows, columns), checked against ``expected_shape``."""
     if (
         not isinstance(shape, list)
         or len(shape) != 2
@@ -280,9 +312,11 @@ def read_truth_file(
     if expected_shape is not None and tuple(expected_shape) != (height, width):
         exp = tuple(int(n) for n in expected_shape)
         raise fail(f"'shape' is {height} x {width} but the frame is {exp[0]} x {exp[1]}")
-    check_bytes(3.0 * 4 * height * width, f"rasterising truth file {where} ({height} x {width})")
+    return height, width
 
-    classes = doc["classes"]
+
+def _read_classes(classes: Any, fail: Fail) -> list[str]:
+    """``classes``: a non-empty list of unique, printable names (at most MAX_CLASSES)."""
     if not isinstance(classes, list) or not classes:
         raise fail("'classes' must be a non-empty list of names")
     if not all(isinstance(c, str) and c.strip() and c.isprintable() for c in classes):
@@ -291,29 +325,47 @@ def read_truth_file(
         raise fail("class names must be unique")
     if len(classes) > MAX_CLASSES:
         raise fail(f"at most {MAX_CLASSES} classes, not {len(classes)}")
+    return classes
 
-    regions = _read_shapes(doc["regions"], "regions", 3, classes, (height, width), fail)
-    stroke_paths = _read_shapes(doc["strokes"], "strokes", 2, classes, (height, width), fail)
-    regions = {name: regions.get(name, ()) for name in classes}
-    stroke_paths = {name: stroke_paths.get(name, ()) for name in classes}
 
-    truth = np.zeros((height, width), np.int32)
+def _most_common_class(labels: np.ndarray, classes: list[str]) -> str:
+    """The class most of ``labels`` (all non-zero) belong to, for messages."""
+    return classes[int(np.bincount(labels).argmax()) - 1]
+
+
+def _fill_regions(
+    regions: dict[str, tuple[np.ndarray, ...]],
+    classes: list[str],
+    shape: tuple[int, int],
+    fail: Fail,
+) -> np.ndarray:
+    """The ``truth`` image: each class's polygons filled with its label."""
+    truth = np.zeros(shape, np.int32)
     for k, name in enumerate(classes, start=1):
-        mine = np.zeros((height, width), bool)
+        mine = np.zeros(shape, bool)
         for poly in regions[name]:
-            rr, cc = draw_polygon(poly[:, 0], poly[:, 1], shape=(height, width))
+            rr, cc = draw_polygon(poly[:, 0], poly[:, 1], shape=shape)
             mine[rr, cc] = True
         clash = mine & (truth != 0)
         if clash.any():
-            other = classes[int(np.bincount(truth[clash]).argmax()) - 1]
+            other = _most_common_class(truth[clash], classes)
             raise fail(
                 f"polygons of classes {other!r} and {name!r} overlap in {int(clash.sum())} pixels"
             )
         truth[mine] = k
+    return truth
 
-    strokes = np.zeros((height, width), np.int32)
+
+def _draw_strokes(
+    stroke_paths: dict[str, tuple[np.ndarray, ...]],
+    classes: list[str],
+    truth: np.ndarray,
+    fail: Fail,
+) -> np.ndarray:
+    """The ``strokes`` image: each class's polylines drawn with its label."""
+    strokes = np.zeros(truth.shape, np.int32)
     for k, name in enumerate(classes, start=1):
-        mine = np.zeros((height, width), bool)
+        mine = np.zeros(truth.shape, bool)
         for i, path_ in enumerate(stroke_paths[name], start=1):
             pts = np.rint(path_).astype(np.intp)
             for (r0, c0), (r1, c1) in zip(pts[:-1], pts[1:], strict=True):
@@ -321,27 +373,14 @@ def read_truth_file(
                 mine[rr, cc] = True
             wrong = mine & (truth != 0) & (truth != k)
             if wrong.any():
-                other = classes[int(np.bincount(truth[wrong]).argmax()) - 1]
+                other = _most_common_class(truth[wrong], classes)
                 raise fail(f"stroke {i} of class {name!r} crosses a polygon of class {other!r}")
         clash = mine & (strokes != 0)
         if clash.any():
-            other = classes[int(np.bincount(strokes[clash]).argmax()) - 1]
+            other = _most_common_class(strokes[clash], classes)
             raise fail(f"strokes of classes {other!r} and {name!r} cross")
         strokes[mine] = k
-
-    truth.setflags(write=False)
-    strokes.setflags(write=False)
-    return TruthFile(
-        path=path,
-        frame=frame,
-        mosaic=tuple(float(a) for a in mosaic),
-        shape=(height, width),
-        classes=tuple(classes),
-        regions=regions,
-        stroke_paths=stroke_paths,
-        truth=truth,
-        strokes=strokes,
-    )
+    return strokes
 
 
 def _load_json(path: Path) -> Any:
@@ -392,7 +431,7 @@ def _read_shapes(
     min_points: int,
     classes: list[str],
     shape: tuple[int, int],
-    fail: Any,
+    fail: Fail,
 ) -> dict[str, tuple[np.ndarray, ...]]:
     """Validate ``regions`` (polygons) or ``strokes`` (polylines) of a truth file."""
     kind = "polygon" if key == "regions" else "stroke"
@@ -414,7 +453,7 @@ def _read_shapes(
 
 
 def _read_points(
-    pts: Any, what: str, min_points: int, shape: tuple[int, int], fail: Any
+    pts: Any, what: str, min_points: int, shape: tuple[int, int], fail: Fail
 ) -> np.ndarray:
     """Validate one vertex list: ``[[row, col], ...]`` inside the frame."""
     if not isinstance(pts, list):

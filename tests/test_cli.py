@@ -473,7 +473,7 @@ BAD_INPUTS = {
         "argument --angles: expected comma-separated numbers in degrees",
     ),
     "bad --mosaic syntax": (
-        lambda t: [_odd_mosaic(t)[0], "--mosaic", "90;45;135;0"],
+        lambda t: [_odd_mosaic(t)[0], "--mosaic", "90:45:135:0"],
         "argument --mosaic: expected comma-separated numbers",
     ),
     "odd-size mosaic": (

@@ -17,13 +17,12 @@ PACKAGE = Path(napari_polarseg.__file__).parent
 
 # Modules over MAX_MODULE_LINES, by path relative to the package. Everything outside
 # engine/ (and engine/pipeline.py) belongs to the restructuring of batch.py,
-# io.py, widgets/ and the pipeline running beside the engine sub-packages.
+# widgets/ and the pipeline running beside the engine sub-packages.
 MODULE_ALLOWLIST = {
     # outside engine/: other parts of issue 15
     "batch.py",
     "classifier_file.py",
     "export.py",
-    "io.py",
     "widgets/_runner.py",
     "widgets/segment.py",
 }
@@ -36,9 +35,6 @@ FUNCTION_ALLOWLIST = {
     "export.py:write_outputs",
     "export.py:write_result_folder",
     "figures.py:sweep_heatmap_figure",
-    "io.py:read_stack",
-    "io.py:read_mask",
-    "truth.py:read_truth_file",
     "widgets/_runner.py:WorkerSlot._launch",
     "widgets/segment.py:SegmentWidget.__init__",
     "widgets/segment.py:SegmentWidget._show",

@@ -57,9 +57,29 @@ def test_angle_from_name_takes_last_number_of_stem(name, angle):
 
 def test_parse_angles_good_and_bad():
     assert pio.parse_angles(" 0,45 , 90,135.5").tolist() == [0.0, 45.0, 90.0, 135.5]
-    for bad in ["0,,90", "0,x,90", "", "0,nan,90", "0;45;90"]:
+    for bad in ["0,,90", "0,x,90", "", "0,nan,90", "0,45,", "0:45:90"]:
         with pytest.raises(PolarsegError, match="comma-separated"):
             pio.parse_angles(bad)
+
+
+@pytest.mark.parametrize("text", ["0 45; 90 135", "0;45;90;135", "0 45 90 135", " 0, 45 ;90\t135 "])
+def test_parse_angles_takes_spaces_and_semicolons(text):
+    assert pio.parse_angles(text).tolist() == [0.0, 45.0, 90.0, 135.0]
+    assert pio.parse_angles(text, option=None).tolist() == [0.0, 45.0, 90.0, 135.0]
+
+
+def test_parse_angles_messages_name_the_option_or_none():
+    with pytest.raises(PolarsegError, match=r"^bad --mosaic value '0,x': .*\(problem at 'x'\)$"):
+        pio.parse_angles("0,x", option="--mosaic")
+    with pytest.raises(PolarsegError) as typed:
+        pio.parse_angles("0, 30, sixty", option=None)
+    assert str(typed.value) == "angles must be numbers in degrees, got 'sixty'"
+    for empty in ("", "  "):
+        with pytest.raises(PolarsegError) as typed:
+            pio.parse_angles(empty, option=None)
+        assert str(typed.value) == (
+            "give the polariser angles in degrees, one per frame (e.g. 0,45,90,135)"
+        )
 
 
 def test_to_grey_uses_bt601_luma_or_one_channel():
@@ -505,6 +525,58 @@ def test_read_mask_formats_and_errors(tmp_path):
     (tmp_path / "m.txt").write_text("1 0")
     with pytest.raises(PolarsegError, match="unsupported mask file type"):
         pio.read_mask(tmp_path / "m.txt", (6, 8))
+
+
+def test_read_arrays_picks_one_array_the_same_way_for_every_caller(tmp_path):
+    a, b = np.arange(6).reshape(2, 3), np.ones((2, 3))
+    np.save(tmp_path / "one.npy", a)
+    np.savez(tmp_path / "two.npz", labels=a, mask=b, angles=np.arange(3.0))
+    np.savez(tmp_path / "only.npz", whatever=b)
+    array, more = pio.read_arrays(tmp_path / "one.npy", ("stack",), optional=("angles",))
+    assert array.tolist() == a.tolist() and more == {}
+    array, more = pio.read_arrays(tmp_path / "two.npz", ("mask", "labels"), optional=("angles",))
+    assert array.tolist() == b.tolist() and more["angles"].tolist() == [0.0, 1.0, 2.0]
+    assert pio.read_arrays(tmp_path / "only.npz", ("mask",))[0].tolist() == b.tolist()
+    with pytest.raises(PolarsegError) as missing:
+        pio.read_arrays(tmp_path / "only.npz", ("a", "b", "c"), only=False)
+    assert str(missing.value) == (
+        f"{tmp_path / 'only.npz'}: no array named 'a', 'b' or 'c' in the .npz file "
+        "(found: whatever)"
+    )
+    (tmp_path / "bad.npz").write_bytes(b"PK\x03\x04 not a zip")
+    with pytest.raises(PolarsegError, match=r"bad\.npz: cannot read the NumPy file \("):
+        pio.read_arrays(tmp_path / "bad.npz", ("mask",))
+
+
+def test_masks_and_labels_share_one_reading_path(tmp_path):
+    labels = np.zeros((6, 8), np.uint8)
+    labels[2:4, 1:5] = 3
+    np.savez(tmp_path / "only.npz", drawn=labels)
+    np.save(tmp_path / "cube.npy", np.zeros((2, 6, 8), np.uint8))
+    np.savez(tmp_path / "two.npz", a=labels, b=labels)
+    assert pio.read_mask(tmp_path / "only.npz", (6, 8)).sum() == 8
+    assert pio.read_labels(tmp_path / "only.npz", (6, 8), "scribbles").max() == 3
+    for name, words in [
+        ("cube.npy", "one 2-D image, got an array of shape (2, 6, 8)"),
+        ("two.npz", "no array named"),
+        ("none.npy", "no such file"),
+        ("x.txt", "file type '.txt'"),
+    ]:
+        for read, what in [(pio.read_mask, "mask"), (pio.read_labels, "ground truth")]:
+            args = (tmp_path / name, (6, 8)) + (() if read is pio.read_mask else (what,))
+            with pytest.raises(PolarsegError, match=re.escape(words)) as err:
+                read(*args)
+            assert str(err.value).startswith(f"{tmp_path / name}: ")
+            if name == "cube.npy":
+                assert f"the {what} must be one 2-D image" in str(err.value)
+    big = tmp_path / "big.npy"
+    header = io.BytesIO()
+    np.lib.format.write_array_header_1_0(
+        header, {"descr": "<i8", "fortran_order": False, "shape": (90000, 90000)}
+    )
+    big.write_bytes(header.getvalue())
+    with pytest.raises(PolarsegError, match=r"big\.npy: reading 90000 x 90000 values of int64"):
+        pio.read_labels(big, (6, 8), "scribbles")
 
 
 def test_header_sizes_are_checked_before_reading(tmp_path):

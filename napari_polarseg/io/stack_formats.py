@@ -1,0 +1,218 @@
+"""One reader per kind of angle stack: a multi-page TIFF, an ``.npz``/``.npy``, frame files
+(a folder or a list), a raw mono or colour-polarisation mosaic.
+
+Each returns a :class:`~napari_polarseg.io.stack_data.StackData` whose angles may still be
+missing; :func:`napari_polarseg.io.readers.read_stack` picks the reader and checks the
+result.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..engine.errors import PolarsegError
+from ..engine.limits import check_bytes
+from ..engine.physics.colour_mosaic import (
+    COLOURS,
+    demosaic_colour,
+    demosaic_colour_flags,
+    luminance,
+)
+from ..engine.physics.mosaic import demosaic, demosaic_flags
+from ..tiff_angles import FROM_JSON
+from .angles import angle_from_name
+from .arrays import read_arrays
+from .common import dims, first_line, input_error, saturation_level
+from .frames import grey_frames, load_frame
+from .stack_data import StackData, StackOptions
+from .tiff import colour_last, read_tiff
+
+
+def _metadata_angles(path: Path, angles: Any) -> np.ndarray | None:
+    """The angles found in a file's metadata as float64 (None if there are none)."""
+    if angles is None:
+        return None
+    try:
+        values = np.asarray(angles, dtype=np.float64).ravel()
+    except (TypeError, ValueError):
+        raise input_error(
+            path, f"the 'angles' metadata is not a list of numbers: {angles!r}"
+        ) from None
+    return values
+
+
+def read_tiff_stack(path: Path, opts: StackOptions) -> StackData:
+    """A multi-page TIFF, its angles from its metadata (if any)."""
+    data, axes, meta = read_tiff(path, opts.limit)
+    data, colour = colour_last(data, axes)
+    if data.ndim == (3 if colour else 2):
+        raise input_error(
+            path,
+            "the TIFF holds a single image, not an angle stack "
+            "(for a raw polarisation-camera frame give the mosaic layout, --mosaic)",
+        )
+    bits = meta.get("bits_per_sample")
+    level = saturation_level(opts.saturation, data.dtype, bits)
+    stack, saturated = grey_frames(path, data, colour, opts.channel, True, level)
+    stack = opts.subtract(path, stack)
+    info = {"format": "tiff", **{k: v for k, v in meta.items() if k != "description"}}
+    info["saturation_level"] = level
+    angles = _metadata_angles(path, meta["description"].get("angles"))
+    if meta["description"].get("angles_from") not in (None, FROM_JSON):
+        info["angles_from"] = meta["description"]["angles_from"]
+    return StackData(stack, angles, os.fspath(path), info, saturated=saturated)
+
+
+def read_array_stack(path: Path, opts: StackOptions) -> StackData:
+    """An ``.npy`` stack, or an ``.npz`` with ``stack`` and optionally ``angles``,
+    ``labels`` (ground truth) and ``params`` (a JSON string)."""
+    info: dict[str, Any] = {"format": path.suffix.lower().lstrip(".")}
+    data, more = read_arrays(
+        path, ("stack",), optional=("angles", "labels", "params"), only=False, limit=opts.limit
+    )
+    angles, ground_truth = more.get("angles"), more.get("labels")
+    if "params" in more:
+        try:
+            info["params"] = json.loads(str(more["params"]))
+        except ValueError as exc:
+            raise input_error(path, f"cannot read the NumPy file ({first_line(exc)})") from exc
+    colour = data.ndim == 4 and data.shape[-1] in (2, 3, 4)
+    level = saturation_level(opts.saturation, data.dtype)
+    stack, saturated = grey_frames(path, data, colour, opts.channel, True, level)
+    stack = opts.subtract(path, stack)
+    info["saturation_level"] = level
+    if angles is not None:
+        if angles.dtype.kind not in "uif":
+            raise input_error(
+                path, f"the 'angles' array must hold numbers, got dtype {angles.dtype}"
+            )
+        angles = _metadata_angles(path, angles.tolist())
+    if ground_truth is not None and ground_truth.shape != stack.shape[1:]:
+        raise input_error(
+            path,
+            f"ground-truth labels are {ground_truth.shape} but the frames are {stack.shape[1:]}",
+        )
+    return StackData(stack, angles, os.fspath(path), info, ground_truth, saturated)
+
+
+def _sorted_by_angle(files: list[Path]) -> tuple[list[Path], np.ndarray]:
+    """Frame files sorted by the angle in their names, and those angles."""
+    named = [angle_from_name(f) for f in files]
+    for f, a in zip(files, named, strict=True):
+        if a is None:
+            raise input_error(
+                f,
+                "no angle in the file name (the last number in the name is the angle in "
+                "degrees, e.g. leaf_030.png); or give the angles",
+            )
+    order = np.argsort(named, kind="stable")
+    return [files[i] for i in order], np.asarray(named, dtype=np.float64)[order]
+
+
+def read_frame_files(
+    source: Path, files: list[Path], angles_given: bool, opts: StackOptions, kind: str
+) -> StackData:
+    """One frame a file (``kind`` ``"folder"`` or ``"files"``); without given angles, the
+    angles come from the file names and the frames are sorted by them."""
+    angles = None
+    if not angles_given:
+        files, angles = _sorted_by_angle(files)
+    frames, flags, levels = [], [], []
+    for f in files:
+        data, colour, bits = load_frame(f, opts.limit)
+        level = saturation_level(opts.saturation, data.dtype, bits)
+        frame, saturated = grey_frames(f, data, colour, opts.channel, False, level)
+        if frames and frame.shape != frames[0].shape:
+            raise input_error(
+                f,
+                f"frame is {frame.shape[0]} x {frame.shape[1]} pixels but {files[0].name} is "
+                f"{frames[0].shape[0]} x {frames[0].shape[1]}; all frames must have one size",
+            )
+        if not frames:  # the whole stack and its float64 copy, before reading the rest
+            check_bytes(
+                len(files) * frame.size * 16.0,
+                f"{os.fspath(source)}: reading {len(files)} frames of {dims(frame.shape)} pixels",
+                opts.limit,
+            )
+        frames.append(frame)
+        flags.append(saturated)
+        levels.append(level)
+    saturated = np.stack(flags) if all(s is not None for s in flags) else None
+    stack = opts.subtract(source, np.stack(frames))
+    info = {"format": kind, "files": [f.name if kind == "folder" else os.fspath(f) for f in files]}
+    known = [lv for lv in levels if lv is not None]
+    info["saturation_level"] = min(known) if known else None
+    return StackData(stack, angles, os.fspath(source), info, saturated=saturated)
+
+
+def _decode_mosaic(
+    path: Path,
+    raw: np.ndarray,
+    saturated_raw: np.ndarray | None,
+    layout: Sequence[float],
+    method: str,
+    bayer: str | None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray | None]:
+    """(stack, angles, saturated, colour stack) of a raw frame, mono or colour."""
+    try:
+        if bayer is None:
+            stack, angles = demosaic(raw, layout, method)
+            saturated = (
+                None if saturated_raw is None else demosaic_flags(saturated_raw, layout, method)
+            )
+            return stack, angles, saturated, None
+        colour_stack, angles = demosaic_colour(raw, layout, bayer, method)
+        saturated = None
+        if saturated_raw is not None:
+            flags = demosaic_colour_flags(saturated_raw, layout, bayer, method)
+            saturated = flags.any(axis=0)
+        return luminance(colour_stack), angles, saturated, colour_stack
+    except PolarsegError as exc:
+        raise input_error(path, str(exc)) from None
+
+
+def read_mosaic(
+    path: Path,
+    layout: Sequence[float],
+    method: str,
+    opts: StackOptions,
+    bayer: str | None = None,
+) -> StackData:
+    """A raw mono (``bayer`` None) or colour-polarisation frame, decoded."""
+    if path.is_dir():
+        raise input_error(path, "a mosaic layout needs a single raw frame, not a folder")
+    data, colour, bits = load_frame(path, opts.limit)
+    level = saturation_level(opts.saturation, data.dtype, bits)
+    raw, saturated_raw = grey_frames(path, data, colour, opts.channel, False, level)
+    if method == "interpolated":
+        planes = 10 if bayer is None else 20  # 12 colour planes, luminance, work space
+        check_bytes(
+            raw.size * 8.0 * planes,
+            f"{os.fspath(path)}: interpolating a {dims(raw.shape)} mosaic",
+            opts.limit,
+        )
+    raw = opts.subtract(path, raw)
+    stack, angles, saturated, colour_stack = _decode_mosaic(
+        path, raw, saturated_raw, layout, method, bayer
+    )
+    info: dict[str, Any] = {
+        "format": "mosaic",
+        "demosaic": method,
+        "mosaic_layout_deg": [float(a) for a in np.asarray(layout, dtype=float).ravel()],
+        "raw_shape": list(raw.shape),
+        "saturation_level": level,
+    }
+    if bayer is not None:
+        info["bayer"] = bayer
+        info["colours"] = list(COLOURS)
+    if bits is not None:
+        info["bits_per_sample"] = bits
+    return StackData(
+        stack, angles, os.fspath(path), info, saturated=saturated, colour_stack=colour_stack
+    )
