@@ -25,7 +25,6 @@ MODULE_ALLOWLIST = {
     "cli.py",
     "export.py",
     "io.py",
-    "widgets/_runner.py",
     "widgets/segment.py",
 }
 
@@ -43,9 +42,7 @@ FUNCTION_ALLOWLIST = {
     "io.py:read_stack",
     "io.py:read_mask",
     "truth.py:read_truth_file",
-    "widgets/_runner.py:WorkerSlot._launch",
     "widgets/segment.py:SegmentWidget.__init__",
-    "widgets/segment.py:SegmentWidget._show",
     # engine/, not done on the engine-packages branch: its docstring documents eleven
     # keyword parameters (the body is helpers); a settings dataclass would change its API
     "engine/synthetic/surface.py:render_surface",

@@ -15,7 +15,8 @@ from qtpy.QtWidgets import QScrollArea, QWidget
 
 from ..engine import PolarsegError
 from ._layers import ANGLES_KEY, find_output, layer_tag, source_key
-from ._runner import PROGRESS_STEPS, WorkerSlot, format_angles, parse_angles
+from ._runner import PROGRESS_STEPS, WorkerSlot
+from .session import format_angles, parse_angles
 
 if TYPE_CHECKING:
     import napari

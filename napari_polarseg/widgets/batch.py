@@ -44,7 +44,8 @@ from ..engine.params import AUTO, RECOMMENDED
 from ..io import read_params_file
 from ._base import ScrollingContainer, is_angle_stack
 from ._layers import ANGLES_KEY, label_colormap
-from ._runner import WorkerSlot, parse_angles
+from ._runner import WorkerSlot
+from .session import parse_angles
 
 if TYPE_CHECKING:
     import napari

@@ -18,7 +18,7 @@ from ..engine import STAGES, Pipeline, PolarsegError, SegmentParams, validity_ma
 from ..engine.analysis import plots
 from ._base import StackWidget
 from ._layers import TAG, find_output, fitted_limits, source_key
-from ._runner import CLASSIFIER_STAGES, ClassifierOutput, classifier_stages, content_digest
+from .session import CLASSIFIER_STAGES, ClassifierOutput, classifier_stages, content_digest
 
 if TYPE_CHECKING:
     import napari

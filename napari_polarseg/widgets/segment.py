@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 import contextlib
+import functools
 import time
-from collections.abc import Callable, Generator
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -14,26 +14,33 @@ from magicgui.widgets import CheckBox, ComboBox, Container, PushButton
 from napari.layers import Labels
 from qtpy.QtCore import QTimer
 
-from ..engine import STAGES, Pipeline, PolarsegError, SegmentationResult, SegmentParams
+from ..engine import Pipeline, PolarsegError, SegmentationResult, SegmentParams
 from ..engine.params import PARAM_SPECS, PRESET_HELP, PRESETS, ParamSpec
-from ..engine.physics.pixel_mask import mask_reasons
 from ..engine.physics.stokes import stokes_components
 from ..io import read_params_file
 from ._base import ClassifierListener, StackWidget
 from ._layers import find_output, label_colormap, remove_output, show_output, source_key
-from ._runner import (
-    CLASSIFIER_STAGES,
-    ClassifierOutput,
-    Partial,
-    PipelineStore,
-    Result,
-    WorkerSlot,
-    classifier_stages,
-    content_digest,
-    scribble_problem,
-)
+from ._runner import WorkerSlot
 from .param_controls import controlled_names, param_controls
 from .polarisation import VIEW_OUTPUTS, composite_for, view_mode_box
+from .session import (
+    ClassifierOutput,
+    ExportRecord,
+    LoadedClassifier,
+    PipelineStore,
+    ShownResult,
+    classifier_text,
+    colour_stack_of,
+    content_digest,
+    export_job,
+    input_info,
+    read_classifier_job,
+    region_digest,
+    scribble_problem,
+    segment_request,
+    shown_result,
+    write_classifier_job,
+)
 
 if TYPE_CHECKING:
     import napari
@@ -68,228 +75,22 @@ FIRST_CONTROLS = ("n_segments",)
 CUT_ONLY = ("scale", "scale_mode", "clustering", "min_segment_blocks", "n_segments")
 
 
-def segment_job(
-    store: PipelineStore,
-    key: str,
-    data: Any,
-    angles_rad: np.ndarray,
-    params: SegmentParams,
-    region: np.ndarray | None = None,
-    mask_key: str | None = None,
-    prefetch: bool = False,
-    cancel: Callable[[], bool] | None = None,
-    report: Callable[[str, float, int], None] | None = None,
-) -> Generator[Any, None, Any]:
-    """Worker job: run the stale stages of the layer's cached pipeline, then assemble.
 
-    ``region`` (H, W bool, True = use) restricts the segmentation; saturated and black
-    samples are left out in any case (:meth:`PipelineStore.obtain`). Yields ``(stage,
-    index, total)`` after every stage; stopping the worker between two yields cancels the
-    run and leaves the stages computed so far cached. When the reconstruction (error map)
-    has to be recomputed, the result without it is yielded first as a
-    :class:`~napari_polarseg.widgets._runner.Partial`: the segments are shown while the
-    last stage runs (after a change of n or w it is a third of the run).
+@dataclass(frozen=True)
+class Delivery:
+    """What a run's result is checked against and shown with: the stack layer, its
+    angles, the snapshot of the inputs when it was requested, the mask, scribbles and
+    classifier file used, and its start time (``time.perf_counter``)."""
 
-    With ``prefetch``, the result is yielded as a
-    :class:`~napari_polarseg.widgets._runner.Result` and the job goes on in idle time
-    with :meth:`Pipeline.prefetch <napari_polarseg.engine.Pipeline.prefetch>` (the
-    eigensolves one more segment needs), stopping at the next request.
-
-    ``cancel`` (the runner's stop request) is handed to the normalized cut, which checks
-    it before every product of its eigensolvers and raises
-    :class:`~napari_polarseg.engine.errors.Cancelled`: Cancel or a newer request stops a
-    long cut (or a prefetch) at once instead of at the end of the stage.
-
-    ``report`` (the runner's, ``WorkerSlot.submit(..., reports=True)``) receives the
-    progress within the stages that loop in chunks (harmonics, reconstruction) as
-    ``(stage, index, total)`` with a fractional ``index`` on the same scale as the
-    yields (:meth:`Pipeline.run_iter <napari_polarseg.engine.Pipeline.run_iter>`).
-    """
-    pipe = store.obtain(key, data, angles_rad, params, region=region, mask_key=mask_key)
-    total = len(STAGES)
-    if pipe.is_fresh("reconstruction", params):
-        yield from pipe.run_iter(params, reconstruction=True, cancel=cancel, progress=report)
-    else:
-        within = None
-        if report is not None:
-
-            def within(stage: str, index: float, _n: int) -> None:
-                report(stage, index, total)
-
-        last = 0
-        for stage, index, _ in pipe.run_iter(params, False, cancel=cancel, progress=within):
-            last = index
-            yield stage, index, total
-        yield Partial(pipe.result(params, reconstruction=False))
-        share = None
-        if report is not None:
-
-            def share(done: float) -> None:
-                report(STAGES[-1], last + done * (total - last), total)
-
-        pipe.get("reconstruction", params, share)
-        yield STAGES[-1], total, total
-    result = pipe.result(params, reconstruction=True)
-    if prefetch:
-        yield Result(result)
-        for _ in pipe.prefetch(params, cancel):
-            yield "prefetch", total, total
-    return result
-
-
-def colour_stack_of(layer: Layer) -> np.ndarray | None:
-    """The (colour, angle, H, W) stacks a colour-polarisation layer carries in
-    ``metadata["colour_stack"]`` (the reader puts them there), if they fit its data."""
-    meta = layer.metadata if isinstance(layer.metadata, dict) else {}
-    colour = meta.get("colour_stack")
-    if not isinstance(colour, np.ndarray) or colour.ndim != 4:
-        return None
-    return colour if colour.shape[1:] == np.shape(layer.data) else None
-
-
-def classifier_job(
-    store: PipelineStore,
-    key: str,
-    data: Any,
-    angles_rad: np.ndarray,
-    params: SegmentParams,
-    scribbles: np.ndarray | None,
-    classifier: PixelClassifier | None,
-    region: np.ndarray | None = None,
-    mask_key: str | None = None,
-    colour_stack: np.ndarray | None = None,
-    cancel: Callable[[], bool] | None = None,
-) -> Generator[Any, None, ClassifierOutput]:
-    """Worker job of the scribble mode: the cached pipeline's stages up to the block
-    features, the stack's kept pixel features, then the pixel classifier trained on
-    ``scribbles`` (or the loaded ``classifier`` applied) and the reconstruction
-    (:func:`~napari_polarseg.widgets._runner.classifier_stages`). ``cancel`` stops the
-    prediction between chunks. ``colour_stack`` (C, N, H, W): the colour stacks of a
-    colour-polarisation frame whose luminance is ``data`` (the reader's
-    ``metadata["colour_stack"]``), whose polarisation images add features."""
-    pipe = store.obtain(key, data, angles_rad, params, region=region, mask_key=mask_key)
-    segmenter = store.segmenter(key, colour_stack)
-    assert segmenter is not None
-    return (
-        yield from classifier_stages(
-            pipe, segmenter, params, scribbles, classifier, reconstruction=True, cancel=cancel
-        )
-    )
-
-
-def read_classifier_job(path: Path) -> Generator[tuple[str, int, int], None, PixelClassifier]:
-    """Worker job of *Load classifier…*: the checked classifier file (never runs code
-    from it; a bad file raises a one-line :class:`PolarsegError`)."""
-    from ..classifier_file import load_pixel_classifier
-
-    yield "reading", 1, 1
-    return load_pixel_classifier(path)
-
-
-def write_classifier_job(
-    path: Path, classifier: PixelClassifier
-) -> Generator[tuple[str, int, int], None, Path]:
-    """Worker job of *Save classifier…*: the classifier file, written atomically."""
-    from ..classifier_file import save_pixel_classifier
-
-    yield "writing", 1, 1
-    save_pixel_classifier(path, classifier)
-    return path
-
-
-def classifier_text(classifier: PixelClassifier) -> str:
-    """``"random_forest, 3 classes (1, 2, 3), 30 features, trained on 273 pixels"``."""
-    classes = ", ".join(str(int(c)) for c in classifier.classes)
-    return (
-        f"{classifier.params.model}, {classifier.classes.size} classes ({classes}), "
-        f"{len(classifier.feature_names)} features, "
-        f"trained on {classifier.n_training_pixels} pixels"
-    )
-
-
-@dataclass(eq=False)
-class LoadedClassifier:
-    """A classifier read by *Load classifier…*, applied instead of training.
-
-    ``strokes`` is the (layer key, content digest) of the chosen scribbles when it was
-    loaded: once they differ (the user painted, or chose other strokes) the widget
-    trains on the strokes again. ``serial`` tells one load from another in snapshots.
-    """
-
-    classifier: PixelClassifier
-    path: Path
-    strokes: tuple[str | None, str | None]
-    serial: int
-
-
-@dataclass
-class ExportRecord:
-    """What *Export results…* writes for a stack layer: its last result and inputs.
-
-    The keyword arguments of :func:`napari_polarseg.export.write_result_folder` but the
-    folder (and ``overview``/``plots``), captured when the result was shown.
-    """
-
-    stack: Any
+    layer: Any
     angles_deg: np.ndarray
-    result: SegmentationResult
-    mask: Any = None
-    source: str | None = None
-    probabilities: np.ndarray | None = None
-    uncertainty: np.ndarray | None = None
-    info: dict[str, Any] = field(default_factory=dict)
-    summary: dict[str, Any] = field(default_factory=dict)
+    snap: tuple[Any, ...]
+    inputs: dict[str, Any]
+    t0: float
 
-    def kwargs(self) -> dict[str, Any]:
-        return {
-            "stack": self.stack,
-            "angles_deg": self.angles_deg,
-            "result": self.result,
-            "mask": self.mask,
-            "source": self.source,
-            "command": "napari",
-            "probabilities": self.probabilities,
-            "uncertainty": self.uncertainty,
-            "info": self.info,
-            "summary": self.summary,
-        }
-
-
-def export_job(
-    folder: Path, kwargs: dict[str, Any]
-) -> Generator[tuple[str, int, int], None, list[str]]:
-    """Worker job of *Export results…*: :func:`~napari_polarseg.export.write_result_folder`
-    (a file that cannot be written is reported as a :class:`PolarsegError`)."""
-    from ..export import OutputError, write_result_folder
-
-    yield "writing", 1, 1
-    try:
-        return write_result_folder(folder, **kwargs)
-    except OutputError as exc:
-        raise PolarsegError(str(exc)) from None
-
-
-def degenerate_text(summary: dict[str, Any]) -> str:
-    """The status line's warning of a degenerate result, from ``result.summary()``
-    (``"degenerate"``: one segment holds >= 95 % of the pixels, or every other is below
-    the minimum size), with what to try; "" when the result is not degenerate."""
-    if not summary.get("degenerate"):
-        return ""
-    return (
-        f"degenerate: {summary.get('degenerate_reason')} (try the recommended preset, "
-        "fewer or more segments, a larger window, or scribbles)"
-    )
-
-
-def mask_text(counts: dict[str, Any]) -> str:
-    """``"masked: 120 saturated, 3 black"`` from ``result.mask_counts`` ("" if none)."""
-    parts = mask_reasons(counts)
-    return f"masked: {', '.join(parts)}" if parts else ""
-
-
-def region_digest(region: np.ndarray | None) -> str | None:
-    """A short fingerprint of a region's content (None for no region)."""
-    return None if region is None else content_digest(np.asarray(region, dtype=bool))
+    def seconds(self) -> float:
+        """Seconds since the run was requested."""
+        return time.perf_counter() - self.t0
 
 
 class SegmentWidget(StackWidget):
@@ -921,41 +722,18 @@ class SegmentWidget(StackWidget):
         except RuntimeError:  # the widget was deleted
             pass
 
-    def _record_export(
-        self,
-        layer: Layer,
-        angles_deg: np.ndarray,
-        result: SegmentationResult,
-        out: ClassifierOutput | None,
-        inputs: dict[str, Any],
-    ) -> None:
+    def _record_export(self, layer: Layer, angles_deg: np.ndarray, shown: ShownResult) -> None:
         """Keep what *Export results…* needs of the result just shown for ``layer``."""
-        from ..export import classifier_summary
-
         key = source_key(layer)
         pipe = self.store.get(key)  # the pipeline that made the result (its pixel mask)
         source = getattr(getattr(layer, "source", None), "path", None)
-        summary: dict[str, Any] = {}
-        if out is not None:
-            labels_from = "scribbles" if out.trained else "classifier"
-            summary = classifier_summary(out.segmentation, labels_from)
-        self._exports[key] = ExportRecord(
+        self._exports[key] = ExportRecord.of(
+            shown,
             stack=layer.data,
-            angles_deg=np.asarray(angles_deg, dtype=float),
-            result=result,
+            angles_deg=angles_deg,
             mask=None if pipe is None else pipe.mask,
             source=None if source is None else str(source),
-            probabilities=None if out is None else out.prediction.probabilities,
-            uncertainty=None if out is None else out.prediction.uncertainty,
-            info={
-                "napari": {
-                    "stack_layer": layer.name,
-                    "mask_layer": inputs.get("mask"),
-                    "scribbles_layer": inputs.get("scribbles"),
-                    "classifier_file": inputs.get("classifier"),
-                }
-            },
-            summary=summary,
+            layer_name=layer.name,
         )
         self._update_export_button()
 
@@ -1175,44 +953,50 @@ class SegmentWidget(StackWidget):
                 self._set_status(f"scribbles: {problem}")
                 return
         inputs = {
-            "mask": _input_info(self.mask_layer.value, mask_key, snap[4]),
+            "mask": input_info(self.mask_layer.value, mask_key, snap[4]),
             "scribbles": None
             if loaded is not None
-            else _input_info(self.scribbles_layer.value, scribble_key, snap[6]),
+            else input_info(self.scribbles_layer.value, scribble_key, snap[6]),
             "classifier": None if loaded is None else str(loaded.path),
         }
-        key = source_key(layer)
-        t0 = time.perf_counter()
+        delivery = Delivery(layer, angles_deg, snap, inputs, time.perf_counter())
         angles_rad = np.deg2rad(angles_deg)
+        classifier = None if loaded is None else loaded.classifier
+        strokes = None if loaded is not None else scribbles
+        request = segment_request(
+            self.store,
+            source_key(layer),
+            layer.data,
+            angles_rad,
+            params,
+            region,
+            mask_key,
+            strokes,
+            classifier,
+            colour_stack_of(layer),
+        )
+        # a new stroke or request stops the prediction, or the cut's eigensolver, at once;
+        # the cut reports progress within the harmonics and reconstruction
+        on_result = functools.partial(self._on_result, delivery)
+        on_partial = functools.partial(self._on_partial, delivery)
+        job, args, total = request.job, request.args, request.total
+        self._submit(job, args, total, on_result, on_partial, self._live_run, True, request.reports)
 
-        def on_result(run_id: int, result: Any) -> None:
-            if snap != self.snapshot() or layer not in self._viewer.layers:
-                self._set_status("result dropped: the parameters changed while it was computed")
-                return
-            if isinstance(result, ClassifierOutput) and result.problem is not None:
-                where = "scribbles" if result.trained else "classifier"
-                self._set_status(f"{where}: {result.problem}")
-                return
-            self._show(layer, angles_deg, result, time.perf_counter() - t0, inputs)
+    def _on_result(self, run: Delivery, run_id: int, result: Any) -> None:
+        """A run's result (GUI thread): shown unless the inputs changed meanwhile."""
+        if run.snap != self.snapshot() or run.layer not in self._viewer.layers:
+            self._set_status("result dropped: the parameters changed while it was computed")
+            return
+        if isinstance(result, ClassifierOutput) and result.problem is not None:
+            where = "scribbles" if result.trained else "classifier"
+            self._set_status(f"{where}: {result.problem}")
+            return
+        self._show(run.layer, run.angles_deg, result, run.seconds(), run.inputs)
 
-        def on_partial(run_id: int, result: Any) -> None:
-            # the segments (or classes) before the error map; dropped like a result
-            if snap == self.snapshot() and layer in self._viewer.layers:
-                self._show(layer, angles_deg, result, time.perf_counter() - t0, inputs)
-
-        if scribbles is None and loaded is None:
-            args = (self.store, key, layer.data, angles_rad, params, region, mask_key, True)
-            job, total = segment_job, len(STAGES)
-        else:
-            classifier = None if loaded is None else loaded.classifier
-            strokes = None if loaded is not None else scribbles
-            args = (self.store, key, layer.data, angles_rad, params, strokes, classifier)
-            args += (region, mask_key, colour_stack_of(layer))
-            job, total = classifier_job, len(CLASSIFIER_STAGES)
-        # a new stroke or request stops the prediction, or the cut's eigensolver, at once
-        cancellable = True
-        reports = job is segment_job  # progress within the harmonics and reconstruction
-        self._submit(job, args, total, on_result, on_partial, self._live_run, cancellable, reports)
+    def _on_partial(self, run: Delivery, run_id: int, result: Any) -> None:
+        """The segments (or classes) before the error map; dropped like a result."""
+        if run.snap == self.snapshot() and run.layer in self._viewer.layers:
+            self._show(run.layer, run.angles_deg, result, run.seconds(), run.inputs)
 
     def _show(
         self,
@@ -1229,49 +1013,13 @@ class SegmentWidget(StackWidget):
         status line only; the complete result that follows updates the rest. Labels equal
         to those already shown only update the segments' metadata.
         """
-        inputs = inputs or {"mask": None, "scribbles": None, "classifier": None}
-        out = result if isinstance(result, ClassifierOutput) else None
+        shown = shown_result(result, angles_deg, inputs)
+        meta, out = shown.meta, shown.out
+        if not shown.partial:
+            self._show_complete(layer, shown)
         if out is not None:
-            result = out.result
-        assert isinstance(result, SegmentationResult)
-        partial = result.reconstruction_error is None
-        summary = result.summary()
-        confidence = None
-        if out is not None:
-            confidence = out.prediction.probabilities.max(axis=0).astype(np.float32)
-            summary["classifier"] = {
-                "labels_from": "scribbles" if out.trained else "classifier",
-                "classes": [int(c) for c in out.prediction.classes],
-                "training_pixels": out.classifier.n_training_pixels,
-                "mean_class_probability": float(confidence.mean()),
-                "mean_uncertainty": float(out.prediction.uncertainty.mean()),
-            }
-        meta = {
-            "polarseg_params": {**result.params.to_dict(), "angles_deg": angles_deg.tolist()},
-            "polarseg_summary": summary,
-            "polarseg_inputs": inputs,
-        }
-        if out is not None:  # the scribble value of the chosen class: strokes' colours
-            labels = np.asarray(out.prediction.classes, dtype=np.int32)[result.labels]
-        else:
-            labels = np.asarray(result.labels, dtype=np.int32) + 1  # a copy: painting is safe
-        if not partial:
-            # the error map (added hidden) goes below the segments, which overlay the stack
-            error = np.array(result.reconstruction_error)
-            self._show_below_segments("error", error, layer, meta)
-            masked = np.zeros(labels.shape, dtype=np.uint8)
-            if result.valid is not None:
-                masked = (~np.asarray(result.valid, dtype=bool)).astype(np.uint8)
-            if self._shows_diagnostics(layer, result, masked):
-                residual = np.array(result.residual)
-                self._show_below_segments("residual", residual, layer, meta)
-                self._show_below_segments("masked", masked, layer, meta)
-            if self.views.value:
-                self._show_views(layer, result, meta)
-        if out is not None:
-            assert confidence is not None
             prediction = out.prediction
-            self._show_below_segments("probability", confidence, layer, meta)
+            self._show_below_segments("probability", shown.confidence, layer, meta)
             self._show_below_segments("uncertainty", prediction.uncertainty, layer, meta)
             self.probabilities, self.classes = prediction.probabilities, prediction.classes
             self.uncertainty = prediction.uncertainty
@@ -1280,35 +1028,33 @@ class SegmentWidget(StackWidget):
                 remove_output(self._viewer, role, layer)
             self.probabilities, self.classes, self.uncertainty = None, None, None
         segments = find_output(self._viewer, "segments", layer)
-        if segments is not None and np.array_equal(segments.data, labels):
+        if segments is not None and np.array_equal(segments.data, shown.labels):
             # e.g. the partial result already shows these labels: keep the data (no redraw)
             segments.metadata = {**segments.metadata, **meta}
         else:
-            show_output(self._viewer, "segments", labels, layer, meta)
-        if out is not None:
-            assert confidence is not None
-            parts = classifier_parts(out, confidence, inputs.get("classifier"))
-        else:
-            parts = [f"{summary['n_segments']} segments"]
-            warning = degenerate_text(summary)
-            if warning:
-                parts.append(warning)
-        if partial:
-            self._set_status(" · ".join([*parts, f"{seconds:.2f} s", "computing the error map…"]))
+            show_output(self._viewer, "segments", shown.labels, layer, meta)
+        if shown.partial:
+            self._set_status(shown.status(seconds))
             return
-        self._shown[source_key(layer)] = (result, inputs)
+        self._shown[source_key(layer)] = (shown.result, shown.inputs)
         self._record_classifier(layer, None if out is None else out.classifier)
-        self._record_export(layer, angles_deg, result, out, inputs)
-        parts += [
-            f"{summary['n_components']} PCA components "
-            f"({summary['explained_variance']:.0%} variance)",
-            f"mean reconstruction error {summary['mean_reconstruction_error']:.3g}",
-        ]
-        masked_text = mask_text(result.mask_counts)
-        if masked_text:
-            parts.append(masked_text)
-        parts.append(f"{seconds:.2f} s")
-        self._done(" · ".join(parts))
+        self._record_export(layer, angles_deg, shown)
+        self._done(shown.status(seconds))
+
+    def _show_complete(self, layer: Layer, shown: ShownResult) -> None:
+        """The layers of a complete result below the segments: the error map, the
+        diagnostics (masked pixels, fit residual) and the HSV and Stokes views."""
+        result, meta = shown.result, shown.meta
+        # the error map (added hidden) goes below the segments, which overlay the stack
+        error = np.array(result.reconstruction_error)
+        self._show_below_segments("error", error, layer, meta)
+        masked = shown.masked()
+        if self._shows_diagnostics(layer, result, masked):
+            residual = np.array(result.residual)
+            self._show_below_segments("residual", residual, layer, meta)
+            self._show_below_segments("masked", masked, layer, meta)
+        if self.views.value:
+            self._show_views(layer, result, meta)
 
     def _record_classifier(self, layer: Layer, classifier: PixelClassifier | None) -> None:
         """Keep the classifier behind ``layer``'s segments (for *Save classifier…* and
@@ -1345,26 +1091,6 @@ class SegmentWidget(StackWidget):
             return True
         return any(find_output(self._viewer, r, layer) is not None for r in ("masked", "residual"))
 
-
-def classifier_parts(
-    out: ClassifierOutput, confidence: np.ndarray, path: str | None = None
-) -> list[str]:
-    """The status line's first parts for labels from the pixel classifier."""
-    classes = out.prediction.classes
-    names = ", ".join(str(int(c)) for c in classes)
-    source = "from scribbles" if out.trained else f"from the classifier {Path(path or '').name}"
-    parts = [f"{classes.size} materials {source} (labels {names})"]
-    if out.trained:
-        parts.append(f"{out.classifier.n_training_pixels} training pixels")
-    parts.append(f"mean class probability {float(confidence.mean()):.2f}")
-    return parts
-
-
-def _input_info(layer: Layer | None, key: str | None, digest: str | None) -> dict | None:
-    """What the segments' metadata records about a mask or scribbles layer."""
-    if layer is None or key is None:
-        return None
-    return {"name": layer.name, "layer_id": key, "digest": digest}
 
 
 def _disconnect_edits(layer: Any, callback: Any) -> None:
