@@ -34,6 +34,17 @@ def is_angle_stack(layer: Layer) -> bool:
     )
 
 
+def ask_file(
+    parent: QWidget, title: str, start: str, filters: str, save: bool = False
+) -> str | None:
+    """A file chosen in a Qt dialog, to save or to open (None when cancelled)."""
+    from qtpy.QtWidgets import QFileDialog
+
+    ask = QFileDialog.getSaveFileName if save else QFileDialog.getOpenFileName
+    path, _ = ask(parent, title, start, filters)
+    return path or None
+
+
 @runtime_checkable
 class ClassifierListener(Protocol):
     """A docked widget that wants each new pixel classifier of a stack (the

@@ -17,7 +17,8 @@ and the widgets show what they return.
   result (:func:`shown_result`, :class:`ExportRecord`).
 - :mod:`~napari_polarseg.widgets.session.inputs` and
   :mod:`~napari_polarseg.widgets.session.text`: content digests, status texts, error
-  messages, the angles field.
+  messages, the angles field; :mod:`~napari_polarseg.widgets.session.files`: the
+  parameters JSON.
 """
 
 from .classify import (
@@ -30,6 +31,7 @@ from .classify import (
     classifier_text,
     scribble_problem,
 )
+from .files import write_params_json
 from .inputs import colour_stack_of, content_digest, input_info, region_digest
 from .jobs import (
     SegmentRequest,
@@ -91,4 +93,5 @@ __all__ = [
     "stack_pipeline",
     "stage_text",
     "write_classifier_job",
+    "write_params_json",
 ]
