@@ -4,6 +4,7 @@ Run/Cancel, status."""
 from __future__ import annotations
 
 import contextlib
+from collections.abc import Callable
 from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
 import numpy as np
@@ -43,6 +44,20 @@ def ask_file(
     ask = QFileDialog.getSaveFileName if save else QFileDialog.getOpenFileName
     path, _ = ask(parent, title, start, filters)
     return path or None
+
+
+class WidgetPart:
+    """Base of the mixins a widget is built from (the Segment widget's parts).
+
+    Annotations only: the :class:`StackWidget` attributes every part uses.
+    """
+
+    _viewer: napari.viewer.Viewer
+    native: Any
+    stack_layer: ComboBox
+    _set_status: Callable[[str], None]
+    _fail: Callable[[PolarsegError], None]
+    _done: Callable[[str], None]
 
 
 @runtime_checkable
@@ -220,6 +235,15 @@ class StackWidget(ScrollingContainer):
             and layer.ndim == 2
             and tuple(layer.data.shape) == size
         ]
+
+    def _labels_box(self, label: str, none: str, tooltip: str) -> ComboBox:
+        """A chooser of the user's Labels layers that fit the stack (:meth:`_labels_choices`),
+        offering ``none`` for no layer, and at first on it."""
+        box = ComboBox(label=label, choices=self._labels_choices, nullable=True, tooltip=tooltip)
+        box.null_string = none
+        box.reset_choices()
+        box.value = None
+        return box
 
     def _on_layers_changed(self, *_: Any) -> None:
         try:

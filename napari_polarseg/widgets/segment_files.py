@@ -7,10 +7,10 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from magicgui.widgets import ComboBox, Container, PushButton
+from magicgui.widgets import Container, PushButton
 
 from ..engine import PolarsegError
-from ._base import ClassifierListener, ask_file
+from ._base import ClassifierListener, WidgetPart, ask_file
 from ._layers import source_key
 from ._runner import WorkerSlot
 from .session import (
@@ -26,13 +26,12 @@ from .session import (
 )
 
 if TYPE_CHECKING:
-    import napari
     from napari.layers import Layer
 
     from ..engine.analysis.pixel_classifier import PixelClassifier
 
 
-class ClassifierFiles:
+class ClassifierFiles(WidgetPart):
     """Mixin of :class:`~napari_polarseg.widgets.segment.SegmentWidget`: the pixel
     classifier behind the segments, its files and the loaded one.
 
@@ -40,11 +39,6 @@ class ClassifierFiles:
     (``shown_result``), ``run`` and ``_on_value_changed``, and its status line.
     """
 
-    _viewer: napari.viewer.Viewer
-    native: Any
-    stack_layer: ComboBox
-    _set_status: Any
-    _fail: Any
     current_scribbles: Any
     shown_result: Any
     run: Any
@@ -235,7 +229,7 @@ class ClassifierFiles:
                 widget.set_classifier(layer, classifier)
 
 
-class ResultExport:
+class ResultExport(WidgetPart):
     """Mixin of :class:`~napari_polarseg.widgets.segment.SegmentWidget`: *Export
     results…*, the chosen stack's last result as the folder ``polarseg segment --out``
     writes.
@@ -243,11 +237,7 @@ class ResultExport:
     Uses the widget's stack chooser, pipelines (``store``) and status line.
     """
 
-    native: Any
-    stack_layer: ComboBox
     store: PipelineStore
-    _set_status: Any
-    _fail: Any
 
     def _build_export_controls(self) -> None:
         """*Export results…* and the records it writes."""

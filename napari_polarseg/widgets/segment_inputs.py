@@ -4,18 +4,16 @@ edits painted into them), and the snapshot of everything a result depends on."""
 from __future__ import annotations
 
 import contextlib
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
-from magicgui.widgets import ComboBox, PushButton
+from magicgui.widgets import PushButton
 from napari.layers import Labels
 
 from ..engine import PolarsegError, SegmentParams
+from ._base import WidgetPart
 from ._layers import label_colormap, source_key
 from .session import LoadedClassifier, content_digest, region_digest
-
-if TYPE_CHECKING:
-    import napari
 
 #: Text of the "mask" menu entry that segments every pixel.
 NO_MASK = "none"
@@ -31,7 +29,7 @@ EDIT_EVENTS = ("paint", "data", "set_data")
 CUT_ONLY = ("scale", "scale_mode", "clustering", "min_segment_blocks", "n_segments")
 
 
-class MaskAndScribbles:
+class MaskAndScribbles(WidgetPart):
     """Mixin of :class:`~napari_polarseg.widgets.segment.SegmentWidget`: the mask and
     scribbles choosers, the edits painted into the chosen layers, the snapshot.
 
@@ -39,44 +37,31 @@ class MaskAndScribbles:
     classifier (``loaded``), the live check box and timer, and its status line.
     """
 
-    _viewer: napari.viewer.Viewer
-    native: Any
-    stack_layer: ComboBox
     angles: Any
     live: Any
     loaded: LoadedClassifier | None
     _timer: Any
-    _labels_choices: Any
-    _set_status: Any
-    _fail: Any
+    _labels_box: Any
     params: Any
 
     def _build_input_controls(self) -> None:
         """The mask and scribbles choosers and *New scribbles layer*."""
         self._watched: dict[str, Any] = {"mask": None, "scribbles": None}
-        self.mask_layer = ComboBox(
-            label="mask",
-            choices=self._labels_choices,
-            nullable=True,
-            tooltip="Segment only where this Labels layer is non-zero (same height x width "
-            "as the stack); saturated and black samples are left out in any case",
+        self.mask_layer = self._labels_box(
+            "mask",
+            NO_MASK,
+            "Segment only where this Labels layer is non-zero (same height x width as the "
+            "stack); saturated and black samples are left out in any case",
         )
-        self.mask_layer.null_string = NO_MASK
-        self.mask_layer.reset_choices()
-        self.mask_layer.value = None
-        self.scribbles_layer = ComboBox(
-            label="scribbles",
-            choices=self._labels_choices,
-            nullable=True,
-            tooltip="Strokes per material in a Labels layer of the stack's height x width "
+        self.scribbles_layer = self._labels_box(
+            "scribbles",
+            NO_SCRIBBLES,
+            "Strokes per material in a Labels layer of the stack's height x width "
             "(0 = unlabelled, 1, 2, … = materials, at least two): a pixel classifier "
             "(random forest on multi-scale polarisation features) trained on the "
             "scribbled pixels replaces the normalized cut; with live update every stroke "
             "retrains it",
         )
-        self.scribbles_layer.null_string = NO_SCRIBBLES
-        self.scribbles_layer.reset_choices()
-        self.scribbles_layer.value = None
         self.new_scribbles_button = PushButton(
             text="New scribbles layer",
             tooltip="Add an empty Labels layer of the stack's size, choose it as the "

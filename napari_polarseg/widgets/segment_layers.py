@@ -6,21 +6,21 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from magicgui.widgets import CheckBox, ComboBox
+from magicgui.widgets import CheckBox
 
 from ..engine.physics.stokes import stokes_components
+from ._base import WidgetPart
 from ._layers import find_output, remove_output, show_output, source_key
 from .polarisation import VIEW_OUTPUTS, composite_for, view_mode_box
 from .session import ClassifierOutput, ShownResult, shown_result
 
 if TYPE_CHECKING:
-    import napari
     from napari.layers import Layer
 
     from ..engine import SegmentationResult
 
 
-class ResultLayers:
+class ResultLayers(WidgetPart):
     """Mixin of :class:`~napari_polarseg.widgets.segment.SegmentWidget`: the layers of
     its results and the *HSV and Stokes layers* option.
 
@@ -29,13 +29,9 @@ class ResultLayers:
     status line.
     """
 
-    _viewer: napari.viewer.Viewer
-    stack_layer: ComboBox
     _shown: dict[str, tuple[SegmentationResult, dict[str, Any]]]
     _record_classifier: Any
     _record_export: Any
-    _set_status: Any
-    _done: Any
 
     def _build_view_controls(self) -> None:
         """*HSV and Stokes layers* and the *HSV view* menu; the last result's arrays."""

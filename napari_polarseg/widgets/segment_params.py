@@ -11,7 +11,7 @@ from magicgui.widgets import ComboBox, Container, PushButton
 from ..engine import PolarsegError, SegmentParams
 from ..engine.params import PARAM_SPECS, PRESET_HELP, PRESETS, ParamSpec
 from ..io import read_params_file
-from ._base import ask_file
+from ._base import WidgetPart, ask_file
 from .param_controls import controlled_names, param_controls
 from .session import write_params_json
 
@@ -19,7 +19,7 @@ if TYPE_CHECKING:
     from magicgui.widgets import Widget
 
 
-class ParameterControls:
+class ParameterControls(WidgetPart):
     """Mixin of :class:`~napari_polarseg.widgets.segment.SegmentWidget`: its parameters.
 
     :meth:`_build_parameter_controls` makes the preset menu, the parameter-file buttons
@@ -28,10 +28,6 @@ class ParameterControls:
     ``native``, ``_set_status`` and ``_fail`` (of
     :class:`~napari_polarseg.widgets._base.StackWidget`).
     """
-
-    native: Any
-    _set_status: Any
-    _fail: Any
 
     def _build_parameter_controls(self, specs: dict[str, ParamSpec] | None) -> None:
         """The preset menu, the parameter-file buttons and the parameter controls."""
@@ -181,4 +177,3 @@ class ParameterControls:
         path = self._ask_path(save=False)
         if path:
             self.load_params(path)
-
