@@ -83,21 +83,25 @@ class MaskAndScribbles(WidgetPart):
     # -- mask and scribbles -----------------------------------------------------------
     def current_mask(self) -> tuple[str | None, np.ndarray | None]:
         """Key and (H, W) bool region (a copy; True = use) of the chosen mask, or Nones."""
-        layer = self.mask_layer.value
+        layer = self._chosen(self.mask_layer, "mask")
         if layer is None:
             return None, None
-        if layer not in self._viewer.layers:
-            raise PolarsegError(f"the mask layer {layer.name!r} is no longer in the viewer")
         return source_key(layer), np.asarray(layer.data) != 0
 
     def current_scribbles(self) -> tuple[str | None, np.ndarray | None]:
         """Key and (H, W) labels (a copy) of the chosen scribbles layer, or Nones."""
-        layer = self.scribbles_layer.value
+        layer = self._chosen(self.scribbles_layer, "scribbles")
         if layer is None:
             return None, None
-        if layer not in self._viewer.layers:
-            raise PolarsegError(f"the scribbles layer {layer.name!r} is no longer in the viewer")
         return source_key(layer), np.array(layer.data, copy=True)
+
+    def _chosen(self, chooser: Any, role: str) -> Any:
+        """The layer ``chooser`` names (None for none); raises PolarsegError when it has
+        been removed from the viewer."""
+        layer = chooser.value
+        if layer is not None and layer not in self._viewer.layers:
+            raise PolarsegError(f"the {role} layer {layer.name!r} is no longer in the viewer")
+        return layer
 
     def new_scribbles_layer(self, *_: Any) -> Labels | None:
         """Add an empty Labels layer for strokes, choose it and start the paint brush.

@@ -26,7 +26,7 @@ from ..engine.analysis.sweep_result import DEFAULT_SCORE, SCORES, SweepResult
 from ._base import StackWidget, ask_file
 from .batch import params_from
 from .canvas import figure_canvas, napari_theme, show_message
-from .session import write_params_json
+from .session import relay, write_params_json
 
 if TYPE_CHECKING:
     import napari
@@ -128,15 +128,15 @@ def sweep_job(
         stack, angles_rad, base, windows, degrees, refractive_indices, truth, score, mask=mask
     )
     try:
-        while True:
-            try:
-                done, total, cell = next(gen)
-            except StopIteration as stop:
-                return stop.value
-            text = f"w={cell.window} L={cell.degree} n={cell.refractive_index:g}"
-            yield text, done, total
+        return (yield from relay(gen, cell_stage))
     finally:
         gen.close()
+
+
+def cell_stage(item: tuple[int, int, Any]) -> tuple[str, int, int]:
+    """``("w=… L=… n=…", done, total)`` of a sweep's ``(done, total, cell)``."""
+    done, total, cell = item
+    return f"w={cell.window} L={cell.degree} n={cell.refractive_index:g}", done, total
 
 
 class SweepWidget(StackWidget):

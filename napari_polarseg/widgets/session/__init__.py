@@ -43,7 +43,7 @@ from .jobs import (
     write_classifier_job,
 )
 from .results import NO_INPUTS, ExportRecord, ShownResult, shown_result
-from .runs import Job, Partial, Result, Stage, StageFailed, blas_share, guarded
+from .runs import Job, Partial, Result, Stage, StageFailed, blas_share, guarded, relay
 from .store import PipelineStore, stack_pipeline
 from .text import (
     degenerate_text,
@@ -86,6 +86,7 @@ __all__ = [
     "parse_angles",
     "read_classifier_job",
     "region_digest",
+    "relay",
     "scribble_problem",
     "segment_job",
     "segment_request",

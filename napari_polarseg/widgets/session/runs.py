@@ -115,3 +115,14 @@ def guarded(job: Job, *args: Any, **kwargs: Any) -> Generator[Stage, None, Any]:
         except RuntimeError as exc:
             raise StageFailed(f"{type(exc).__name__}: {exc}") from exc
     return result
+
+
+def relay(items: Iterator[Any], stage: Callable[[Any], Stage]) -> Generator[Stage, None, Any]:
+    """Yield ``stage(item)`` for every item of the generator ``items`` and return what it
+    returns: an engine iterator (a batch's rows, a sweep's cells) as a job's stages."""
+    while True:
+        try:
+            item = next(items)
+        except StopIteration as stop:
+            return stop.value
+        yield stage(item)
