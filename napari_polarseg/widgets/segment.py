@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import functools
 import time
-from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -31,6 +30,7 @@ from .segment_layers import ResultLayers
 from .segment_params import ParameterControls
 from .session import (
     ClassifierOutput,
+    Delivery,
     PipelineStore,
     colour_stack_of,
     input_info,
@@ -51,7 +51,6 @@ __all__ = [
     "NO_MASK",
     "NO_SCRIBBLES",
     "PRESETS",
-    "Delivery",
     "SegmentWidget",
 ]
 
@@ -65,23 +64,6 @@ CONTROLLED = controlled_names(PARAM_SPECS)
 
 #: Parameter controls shown above the collapsed *advanced settings* section.
 FIRST_CONTROLS = ("n_segments",)
-
-
-@dataclass(frozen=True)
-class Delivery:
-    """What a run's result is checked against and shown with: the stack layer, its
-    angles, the snapshot of the inputs when it was requested, the mask, scribbles and
-    classifier file used, and its start time (``time.perf_counter``)."""
-
-    layer: Any
-    angles_deg: np.ndarray
-    snap: tuple[Any, ...]
-    inputs: dict[str, Any]
-    t0: float
-
-    def seconds(self) -> float:
-        """Seconds since the run was requested."""
-        return time.perf_counter() - self.t0
 
 
 class SegmentWidget(

@@ -42,7 +42,7 @@ from .jobs import (
     segment_request,
     write_classifier_job,
 )
-from .results import NO_INPUTS, ExportRecord, ShownResult, shown_result
+from .results import NO_INPUTS, Delivery, ExportRecord, ShownResult, shown_result
 from .runs import Job, Partial, Result, Stage, StageFailed, blas_share, guarded, relay
 from .store import PipelineStore, stack_pipeline
 from .text import (
@@ -59,6 +59,7 @@ __all__ = [
     "NO_INPUTS",
     "PIPELINE_STAGES",
     "ClassifierOutput",
+    "Delivery",
     "ExportRecord",
     "Job",
     "LoadedClassifier",

@@ -9,6 +9,7 @@ the ``segments`` layer, the metadata of every output layer and the status line;
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -20,6 +21,23 @@ from .text import degenerate_text, mask_text
 
 #: The inputs of a run without mask, scribbles or classifier file.
 NO_INPUTS: dict[str, Any] = {"mask": None, "scribbles": None, "classifier": None}
+
+
+@dataclass(frozen=True)
+class Delivery:
+    """What a Segment-widget run's result is checked against and shown with: the stack
+    layer, its angles, the snapshot of the inputs when it was requested, the mask,
+    scribbles and classifier file used, and its start time (``time.perf_counter``)."""
+
+    layer: Any
+    angles_deg: np.ndarray
+    snap: tuple[Any, ...]
+    inputs: dict[str, Any]
+    t0: float
+
+    def seconds(self) -> float:
+        """Seconds since the run was requested."""
+        return time.perf_counter() - self.t0
 
 
 @dataclass
