@@ -23,8 +23,6 @@ MODULE_ALLOWLIST = {
     "batch.py",
     "classifier_file.py",
     "export.py",
-    "widgets/_runner.py",
-    "widgets/segment.py",
 }
 
 # Functions over MAX_FUNCTION_LINES, as "path:qualified name".
@@ -35,9 +33,6 @@ FUNCTION_ALLOWLIST = {
     "export.py:write_outputs",
     "export.py:write_result_folder",
     "figures.py:sweep_heatmap_figure",
-    "widgets/_runner.py:WorkerSlot._launch",
-    "widgets/segment.py:SegmentWidget.__init__",
-    "widgets/segment.py:SegmentWidget._show",
     # engine/, not done on the engine-packages branch: its docstring documents eleven
     # keyword parameters (the body is helpers); a settings dataclass would change its API
     "engine/synthetic/surface.py:render_surface",

@@ -15,6 +15,8 @@ GUI_ROOTS = ["napari", "magicgui", "qtpy", "PyQt5", "PyQt6", "PySide2", "PySide6
         "napari_polarseg.engine",
         "napari_polarseg.engine.pipeline",
         "napari_polarseg.export",
+        # the widgets' headless session layer (pipeline store, jobs, results, texts)
+        "napari_polarseg.widgets.session",
     ],
 )
 def test_import_loads_no_gui_module(module):

@@ -4,6 +4,7 @@ Run/Cancel, status."""
 from __future__ import annotations
 
 import contextlib
+from collections.abc import Callable
 from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
 import numpy as np
@@ -14,8 +15,10 @@ from qtpy.QtCore import QEvent, QObject
 from qtpy.QtWidgets import QScrollArea, QWidget
 
 from ..engine import PolarsegError
+from ..io import parse_angles
 from ._layers import ANGLES_KEY, find_output, layer_tag, source_key
-from ._runner import PROGRESS_STEPS, WorkerSlot, format_angles, parse_angles
+from ._runner import PROGRESS_STEPS, WorkerSlot
+from .session import format_angles
 
 if TYPE_CHECKING:
     import napari
@@ -31,6 +34,31 @@ def is_angle_stack(layer: Layer) -> bool:
         and layer.ndim == 3
         and layer_tag(layer) is None
     )
+
+
+def ask_file(
+    parent: QWidget, title: str, start: str, filters: str, save: bool = False
+) -> str | None:
+    """A file chosen in a Qt dialog, to save or to open (None when cancelled)."""
+    from qtpy.QtWidgets import QFileDialog
+
+    ask = QFileDialog.getSaveFileName if save else QFileDialog.getOpenFileName
+    path, _ = ask(parent, title, start, filters)
+    return path or None
+
+
+class WidgetPart:
+    """Base of the mixins a widget is built from (the Segment widget's parts).
+
+    Annotations only: the :class:`StackWidget` attributes every part uses.
+    """
+
+    _viewer: napari.viewer.Viewer
+    native: Any
+    stack_layer: ComboBox
+    _set_status: Callable[[str], None]
+    _fail: Callable[[PolarsegError], None]
+    _done: Callable[[str], None]
 
 
 @runtime_checkable
@@ -209,6 +237,15 @@ class StackWidget(ScrollingContainer):
             and tuple(layer.data.shape) == size
         ]
 
+    def _labels_box(self, label: str, none: str, tooltip: str) -> ComboBox:
+        """A chooser of the user's Labels layers that fit the stack (:meth:`_labels_choices`),
+        offering ``none`` for no layer, and at first on it."""
+        box = ComboBox(label=label, choices=self._labels_choices, nullable=True, tooltip=tooltip)
+        box.null_string = none
+        box.reset_choices()
+        box.value = None
+        return box
+
     def _on_layers_changed(self, *_: Any) -> None:
         try:
             self._refresh_stacks()
@@ -234,7 +271,7 @@ class StackWidget(ScrollingContainer):
             self.angles.value = format_angles(angles)
         elif self.angles.value:
             try:
-                if parse_angles(self.angles.value).size != layer.data.shape[0]:
+                if parse_angles(self.angles.value, option=None).size != layer.data.shape[0]:
                     self.angles.value = ""
             except PolarsegError:
                 self.angles.value = ""
@@ -244,7 +281,7 @@ class StackWidget(ScrollingContainer):
         layer = self.stack_layer.value
         if layer is None:
             raise PolarsegError("choose an angle-stack image layer (angles, rows, columns)")
-        return layer, parse_angles(self.angles.value)
+        return layer, parse_angles(self.angles.value, option=None)
 
     def output(self, role: str, source: Layer | None = None) -> Layer | None:
         """The plugin's ``role`` layer (e.g. ``"segments"``) for ``source`` or the chosen stack."""

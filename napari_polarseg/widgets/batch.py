@@ -16,6 +16,7 @@ Both are thin: the work is done by the engine; nothing here is needed by the CLI
 
 from __future__ import annotations
 
+import itertools
 import threading
 from collections.abc import Generator
 from pathlib import Path
@@ -41,10 +42,11 @@ from ..engine.analysis.change_test import DEFAULT_FALSE_ALARM
 from ..engine.analysis.timeseries import METHODS, segment_timeseries
 from ..engine.analysis.timeseries_result import TimeSeriesResult
 from ..engine.params import AUTO, RECOMMENDED
-from ..io import read_params_file
+from ..io import parse_angles, read_params_file
 from ._base import ScrollingContainer, is_angle_stack
 from ._layers import ANGLES_KEY, label_colormap
-from ._runner import WorkerSlot, parse_angles
+from ._runner import WorkerSlot
+from .session import relay
 
 if TYPE_CHECKING:
     import napari
@@ -87,15 +89,13 @@ def batch_job(
     stop: threading.Event,
 ) -> Generator[tuple[str, int, int], None, batch_engine.BatchResult]:
     """Worker job: run the batch, yielding ``(scene: status, index, total)`` per scene."""
-    gen = batch_engine.iter_batch(scenes, out, params, cancel=stop.is_set, **options)
-    index = 0
-    while True:
-        try:
-            row = next(gen)
-        except StopIteration as stop_iteration:
-            return stop_iteration.value
-        index += 1
-        yield f"{row['scene']}: {row['status']}", index, len(scenes)
+    rows = batch_engine.iter_batch(scenes, out, params, cancel=stop.is_set, **options)
+    index = itertools.count(1)
+
+    def stage(row: dict[str, Any]) -> tuple[str, int, int]:
+        return f"{row['scene']}: {row['status']}", next(index), len(scenes)
+
+    return (yield from relay(rows, stage))
 
 
 def params_from(viewer: napari.viewer.Viewer, source: str, path: Any = None) -> SegmentParams:
@@ -499,7 +499,7 @@ class TimeSeriesWidget(ScrollingContainer):
                 meta = layer.metadata.get(ANGLES_KEY) if isinstance(layer.metadata, dict) else None
                 if meta is None:
                     raise PolarsegError(f"layer {layer.name!r} has no polariser angles")
-                angles.append(np.deg2rad(parse_angles(",".join(str(a) for a in meta))))
+                angles.append(np.deg2rad(parse_angles(",".join(str(a) for a in meta), option=None)))
             params = self.params()
         except PolarsegError as exc:
             self._set_status(f"error: {exc}")

@@ -14,11 +14,18 @@ import numpy as np
 from magicgui.widgets import ComboBox, PushButton
 
 from .. import figures
-from ..engine import STAGES, Pipeline, PolarsegError, SegmentParams, validity_mask
+from ..engine import STAGES, PolarsegError, SegmentParams
 from ..engine.analysis import plots
 from ._base import StackWidget
 from ._layers import TAG, find_output, fitted_limits, source_key
-from ._runner import CLASSIFIER_STAGES, ClassifierOutput, classifier_stages, content_digest
+from .canvas import figure_canvas, napari_theme, show_message
+from .session import (
+    CLASSIFIER_STAGES,
+    ClassifierOutput,
+    classifier_stages,
+    content_digest,
+    stack_pipeline,
+)
 
 if TYPE_CHECKING:
     import napari
@@ -67,13 +74,11 @@ def segment_job(
     labels) the pixel classifier trained on them replaces the normalized cut, with
     ``classifier_file`` the classifier saved there (read again, checked, not retrained).
     Returns the result, or for the classifier the
-    :class:`~napari_polarseg.widgets._runner.ClassifierOutput` (result and classifier).
+    :class:`~napari_polarseg.widgets.session.ClassifierOutput` (result and classifier).
     """
     from ..engine.analysis.pixel_segmentation import PixelSegmenter
 
-    stack = np.asarray(data)
-    mask = validity_mask(stack, saturation="auto", dark_level=0, region=region)
-    pipe = Pipeline(stack, np.asarray(angles_rad, dtype=float), params, mask=mask)
+    pipe = stack_pipeline(data, angles_rad, params, region)
     if scribbles is not None or classifier_file is not None:
         classifier = None
         if classifier_file is not None:
@@ -100,21 +105,6 @@ def histogram_job(
     return hist
 
 
-def napari_theme(viewer: napari.viewer.Viewer) -> dict[str, str]:
-    """Figure colours from the viewer's napari theme (a dark grey if unavailable)."""
-    try:
-        from napari.utils.theme import get_theme
-
-        theme = get_theme(viewer.theme)
-        return {
-            "background": theme.background.as_hex(),
-            "foreground": theme.text.as_hex(),
-            "accent": theme.highlight.as_hex() if theme.highlight else figures.DARK["accent"],
-        }
-    except Exception:  # noqa: BLE001 - any theme problem: fall back to dark grey
-        return dict(figures.DARK)
-
-
 class PlotsWidget(StackWidget):
     """Plots of the last segmentation of an angle stack (thesis figures 4.1, 5.17).
 
@@ -138,9 +128,6 @@ class PlotsWidget(StackWidget):
     progress_desc = "Polarisation plots"
 
     def __init__(self, viewer: napari.viewer.Viewer) -> None:
-        from matplotlib.backends.backend_qtagg import FigureCanvasQTAgg
-        from matplotlib.figure import Figure
-
         super().__init__(viewer)
         self.result: SegmentationResult | None = None
         self.histograms: plots.ReconstructionHistograms | None = None
@@ -153,9 +140,7 @@ class PlotsWidget(StackWidget):
         self.components_button = PushButton(text="Add component maps")
         self._add_parameters([self.plot, self.components_button])
         self.theme = napari_theme(viewer)
-        self.figure = Figure(figsize=(4.0, 3.2), layout="constrained")
-        self.canvas = FigureCanvasQTAgg(self.figure)
-        self.canvas.setMinimumHeight(280)
+        self.figure, self.canvas = figure_canvas((4.0, 3.2), min_height=280)
         self.add_native(self.canvas, expand=True)
         self.plot.changed.connect(self.draw)
         self.components_button.changed.connect(self.add_component_maps)
@@ -370,11 +355,7 @@ class PlotsWidget(StackWidget):
         figures.importances_figure(data, self.figure, self.theme)
 
     def _message(self, text: str) -> None:
-        self.figure.clear()
-        self.figure.set_facecolor(self.theme["background"])
-        self.figure.text(
-            0.5, 0.5, text, ha="center", va="center", wrap=True, color=self.theme["foreground"]
-        )
+        show_message(self.figure, self.theme, text)
 
     # -- component layers --------------------------------------------------------------
     def add_component_maps(self, *_: Any) -> list[Layer]:

@@ -1,60 +1,61 @@
-"""The "Segment by material" widget: the cached engine pipeline, run in a worker thread."""
+"""The "Segment by material" widget: the cached engine pipeline, run in a worker thread.
+
+Thin: the jobs, pipelines and result texts are the session layer
+(:mod:`napari_polarseg.widgets.session`); the widget's parts are mixins, one module each:
+:mod:`~napari_polarseg.widgets.segment_params` (the parameter controls and files),
+:mod:`~napari_polarseg.widgets.segment_inputs` (mask, scribbles, snapshot),
+:mod:`~napari_polarseg.widgets.segment_files` (classifier files, *Export results…*) and
+:mod:`~napari_polarseg.widgets.segment_layers` (the output layers). This module builds
+the widget and runs it.
+"""
 
 from __future__ import annotations
 
-import contextlib
+import functools
 import time
-from collections.abc import Callable, Generator
-from dataclasses import dataclass, field
-from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from magicgui.widgets import CheckBox, ComboBox, Container, PushButton
-from napari.layers import Labels
+from magicgui.widgets import CheckBox, Container
 from qtpy.QtCore import QTimer
 
-from ..engine import STAGES, Pipeline, PolarsegError, SegmentationResult, SegmentParams
-from ..engine.params import PARAM_SPECS, PRESET_HELP, PRESETS, ParamSpec
-from ..engine.physics.pixel_mask import mask_reasons
-from ..engine.physics.stokes import stokes_components
-from ..io import read_params_file
-from ._base import ClassifierListener, StackWidget
-from ._layers import find_output, label_colormap, remove_output, show_output, source_key
-from ._runner import (
-    CLASSIFIER_STAGES,
+from ..engine import Pipeline, PolarsegError, SegmentationResult
+from ..engine.params import PARAM_SPECS, PRESETS, ParamSpec
+from ._base import StackWidget
+from ._layers import find_output, source_key
+from .param_controls import controlled_names
+from .segment_files import ClassifierFiles, ResultExport
+from .segment_inputs import CUT_ONLY, NO_MASK, NO_SCRIBBLES, MaskAndScribbles
+from .segment_layers import ResultLayers
+from .segment_params import ParameterControls
+from .session import (
     ClassifierOutput,
-    Partial,
+    Delivery,
     PipelineStore,
-    Result,
-    WorkerSlot,
-    classifier_stages,
-    content_digest,
+    colour_stack_of,
+    input_info,
     scribble_problem,
+    segment_request,
 )
-from .param_controls import controlled_names, param_controls
-from .polarisation import VIEW_OUTPUTS, composite_for, view_mode_box
 
 if TYPE_CHECKING:
     import napari
     from napari.layers import Layer
 
-    from ..engine.analysis.pixel_classifier import PixelClassifier
+# Names importers take from this module (tests, benchmarks): defined beside the mixins.
+__all__ = [
+    "CONTROLLED",
+    "CUT_ONLY",
+    "FIRST_CONTROLS",
+    "LIVE_DELAY_MS",
+    "NO_MASK",
+    "NO_SCRIBBLES",
+    "PRESETS",
+    "SegmentWidget",
+]
 
 #: Milliseconds the live update waits after the last change before it reruns.
 LIVE_DELAY_MS = 150
-
-
-#: Text of the "mask" menu entry that segments every pixel.
-NO_MASK = "none"
-
-#: Text of the "scribbles" menu entry that segments without supervision (normalized cut).
-NO_SCRIBBLES = "none (unsupervised)"
-
-#: Layer events that mean the user edited a Labels layer: a brush, fill or eraser stroke
-#: (``paint``), new data (``data``), undo/redo and other refreshes (``set_data``).
-EDIT_EVENTS = ("paint", "data", "set_data")
-
 
 #: SegmentParams fields that have a control in the widget (the labelled specs of the
 #: table, :func:`~napari_polarseg.widgets.param_controls.controlled_names`); the others
@@ -64,235 +65,15 @@ CONTROLLED = controlled_names(PARAM_SPECS)
 #: Parameter controls shown above the collapsed *advanced settings* section.
 FIRST_CONTROLS = ("n_segments",)
 
-#: Controls of the normalized cut only: disabled while scribbles replace the cut.
-CUT_ONLY = ("scale", "scale_mode", "clustering", "min_segment_blocks", "n_segments")
 
-
-def segment_job(
-    store: PipelineStore,
-    key: str,
-    data: Any,
-    angles_rad: np.ndarray,
-    params: SegmentParams,
-    region: np.ndarray | None = None,
-    mask_key: str | None = None,
-    prefetch: bool = False,
-    cancel: Callable[[], bool] | None = None,
-    report: Callable[[str, float, int], None] | None = None,
-) -> Generator[Any, None, Any]:
-    """Worker job: run the stale stages of the layer's cached pipeline, then assemble.
-
-    ``region`` (H, W bool, True = use) restricts the segmentation; saturated and black
-    samples are left out in any case (:meth:`PipelineStore.obtain`). Yields ``(stage,
-    index, total)`` after every stage; stopping the worker between two yields cancels the
-    run and leaves the stages computed so far cached. When the reconstruction (error map)
-    has to be recomputed, the result without it is yielded first as a
-    :class:`~napari_polarseg.widgets._runner.Partial`: the segments are shown while the
-    last stage runs (after a change of n or w it is a third of the run).
-
-    With ``prefetch``, the result is yielded as a
-    :class:`~napari_polarseg.widgets._runner.Result` and the job goes on in idle time
-    with :meth:`Pipeline.prefetch <napari_polarseg.engine.Pipeline.prefetch>` (the
-    eigensolves one more segment needs), stopping at the next request.
-
-    ``cancel`` (the runner's stop request) is handed to the normalized cut, which checks
-    it before every product of its eigensolvers and raises
-    :class:`~napari_polarseg.engine.errors.Cancelled`: Cancel or a newer request stops a
-    long cut (or a prefetch) at once instead of at the end of the stage.
-
-    ``report`` (the runner's, ``WorkerSlot.submit(..., reports=True)``) receives the
-    progress within the stages that loop in chunks (harmonics, reconstruction) as
-    ``(stage, index, total)`` with a fractional ``index`` on the same scale as the
-    yields (:meth:`Pipeline.run_iter <napari_polarseg.engine.Pipeline.run_iter>`).
-    """
-    pipe = store.obtain(key, data, angles_rad, params, region=region, mask_key=mask_key)
-    total = len(STAGES)
-    if pipe.is_fresh("reconstruction", params):
-        yield from pipe.run_iter(params, reconstruction=True, cancel=cancel, progress=report)
-    else:
-        within = None
-        if report is not None:
-
-            def within(stage: str, index: float, _n: int) -> None:
-                report(stage, index, total)
-
-        last = 0
-        for stage, index, _ in pipe.run_iter(params, False, cancel=cancel, progress=within):
-            last = index
-            yield stage, index, total
-        yield Partial(pipe.result(params, reconstruction=False))
-        share = None
-        if report is not None:
-
-            def share(done: float) -> None:
-                report(STAGES[-1], last + done * (total - last), total)
-
-        pipe.get("reconstruction", params, share)
-        yield STAGES[-1], total, total
-    result = pipe.result(params, reconstruction=True)
-    if prefetch:
-        yield Result(result)
-        for _ in pipe.prefetch(params, cancel):
-            yield "prefetch", total, total
-    return result
-
-
-def colour_stack_of(layer: Layer) -> np.ndarray | None:
-    """The (colour, angle, H, W) stacks a colour-polarisation layer carries in
-    ``metadata["colour_stack"]`` (the reader puts them there), if they fit its data."""
-    meta = layer.metadata if isinstance(layer.metadata, dict) else {}
-    colour = meta.get("colour_stack")
-    if not isinstance(colour, np.ndarray) or colour.ndim != 4:
-        return None
-    return colour if colour.shape[1:] == np.shape(layer.data) else None
-
-
-def classifier_job(
-    store: PipelineStore,
-    key: str,
-    data: Any,
-    angles_rad: np.ndarray,
-    params: SegmentParams,
-    scribbles: np.ndarray | None,
-    classifier: PixelClassifier | None,
-    region: np.ndarray | None = None,
-    mask_key: str | None = None,
-    colour_stack: np.ndarray | None = None,
-    cancel: Callable[[], bool] | None = None,
-) -> Generator[Any, None, ClassifierOutput]:
-    """Worker job of the scribble mode: the cached pipeline's stages up to the block
-    features, the stack's kept pixel features, then the pixel classifier trained on
-    ``scribbles`` (or the loaded ``classifier`` applied) and the reconstruction
-    (:func:`~napari_polarseg.widgets._runner.classifier_stages`). ``cancel`` stops the
-    prediction between chunks. ``colour_stack`` (C, N, H, W): the colour stacks of a
-    colour-polarisation frame whose luminance is ``data`` (the reader's
-    ``metadata["colour_stack"]``), whose polarisation images add features."""
-    pipe = store.obtain(key, data, angles_rad, params, region=region, mask_key=mask_key)
-    segmenter = store.segmenter(key, colour_stack)
-    assert segmenter is not None
-    return (
-        yield from classifier_stages(
-            pipe, segmenter, params, scribbles, classifier, reconstruction=True, cancel=cancel
-        )
-    )
-
-
-def read_classifier_job(path: Path) -> Generator[tuple[str, int, int], None, PixelClassifier]:
-    """Worker job of *Load classifier…*: the checked classifier file (never runs code
-    from it; a bad file raises a one-line :class:`PolarsegError`)."""
-    from ..classifier_file import load_pixel_classifier
-
-    yield "reading", 1, 1
-    return load_pixel_classifier(path)
-
-
-def write_classifier_job(
-    path: Path, classifier: PixelClassifier
-) -> Generator[tuple[str, int, int], None, Path]:
-    """Worker job of *Save classifier…*: the classifier file, written atomically."""
-    from ..classifier_file import save_pixel_classifier
-
-    yield "writing", 1, 1
-    save_pixel_classifier(path, classifier)
-    return path
-
-
-def classifier_text(classifier: PixelClassifier) -> str:
-    """``"random_forest, 3 classes (1, 2, 3), 30 features, trained on 273 pixels"``."""
-    classes = ", ".join(str(int(c)) for c in classifier.classes)
-    return (
-        f"{classifier.params.model}, {classifier.classes.size} classes ({classes}), "
-        f"{len(classifier.feature_names)} features, "
-        f"trained on {classifier.n_training_pixels} pixels"
-    )
-
-
-@dataclass(eq=False)
-class LoadedClassifier:
-    """A classifier read by *Load classifier…*, applied instead of training.
-
-    ``strokes`` is the (layer key, content digest) of the chosen scribbles when it was
-    loaded: once they differ (the user painted, or chose other strokes) the widget
-    trains on the strokes again. ``serial`` tells one load from another in snapshots.
-    """
-
-    classifier: PixelClassifier
-    path: Path
-    strokes: tuple[str | None, str | None]
-    serial: int
-
-
-@dataclass
-class ExportRecord:
-    """What *Export results…* writes for a stack layer: its last result and inputs.
-
-    The keyword arguments of :func:`napari_polarseg.export.write_result_folder` but the
-    folder (and ``overview``/``plots``), captured when the result was shown.
-    """
-
-    stack: Any
-    angles_deg: np.ndarray
-    result: SegmentationResult
-    mask: Any = None
-    source: str | None = None
-    probabilities: np.ndarray | None = None
-    uncertainty: np.ndarray | None = None
-    info: dict[str, Any] = field(default_factory=dict)
-    summary: dict[str, Any] = field(default_factory=dict)
-
-    def kwargs(self) -> dict[str, Any]:
-        return {
-            "stack": self.stack,
-            "angles_deg": self.angles_deg,
-            "result": self.result,
-            "mask": self.mask,
-            "source": self.source,
-            "command": "napari",
-            "probabilities": self.probabilities,
-            "uncertainty": self.uncertainty,
-            "info": self.info,
-            "summary": self.summary,
-        }
-
-
-def export_job(
-    folder: Path, kwargs: dict[str, Any]
-) -> Generator[tuple[str, int, int], None, list[str]]:
-    """Worker job of *Export results…*: :func:`~napari_polarseg.export.write_result_folder`
-    (a file that cannot be written is reported as a :class:`PolarsegError`)."""
-    from ..export import OutputError, write_result_folder
-
-    yield "writing", 1, 1
-    try:
-        return write_result_folder(folder, **kwargs)
-    except OutputError as exc:
-        raise PolarsegError(str(exc)) from None
-
-
-def degenerate_text(summary: dict[str, Any]) -> str:
-    """The status line's warning of a degenerate result, from ``result.summary()``
-    (``"degenerate"``: one segment holds >= 95 % of the pixels, or every other is below
-    the minimum size), with what to try; "" when the result is not degenerate."""
-    if not summary.get("degenerate"):
-        return ""
-    return (
-        f"degenerate: {summary.get('degenerate_reason')} (try the recommended preset, "
-        "fewer or more segments, a larger window, or scribbles)"
-    )
-
-
-def mask_text(counts: dict[str, Any]) -> str:
-    """``"masked: 120 saturated, 3 black"`` from ``result.mask_counts`` ("" if none)."""
-    parts = mask_reasons(counts)
-    return f"masked: {', '.join(parts)}" if parts else ""
-
-
-def region_digest(region: np.ndarray | None) -> str | None:
-    """A short fingerprint of a region's content (None for no region)."""
-    return None if region is None else content_digest(np.asarray(region, dtype=bool))
-
-
-class SegmentWidget(StackWidget):
+class SegmentWidget(
+    ResultLayers,
+    ClassifierFiles,
+    ResultExport,
+    MaskAndScribbles,
+    ParameterControls,
+    StackWidget,
+):
     """Segment an angle stack by material (thesis section 4.5) with live parameters.
 
     Controls: a preset (thesis values or the recommended ones), *Load parameters…* and
@@ -369,142 +150,33 @@ class SegmentWidget(StackWidget):
         self, viewer: napari.viewer.Viewer, specs: dict[str, ParamSpec] | None = None
     ) -> None:
         super().__init__(viewer)
-        d = PRESETS["auto"]
-        self._base = d  # values of the fields without a control
         self.store = PipelineStore()
         #: Per stack key: (result, inputs) behind the stack's ``segments`` layer.
         self._shown: dict[str, tuple[SegmentationResult, dict[str, Any]]] = {}
-        #: Class probabilities (K, H, W) of the last scribble run shown, and the
-        #: scribble label of each class (None after an unsupervised run).
-        self.probabilities: np.ndarray | None = None
-        self.classes: np.ndarray | None = None
-        #: Uncertainty (H, W) of the last scribble run shown (None after an unsupervised run).
-        self.uncertainty: np.ndarray | None = None
-        #: Per stack key: the pixel classifier behind the stack's ``segments`` layer.
-        self._classifiers: dict[str, PixelClassifier] = {}
-        #: The classifier *Load classifier…* read, while it is applied.
-        self.loaded: LoadedClassifier | None = None
-        self._loads = 0  # serial number of the last load
-        self._classifier_dir = Path.home()
-        self._classifier_slot = WorkerSlot("Classifier file", on_status=self._set_status)
         self._requested: tuple[Any, ...] | None = None  # snapshot of the last request
         self._force = False  # a control changed: the next live run is not skipped
-        self._watched: dict[str, Any] = {"mask": None, "scribbles": None}
-        self._params_dir = Path.home()
         self._live_run = False  # run() was called by the live update
-        #: Per stack key: what *Export results…* writes (the last result shown).
-        self._exports: dict[str, ExportRecord] = {}
-        self._export_dir = Path.home()
-        self._export_slot = WorkerSlot("Export results", on_status=self._set_status)
-        self.preset = ComboBox(
-            label="preset",
-            choices=list(PRESETS),
-            value="auto",
-            tooltip="; ".join(f"{name}: {text}" for name, text in PRESET_HELP.items()),
-        )
-        self.load_button = PushButton(
-            text="Load parameters…",
-            tooltip="Set every control from a parameters JSON file (as written by 'Save "
-            "parameters…', or a params.json from polarseg segment)",
-        )
-        self.save_button = PushButton(
-            text="Save parameters…",
-            tooltip="Write the parameters as JSON, the format of polarseg segment --params",
-        )
-        self.params_file = Container(
-            layout="horizontal",
-            widgets=[self.load_button, self.save_button],
-            labels=False,
-            label="",
-        )
-        self.params_file.margins = (0, 0, 0, 0)
-        #: The parameter table the controls are made from (one control per labelled spec).
-        self.param_specs = dict(specs or PARAM_SPECS)
-        self.controlled = controlled_names(self.param_specs)
-        for name, control in param_controls(d.to_dict(), self.param_specs).items():
-            setattr(self, name, control)
-        self.specular_branch.visible = False
+        self._build_classifier_controls()
+        self._build_export_controls()
+        self._build_parameter_controls(specs)
         self.live = CheckBox(
             text="live update",
             value=False,
             tooltip="Rerun (only the stale stages) whenever a value changes or a stroke is "
             "painted into the chosen mask or scribbles layer",
         )
-        self.mask_layer = ComboBox(
-            label="mask",
-            choices=self._labels_choices,
-            nullable=True,
-            tooltip="Segment only where this Labels layer is non-zero (same height x width "
-            "as the stack); saturated and black samples are left out in any case",
-        )
-        self.mask_layer.null_string = NO_MASK
-        self.mask_layer.reset_choices()
-        self.mask_layer.value = None
-        self.scribbles_layer = ComboBox(
-            label="scribbles",
-            choices=self._labels_choices,
-            nullable=True,
-            tooltip="Strokes per material in a Labels layer of the stack's height x width "
-            "(0 = unlabelled, 1, 2, … = materials, at least two): a pixel classifier "
-            "(random forest on multi-scale polarisation features) trained on the "
-            "scribbled pixels replaces the normalized cut; with live update every stroke "
-            "retrains it",
-        )
-        self.scribbles_layer.null_string = NO_SCRIBBLES
-        self.scribbles_layer.reset_choices()
-        self.scribbles_layer.value = None
-        self.new_scribbles_button = PushButton(
-            text="New scribbles layer",
-            tooltip="Add an empty Labels layer of the stack's size, choose it as the "
-            "scribbles and start the paint brush: paint label 1 on one material, 2 on "
-            "another, …",
-        )
-        self.load_classifier_button = PushButton(
-            text="Load classifier…",
-            tooltip="Apply a saved pixel classifier (.polarseg-clf, from 'Save classifier…' "
-            "or polarseg segment --save-classifier) to the chosen stack without "
-            "retraining, until the strokes change or it is cleared. The file is checked "
-            "and never runs code",
-        )
-        self.save_classifier_button = PushButton(
-            text="Save classifier…",
-            enabled=False,
-            tooltip="Write the pixel classifier behind the chosen stack's segments to a "
-            ".polarseg-clf file (for 'Load classifier…' and polarseg segment --classifier)",
-        )
-        self.clear_classifier_button = PushButton(
-            text="Clear",
-            enabled=False,
-            tooltip="Stop applying the loaded classifier: train on the strokes again (or "
-            "segment without supervision)",
-        )
-        self.classifier_file = Container(
-            layout="horizontal",
-            widgets=[
-                self.load_classifier_button,
-                self.save_classifier_button,
-                self.clear_classifier_button,
-            ],
-            labels=False,
-            label="classifier",
-        )
-        self.classifier_file.margins = (0, 0, 0, 0)
-        self.export_button = PushButton(
-            text="Export results…",
-            enabled=False,
-            tooltip="Write the last result of the chosen stack into a folder: labels, maps, "
-            "mask, per-segment statistics (segments.csv), params.json (loadable with 'Load "
-            "parameters…' and polarseg segment --params), summary.json and overview.png, "
-            "as polarseg segment --out writes them",
-        )
-        self.views = CheckBox(
-            text="HSV and Stokes layers",
-            value=False,
-            tooltip="Also add the AoLP/DoLP HSV view and the S0, S1, S2 Stokes layers "
-            "(hidden) of each result, as the Polarisation image widget does",
-        )
-        self.view_mode = view_mode_box()
-        self.parameter_widgets = [getattr(self, name) for name in self.controlled]
+        self._build_input_controls()
+        self._build_view_controls()
+        self._lay_out()
+        self._timer = QTimer(self.native)  # deleted with the widget: never fires after it
+        self._timer.setSingleShot(True)
+        self._timer.setInterval(LIVE_DELAY_MS)
+        self._timer.timeout.connect(self._on_timer)
+        self._connect()
+        self._unwatch_when_closed()
+
+    def _lay_out(self) -> None:
+        """The first controls, then the collapsed *advanced settings*; Export after Run."""
         # the few controls a user touches first stay in view; the rest (every parameter
         # the preset sets, the mask, the files) sit in the collapsed "advanced" section
         self.advanced = Container(
@@ -527,9 +199,6 @@ class SegmentWidget(StackWidget):
             tooltip="Show every parameter of the pipeline (the preset sets them), the mask, "
             "and the parameter and classifier files",
         )
-        self.show_advanced.changed.connect(self._on_show_advanced)
-        self.views.changed.connect(self._on_views_changed)
-        self.view_mode.changed.connect(self._on_views_changed)
         self._add_parameters(
             [
                 self.preset,
@@ -542,10 +211,12 @@ class SegmentWidget(StackWidget):
             ]
         )
         self.insert(self.index(self.progress), self.export_button)  # after Run and Cancel
-        self._timer = QTimer(self.native)  # deleted with the widget: never fires after it
-        self._timer.setSingleShot(True)
-        self._timer.setInterval(LIVE_DELAY_MS)
-        self._timer.timeout.connect(self._on_timer)
+
+    def _connect(self) -> None:
+        """Connect the controls to their handlers (the order of the original widget)."""
+        self.show_advanced.changed.connect(self._on_show_advanced)
+        self.views.changed.connect(self._on_views_changed)
+        self.view_mode.changed.connect(self._on_views_changed)
         self.stack_layer.changed.connect(self.mask_layer.reset_choices)
         self.stack_layer.changed.connect(self.scribbles_layer.reset_choices)
         watched = [self.stack_layer, self.angles, self.mask_layer, self.scribbles_layer]
@@ -566,400 +237,12 @@ class SegmentWidget(StackWidget):
         self.clear_classifier_button.changed.connect(self.clear_classifier)
         self.stack_layer.changed.connect(self._update_classifier_buttons)
         self.stack_layer.changed.connect(self._update_export_button)
-        watches, on_edit = self._watched, self._on_layer_edited
 
-        def _unwatch(*_: Any) -> None:
-            for layer in watches.values():
-                _disconnect_edits(layer, on_edit)
-            watches.clear()
-
-        self.native.destroyed.connect(_unwatch)
-
-    # -- parameters -------------------------------------------------------------------
-    def params(self) -> SegmentParams:
-        """The engine parameters the widget's values describe (raises PolarsegError).
-
-        Fields without a control (``ridge``, ``spatial_radius``, ``spatial_sigma``,
-        ``ncut_threshold``, ``affinity_graph``) come from the chosen preset or the last
-        :meth:`set_params`. A float set with more decimals than its control shows (e.g.
-        ``refractive_index`` 1.4537 from a file, shown as 1.454) is kept exactly until the
-        control is changed.
-        """
-        values: dict[str, Any] = {}
-        for name in self.controlled:
-            spec, shown = self.param_specs[name], getattr(self, name).value
-            if spec.choices is not None:
-                values[name] = str(shown)
-            elif spec.decimals is None:
-                values[name] = int(shown)
-            else:  # the control shows spec.decimals decimals of the exact value
-                exact = float(getattr(self._base, name))
-                tolerance = 0.5 * 10.0**-spec.decimals + 1e-12
-                values[name] = exact if abs(exact - float(shown)) <= tolerance else float(shown)
-        return self._base.replace(**values)
-
-    def set_params(self, params: SegmentParams | None = None, **changes: Any) -> None:
-        """Set the controls from ``params`` and/or keyword changes (SegmentParams names).
-
-        Validated first, also against the controls' ranges (raises PolarsegError and
-        changes nothing); with live update on, the burst of changes triggers one run.
-        """
-        values = (params or self.params()).replace(**changes)
-        self._check_controls(values)
-        self._base = values
-        for name in self.controlled:
-            getattr(self, name).value = getattr(values, name)
-
-    def _check_controls(self, values: SegmentParams) -> None:
-        """Raise PolarsegError if a value does not fit its control (range, menu)."""
-        for name in self.controlled:
-            control, value = getattr(self, name), getattr(values, name)
-            if isinstance(control, ComboBox):
-                if value not in control.choices:
-                    raise PolarsegError(f"{name} {value!r} is not offered by the widget")
-            elif not control.min <= value <= control.max:
-                raise PolarsegError(
-                    f"{name} {value} is outside the widget's range {control.min:g}..{control.max:g}"
-                )
-
+    # -- sections -----------------------------------------------------------------------
     def _on_show_advanced(self, shown: bool) -> None:
         self.advanced.visible = bool(shown)
 
-    def _on_views_changed(self, *_: Any) -> None:
-        """Draw the views of the chosen stack's shown result at once (no rerun)."""
-        layer = self.stack_layer.value
-        shown = None if layer is None else self._shown.get(source_key(layer))
-        if self.views.value and shown is not None and layer in self._viewer.layers:
-            segments = find_output(self._viewer, "segments", layer)
-            meta = (
-                {}
-                if segments is None
-                else {"polarseg_params": segments.metadata.get("polarseg_params")}
-            )
-            self._show_views(layer, shown[0], meta)
-
-    def _show_views(self, layer: Layer, result: SegmentationResult, meta: dict) -> None:
-        """The S0, S1, S2 Stokes layers (hidden) and the AoLP/DoLP HSV view of ``result``
-        in the chosen *HSV view* (:data:`~napari_polarseg.widgets.polarisation.VIEW_MODES`),
-        below the segments; the Polarisation image widget shares these layers."""
-        arrays = (np.asarray(result.intensity), np.asarray(result.dop), np.asarray(result.phase))
-        for role, data in zip(VIEW_OUTPUTS[:-1], stokes_components(*arrays), strict=True):
-            self._show_below_segments(role, data, layer, meta)
-        mode = str(self.view_mode.value)
-        rgb, rho_max = composite_for(*arrays, 0.0, mode)
-        composite = {"polarseg_composite": {"dolp_max": rho_max, "mode": mode}}
-        self._show_below_segments("hsv", rgb, layer, {**meta, **composite})
-
-    def _on_preset_changed(self, name: str) -> None:
-        self.set_params(PRESETS[name])
-
-    # -- parameter files --------------------------------------------------------------
-    def save_params(self, path: str | Path) -> bool:
-        """Write the current parameters to ``path`` as JSON (``SegmentParams.to_json``).
-
-        The format of ``polarseg segment --params`` (and of *Load parameters…*, the
-        batch widget's JSON file). Problems go to the status line and a notification;
-        returns whether the file was written.
-        """
-        from ..io import atomic_output
-
-        path = Path(path)
-        try:
-            text = self.params().to_json() + "\n"
-            with atomic_output(path) as tmp:
-                tmp.write_text(text, encoding="utf-8")
-        except PolarsegError as exc:
-            self._fail(exc)
-            return False
-        except OSError as exc:
-            reason = exc.strerror or str(exc)
-            self._fail(PolarsegError(f"{path}: cannot write the parameters file ({reason})"))
-            return False
-        self._params_dir = path.parent
-        self._set_status(f"saved the parameters to {path}")
-        return True
-
-    def load_params(self, path: str | Path) -> bool:
-        """Set every control from a parameters JSON file (see :func:`read_params_file`).
-
-        Missing fields take the thesis defaults, as with ``polarseg segment --params``.
-        Invalid JSON, an unknown field or a value out of range leave every control as it
-        was and are reported in the status line (and a notification); returns whether
-        the parameters were loaded. With live update on, loading triggers one run.
-        """
-        path = Path(path)
-        try:
-            params = read_params_file(path)
-            try:
-                self.set_params(params)
-            except PolarsegError as exc:
-                raise PolarsegError(f"{path}: {exc}") from None
-        except PolarsegError as exc:
-            self._fail(exc)
-            return False
-        self._params_dir = path.parent
-        self._set_status(f"loaded the parameters from {path}")
-        return True
-
-    def _ask_path(self, save: bool) -> str | None:
-        """A file chosen in a Qt dialog (None when cancelled)."""
-        from qtpy.QtWidgets import QFileDialog
-
-        filters = "JSON (*.json);;All files (*)"
-        if save:
-            start = str(self._params_dir / "params.json")
-            path, _ = QFileDialog.getSaveFileName(self.native, "Save parameters", start, filters)
-        else:
-            start = str(self._params_dir)
-            path, _ = QFileDialog.getOpenFileName(self.native, "Load parameters", start, filters)
-        return path or None
-
-    def _on_save_clicked(self, *_: Any) -> None:
-        path = self._ask_path(save=True)
-        if path:
-            self.save_params(path if Path(path).suffix else f"{path}.json")
-
-    def _on_load_clicked(self, *_: Any) -> None:
-        path = self._ask_path(save=False)
-        if path:
-            self.load_params(path)
-
-    # -- classifier files -------------------------------------------------------------
-    @property
-    def classifier(self) -> PixelClassifier | None:
-        """The pixel classifier behind the chosen stack's segments (None if they did not
-        come from it): what *Save classifier…* writes."""
-        layer = self.stack_layer.value
-        return None if layer is None else self.shown_classifier(layer)
-
-    def shown_classifier(self, layer: Layer) -> PixelClassifier | None:
-        """The pixel classifier behind ``layer``'s ``segments`` layer, if this widget made
-        them with one (trained on strokes or loaded)."""
-        if self.shown_result(layer) is None:
-            return None
-        return self._classifiers.get(source_key(layer))
-
-    def save_classifier(self, path: str | Path) -> bool:
-        """Write the chosen stack's pixel classifier to ``path`` in a worker thread.
-
-        The ``.polarseg-clf`` format of ``polarseg segment --save-classifier`` (the suffix
-        is added when missing). Returns whether the writing started; the status line then
-        says where it went, or why it could not be written (also as a notification).
-        """
-        classifier = self.classifier
-        if classifier is None:
-            self._fail(
-                PolarsegError(
-                    "no classifier to save: paint strokes of at least 2 materials into the "
-                    "scribbles layer and run first"
-                )
-            )
-            return False
-        from ..classifier_file import SUFFIX
-
-        path = Path(path)
-        if not path.name.endswith(SUFFIX):
-            path = path.with_name(path.name + SUFFIX)
-
-        def on_result(run_id: int, written: Path) -> None:
-            self._classifier_dir = written.parent
-            self._set_status(f"saved the classifier to {written}")
-
-        self._set_status(f"saving the classifier to {path}…")
-        self._classifier_slot.submit(write_classifier_job, (path, classifier), 1, on_result)
-        return True
-
-    def load_classifier(self, path: str | Path) -> bool:
-        """Read a classifier file in a worker thread and apply it to the chosen stack.
-
-        The file is checked before anything in it is used and never runs code
-        (:func:`napari_polarseg.classifier_file.load_pixel_classifier`). A bad file is
-        reported in the status line (and a notification) and changes nothing else. A good
-        one is applied, without retraining, to the chosen stack at once and at every
-        later run, until the scribbles change (painting, another layer) or
-        :meth:`clear_classifier`. Returns whether the reading started.
-        """
-        path = Path(path)
-
-        def on_result(run_id: int, classifier: PixelClassifier) -> None:
-            try:
-                key, strokes = self.current_scribbles()
-            except PolarsegError:
-                key, strokes = None, None
-            self._loads += 1
-            self.loaded = LoadedClassifier(
-                classifier, path, (key, content_digest(strokes)), self._loads
-            )
-            self._classifier_dir = path.parent
-            self._update_classifier_buttons()
-            self._on_scribbles_changed()
-            self._set_status(f"loaded the classifier {path.name}: {classifier_text(classifier)}")
-            if self.stack_layer.value is not None:
-                self.run()
-
-        self._set_status(f"reading the classifier {path}…")
-        self._classifier_slot.submit(read_classifier_job, (path,), 1, on_result)
-        return True
-
-    def clear_classifier(self, *_: Any) -> None:
-        """Stop applying the loaded classifier (a rerun trains on the strokes again, or
-        segments without supervision when no scribbles layer is chosen)."""
-        if self.loaded is None:
-            return
-        name, self.loaded = self.loaded.path.name, None
-        self._update_classifier_buttons()
-        self._on_scribbles_changed()
-        self._set_status(f"the classifier {name} is no longer applied")
-        self._on_value_changed()
-
-    def _applied(self, scribble_key: str | None, digest: str | None) -> LoadedClassifier | None:
-        """The loaded classifier if it still applies (the strokes are as when loaded)."""
-        loaded = self.loaded
-        if loaded is None or loaded.strokes != (scribble_key, digest):
-            return None
-        return loaded
-
-    def _ask_classifier_path(self, save: bool) -> str | None:
-        """A classifier file chosen in a Qt dialog (None when cancelled)."""
-        from qtpy.QtWidgets import QFileDialog
-
-        from ..classifier_file import SUFFIX
-
-        filters = f"Classifier (*{SUFFIX});;All files (*)"
-        if save:
-            layer = self.stack_layer.value
-            stem = "classifier" if layer is None else f"{layer.name} classifier"
-            start = str(self._classifier_dir / f"{stem}{SUFFIX}")
-            path, _ = QFileDialog.getSaveFileName(self.native, "Save classifier", start, filters)
-        else:
-            start = str(self._classifier_dir)
-            path, _ = QFileDialog.getOpenFileName(self.native, "Load classifier", start, filters)
-        return path or None
-
-    def _on_save_classifier_clicked(self, *_: Any) -> None:
-        path = self._ask_classifier_path(save=True)
-        if path:
-            self.save_classifier(path)
-
-    def _on_load_classifier_clicked(self, *_: Any) -> None:
-        path = self._ask_classifier_path(save=False)
-        if path:
-            self.load_classifier(path)
-
-    def _update_classifier_buttons(self, *_: Any) -> None:
-        button = getattr(self, "save_classifier_button", None)  # None while being built
-        if button is None:
-            return
-        try:
-            button.enabled = self.classifier is not None
-            self.clear_classifier_button.enabled = self.loaded is not None
-        except RuntimeError:  # the widget was deleted
-            pass
-
-    def _notify_plots(self, layer: Layer, classifier: PixelClassifier | None) -> None:
-        """Hand every docked :class:`ClassifierListener` (the *Polarisation plots*
-        widget) the stack's new classifier."""
-        try:
-            docked = list(self._viewer.window.dock_widgets.values())
-        except (AttributeError, RuntimeError):  # no window (headless viewer) or closing
-            return
-        for widget in docked:
-            if isinstance(widget, ClassifierListener):
-                widget.set_classifier(layer, classifier)
-
-    # -- exporting --------------------------------------------------------------------
-    def export_results(
-        self, folder: str | Path, *, overview: bool = True, plots: bool = False
-    ) -> bool:
-        """Write the chosen stack's last result into ``folder``, in a worker thread.
-
-        The files of ``polarseg segment --out`` (:func:`napari_polarseg.export.
-        write_result_folder`): ``labels.tif`` (0 = first segment; after a scribble run the
-        class index, 0 = smallest scribble value), the float maps, ``mask.tif``,
-        ``segments.csv``, ``params.json`` (reloads with :meth:`load_params` and ``polarseg
-        segment --params``), ``summary.json``, ``stokes.tif`` and ``aolp_dolp.png``,
-        ``overview.png`` (unless ``overview`` is False), the analyst's plots in ``plots/``
-        with ``plots``, and when the labels came from the pixel classifier
-        ``probabilities.tif`` and ``uncertainty.tif``. The result is the one the stack's
-        ``segments`` layer was made from, with the stack, angles, parameters and mask of
-        that run. Returns whether the export started; the status line then says how many
-        files were written, or why they could not be (also as a notification). :meth:`wait`
-        waits for it.
-        """
-        layer = self.stack_layer.value
-        record = None if layer is None else self._exports.get(source_key(layer))
-        if record is None:
-            self._fail(PolarsegError("nothing to export: run a segmentation of this stack first"))
-            return False
-        folder = Path(folder)
-        kwargs = {**record.kwargs(), "overview": overview, "plots": plots}
-
-        def on_result(run_id: int, written: list[str]) -> None:
-            self._export_dir = folder
-            self._set_status(f"exported {len(written)} files to {folder}")
-
-        self._set_status(f"exporting to {folder}…")
-        self._export_slot.submit(export_job, (folder, kwargs), 1, on_result)
-        return True
-
-    def _on_export_clicked(self, *_: Any) -> None:
-        from qtpy.QtWidgets import QFileDialog
-
-        folder = QFileDialog.getExistingDirectory(
-            self.native, "Export results into a folder", str(self._export_dir)
-        )
-        if folder:
-            self.export_results(folder)
-
-    def _update_export_button(self, *_: Any) -> None:
-        button = getattr(self, "export_button", None)  # None while the widget is built
-        if button is None:
-            return
-        layer = self.stack_layer.value
-        try:
-            button.enabled = layer is not None and source_key(layer) in self._exports
-        except RuntimeError:  # the widget was deleted
-            pass
-
-    def _record_export(
-        self,
-        layer: Layer,
-        angles_deg: np.ndarray,
-        result: SegmentationResult,
-        out: ClassifierOutput | None,
-        inputs: dict[str, Any],
-    ) -> None:
-        """Keep what *Export results…* needs of the result just shown for ``layer``."""
-        from ..export import classifier_summary
-
-        key = source_key(layer)
-        pipe = self.store.get(key)  # the pipeline that made the result (its pixel mask)
-        source = getattr(getattr(layer, "source", None), "path", None)
-        summary: dict[str, Any] = {}
-        if out is not None:
-            labels_from = "scribbles" if out.trained else "classifier"
-            summary = classifier_summary(out.segmentation, labels_from)
-        self._exports[key] = ExportRecord(
-            stack=layer.data,
-            angles_deg=np.asarray(angles_deg, dtype=float),
-            result=result,
-            mask=None if pipe is None else pipe.mask,
-            source=None if source is None else str(source),
-            probabilities=None if out is None else out.prediction.probabilities,
-            uncertainty=None if out is None else out.prediction.uncertainty,
-            info={
-                "napari": {
-                    "stack_layer": layer.name,
-                    "mask_layer": inputs.get("mask"),
-                    "scribbles_layer": inputs.get("scribbles"),
-                    "classifier_file": inputs.get("classifier"),
-                }
-            },
-            summary=summary,
-        )
-        self._update_export_button()
-
-    # -- mask and scribbles -----------------------------------------------------------
+    # -- stacks, pipelines and results ------------------------------------------------
     def _refresh_stacks(self) -> None:
         super()._refresh_stacks()
         for name in ("mask_layer", "scribbles_layer"):
@@ -969,116 +252,6 @@ class SegmentWidget(StackWidget):
         if getattr(self, "scribbles_layer", None) is not None:
             self._sync_watches()
             self._on_scribbles_changed()
-
-    def current_mask(self) -> tuple[str | None, np.ndarray | None]:
-        """Key and (H, W) bool region (a copy; True = use) of the chosen mask, or Nones."""
-        layer = self.mask_layer.value
-        if layer is None:
-            return None, None
-        if layer not in self._viewer.layers:
-            raise PolarsegError(f"the mask layer {layer.name!r} is no longer in the viewer")
-        return source_key(layer), np.asarray(layer.data) != 0
-
-    def current_scribbles(self) -> tuple[str | None, np.ndarray | None]:
-        """Key and (H, W) labels (a copy) of the chosen scribbles layer, or Nones."""
-        layer = self.scribbles_layer.value
-        if layer is None:
-            return None, None
-        if layer not in self._viewer.layers:
-            raise PolarsegError(f"the scribbles layer {layer.name!r} is no longer in the viewer")
-        return source_key(layer), np.array(layer.data, copy=True)
-
-    def new_scribbles_layer(self, *_: Any) -> Labels | None:
-        """Add an empty Labels layer for strokes, choose it and start the paint brush.
-
-        Named ``"<stack> scribbles"``, of the stack's height x width (and placement),
-        selected in the layer list with the paint tool on label 1.
-        """
-        stack = self.stack_layer.value
-        if stack is None:
-            self._fail(PolarsegError("choose an angle-stack image layer first"))
-            return None
-        h, w = stack.data.shape[-2:]
-        layer = self._viewer.add_labels(
-            np.zeros((h, w), dtype=np.int32),
-            name=f"{stack.name} scribbles",
-            colormap=label_colormap(),  # the segments' colours: a stroke and its segment match
-            scale=tuple(stack.scale[-2:]),
-            translate=tuple(stack.translate[-2:]),
-        )
-        self.scribbles_layer.reset_choices()
-        self.scribbles_layer.value = layer
-        layer.selected_label = 1
-        self._viewer.layers.selection.active = layer
-        layer.mode = "paint"
-        self._set_status(
-            f"paint strokes into {layer.name!r}: label 1 on one material, 2 on another, … "
-            "(at least 2), then Run (or tick live update)"
-        )
-        return layer
-
-    def _on_scribbles_changed(self, *_: Any) -> None:
-        # the classifier replaces the cut: its controls do nothing
-        unsupervised = self.scribbles_layer.value is None and self.loaded is None
-        for name in CUT_ONLY:
-            getattr(self, name).enabled = unsupervised
-
-    def _sync_watches(self, *_: Any) -> None:
-        """Listen to edits of the chosen mask and scribbles layers (and no others)."""
-        for role, chooser in (("mask", self.mask_layer), ("scribbles", self.scribbles_layer)):
-            old, new = self._watched.get(role), chooser.value
-            if old is new:
-                continue
-            if old is not None and old not in self._watched_except(role):
-                _disconnect_edits(old, self._on_layer_edited)
-            if new is not None and new not in self._watched_except(role):
-                for name in EDIT_EVENTS:
-                    getattr(new.events, name).connect(self._on_layer_edited)
-            self._watched[role] = new
-
-    def _watched_except(self, role: str) -> list[Any]:
-        return [layer for r, layer in self._watched.items() if r != role and layer is not None]
-
-    def _on_layer_edited(self, *_: Any) -> None:
-        """A stroke (or undo, new data) in the chosen mask or scribbles layer."""
-        try:
-            if self.live.value:
-                self._timer.start()  # the same debounce as a changed value
-        except RuntimeError:  # the widget was deleted
-            pass
-
-    def snapshot(self) -> tuple[Any, ...] | None:
-        """Everything a result depends on, or None if the values are invalid."""
-        try:
-            params = self.params()
-            mask_key, region = self.current_mask()
-            scribble_key, scribbles = self.current_scribbles()
-        except PolarsegError:
-            return None
-        return self._snapshot_of(params, mask_key, region, scribble_key, scribbles)
-
-    def _snapshot_of(
-        self,
-        params: SegmentParams,
-        mask_key: str | None,
-        region: np.ndarray | None,
-        scribble_key: str | None,
-        scribbles: np.ndarray | None,
-    ) -> tuple[Any, ...]:
-        layer = self.stack_layer.value
-        key = None if layer is None else source_key(layer)
-        digest = content_digest(scribbles)
-        loaded = self._applied(scribble_key, digest)
-        return (
-            key,
-            self.angles.value,
-            params,
-            mask_key,
-            region_digest(region),
-            scribble_key,
-            digest,
-            None if loaded is None else loaded.serial,
-        )
 
     @property
     def pipeline(self) -> Pipeline | None:
@@ -1105,23 +278,19 @@ class SegmentWidget(StackWidget):
         store = getattr(self, "store", None)  # None while the base class initialises
         if store is not None:
             store.discard(keep)
-        shown = getattr(self, "_shown", None)
-        if shown is not None:
-            for key in set(shown) - keep:
-                del shown[key]
-        exports = getattr(self, "_exports", None)
-        if exports is not None:
-            for key in set(exports) - keep:
-                del exports[key]
-            self._update_export_button()
-        classifiers = getattr(self, "_classifiers", None)
-        if classifiers is not None:
-            for key in set(classifiers) - keep:
-                del classifiers[key]
-            self._update_classifier_buttons()
-
-    def _on_model_changed(self, model: str) -> None:
-        self.specular_branch.visible = model == "specular"
+        updates = {
+            "_shown": None,
+            "_exports": self._update_export_button,
+            "_classifiers": self._update_classifier_buttons,
+        }
+        for name, update in updates.items():
+            kept = getattr(self, name, None)  # None while the widget is built
+            if kept is None:
+                continue
+            for key in set(kept) - keep:
+                del kept[key]
+            if update is not None:
+                update()
 
     def _on_value_changed(self, *_: Any) -> None:
         if self.live.value:
@@ -1175,201 +344,47 @@ class SegmentWidget(StackWidget):
                 self._set_status(f"scribbles: {problem}")
                 return
         inputs = {
-            "mask": _input_info(self.mask_layer.value, mask_key, snap[4]),
+            "mask": input_info(self.mask_layer.value, mask_key, snap[4]),
             "scribbles": None
             if loaded is not None
-            else _input_info(self.scribbles_layer.value, scribble_key, snap[6]),
+            else input_info(self.scribbles_layer.value, scribble_key, snap[6]),
             "classifier": None if loaded is None else str(loaded.path),
         }
-        key = source_key(layer)
-        t0 = time.perf_counter()
+        delivery = Delivery(layer, angles_deg, snap, inputs, time.perf_counter())
         angles_rad = np.deg2rad(angles_deg)
+        classifier = None if loaded is None else loaded.classifier
+        strokes = None if loaded is not None else scribbles
+        request = segment_request(
+            self.store,
+            source_key(layer),
+            layer.data,
+            angles_rad,
+            params,
+            region,
+            mask_key,
+            strokes,
+            classifier,
+            colour_stack_of(layer),
+        )
+        # a new stroke or request stops the prediction, or the cut's eigensolver, at once;
+        # the cut reports progress within the harmonics and reconstruction
+        on_result = functools.partial(self._on_result, delivery)
+        on_partial = functools.partial(self._on_partial, delivery)
+        job, args, total = request.job, request.args, request.total
+        self._submit(job, args, total, on_result, on_partial, self._live_run, True, request.reports)
 
-        def on_result(run_id: int, result: Any) -> None:
-            if snap != self.snapshot() or layer not in self._viewer.layers:
-                self._set_status("result dropped: the parameters changed while it was computed")
-                return
-            if isinstance(result, ClassifierOutput) and result.problem is not None:
-                where = "scribbles" if result.trained else "classifier"
-                self._set_status(f"{where}: {result.problem}")
-                return
-            self._show(layer, angles_deg, result, time.perf_counter() - t0, inputs)
-
-        def on_partial(run_id: int, result: Any) -> None:
-            # the segments (or classes) before the error map; dropped like a result
-            if snap == self.snapshot() and layer in self._viewer.layers:
-                self._show(layer, angles_deg, result, time.perf_counter() - t0, inputs)
-
-        if scribbles is None and loaded is None:
-            args = (self.store, key, layer.data, angles_rad, params, region, mask_key, True)
-            job, total = segment_job, len(STAGES)
-        else:
-            classifier = None if loaded is None else loaded.classifier
-            strokes = None if loaded is not None else scribbles
-            args = (self.store, key, layer.data, angles_rad, params, strokes, classifier)
-            args += (region, mask_key, colour_stack_of(layer))
-            job, total = classifier_job, len(CLASSIFIER_STAGES)
-        # a new stroke or request stops the prediction, or the cut's eigensolver, at once
-        cancellable = True
-        reports = job is segment_job  # progress within the harmonics and reconstruction
-        self._submit(job, args, total, on_result, on_partial, self._live_run, cancellable, reports)
-
-    def _show(
-        self,
-        layer: Layer,
-        angles_deg: np.ndarray,
-        result: SegmentationResult | ClassifierOutput,
-        seconds: float,
-        inputs: dict[str, Any] | None = None,
-    ) -> None:
-        """Show a run's layers and summary.
-
-        A partial result (no reconstruction yet: the worker yielded it before its last
-        stage) updates the segments (and class probability, uncertainty) layers and the
-        status line only; the complete result that follows updates the rest. Labels equal
-        to those already shown only update the segments' metadata.
-        """
-        inputs = inputs or {"mask": None, "scribbles": None, "classifier": None}
-        out = result if isinstance(result, ClassifierOutput) else None
-        if out is not None:
-            result = out.result
-        assert isinstance(result, SegmentationResult)
-        partial = result.reconstruction_error is None
-        summary = result.summary()
-        confidence = None
-        if out is not None:
-            confidence = out.prediction.probabilities.max(axis=0).astype(np.float32)
-            summary["classifier"] = {
-                "labels_from": "scribbles" if out.trained else "classifier",
-                "classes": [int(c) for c in out.prediction.classes],
-                "training_pixels": out.classifier.n_training_pixels,
-                "mean_class_probability": float(confidence.mean()),
-                "mean_uncertainty": float(out.prediction.uncertainty.mean()),
-            }
-        meta = {
-            "polarseg_params": {**result.params.to_dict(), "angles_deg": angles_deg.tolist()},
-            "polarseg_summary": summary,
-            "polarseg_inputs": inputs,
-        }
-        if out is not None:  # the scribble value of the chosen class: strokes' colours
-            labels = np.asarray(out.prediction.classes, dtype=np.int32)[result.labels]
-        else:
-            labels = np.asarray(result.labels, dtype=np.int32) + 1  # a copy: painting is safe
-        if not partial:
-            # the error map (added hidden) goes below the segments, which overlay the stack
-            error = np.array(result.reconstruction_error)
-            self._show_below_segments("error", error, layer, meta)
-            masked = np.zeros(labels.shape, dtype=np.uint8)
-            if result.valid is not None:
-                masked = (~np.asarray(result.valid, dtype=bool)).astype(np.uint8)
-            if self._shows_diagnostics(layer, result, masked):
-                residual = np.array(result.residual)
-                self._show_below_segments("residual", residual, layer, meta)
-                self._show_below_segments("masked", masked, layer, meta)
-            if self.views.value:
-                self._show_views(layer, result, meta)
-        if out is not None:
-            assert confidence is not None
-            prediction = out.prediction
-            self._show_below_segments("probability", confidence, layer, meta)
-            self._show_below_segments("uncertainty", prediction.uncertainty, layer, meta)
-            self.probabilities, self.classes = prediction.probabilities, prediction.classes
-            self.uncertainty = prediction.uncertainty
-        else:
-            for role in ("probability", "uncertainty"):  # they would be stale
-                remove_output(self._viewer, role, layer)
-            self.probabilities, self.classes, self.uncertainty = None, None, None
-        segments = find_output(self._viewer, "segments", layer)
-        if segments is not None and np.array_equal(segments.data, labels):
-            # e.g. the partial result already shows these labels: keep the data (no redraw)
-            segments.metadata = {**segments.metadata, **meta}
-        else:
-            show_output(self._viewer, "segments", labels, layer, meta)
-        if out is not None:
-            assert confidence is not None
-            parts = classifier_parts(out, confidence, inputs.get("classifier"))
-        else:
-            parts = [f"{summary['n_segments']} segments"]
-            warning = degenerate_text(summary)
-            if warning:
-                parts.append(warning)
-        if partial:
-            self._set_status(" · ".join([*parts, f"{seconds:.2f} s", "computing the error map…"]))
+    def _on_result(self, run: Delivery, run_id: int, result: Any) -> None:
+        """A run's result (GUI thread): shown unless the inputs changed meanwhile."""
+        if run.snap != self.snapshot() or run.layer not in self._viewer.layers:
+            self._set_status("result dropped: the parameters changed while it was computed")
             return
-        self._shown[source_key(layer)] = (result, inputs)
-        self._record_classifier(layer, None if out is None else out.classifier)
-        self._record_export(layer, angles_deg, result, out, inputs)
-        parts += [
-            f"{summary['n_components']} PCA components "
-            f"({summary['explained_variance']:.0%} variance)",
-            f"mean reconstruction error {summary['mean_reconstruction_error']:.3g}",
-        ]
-        masked_text = mask_text(result.mask_counts)
-        if masked_text:
-            parts.append(masked_text)
-        parts.append(f"{seconds:.2f} s")
-        self._done(" · ".join(parts))
-
-    def _record_classifier(self, layer: Layer, classifier: PixelClassifier | None) -> None:
-        """Keep the classifier behind ``layer``'s segments (for *Save classifier…* and
-        the plots' feature importances)."""
-        key = source_key(layer)
-        if classifier is None and key not in self._classifiers:
+        if isinstance(result, ClassifierOutput) and result.problem is not None:
+            where = "scribbles" if result.trained else "classifier"
+            self._set_status(f"{where}: {result.problem}")
             return
-        if classifier is None:
-            del self._classifiers[key]
-        else:
-            self._classifiers[key] = classifier
-        self._update_classifier_buttons()
-        self._notify_plots(layer, classifier)
+        self._show(run.layer, run.angles_deg, result, run.seconds(), run.inputs)
 
-    def _show_below_segments(self, role: str, data: np.ndarray, layer: Layer, meta: dict) -> None:
-        """Add/update the ``role`` layer; a new one goes just below the segments (which a
-        partial result may have shown first), an existing one keeps its place."""
-        new = find_output(self._viewer, role, layer) is None
-        shown = show_output(self._viewer, role, data, layer, meta)
-        segments = find_output(self._viewer, "segments", layer)
-        if new and segments is not None:
-            layers = self._viewer.layers
-            below = layers.index(segments)
-            if layers.index(shown) > below:
-                layers.move(layers.index(shown), below)
-
-    def _shows_diagnostics(self, layer: Layer, result: Any, masked: np.ndarray) -> bool:
-        """Whether to add/update ``masked pixels`` and ``fit residual`` for this result.
-
-        From the first run that leaves a pixel out or fits robustly on; once they exist
-        they are updated on every run (so they never show a stale mask).
-        """
-        if result.params.fit != "lsq" or bool(masked.any()):
-            return True
-        return any(find_output(self._viewer, r, layer) is not None for r in ("masked", "residual"))
-
-
-def classifier_parts(
-    out: ClassifierOutput, confidence: np.ndarray, path: str | None = None
-) -> list[str]:
-    """The status line's first parts for labels from the pixel classifier."""
-    classes = out.prediction.classes
-    names = ", ".join(str(int(c)) for c in classes)
-    source = "from scribbles" if out.trained else f"from the classifier {Path(path or '').name}"
-    parts = [f"{classes.size} materials {source} (labels {names})"]
-    if out.trained:
-        parts.append(f"{out.classifier.n_training_pixels} training pixels")
-    parts.append(f"mean class probability {float(confidence.mean()):.2f}")
-    return parts
-
-
-def _input_info(layer: Layer | None, key: str | None, digest: str | None) -> dict | None:
-    """What the segments' metadata records about a mask or scribbles layer."""
-    if layer is None or key is None:
-        return None
-    return {"name": layer.name, "layer_id": key, "digest": digest}
-
-
-def _disconnect_edits(layer: Any, callback: Any) -> None:
-    if layer is None:
-        return
-    for name in EDIT_EVENTS:
-        with contextlib.suppress(Exception):
-            getattr(layer.events, name).disconnect(callback)
+    def _on_partial(self, run: Delivery, run_id: int, result: Any) -> None:
+        """The segments (or classes) before the error map; dropped like a result."""
+        if run.snap == self.snapshot() and run.layer in self._viewer.layers:
+            self._show(run.layer, run.angles_deg, result, run.seconds(), run.inputs)

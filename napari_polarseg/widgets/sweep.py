@@ -20,13 +20,13 @@ import numpy as np
 from magicgui.widgets import ComboBox, Container, LineEdit, PushButton, SpinBox, Table
 
 from .. import figures
-from .. import io as pio
 from ..engine import PolarsegError, SegmentParams, validity_mask
 from ..engine.analysis.sweep import check_grid, iter_sweep
 from ..engine.analysis.sweep_result import DEFAULT_SCORE, SCORES, SweepResult
-from ._base import StackWidget
+from ._base import StackWidget, ask_file
 from .batch import params_from
-from .plots import napari_theme
+from .canvas import figure_canvas, napari_theme, show_message
+from .session import relay, write_params_json
 
 if TYPE_CHECKING:
     import napari
@@ -128,15 +128,15 @@ def sweep_job(
         stack, angles_rad, base, windows, degrees, refractive_indices, truth, score, mask=mask
     )
     try:
-        while True:
-            try:
-                done, total, cell = next(gen)
-            except StopIteration as stop:
-                return stop.value
-            text = f"w={cell.window} L={cell.degree} n={cell.refractive_index:g}"
-            yield text, done, total
+        return (yield from relay(gen, cell_stage))
     finally:
         gen.close()
+
+
+def cell_stage(item: tuple[int, int, Any]) -> tuple[str, int, int]:
+    """``("w=… L=… n=…", done, total)`` of a sweep's ``(done, total, cell)``."""
+    done, total, cell = item
+    return f"w={cell.window} L={cell.degree} n={cell.refractive_index:g}", done, total
 
 
 class SweepWidget(StackWidget):
@@ -163,9 +163,6 @@ class SweepWidget(StackWidget):
     progress_desc = "Parameter sweep"
 
     def __init__(self, viewer: napari.viewer.Viewer) -> None:
-        from matplotlib.backends.backend_qtagg import FigureCanvasQTAgg
-        from matplotlib.figure import Figure
-
         super().__init__(viewer)
         self.result: SweepResult | None = None
         self._source: Layer | None = None
@@ -189,16 +186,12 @@ class SweepWidget(StackWidget):
         self.n_segments = SpinBox(
             label="segments", value=0, min=0, max=256, tooltip="0: from the parameters"
         )
-        self.ground_truth = ComboBox(
-            label="ground truth",
-            choices=self._labels_choices,
-            nullable=True,
-            tooltip="A Labels layer of the true materials (the stack's height x width): adds "
+        self.ground_truth = self._labels_box(
+            "ground truth",
+            "none",
+            "A Labels layer of the true materials (the stack's height x width): adds "
             "the adjusted Rand index of every cell",
         )
-        self.ground_truth.null_string = "none"
-        self.ground_truth.reset_choices()
-        self.ground_truth.value = None
         self.score = ComboBox(
             label="best by",
             choices=list(SCORES),
@@ -224,9 +217,7 @@ class SweepWidget(StackWidget):
             ]
         )
         self.theme = napari_theme(viewer)
-        self.figure = Figure(figsize=(4.0, 3.0), layout="constrained")
-        self.canvas = FigureCanvasQTAgg(self.figure)
-        self.canvas.setMinimumHeight(260)
+        self.figure, self.canvas = figure_canvas((4.0, 3.0), min_height=260)
         self.table = Table(value=sweep_table(None))
         self.table.native.setMinimumHeight(160)
         buttons = Container(layout="horizontal", widgets=[self.use_button, self.save_button])
@@ -317,17 +308,7 @@ class SweepWidget(StackWidget):
         """Draw the chosen metric's heatmaps (a hint before the first sweep)."""
         result, theme = self.result, self.theme
         if result is None:
-            self.figure.clear()
-            self.figure.set_facecolor(theme["background"])
-            self.figure.text(
-                0.5,
-                0.5,
-                "press 'Run sweep' to score the grid",
-                ha="center",
-                va="center",
-                wrap=True,
-                color=theme["foreground"],
-            )
+            show_message(self.figure, theme, "press 'Run sweep' to score the grid")
         else:
             metric = self.metric.value
             if metric == "ari" and not result.has_ground_truth:
@@ -385,18 +366,14 @@ class SweepWidget(StackWidget):
             self._fail(exc)
             return None
         if path is None:
-            from qtpy.QtWidgets import QFileDialog
-
-            name, _ = QFileDialog.getSaveFileName(
-                self.native, "Save the best parameters", "best_params.json", "JSON (*.json)"
+            path = ask_file(
+                self.native, "Save the best parameters", "best_params.json", "JSON (*.json)", True
             )
-            if not name:
+            if path is None:
                 return None
-            path = name
         path = Path(path)
         try:
-            with pio.atomic_output(path) as tmp:
-                tmp.write_text(params.to_json() + "\n", encoding="utf-8")
+            write_params_json(path, params)
         except OSError as exc:
             self._fail(PolarsegError(f"cannot write {path}: {exc.strerror or exc}"))
             return None

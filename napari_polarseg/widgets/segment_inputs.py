@@ -1,0 +1,212 @@
+"""The Segment widget's inputs beside the stack: the mask and scribbles layers (and the
+edits painted into them), and the snapshot of everything a result depends on."""
+
+from __future__ import annotations
+
+import contextlib
+from typing import Any
+
+import numpy as np
+from magicgui.widgets import PushButton
+from napari.layers import Labels
+
+from ..engine import PolarsegError, SegmentParams
+from ._base import WidgetPart
+from ._layers import label_colormap, source_key
+from .session import LoadedClassifier, content_digest, region_digest
+
+#: Text of the "mask" menu entry that segments every pixel.
+NO_MASK = "none"
+
+#: Text of the "scribbles" menu entry that segments without supervision (normalized cut).
+NO_SCRIBBLES = "none (unsupervised)"
+
+#: Layer events that mean the user edited a Labels layer: a brush, fill or eraser stroke
+#: (``paint``), new data (``data``), undo/redo and other refreshes (``set_data``).
+EDIT_EVENTS = ("paint", "data", "set_data")
+
+#: Controls of the normalized cut only: disabled while scribbles replace the cut.
+CUT_ONLY = ("scale", "scale_mode", "clustering", "min_segment_blocks", "n_segments")
+
+
+class MaskAndScribbles(WidgetPart):
+    """Mixin of :class:`~napari_polarseg.widgets.segment.SegmentWidget`: the mask and
+    scribbles choosers, the edits painted into the chosen layers, the snapshot.
+
+    Uses the widget's viewer, stack chooser, angles, :meth:`params`, the loaded
+    classifier (``loaded``), the live check box and timer, and its status line.
+    """
+
+    angles: Any
+    live: Any
+    loaded: LoadedClassifier | None
+    _timer: Any
+    _labels_box: Any
+    params: Any
+
+    def _build_input_controls(self) -> None:
+        """The mask and scribbles choosers and *New scribbles layer*."""
+        self._watched: dict[str, Any] = {"mask": None, "scribbles": None}
+        self.mask_layer = self._labels_box(
+            "mask",
+            NO_MASK,
+            "Segment only where this Labels layer is non-zero (same height x width as the "
+            "stack); saturated and black samples are left out in any case",
+        )
+        self.scribbles_layer = self._labels_box(
+            "scribbles",
+            NO_SCRIBBLES,
+            "Strokes per material in a Labels layer of the stack's height x width "
+            "(0 = unlabelled, 1, 2, … = materials, at least two): a pixel classifier "
+            "(random forest on multi-scale polarisation features) trained on the "
+            "scribbled pixels replaces the normalized cut; with live update every stroke "
+            "retrains it",
+        )
+        self.new_scribbles_button = PushButton(
+            text="New scribbles layer",
+            tooltip="Add an empty Labels layer of the stack's size, choose it as the "
+            "scribbles and start the paint brush: paint label 1 on one material, 2 on "
+            "another, …",
+        )
+
+    def _unwatch_when_closed(self) -> None:
+        """Stop listening to the edits of the watched layers when the widget is closed."""
+        watches, on_edit = self._watched, self._on_layer_edited
+
+        def _unwatch(*_: Any) -> None:
+            for layer in watches.values():
+                disconnect_edits(layer, on_edit)
+            watches.clear()
+
+        self.native.destroyed.connect(_unwatch)
+
+    # -- mask and scribbles -----------------------------------------------------------
+    def current_mask(self) -> tuple[str | None, np.ndarray | None]:
+        """Key and (H, W) bool region (a copy; True = use) of the chosen mask, or Nones."""
+        layer = self._chosen(self.mask_layer, "mask")
+        if layer is None:
+            return None, None
+        return source_key(layer), np.asarray(layer.data) != 0
+
+    def current_scribbles(self) -> tuple[str | None, np.ndarray | None]:
+        """Key and (H, W) labels (a copy) of the chosen scribbles layer, or Nones."""
+        layer = self._chosen(self.scribbles_layer, "scribbles")
+        if layer is None:
+            return None, None
+        return source_key(layer), np.array(layer.data, copy=True)
+
+    def _chosen(self, chooser: Any, role: str) -> Any:
+        """The layer ``chooser`` names (None for none); raises PolarsegError when it has
+        been removed from the viewer."""
+        layer = chooser.value
+        if layer is not None and layer not in self._viewer.layers:
+            raise PolarsegError(f"the {role} layer {layer.name!r} is no longer in the viewer")
+        return layer
+
+    def new_scribbles_layer(self, *_: Any) -> Labels | None:
+        """Add an empty Labels layer for strokes, choose it and start the paint brush.
+
+        Named ``"<stack> scribbles"``, of the stack's height x width (and placement),
+        selected in the layer list with the paint tool on label 1.
+        """
+        stack = self.stack_layer.value
+        if stack is None:
+            self._fail(PolarsegError("choose an angle-stack image layer first"))
+            return None
+        h, w = stack.data.shape[-2:]
+        layer = self._viewer.add_labels(
+            np.zeros((h, w), dtype=np.int32),
+            name=f"{stack.name} scribbles",
+            colormap=label_colormap(),  # the segments' colours: a stroke and its segment match
+            scale=tuple(stack.scale[-2:]),
+            translate=tuple(stack.translate[-2:]),
+        )
+        self.scribbles_layer.reset_choices()
+        self.scribbles_layer.value = layer
+        layer.selected_label = 1
+        self._viewer.layers.selection.active = layer
+        layer.mode = "paint"
+        self._set_status(
+            f"paint strokes into {layer.name!r}: label 1 on one material, 2 on another, … "
+            "(at least 2), then Run (or tick live update)"
+        )
+        return layer
+
+    def _on_scribbles_changed(self, *_: Any) -> None:
+        # the classifier replaces the cut: its controls do nothing
+        unsupervised = self.scribbles_layer.value is None and self.loaded is None
+        for name in CUT_ONLY:
+            getattr(self, name).enabled = unsupervised
+
+    def _sync_watches(self, *_: Any) -> None:
+        """Listen to edits of the chosen mask and scribbles layers (and no others)."""
+        for role, chooser in (("mask", self.mask_layer), ("scribbles", self.scribbles_layer)):
+            old, new = self._watched.get(role), chooser.value
+            if old is new:
+                continue
+            if old is not None and old not in self._watched_except(role):
+                disconnect_edits(old, self._on_layer_edited)
+            if new is not None and new not in self._watched_except(role):
+                for name in EDIT_EVENTS:
+                    getattr(new.events, name).connect(self._on_layer_edited)
+            self._watched[role] = new
+
+    def _watched_except(self, role: str) -> list[Any]:
+        return [layer for r, layer in self._watched.items() if r != role and layer is not None]
+
+    def _on_layer_edited(self, *_: Any) -> None:
+        """A stroke (or undo, new data) in the chosen mask or scribbles layer."""
+        try:
+            if self.live.value:
+                self._timer.start()  # the same debounce as a changed value
+        except RuntimeError:  # the widget was deleted
+            pass
+
+    def snapshot(self) -> tuple[Any, ...] | None:
+        """Everything a result depends on, or None if the values are invalid."""
+        try:
+            params = self.params()
+            mask_key, region = self.current_mask()
+            scribble_key, scribbles = self.current_scribbles()
+        except PolarsegError:
+            return None
+        return self._snapshot_of(params, mask_key, region, scribble_key, scribbles)
+
+    def _snapshot_of(
+        self,
+        params: SegmentParams,
+        mask_key: str | None,
+        region: np.ndarray | None,
+        scribble_key: str | None,
+        scribbles: np.ndarray | None,
+    ) -> tuple[Any, ...]:
+        layer = self.stack_layer.value
+        key = None if layer is None else source_key(layer)
+        digest = content_digest(scribbles)
+        loaded = self._applied(scribble_key, digest)
+        return (
+            key,
+            self.angles.value,
+            params,
+            mask_key,
+            region_digest(region),
+            scribble_key,
+            digest,
+            None if loaded is None else loaded.serial,
+        )
+
+    def _applied(self, scribble_key: str | None, digest: str | None) -> LoadedClassifier | None:
+        """The loaded classifier if it still applies (the strokes are as when loaded)."""
+        loaded = self.loaded
+        if loaded is None or loaded.strokes != (scribble_key, digest):
+            return None
+        return loaded
+
+
+def disconnect_edits(layer: Any, callback: Any) -> None:
+    """Stop calling ``callback`` on the edit events (:data:`EDIT_EVENTS`) of ``layer``."""
+    if layer is None:
+        return
+    for name in EDIT_EVENTS:
+        with contextlib.suppress(Exception):
+            getattr(layer.events, name).disconnect(callback)

@@ -1,0 +1,179 @@
+"""The Segment widget's parameters: the preset, one control per labelled spec of the
+parameter table, and the parameter files (*Load parameters…*, *Save parameters…*)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from magicgui.widgets import ComboBox, Container, PushButton
+
+from ..engine import PolarsegError, SegmentParams
+from ..engine.params import PARAM_SPECS, PRESET_HELP, PRESETS, ParamSpec
+from ..io import read_params_file
+from ._base import WidgetPart, ask_file
+from .param_controls import controlled_names, param_controls
+from .session import write_params_json
+
+if TYPE_CHECKING:
+    from magicgui.widgets import Widget
+
+
+class ParameterControls(WidgetPart):
+    """Mixin of :class:`~napari_polarseg.widgets.segment.SegmentWidget`: its parameters.
+
+    :meth:`_build_parameter_controls` makes the preset menu, the parameter-file buttons
+    and one control per labelled spec (attributes named like the SegmentParams fields);
+    :meth:`params` reads them, :meth:`set_params` sets them. Uses the widget's
+    ``native``, ``_set_status`` and ``_fail`` (of
+    :class:`~napari_polarseg.widgets._base.StackWidget`).
+    """
+
+    def _build_parameter_controls(self, specs: dict[str, ParamSpec] | None) -> None:
+        """The preset menu, the parameter-file buttons and the parameter controls."""
+        d = PRESETS["auto"]
+        self._base = d  # values of the fields without a control
+        self._params_dir = Path.home()
+        self.preset = ComboBox(
+            label="preset",
+            choices=list(PRESETS),
+            value="auto",
+            tooltip="; ".join(f"{name}: {text}" for name, text in PRESET_HELP.items()),
+        )
+        self.load_button = PushButton(
+            text="Load parameters…",
+            tooltip="Set every control from a parameters JSON file (as written by 'Save "
+            "parameters…', or a params.json from polarseg segment)",
+        )
+        self.save_button = PushButton(
+            text="Save parameters…",
+            tooltip="Write the parameters as JSON, the format of polarseg segment --params",
+        )
+        self.params_file = Container(
+            layout="horizontal",
+            widgets=[self.load_button, self.save_button],
+            labels=False,
+            label="",
+        )
+        self.params_file.margins = (0, 0, 0, 0)
+        #: The parameter table the controls are made from (one control per labelled spec).
+        self.param_specs = dict(specs or PARAM_SPECS)
+        self.controlled = controlled_names(self.param_specs)
+        for name, control in param_controls(d.to_dict(), self.param_specs).items():
+            setattr(self, name, control)
+        self.specular_branch.visible = False
+        self.parameter_widgets: list[Widget] = [getattr(self, n) for n in self.controlled]
+
+    # -- parameters -------------------------------------------------------------------
+    def params(self) -> SegmentParams:
+        """The engine parameters the widget's values describe (raises PolarsegError).
+
+        Fields without a control (``ridge``, ``spatial_radius``, ``spatial_sigma``,
+        ``ncut_threshold``, ``affinity_graph``) come from the chosen preset or the last
+        :meth:`set_params`. A float set with more decimals than its control shows (e.g.
+        ``refractive_index`` 1.4537 from a file, shown as 1.454) is kept exactly until the
+        control is changed.
+        """
+        values: dict[str, Any] = {}
+        for name in self.controlled:
+            spec, shown = self.param_specs[name], getattr(self, name).value
+            if spec.choices is not None:
+                values[name] = str(shown)
+            elif spec.decimals is None:
+                values[name] = int(shown)
+            else:  # the control shows spec.decimals decimals of the exact value
+                exact = float(getattr(self._base, name))
+                tolerance = 0.5 * 10.0**-spec.decimals + 1e-12
+                values[name] = exact if abs(exact - float(shown)) <= tolerance else float(shown)
+        return self._base.replace(**values)
+
+    def set_params(self, params: SegmentParams | None = None, **changes: Any) -> None:
+        """Set the controls from ``params`` and/or keyword changes (SegmentParams names).
+
+        Validated first, also against the controls' ranges (raises PolarsegError and
+        changes nothing); with live update on, the burst of changes triggers one run.
+        """
+        values = (params or self.params()).replace(**changes)
+        self._check_controls(values)
+        self._base = values
+        for name in self.controlled:
+            getattr(self, name).value = getattr(values, name)
+
+    def _check_controls(self, values: SegmentParams) -> None:
+        """Raise PolarsegError if a value does not fit its control (range, menu)."""
+        for name in self.controlled:
+            control, value = getattr(self, name), getattr(values, name)
+            if isinstance(control, ComboBox):
+                if value not in control.choices:
+                    raise PolarsegError(f"{name} {value!r} is not offered by the widget")
+            elif not control.min <= value <= control.max:
+                raise PolarsegError(
+                    f"{name} {value} is outside the widget's range {control.min:g}..{control.max:g}"
+                )
+
+    def _on_preset_changed(self, name: str) -> None:
+        self.set_params(PRESETS[name])
+
+    def _on_model_changed(self, model: str) -> None:
+        self.specular_branch.visible = model == "specular"
+
+    def save_params(self, path: str | Path) -> bool:
+        """Write the current parameters to ``path`` as JSON (``SegmentParams.to_json``).
+
+        The format of ``polarseg segment --params`` (and of *Load parameters…*, the
+        batch widget's JSON file). Problems go to the status line and a notification;
+        returns whether the file was written.
+        """
+        path = Path(path)
+        try:
+            write_params_json(path, self.params())
+        except PolarsegError as exc:
+            self._fail(exc)
+            return False
+        except OSError as exc:
+            reason = exc.strerror or str(exc)
+            self._fail(PolarsegError(f"{path}: cannot write the parameters file ({reason})"))
+            return False
+        self._params_dir = path.parent
+        self._set_status(f"saved the parameters to {path}")
+        return True
+
+    def load_params(self, path: str | Path) -> bool:
+        """Set every control from a parameters JSON file (see :func:`read_params_file`).
+
+        Missing fields take the thesis defaults, as with ``polarseg segment --params``.
+        Invalid JSON, an unknown field or a value out of range leave every control as it
+        was and are reported in the status line (and a notification); returns whether
+        the parameters were loaded. With live update on, loading triggers one run.
+        """
+        path = Path(path)
+        try:
+            params = read_params_file(path)
+            try:
+                self.set_params(params)
+            except PolarsegError as exc:
+                raise PolarsegError(f"{path}: {exc}") from None
+        except PolarsegError as exc:
+            self._fail(exc)
+            return False
+        self._params_dir = path.parent
+        self._set_status(f"loaded the parameters from {path}")
+        return True
+
+    def _ask_path(self, save: bool) -> str | None:
+        """A file chosen in a Qt dialog (None when cancelled)."""
+        filters = "JSON (*.json);;All files (*)"
+        if save:
+            start = str(self._params_dir / "params.json")
+            return ask_file(self.native, "Save parameters", start, filters, save=True)
+        return ask_file(self.native, "Load parameters", str(self._params_dir), filters)
+
+    def _on_save_clicked(self, *_: Any) -> None:
+        path = self._ask_path(save=True)
+        if path:
+            self.save_params(path if Path(path).suffix else f"{path}.json")
+
+    def _on_load_clicked(self, *_: Any) -> None:
+        path = self._ask_path(save=False)
+        if path:
+            self.load_params(path)

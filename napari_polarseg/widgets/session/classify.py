@@ -1,0 +1,202 @@
+"""The scribble mode without Qt: the stages it runs, the pixel classifier trained on the
+user's strokes (or a loaded one) in place of affinity and cut, and its texts.
+
+:func:`classifier_stages` is the scribble mode's job body: the pipeline's stages up to
+the block features, the pixel feature stack (kept by a
+:class:`~napari_polarseg.engine.analysis.pixel_segmentation.PixelSegmenter` per
+pipeline), then the pixel classifier, assembled into a
+:class:`~napari_polarseg.engine.SegmentationResult` like the cut's. A ``cancel``
+callable that turns True when a newer request or Cancel stops the run makes the
+prediction stop between chunks instead of at the next stage boundary.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Generator
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from ...engine import Pipeline, PolarsegError, SegmentationResult, SegmentParams
+from .runs import Partial, Stage
+
+if TYPE_CHECKING:
+    from ...engine.analysis.pixel_classifier import PixelClassifier, PixelPrediction
+    from ...engine.analysis.pixel_segmentation import PixelSegmentation, PixelSegmenter
+
+#: Stages of the scribble mode: the pipeline's maps and block features (for the result's
+#: plots and error map), the pixel features, the classifier (training and prediction, or
+#: prediction only for a loaded classifier) and the reconstruction. The cut's own stages
+#: (affinity, cut, labels) are neither computed nor invalidated.
+PIPELINE_STAGES = ("polarisation", "normals", "harmonics", "pca")
+CLASSIFIER_STAGES = (*PIPELINE_STAGES, "pixel features", "pixel classifier", "reconstruction")
+
+
+def scribble_problem(scribbles: np.ndarray) -> str | None:
+    """Why ``scribbles`` cannot train the classifier yet (None when they can).
+
+    Checked in the GUI thread before a run: at least two distinct non-zero labels.
+    """
+    values = np.unique(np.asarray(scribbles))
+    if values.size and values[0] < 0:
+        return "scribble labels must be >= 0 (0 = unlabelled)"
+    marked = values[values > 0]
+    if marked.size >= 2:
+        return None
+    found = "none yet" if marked.size == 0 else f"only label {int(marked[0])}"
+    return f"paint at least 2 materials (label 1 on one material, 2 on another, …); found {found}"
+
+
+@dataclass
+class ClassifierOutput:
+    """What a scribble-mode job returns (or yields as a :class:`Partial`).
+
+    ``segmentation`` is the engine's
+    :class:`~napari_polarseg.engine.analysis.pixel_segmentation.PixelSegmentation`: its
+    ``result.labels`` hold the class index 0..K-1, ``prediction.classes[k]`` is the
+    scribble value (label) of class k, ``prediction.probabilities`` is (K, H, W) and
+    sums to 1 over K, ``prediction.uncertainty`` is (H, W) in [0, 1]. ``trained`` is
+    False when a loaded classifier was applied. When the strokes cannot train the
+    classifier (e.g. every pixel of a material is masked) or the classifier does not
+    fit the stack, ``problem`` says why and ``segmentation`` is None.
+    """
+
+    segmentation: PixelSegmentation | None
+    trained: bool = True
+    problem: str | None = None
+
+    @property
+    def result(self) -> SegmentationResult:
+        assert self.segmentation is not None
+        return self.segmentation.result
+
+    @property
+    def prediction(self) -> PixelPrediction:
+        assert self.segmentation is not None
+        return self.segmentation.prediction
+
+    @property
+    def classifier(self) -> PixelClassifier:
+        assert self.segmentation is not None
+        return self.segmentation.classifier
+
+
+def classifier_stages(
+    pipe: Pipeline,
+    segmenter: PixelSegmenter,
+    params: SegmentParams,
+    scribbles: np.ndarray | None = None,
+    classifier: PixelClassifier | None = None,
+    reconstruction: bool = True,
+    cancel: Callable[[], bool] | None = None,
+) -> Generator[Any, None, ClassifierOutput]:
+    """Run the stages the scribble mode needs (yielding after each), then classify.
+
+    Trains the pixel classifier on ``scribbles``, or applies ``classifier`` (exactly one
+    of them). ``len(CLASSIFIER_STAGES)`` stage yields (one fewer without the
+    reconstruction). The pipeline's cached stages and ``segmenter``'s feature stack are
+    reused: once they are computed, a new stroke reruns only training and prediction.
+    When the reconstruction still has to be computed, the output without it is yielded
+    as a :class:`Partial` first (the segments are shown while the error map is
+    computed). ``cancel`` is handed to the prediction, which raises
+    :class:`~napari_polarseg.engine.errors.Cancelled` between chunks when it returns
+    True.
+    """
+    names = CLASSIFIER_STAGES if reconstruction else CLASSIFIER_STAGES[:-1]
+    total = len(names)
+    timings: dict[str, float] = {}
+    recomputed: list[str] = []
+    partial = reconstruction and not pipe.is_fresh("reconstruction", params)
+
+    def run_stage(i: int, name: str) -> Stage:
+        before = pipe.calls[name]
+        t0 = time.perf_counter()
+        pipe.get(name, params)
+        if pipe.calls[name] != before:
+            timings[name] = time.perf_counter() - t0
+            recomputed.append(name)
+        return name, i + 1, total
+
+    for i, name in enumerate(PIPELINE_STAGES):
+        yield run_stage(i, name)
+    fparams = None if classifier is None else classifier.feature_params
+    before = segmenter.cached_features
+    t0 = time.perf_counter()
+    segmenter.features(fparams, segment_params=params)
+    if segmenter.cached_features is not before:
+        timings["pixel features"] = time.perf_counter() - t0
+        recomputed.append("pixel features")
+    yield "pixel features", len(PIPELINE_STAGES) + 1, total
+    try:
+        seg = segmenter.segment(
+            scribbles,
+            classifier,
+            feature_params=fparams,
+            reconstruction=reconstruction and not partial,
+            cancel=cancel,
+            segment_params=params,
+        )
+    except PolarsegError as exc:
+        return ClassifierOutput(None, classifier is None, problem=str(exc))
+    timings["pixel classifier"] = seg.seconds.get("train", 0.0) + seg.seconds.get("predict", 0.0)
+    recomputed.append("pixel classifier")
+
+    def output(segmentation: PixelSegmentation, with_reconstruction: bool) -> ClassifierOutput:
+        stages = names if with_reconstruction else names[:-1]
+        result = replace(
+            segmentation.result,
+            params=params,
+            timings={name: timings.get(name, 0.0) for name in stages},
+            recomputed=[name for name in stages if name in recomputed],
+        )
+        return ClassifierOutput(replace(segmentation, result=result), classifier is None)
+
+    yield "pixel classifier", len(PIPELINE_STAGES) + 2, total
+    if not partial:
+        return output(seg, reconstruction)
+    yield Partial(output(seg, False))
+    yield run_stage(total - 1, names[-1])
+    result = segmenter.result(seg.prediction.labels, True, seg.seconds, params)
+    return output(replace(seg, result=result), True)
+
+
+def classifier_text(classifier: PixelClassifier) -> str:
+    """``"random_forest, 3 classes (1, 2, 3), 30 features, trained on 273 pixels"``."""
+    classes = ", ".join(str(int(c)) for c in classifier.classes)
+    return (
+        f"{classifier.params.model}, {classifier.classes.size} classes ({classes}), "
+        f"{len(classifier.feature_names)} features, "
+        f"trained on {classifier.n_training_pixels} pixels"
+    )
+
+
+@dataclass(eq=False)
+class LoadedClassifier:
+    """A classifier read by *Load classifier…*, applied instead of training.
+
+    ``strokes`` is the (layer key, content digest) of the chosen scribbles when it was
+    loaded: once they differ (the user painted, or chose other strokes) the widget
+    trains on the strokes again. ``serial`` tells one load from another in snapshots.
+    """
+
+    classifier: PixelClassifier
+    path: Path
+    strokes: tuple[str | None, str | None]
+    serial: int
+
+
+def classifier_parts(
+    out: ClassifierOutput, confidence: np.ndarray, path: str | None = None
+) -> list[str]:
+    """The status line's first parts for labels from the pixel classifier."""
+    classes = out.prediction.classes
+    names = ", ".join(str(int(c)) for c in classes)
+    source = "from scribbles" if out.trained else f"from the classifier {Path(path or '').name}"
+    parts = [f"{classes.size} materials {source} (labels {names})"]
+    if out.trained:
+        parts.append(f"{out.classifier.n_training_pixels} training pixels")
+    parts.append(f"mean class probability {float(confidence.mean()):.2f}")
+    return parts

@@ -1,0 +1,203 @@
+"""What the Segment widget shows and exports of a result, made without Qt.
+
+:func:`shown_result` turns a run's result (a
+:class:`~napari_polarseg.engine.SegmentationResult`, or the scribble mode's
+:class:`~napari_polarseg.widgets.session.classify.ClassifierOutput`) into the labels of
+the ``segments`` layer, the metadata of every output layer and the status line;
+:class:`ExportRecord` is what *Export results…* writes for it.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from ...engine import SegmentationResult
+from .classify import ClassifierOutput, classifier_parts
+from .text import degenerate_text, mask_text
+
+#: The inputs of a run without mask, scribbles or classifier file.
+NO_INPUTS: dict[str, Any] = {"mask": None, "scribbles": None, "classifier": None}
+
+
+@dataclass(frozen=True)
+class Delivery:
+    """What a Segment-widget run's result is checked against and shown with: the stack
+    layer, its angles, the snapshot of the inputs when it was requested, the mask,
+    scribbles and classifier file used, and its start time (``time.perf_counter``)."""
+
+    layer: Any
+    angles_deg: np.ndarray
+    snap: tuple[Any, ...]
+    inputs: dict[str, Any]
+    t0: float
+
+    def seconds(self) -> float:
+        """Seconds since the run was requested."""
+        return time.perf_counter() - self.t0
+
+
+@dataclass
+class ShownResult:
+    """A run's result as the Segment widget shows it.
+
+    ``labels`` are the ``segments`` layer's data: segment k of the engine is label k + 1
+    (napari draws label 0 as transparent background); with the pixel classifier, the
+    scribble value of the chosen class, so segments and strokes share their colours.
+    ``confidence`` is the classifier's probability of the chosen class (None after the
+    cut); ``meta`` the metadata of every output layer; ``inputs`` the mask, scribbles and
+    classifier file the run used.
+    """
+
+    result: SegmentationResult
+    out: ClassifierOutput | None
+    summary: dict[str, Any]
+    meta: dict[str, Any]
+    labels: np.ndarray
+    confidence: np.ndarray | None
+    inputs: dict[str, Any]
+
+    @property
+    def partial(self) -> bool:
+        """True before the reconstruction (the worker yielded it before its last stage)."""
+        return self.result.reconstruction_error is None
+
+    def masked(self) -> np.ndarray:
+        """1 where a pixel was left out of the fit and the features (uint8, H x W)."""
+        masked = np.zeros(self.labels.shape, dtype=np.uint8)
+        if self.result.valid is not None:
+            masked = (~np.asarray(self.result.valid, dtype=bool)).astype(np.uint8)
+        return masked
+
+    def status(self, seconds: float) -> str:
+        """The status line: labels, then (once complete) PCA, error, mask and time."""
+        summary = self.summary
+        if self.out is not None:
+            assert self.confidence is not None
+            parts = classifier_parts(self.out, self.confidence, self.inputs.get("classifier"))
+        else:
+            parts = [f"{summary['n_segments']} segments"]
+            warning = degenerate_text(summary)
+            if warning:
+                parts.append(warning)
+        if self.partial:
+            return " · ".join([*parts, f"{seconds:.2f} s", "computing the error map…"])
+        parts += [
+            f"{summary['n_components']} PCA components "
+            f"({summary['explained_variance']:.0%} variance)",
+            f"mean reconstruction error {summary['mean_reconstruction_error']:.3g}",
+        ]
+        masked_text = mask_text(self.result.mask_counts)
+        if masked_text:
+            parts.append(masked_text)
+        parts.append(f"{seconds:.2f} s")
+        return " · ".join(parts)
+
+
+def shown_result(
+    value: SegmentationResult | ClassifierOutput,
+    angles_deg: np.ndarray,
+    inputs: dict[str, Any] | None = None,
+) -> ShownResult:
+    """The labels, metadata and summary the Segment widget shows of ``value``."""
+    inputs = inputs or dict(NO_INPUTS)
+    out = value if isinstance(value, ClassifierOutput) else None
+    result = out.result if out is not None else value
+    assert isinstance(result, SegmentationResult)
+    summary = result.summary()
+    confidence = None
+    if out is not None:
+        confidence = out.prediction.probabilities.max(axis=0).astype(np.float32)
+        summary["classifier"] = {
+            "labels_from": "scribbles" if out.trained else "classifier",
+            "classes": [int(c) for c in out.prediction.classes],
+            "training_pixels": out.classifier.n_training_pixels,
+            "mean_class_probability": float(confidence.mean()),
+            "mean_uncertainty": float(out.prediction.uncertainty.mean()),
+        }
+    meta = {
+        "polarseg_params": {**result.params.to_dict(), "angles_deg": angles_deg.tolist()},
+        "polarseg_summary": summary,
+        "polarseg_inputs": inputs,
+    }
+    if out is not None:  # the scribble value of the chosen class: strokes' colours
+        labels = np.asarray(out.prediction.classes, dtype=np.int32)[result.labels]
+    else:
+        labels = np.asarray(result.labels, dtype=np.int32) + 1  # a copy: painting is safe
+    return ShownResult(result, out, summary, meta, labels, confidence, inputs)
+
+
+@dataclass
+class ExportRecord:
+    """What *Export results…* writes for a stack layer: its last result and inputs.
+
+    The keyword arguments of :func:`napari_polarseg.export.write_result_folder` but the
+    folder (and ``overview``/``plots``), captured when the result was shown.
+    """
+
+    stack: Any
+    angles_deg: np.ndarray
+    result: SegmentationResult
+    mask: Any = None
+    source: str | None = None
+    probabilities: np.ndarray | None = None
+    uncertainty: np.ndarray | None = None
+    info: dict[str, Any] = field(default_factory=dict)
+    summary: dict[str, Any] = field(default_factory=dict)
+
+    def kwargs(self) -> dict[str, Any]:
+        """The keyword arguments of :func:`~napari_polarseg.export.write_result_folder`."""
+        return {
+            "stack": self.stack,
+            "angles_deg": self.angles_deg,
+            "result": self.result,
+            "mask": self.mask,
+            "source": self.source,
+            "command": "napari",
+            "probabilities": self.probabilities,
+            "uncertainty": self.uncertainty,
+            "info": self.info,
+            "summary": self.summary,
+        }
+
+    @classmethod
+    def of(
+        cls,
+        shown: ShownResult,
+        stack: Any,
+        angles_deg: np.ndarray,
+        mask: Any,
+        source: str | None,
+        layer_name: str,
+    ) -> ExportRecord:
+        """What *Export results…* needs of ``shown`` (a complete result) of the stack
+        layer ``layer_name`` (``stack`` its data, ``mask`` the pipeline's pixel mask,
+        ``source`` the file it was read from)."""
+        from ...export import classifier_summary
+
+        out, inputs = shown.out, shown.inputs
+        summary: dict[str, Any] = {}
+        if out is not None:
+            labels_from = "scribbles" if out.trained else "classifier"
+            summary = classifier_summary(out.segmentation, labels_from)
+        return cls(
+            stack=stack,
+            angles_deg=np.asarray(angles_deg, dtype=float),
+            result=shown.result,
+            mask=mask,
+            source=source,
+            probabilities=None if out is None else out.prediction.probabilities,
+            uncertainty=None if out is None else out.prediction.uncertainty,
+            info={
+                "napari": {
+                    "stack_layer": layer_name,
+                    "mask_layer": inputs.get("mask"),
+                    "scribbles_layer": inputs.get("scribbles"),
+                    "classifier_file": inputs.get("classifier"),
+                }
+            },
+            summary=summary,
+        )

@@ -1,0 +1,127 @@
+"""The pipelines the Segment widget keeps: one per angle-stack layer, no Qt.
+
+:class:`PipelineStore` keeps one :class:`~napari_polarseg.engine.Pipeline` per
+angle-stack layer so that a rerun only recomputes the stages a parameter change made
+stale; a different mask (another region, an edited one, or none) builds a new one.
+"""
+
+from __future__ import annotations
+
+import threading
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from ...engine import Pipeline, SegmentParams, validity_mask
+from ...engine.analysis.pixel_segmentation import PixelSegmenter
+
+
+def stack_pipeline(
+    data: Any, angles_rad: Any, params: SegmentParams, region: np.ndarray | None = None
+) -> Pipeline:
+    """A new pipeline of the stack ``data`` as the widgets segment it.
+
+    Its mask is :func:`~napari_polarseg.engine.validity_mask`'s: saturated samples (at
+    the integer dtype's maximum) and black ones (at or below 0) are left out and
+    counted, and so is every pixel outside ``region`` ((H, W) bool, True = use; None:
+    every pixel).
+    """
+    stack = np.asarray(data)
+    mask = validity_mask(stack, saturation="auto", dark_level=0, region=region)
+    return Pipeline(stack, np.asarray(angles_rad, dtype=float), params, mask=mask)
+
+
+@dataclass
+class _Entry:
+    """A kept pipeline, what it was built from and the pixel segmenter beside it."""
+
+    data: Any
+    angles: tuple[float, ...]
+    mask_key: str | None
+    region: np.ndarray | None
+    pipeline: Pipeline
+    segmenter: PixelSegmenter | None = None
+
+    def matches(
+        self, data: Any, angles: tuple[float, ...], mask_key: str | None, region: Any
+    ) -> bool:
+        if self.data is not data or self.angles != angles or self.mask_key != mask_key:
+            return False
+        if self.region is None or region is None:
+            return self.region is None and region is None
+        return self.region.shape == region.shape and bool(np.array_equal(self.region, region))
+
+
+class PipelineStore:
+    """One cached :class:`Pipeline` per angle-stack layer (keyed by the layer's id).
+
+    The pipeline is rebuilt when the layer's data object, the angles or the mask (its
+    ``mask_key`` or the content of its ``region``) change; otherwise the same object is
+    reused so cached stages survive parameter changes. Beside each pipeline it keeps one
+    :class:`~napari_polarseg.engine.analysis.pixel_segmentation.PixelSegmenter`
+    (:meth:`segmenter`), so the scribble mode computes the pixel features once per
+    stack and a new stroke only retrains and predicts. Safe to call from a worker thread
+    (the slot runs one worker at a time; a lock guards the dict).
+    """
+
+    def __init__(self) -> None:
+        self._entries: dict[str, _Entry] = {}
+        self._lock = threading.Lock()
+
+    def get(self, key: str) -> Pipeline | None:
+        """The pipeline kept for ``key``, if any."""
+        with self._lock:
+            entry = self._entries.get(key)
+        return None if entry is None else entry.pipeline
+
+    def obtain(
+        self,
+        key: str,
+        data: Any,
+        angles_rad: np.ndarray,
+        params: SegmentParams,
+        region: np.ndarray | None = None,
+        mask_key: str | None = None,
+    ) -> Pipeline:
+        """The pipeline for ``key`` (made with ``params``), built if missing or out of date.
+
+        ``region`` (H, W) bool (True = use the pixel) or None restricts the segmentation;
+        a new pipeline gets the mask :func:`~napari_polarseg.engine.validity_mask` builds
+        from the stack (saturated samples at the integer dtype's maximum and black ones at
+        or below 0 are left out and counted) and the region. ``mask_key`` names where the
+        region came from (e.g. the Labels layer's id); a change of either rebuilds.
+        """
+        angles = tuple(float(a) for a in np.asarray(angles_rad, dtype=float).ravel())
+        if region is not None:
+            region = np.asarray(region, dtype=bool)
+        with self._lock:
+            entry = self._entries.get(key)
+        if entry is None or not entry.matches(data, angles, mask_key, region):
+            pipeline = stack_pipeline(data, angles, params, region)
+            entry = _Entry(data, angles, mask_key, region, pipeline)
+            with self._lock:
+                self._entries[key] = entry
+        return entry.pipeline
+
+    def segmenter(self, key: str, colour_stack: np.ndarray | None = None) -> PixelSegmenter | None:
+        """The pixel segmenter beside ``key``'s pipeline (made at the first call; None
+        without a pipeline). A rebuilt pipeline, or another ``colour_stack`` (the colour
+        stacks of a colour-polarisation frame, :class:`PixelSegmenter`), gets a new one."""
+        with self._lock:
+            entry = self._entries.get(key)
+            if entry is None:
+                return None
+            if entry.segmenter is None or entry.segmenter.colour_stack is not colour_stack:
+                entry.segmenter = PixelSegmenter(entry.pipeline, colour_stack=colour_stack)
+            return entry.segmenter
+
+    def discard(self, keep: set[str]) -> None:
+        """Forget the pipelines of every key not in ``keep`` (layers that were removed)."""
+        with self._lock:
+            for key in set(self._entries) - keep:
+                del self._entries[key]
+
+    def __len__(self) -> int:
+        with self._lock:
+            return len(self._entries)

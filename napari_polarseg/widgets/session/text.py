@@ -1,0 +1,54 @@
+"""The texts the widgets show, made without Qt: the status line of a running job, error
+messages, the polariser angles field (parsed by :func:`napari_polarseg.io.parse_angles`),
+the warnings of a result."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from ...engine import PolarsegError
+from ...engine.physics.pixel_mask import mask_reasons
+from .runs import StageFailed
+
+
+def stage_text(stage: str, index: float, total: int) -> str:
+    """The status line of a running job: ``"running: pca (4/8)"`` after a stage,
+    ``"running: harmonics 40 % (2/8)"`` within one (a fractional ``index``)."""
+    if not stage:
+        return "running…"
+    done = int(index)
+    share = index - done
+    within = f" {share:.0%}".replace("%", " %") if share > 0 else ""
+    return f"running: {stage}{within} ({done}/{total})"
+
+
+def error_message(exc: BaseException) -> str:
+    """The one line shown to the user: the engine's message, or type and message."""
+    if isinstance(exc, (PolarsegError, StageFailed)):
+        return str(exc)
+    return f"{type(exc).__name__}: {exc}"
+
+
+def format_angles(angles_deg: Any) -> str:
+    """``[0.0, 45.0]`` -> ``"0, 45"``."""
+    return ", ".join(f"{float(a):g}" for a in np.asarray(angles_deg, dtype=float).ravel())
+
+
+def degenerate_text(summary: dict[str, Any]) -> str:
+    """The status line's warning of a degenerate result, from ``result.summary()``
+    (``"degenerate"``: one segment holds >= 95 % of the pixels, or every other is below
+    the minimum size), with what to try; "" when the result is not degenerate."""
+    if not summary.get("degenerate"):
+        return ""
+    return (
+        f"degenerate: {summary.get('degenerate_reason')} (try the recommended preset, "
+        "fewer or more segments, a larger window, or scribbles)"
+    )
+
+
+def mask_text(counts: dict[str, Any]) -> str:
+    """``"masked: 120 saturated, 3 black"`` from ``result.mask_counts`` ("" if none)."""
+    parts = mask_reasons(counts)
+    return f"masked: {', '.join(parts)}" if parts else ""
