@@ -22,3 +22,18 @@ def test_segment_widget_defaults_to_auto_and_matches_the_engine(
     np.testing.assert_array_equal(widget.output("segments").data, ref.labels + 1)
     # a degenerate result would say so in the status line; this one is not
     assert "degenerate" not in widget.status.value
+    assert "one smooth surface" not in widget.status.value  # many leaves, not a close-up
+
+
+def test_status_line_says_when_the_frame_is_a_close_up(viewer, open_sample, add_widget, qtbot):
+    """On the fruit close-up the default segments by the departure from the surface's
+    trend and the status line says so, as the CLI does."""
+    stack = open_sample("fruit")
+    widget = add_widget("Segment by material", preset=None)
+    run_and_wait(qtbot, widget)
+    assert error_messages() == []
+    assert "one smooth surface (91% of the polarisation)" in widget.status.value
+    summary = widget.output("segments").metadata["polarseg_summary"]
+    assert summary["superpixels"]["close_up"] is True
+    ref = engine_result(stack, AUTO)
+    np.testing.assert_array_equal(widget.output("segments").data, ref.labels + 1)

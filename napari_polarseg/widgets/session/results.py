@@ -17,7 +17,7 @@ import numpy as np
 
 from ...engine import SegmentationResult
 from .classify import ClassifierOutput, classifier_parts
-from .text import degenerate_text, mask_text
+from .text import close_up_text, degenerate_text, mask_text
 
 #: The inputs of a run without mask, scribbles or classifier file.
 NO_INPUTS: dict[str, Any] = {"mask": None, "scribbles": None, "classifier": None}
@@ -80,9 +80,7 @@ class ShownResult:
             parts = classifier_parts(self.out, self.confidence, self.inputs.get("classifier"))
         else:
             parts = [f"{summary['n_segments']} segments"]
-            warning = degenerate_text(summary)
-            if warning:
-                parts.append(warning)
+            parts += [t for t in (close_up_text(summary), degenerate_text(summary)) if t]
         if self.partial:
             return " · ".join([*parts, f"{seconds:.2f} s", "computing the error map…"])
         parts += [

@@ -48,6 +48,18 @@ def degenerate_text(summary: dict[str, Any]) -> str:
     )
 
 
+def close_up_text(summary: dict[str, Any]) -> str:
+    """The status line's note that the frame was taken for a close-up of one smooth
+    surface (``summary["superpixels"]["close_up"]``, preset auto); "" otherwise."""
+    record = summary.get("superpixels") or {}
+    if not record.get("close_up"):
+        return ""
+    return (
+        f"one smooth surface ({record['surface_share']:.0%} of the polarisation): "
+        "segments where it departs from the surface's trend"
+    )
+
+
 def mask_text(counts: dict[str, Any]) -> str:
     """``"masked: 120 saturated, 3 black"`` from ``result.mask_counts`` ("" if none)."""
     parts = mask_reasons(counts)
