@@ -65,8 +65,8 @@ from . import __version__
 from . import io as pio
 from .engine.errors import Cancelled, PolarsegError
 from .engine.params import SegmentParams
-from .export import FLOAT_OUTPUTS, OutputError
 from .jobs import OutputOptions, ReadOptions, segment_args, segment_to_folder
+from .outputs import FLOAT_OUTPUTS, OutputError
 
 #: Name of the completion marker inside a finished scene folder.
 MARKER = ".polarseg-complete.json"

@@ -2,7 +2,7 @@
 
 :func:`segment_to_folder` reads an input with :class:`ReadOptions`, segments it (normalized
 cut, or a pixel classifier trained on scribbles or loaded from a file), and writes the
-``segment`` result folder (:func:`napari_polarseg.export.write_result_folder`) with the
+``segment`` result folder (:func:`napari_polarseg.outputs.write_result_folder`) with the
 optional files of :class:`OutputOptions`. Everything is computed before the first file is
 written. What a command line would say about the run (its summary line, the warning of a
 degenerate result, the classifier and evaluation lines) comes back as
@@ -29,7 +29,7 @@ from .engine.params import PRESETS, SegmentParams
 from .engine.physics.pixel_mask import PixelMask, mask_reasons
 from .engine.physics.polarimage import validity_mask
 from .engine.physics.registration import register_stack, shift_frames
-from .export import classifier_summary, write_result_folder
+from .outputs import classifier_summary, write_result_folder
 from .status_line import StatusLine
 
 #: Prefix of every message line (the command's name).
@@ -436,7 +436,7 @@ def segment_to_folder(
     with ``params`` and write the ``segment`` result folder ``out``.
 
     Raises :class:`PolarsegError` for bad input and
-    :class:`napari_polarseg.export.OutputError` when the folder cannot be written.
+    :class:`napari_polarseg.outputs.OutputError` when the folder cannot be written.
     """
     read = read or ReadOptions()
     status = status or StatusLine(False, PROG)
