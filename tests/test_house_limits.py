@@ -20,7 +20,6 @@ PACKAGE = Path(napari_polarseg.__file__).parent
 # io.py, widgets/ and the pipeline running beside the engine sub-packages.
 MODULE_ALLOWLIST = {
     # outside engine/: other parts of issue 15
-    "classifier_file.py",
     "cli.py",
     "io.py",
     "widgets/_runner.py",
