@@ -2,7 +2,7 @@
 
 :func:`segment_to_folder` reads an input with :class:`ReadOptions`, segments it (normalized
 cut, or a pixel classifier trained on scribbles or loaded from a file), and writes the
-``segment`` result folder (:func:`napari_polarseg.export.write_result_folder`) with the
+``segment`` result folder (:func:`napari_polarseg.outputs.write_result_folder`) with the
 optional files of :class:`OutputOptions`. Everything is computed before the first file is
 written. What a command line would say about the run (its summary line, the warning of a
 degenerate result, the classifier and evaluation lines) comes back as
@@ -12,7 +12,6 @@ never imports napari, Qt or the command line.
 
 from __future__ import annotations
 
-import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -29,7 +28,8 @@ from .engine.params import PRESETS, SegmentParams
 from .engine.physics.pixel_mask import PixelMask, mask_reasons
 from .engine.physics.polarimage import validity_mask
 from .engine.physics.registration import register_stack, shift_frames
-from .export import classifier_summary, write_result_folder
+from .engine.timing import timed
+from .outputs import classifier_summary, write_result_folder
 from .status_line import StatusLine
 
 #: Prefix of every message line (the command's name).
@@ -285,23 +285,21 @@ def segment_data(
     colour_stack = data.colour_stack
     if register:
         status.show("registering the frames")
-        t0 = time.perf_counter()
-        stack, shifts = register_stack(stack)
-        mask = mask.shifted(shifts)
-        if colour_stack is not None:
-            colour_stack = shift_frames(colour_stack, shifts)
-        seconds["register"] = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    pipe = Pipeline(stack, data.angles_rad, params, mask=mask)
-    run = Run(data, params, stack, None, shifts, seconds, mask, pipe)  # type: ignore[arg-type]
-    run.colour_stack = colour_stack
-    if labels_by is None:
-        status.stage(STAGES[0], 1, len(STAGES), "segmenting:")
-        run.result = pipe.run(progress=progress)
-    else:
-        status.show("pixel classifier: features, training and prediction")
-        labels_by.label(run)
-    seconds["segment"] = time.perf_counter() - t0
+        with timed(seconds, "register"):
+            stack, shifts = register_stack(stack)
+            mask = mask.shifted(shifts)
+            if colour_stack is not None:
+                colour_stack = shift_frames(colour_stack, shifts)
+    with timed(seconds, "segment"):
+        pipe = Pipeline(stack, data.angles_rad, params, mask=mask)
+        run = Run(data, params, stack, None, shifts, seconds, mask, pipe)  # type: ignore[arg-type]
+        run.colour_stack = colour_stack
+        if labels_by is None:
+            status.stage(STAGES[0], 1, len(STAGES), "segmenting:")
+            run.result = pipe.run(progress=progress)
+        else:
+            status.show("pixel classifier: features, training and prediction")
+            labels_by.label(run)
     return run
 
 
@@ -444,32 +442,33 @@ def segment_to_folder(
     with ``params`` and write the ``segment`` result folder ``out``.
 
     Raises :class:`PolarsegError` for bad input and
-    :class:`napari_polarseg.export.OutputError` when the folder cannot be written.
+    :class:`napari_polarseg.outputs.OutputError` when the folder cannot be written.
     """
     read = read or ReadOptions()
     status = status or StatusLine(False, PROG)
     first = input if isinstance(input, (str, Path)) else list(input)[0]
     status.show(f"reading {Path(first).name}")
-    t0 = time.perf_counter()
-    data = pio.read_stack(
-        input,
-        angles_deg=None if read.angles_deg is None else np.asarray(read.angles_deg, float),
-        mosaic=None if read.mosaic_deg is None else np.asarray(read.mosaic_deg, float),
-        channel=read.channel,
-        demosaic=read.demosaic,
-        bayer=read.bayer,
-        dark=read.dark_frame,
-        offset=read.offset,
-        saturation=read.saturation,
-        max_bytes=read.max_bytes(),
-    )
+    seconds: dict[str, float] = {}
+    with timed(seconds, "read"):
+        data = pio.read_stack(
+            input,
+            angles_deg=None if read.angles_deg is None else np.asarray(read.angles_deg, float),
+            mosaic=None if read.mosaic_deg is None else np.asarray(read.mosaic_deg, float),
+            channel=read.channel,
+            demosaic=read.demosaic,
+            bayer=read.bayer,
+            dark=read.dark_frame,
+            offset=read.offset,
+            saturation=read.saturation,
+            max_bytes=read.max_bytes(),
+        )
     return data_to_folder(
         data,
         out,
         params,
         read,
         outputs,
-        read_seconds=time.perf_counter() - t0,
+        read_seconds=seconds["read"],
         command=command,
         status=status,
         progress=progress,

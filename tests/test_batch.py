@@ -218,18 +218,18 @@ def cluster() -> Iterator[str]:
 def flaky_task(job: dict) -> dict:
     """run_scene, except: scene ``raises`` raises; scene ``dies`` kills its worker process
     after writing every file into its temporary folder, just before the rename."""
-    from napari_polarseg import batch as worker_batch
+    from napari_polarseg.batch import scene as worker_scene
 
     if job["name"] == "raises":
         raise RuntimeError("injected task failure")
     if job["name"] == "dies":
 
         def die(tmp: Path, final: Path) -> None:
-            assert (tmp / "labels.tif").is_file() and (tmp / worker_batch.MARKER).is_file()
+            assert (tmp / "labels.tif").is_file() and (tmp / worker_scene.MARKER).is_file()
             os._exit(13)
 
-        worker_batch._commit = die
-    return worker_batch.run_scene(job)
+        worker_scene._commit = die
+    return worker_scene.run_scene(job)
 
 
 def test_failed_scenes_are_recorded_and_rerun_resumes(

@@ -13,8 +13,7 @@ from skimage import io as skio
 from napari_polarseg import cli
 from napari_polarseg import io as pio
 from napari_polarseg.engine import SegmentParams, diffuse_dop
-from napari_polarseg.export import FLOAT_OUTPUTS
-from napari_polarseg.figures import PLOT_FILES
+from napari_polarseg.outputs import FLOAT_OUTPUTS, PLOT_FILES
 
 ANGLES_DEG = np.arange(0.0, 180.0, 30.0)
 SWEEP_FILES = {"sweep.csv", "sweep.json", "sweep_heatmap.png", "best_params.json"}

@@ -1,4 +1,4 @@
-"""export.write_result_folder: the `segment` output folder from any SegmentationResult."""
+"""outputs.write_result_folder: the `segment` output folder from any SegmentationResult."""
 
 from __future__ import annotations
 
@@ -17,8 +17,8 @@ from napari_polarseg import io as pio
 from napari_polarseg.engine import Pipeline, PolarsegError, SegmentParams
 from napari_polarseg.engine.analysis.evaluation import evaluate
 from napari_polarseg.engine.synthetic.scenes import make_scene
-from napari_polarseg.export import OutputError, write_result_folder
 from napari_polarseg.io import read_params_dict
+from napari_polarseg.outputs import OutputError, write_result_folder
 
 SHAPE = (64, 72)
 PARAMS = SegmentParams(window=8, degree=4, n_segments=3)

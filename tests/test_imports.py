@@ -14,7 +14,7 @@ GUI_ROOTS = ["napari", "magicgui", "qtpy", "PyQt5", "PyQt6", "PySide2", "PySide6
         "napari_polarseg",
         "napari_polarseg.engine",
         "napari_polarseg.engine.pipeline",
-        "napari_polarseg.export",
+        "napari_polarseg.outputs",
         # the widgets' headless session layer (pipeline store, jobs, results, texts)
         "napari_polarseg.widgets.session",
     ],

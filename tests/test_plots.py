@@ -128,7 +128,7 @@ def test_error_table_decreases_with_degree(result):
 
 
 def test_save_plots_writes_non_empty_pngs(result, tmp_path):
-    from napari_polarseg.figures import PLOT_FILES, save_plots
+    from napari_polarseg.outputs.figures import PLOT_FILES, save_plots
 
     paths = save_plots(result, tmp_path / "plots", degrees=(2, 6), windows=[10], dpi=50)
     assert set(paths) == set(PLOT_FILES)
@@ -139,7 +139,7 @@ def test_save_plots_writes_non_empty_pngs(result, tmp_path):
 
 
 def test_figures_hold_the_data(result):
-    from napari_polarseg import figures
+    from napari_polarseg.outputs import figures
 
     data = plots.scatter_data(result, max_points=300)
     fig = figures.scatter_figure(data, "both")
@@ -157,7 +157,7 @@ def test_figures_hold_the_data(result):
 
 
 def test_feature_importances_keep_the_largest_in_order():
-    from napari_polarseg import figures
+    from napari_polarseg.outputs import figures
 
     values = {"a@1": 0.1, "b@2": 0.4, "c@4": 0.05, "d@8": 0.3, "e@16": 0.15}
     data = plots.feature_importances(values, top=3)

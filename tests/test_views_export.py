@@ -16,7 +16,7 @@ import tifffile
 from skimage import io as skio
 from test_cli import CONTRACT, run, two_material_scene
 
-from napari_polarseg import export
+from napari_polarseg import outputs
 from napari_polarseg.cli import demo as cli_demo
 from napari_polarseg.engine import Pipeline, PolarsegError, SegmentParams
 from napari_polarseg.engine.analysis.evaluation import adjusted_rand_index
@@ -26,10 +26,11 @@ from napari_polarseg.engine.analysis.views import (
     auto_dolp_max,
 )
 from napari_polarseg.engine.synthetic.scenes import make_scene
-from napari_polarseg.export import (
+from napari_polarseg.outputs import (
     COMPOSITE_FILE,
     STOKES_FILE,
     overview_figure,
+    result_folder,
     segment_colours_for,
     write_result_folder,
 )
@@ -137,8 +138,8 @@ def test_overview_has_the_truth_panel_and_the_ari_when_the_truth_is_given(four_a
     hsv = np.asarray(with_truth.axes[4].images[0].get_array())
     assert hsv.shape == (*SHAPE, 3) and hsv.dtype == np.uint8
     # one panel more, the same height
-    a = export.render_overview(scene.stack[0], result)
-    b = export.render_overview(scene.stack[0], result, truth=scene.labels)
+    a = outputs.render_overview(scene.stack[0], result)
+    b = outputs.render_overview(scene.stack[0], result, truth=scene.labels)
     assert a.shape[0] == b.shape[0] and b.shape[1] / a.shape[1] == pytest.approx(8 / 7, rel=0.02)
 
 
@@ -157,13 +158,13 @@ def toy_samples(tmp_path, monkeypatch):
 
 def test_cli_demo_writes_the_views_and_draws_the_truth(tmp_path, capsys, toy_samples, monkeypatch):
     drawn = {}
-    real = export.render_overview
+    real = result_folder.render_overview
 
     def spy(first_frame, result, **kwargs):
         drawn.update(kwargs)
         return real(first_frame, result, **kwargs)
 
-    monkeypatch.setattr(export, "render_overview", spy)
+    monkeypatch.setattr(result_folder, "render_overview", spy)
     out = tmp_path / "demo"
     code, _, err = run(capsys, "demo", "--out", out, "--scene", "toy", "--degree", "4")
     assert code == 0, err
@@ -187,13 +188,13 @@ def test_cli_segment_writes_the_views_without_truth(tmp_path, capsys, monkeypatc
     path = tmp_path / "stack.npy"
     np.save(path, stack)
     drawn = {}
-    real = export.render_overview
+    real = result_folder.render_overview
 
     def spy(first_frame, result, **kwargs):
         drawn.update(kwargs)
         return real(first_frame, result, **kwargs)
 
-    monkeypatch.setattr(export, "render_overview", spy)
+    monkeypatch.setattr(result_folder, "render_overview", spy)
     out = tmp_path / "out"
     angles = ",".join(str(a) for a in np.arange(0, 180, 30))
     code, _, err = run(

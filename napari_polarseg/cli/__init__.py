@@ -70,9 +70,10 @@ being segmented. A raw frame named after a Sony polarisation sensor (``…_IMX25
 read with the sensor's layout (and RGGB order for the colour sensors). ``demo`` (and
 ``segment --overview``) also writes ``overview.png`` (with the ground truth beside the
 segments and the adjusted Rand index in their title when the truth is known); ``--plots``
-the analyst's plots as PNGs into ``DIR/plots/`` (:func:`napari_polarseg.figures.save_plots`).
-The folder is written by :func:`napari_polarseg.export.write_result_folder`, as the
-plugin's *Export results…* does.
+the analyst's plots as PNGs into ``DIR/plots/``
+(:func:`napari_polarseg.outputs.figures.save_plots`). The folder is written by
+:func:`napari_polarseg.outputs.write_result_folder`, as the plugin's *Export results…*
+does.
 
 ``sweep`` segments one stack for every w, L (and n) of a grid with one cached pipeline
 (:mod:`napari_polarseg.engine.analysis.sweep`) and writes ``sweep.csv`` (one row per cell: the
@@ -116,7 +117,7 @@ from collections.abc import Sequence
 from .. import __version__
 from ..engine.errors import PolarsegError
 from ..engine.params import ParamSpec
-from ..export import OutputError
+from ..outputs import OutputError
 from ..status_line import StatusLine
 from . import batch, demo, segment, sweep, timeseries
 from .arguments import PROG, CommandParser, UsageError

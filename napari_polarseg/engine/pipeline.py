@@ -20,7 +20,6 @@ the cached cut tree and never recomputes harmonics.
 from __future__ import annotations
 
 import threading
-import time
 import warnings
 from collections import Counter
 from collections.abc import Callable, Iterator
@@ -45,6 +44,7 @@ from .stages import (
     block_vectors,
     own_key,
 )
+from .timing import timed
 
 
 class Pipeline:
@@ -205,9 +205,8 @@ class Pipeline:
             entry = self._cache.get(stage)
             if entry is not None and entry[0] == key:
                 return entry[1]
-            t0 = time.perf_counter()
-            value = STAGE_FUNCTIONS[stage](self, run)
-            self._seconds[stage] = time.perf_counter() - t0
+            with timed(self._seconds, stage):
+                value = STAGE_FUNCTIONS[stage](self, run)
             self.calls[stage] += 1
             run.recomputed.append(stage)
             done_for, names = self._recomputed
@@ -426,13 +425,13 @@ class Pipeline:
         training blocks.
         """
         p = self.snapshot(params)
-        t0 = time.perf_counter()
-        block, labels, maps, classes, n_train = self._classify(scribbles, p)
-        seconds = time.perf_counter() - t0
+        scribble_seconds: dict[str, float] = {}
+        with timed(scribble_seconds, "scribbles"):
+            block, labels, maps, classes, n_train = self._classify(scribbles, p)
         names = ["polarisation", "normals", "harmonics", "pca"]
         names += ["reconstruction"] if reconstruction else []
         timings = {s: self._seconds.get(s, 0.0) for s in names}
-        timings["scribbles"] = seconds
+        timings.update(scribble_seconds)
         done = self.recomputed_stages(p)
         recomputed = [s for s in names if s in done] + ["scribbles"]
         result = self.assemble_result(

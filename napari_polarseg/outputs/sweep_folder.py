@@ -6,9 +6,9 @@ from __future__ import annotations
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from .. import figures
 from .. import io as pio
-from ..export import OutputError
+from . import figures
+from .contract import OutputError
 
 if TYPE_CHECKING:
     from ..engine.analysis.sweep_result import SweepResult

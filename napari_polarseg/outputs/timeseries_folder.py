@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .. import io as pio
-from ..export import OutputError, labels_image
+from .contract import OutputError, labels_image
 
 if TYPE_CHECKING:
     from ..engine.analysis.timeseries_result import TimeSeriesResult

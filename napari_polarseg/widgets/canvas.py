@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
-from .. import figures
+from ..outputs import figures
 
 if TYPE_CHECKING:
     import napari

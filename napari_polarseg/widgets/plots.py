@@ -1,8 +1,8 @@
 """The "Polarisation plots" widget: the analyst's plots of a stack's last segmentation.
 
 Thin: the data come from :mod:`napari_polarseg.engine.analysis.plots`, the drawing from
-:mod:`napari_polarseg.figures`; this module only finds the segmentation, runs the engine
-in a worker when needed and shows a matplotlib canvas themed like napari.
+:mod:`napari_polarseg.outputs.figures`; this module only finds the segmentation, runs the
+engine in a worker when needed and shows a matplotlib canvas themed like napari.
 """
 
 from __future__ import annotations
@@ -13,9 +13,9 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from magicgui.widgets import ComboBox, PushButton
 
-from .. import figures
 from ..engine import STAGES, PolarsegError, SegmentParams
 from ..engine.analysis import plots
+from ..outputs import figures
 from ._base import StackWidget
 from ._layers import TAG, find_output, fitted_limits, source_key
 from .canvas import figure_canvas, napari_theme, show_message

@@ -259,7 +259,7 @@ class ResultExport(WidgetPart):
     ) -> bool:
         """Write the chosen stack's last result into ``folder``, in a worker thread.
 
-        The files of ``polarseg segment --out`` (:func:`napari_polarseg.export.
+        The files of ``polarseg segment --out`` (:func:`napari_polarseg.outputs.
         write_result_folder`): ``labels.tif`` (0 = first segment; after a scribble run the
         class index, 0 = smallest scribble value), the float maps, ``mask.tif``,
         ``segments.csv``, ``params.json`` (reloads with :meth:`load_params` and ``polarseg

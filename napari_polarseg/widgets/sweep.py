@@ -2,7 +2,7 @@
 
 Thin: the sweep is :func:`napari_polarseg.engine.analysis.sweep.iter_sweep` run in a napari
 worker (progress bar per cell, *Cancel* stops after the running cell), the heatmaps are
-:func:`napari_polarseg.figures.sweep_heatmap_figure` on a matplotlib canvas themed like
+:func:`napari_polarseg.outputs.figures.sweep_heatmap_figure` on a matplotlib canvas themed like
 napari, the table is the sweep's rows. *Use best* hands the best cell's parameters to the
 *Segment by material* widget (docking it if needed) and runs it; *Save best…* writes them
 as a SegmentParams JSON file (the format of ``polarseg segment --params``).
@@ -19,10 +19,10 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from magicgui.widgets import ComboBox, Container, LineEdit, PushButton, SpinBox, Table
 
-from .. import figures
 from ..engine import PolarsegError, SegmentParams, validity_mask
 from ..engine.analysis.sweep import check_grid, iter_sweep
 from ..engine.analysis.sweep_result import DEFAULT_SCORE, SCORES, SweepResult
+from ..outputs import figures
 from ._base import StackWidget, ask_file
 from .batch import params_from
 from .canvas import figure_canvas, napari_theme, show_message

@@ -11,7 +11,7 @@ import tifffile
 from _gui_helpers import click, error_messages, run_and_wait, wait_idle
 
 from napari_polarseg.engine import SegmentParams
-from napari_polarseg.export import FLOAT_OUTPUTS
+from napari_polarseg.outputs import FLOAT_OUTPUTS
 
 pytestmark = pytest.mark.gui
 

@@ -18,7 +18,6 @@ can tell materials apart by the colour of their polarised reflection as well.
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -36,6 +35,7 @@ from ..params import SegmentParams
 from ..physics.colour_mosaic import COLOURS, colour_polarisation_images
 from ..pipeline import Pipeline
 from ..result import SegmentationResult
+from ..timing import timed
 from .pixel_classifier import (
     ClassifierParams,
     PixelClassifier,
@@ -195,22 +195,19 @@ class PixelSegmenter:
         if (scribbles is None) == (classifier is None):
             raise ValueError("give scribbles or a classifier, not both or neither")
         seconds: dict[str, float] = {}
-        t0 = time.perf_counter()
-        fparams = classifier.feature_params if classifier is not None else feature_params
-        colour = classifier is None or any(
-            name.split(":", 1)[0] in self.colours for name in classifier.feature_names
-        )
-        feats = self.features(fparams, colour, segment_params)
-        seconds["features"] = time.perf_counter() - t0
+        with timed(seconds, "features"):
+            fparams = classifier.feature_params if classifier is not None else feature_params
+            colour = classifier is None or any(
+                name.split(":", 1)[0] in self.colours for name in classifier.feature_names
+            )
+            feats = self.features(fparams, colour, segment_params)
         seconds["train"] = 0.0  # an applied classifier is not retrained
         if classifier is None:
-            t0 = time.perf_counter()
-            classifier = self.train(scribbles, feats.params, params, segment_params)
-            seconds["train"] = time.perf_counter() - t0
-        t0 = time.perf_counter()
-        guide = self.guide(segment_params) if classifier.params.smoothing > 0 else None
-        prediction = predict_pixels(classifier, feats, guide=guide, cancel=cancel)
-        seconds["predict"] = time.perf_counter() - t0
+            with timed(seconds, "train"):
+                classifier = self.train(scribbles, feats.params, params, segment_params)
+        with timed(seconds, "predict"):
+            guide = self.guide(segment_params) if classifier.params.smoothing > 0 else None
+            prediction = predict_pixels(classifier, feats, guide=guide, cancel=cancel)
         result = self.result(prediction.labels, reconstruction, seconds, segment_params)
         return PixelSegmentation(result, prediction, classifier, seconds)
 

@@ -1,6 +1,6 @@
 """Data of the analyst's plots (thesis figures 4.1, 5.2/5.11, 5.4/5.13, 5.17, table 5.1).
 
-Plain arrays only: no matplotlib here (see :mod:`napari_polarseg.figures` for the figures
+Plain arrays only: no matplotlib here (see :mod:`napari_polarseg.outputs.figures` for the figures
 and :mod:`napari_polarseg.widgets.plots` for the napari dock widget).
 
 - :func:`scatter_data` — a sample of (Î, ρ, φ) per pixel with its segment (figure 4.1);

@@ -91,7 +91,6 @@ Angles are radians here.
 
 from __future__ import annotations
 
-import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, NamedTuple
@@ -105,6 +104,7 @@ from ..graph import affinity, ncut, spectral
 from ..params import SegmentParams
 from ..pipeline import Pipeline
 from ..stages import MAX_DENSE_BLOCKS, POLSTATS_KINDS
+from ..timing import timed
 from .change_test import (
     CHANGE_SOURCES,
     DEFAULT_FALSE_ALARM,
@@ -228,12 +228,12 @@ def _cut_days(
     """Steps "affinity" and "cut": the block graph, its cut and the labels of every day."""
     n_days = scores.shape[0] // int(np.prod(grid))
     W, min_size = steps.run("affinity", _block_graph, scores, grid, n_days, opt.params, opt.method)
-    t0 = time.perf_counter()
-    tree = _cut_tree(W, min_size, opt.params)
-    segs = _segments(
-        opt.method, tree, scores, grid, shape, opt.params, change_stats, opt.change_window
-    )
-    steps.done("cut", t0)
+    with timed(steps.timings, "cut"):
+        tree = _cut_tree(W, min_size, opt.params)
+        segs = _segments(
+            opt.method, tree, scores, grid, shape, opt.params, change_stats, opt.change_window
+        )
+    steps.done("cut")
     return tree, segs
 
 
@@ -359,15 +359,14 @@ class _Steps:
 
     def run(self, stage: str, work: Callable[..., Any], *args: Any) -> Any:
         """``work(*args)`` as the step ``stage``: timed, reported, then Cancel checked."""
-        t0 = time.perf_counter()
-        out = work(*args)
-        self.done(stage, t0)
+        with timed(self.timings, stage):
+            out = work(*args)
+        self.done(stage)
         return out
 
-    def done(self, stage: str, t0: float) -> None:
-        """Record ``stage`` (started at ``t0``), report it, raise Cancelled if asked."""
+    def done(self, stage: str) -> None:
+        """Report ``stage`` (timed into :attr:`timings`), raise Cancelled if asked."""
         self.step += 1
-        self.timings[stage] = time.perf_counter() - t0
         if self.progress is not None:
             self.progress(stage, self.step, self.total)
         if self.cancel is not None and self.step < self.total and self.cancel():
@@ -389,29 +388,30 @@ def _day_pipelines(
     shape: tuple[int, ...] | None = None
     grid: tuple[int, ...] | None = None
     for t in range(len(stacks)):
-        t0 = time.perf_counter()
-        try:
-            pipe = Pipeline(np.asarray(stacks[t]), angle_list[t], params, mask=mask_list[t])
-            coef = pipe.get("harmonics")
-            # polarisation statistics are standardised over all days below, not per day
-            vectors.append(pipe.block_vectors(standardise=False))
-        except PolarsegError as exc:
-            raise PolarsegError(f"day {t + 1}: {exc}") from None
-        day_shape = tuple(pipe.stack.shape[1:])
-        if shape is None:
-            shape, grid = day_shape, tuple(coef.shape[:2])
-            if change_window > min(day_shape):
+        name = f"day {t + 1} harmonics"
+        with timed(steps.timings, name):
+            try:
+                pipe = Pipeline(np.asarray(stacks[t]), angle_list[t], params, mask=mask_list[t])
+                coef = pipe.get("harmonics")
+                # polarisation statistics are standardised over all days below, not per day
+                vectors.append(pipe.block_vectors(standardise=False))
+            except PolarsegError as exc:
+                raise PolarsegError(f"day {t + 1}: {exc}") from None
+            day_shape = tuple(pipe.stack.shape[1:])
+            if shape is None:
+                shape, grid = day_shape, tuple(coef.shape[:2])
+                if change_window > min(day_shape):
+                    raise PolarsegError(
+                        f"change_window {change_window} is larger than the image "
+                        f"({day_shape[0]} x {day_shape[1]} pixels)"
+                    )
+            elif day_shape != shape:
                 raise PolarsegError(
-                    f"change_window {change_window} is larger than the image "
-                    f"({day_shape[0]} x {day_shape[1]} pixels)"
+                    f"day {t + 1} is {day_shape[0]} x {day_shape[1]} pixels but day 1 is "
+                    f"{shape[0]} x {shape[1]}: a time series needs the same view every day"
                 )
-        elif day_shape != shape:
-            raise PolarsegError(
-                f"day {t + 1} is {day_shape[0]} x {day_shape[1]} pixels but day 1 is "
-                f"{shape[0]} x {shape[1]}: a time series needs the same view every day"
-            )
-        pipelines.append(pipe)
-        steps.done(f"day {t + 1} harmonics", t0)
+            pipelines.append(pipe)
+        steps.done(name)
     assert shape is not None and grid is not None
     return pipelines, vectors, shape, grid
 

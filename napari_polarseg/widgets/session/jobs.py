@@ -143,9 +143,9 @@ def write_classifier_job(path: Path, classifier: PixelClassifier) -> Generator[S
 
 
 def export_job(folder: Path, kwargs: dict[str, Any]) -> Generator[Stage, None, list[str]]:
-    """Worker job of *Export results…*: :func:`~napari_polarseg.export.write_result_folder`
+    """Worker job of *Export results…*: :func:`~napari_polarseg.outputs.write_result_folder`
     (a file that cannot be written is reported as a :class:`PolarsegError`)."""
-    from ...export import OutputError, write_result_folder
+    from ...outputs import OutputError, write_result_folder
 
     yield "writing", 1, 1
     try:

@@ -132,7 +132,7 @@ def shown_result(
 class ExportRecord:
     """What *Export results…* writes for a stack layer: its last result and inputs.
 
-    The keyword arguments of :func:`napari_polarseg.export.write_result_folder` but the
+    The keyword arguments of :func:`napari_polarseg.outputs.write_result_folder` but the
     folder (and ``overview``/``plots``), captured when the result was shown.
     """
 
@@ -147,7 +147,7 @@ class ExportRecord:
     summary: dict[str, Any] = field(default_factory=dict)
 
     def kwargs(self) -> dict[str, Any]:
-        """The keyword arguments of :func:`~napari_polarseg.export.write_result_folder`."""
+        """The keyword arguments of :func:`~napari_polarseg.outputs.write_result_folder`."""
         return {
             "stack": self.stack,
             "angles_deg": self.angles_deg,
@@ -174,7 +174,7 @@ class ExportRecord:
         """What *Export results…* needs of ``shown`` (a complete result) of the stack
         layer ``layer_name`` (``stack`` its data, ``mask`` the pipeline's pixel mask,
         ``source`` the file it was read from)."""
-        from ...export import classifier_summary
+        from ...outputs import classifier_summary
 
         out, inputs = shown.out, shown.inputs
         summary: dict[str, Any] = {}

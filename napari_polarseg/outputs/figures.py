@@ -19,15 +19,15 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from . import io as pio
-from .engine.analysis import plots
-from .engine.errors import PolarsegError
+from .. import io as pio
+from ..engine.analysis import plots
+from ..engine.errors import PolarsegError
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
-    from .engine import SegmentationResult
-    from .engine.analysis.sweep_result import SweepResult
+    from ..engine import SegmentationResult
+    from ..engine.analysis.sweep_result import SweepCell, SweepResult
 
 #: Colours of the light default theme: figure background, text/axes, accent.
 LIGHT = {"background": "#ffffff", "foreground": "#000000", "accent": "#1f77b4"}
@@ -54,6 +54,14 @@ def _figure(fig: Figure | None, size: tuple[float, float], theme: dict[str, str]
         fig.clear()
     fig.set_facecolor(theme["background"])
     return fig
+
+
+def _single_axes(
+    fig: Figure | None, size: tuple[float, float], theme: dict[str, str]
+) -> tuple[Figure, Any]:
+    """A figure as :func:`_figure` makes it, with one axes filling it."""
+    fig = _figure(fig, size, theme)
+    return fig, fig.add_subplot(1, 1, 1)
 
 
 def _style(ax: Any, theme: dict[str, str]) -> None:
@@ -117,8 +125,7 @@ def explained_variance_figure(
     data: plots.ExplainedVariance, fig: Figure | None = None, theme: dict[str, str] = LIGHT
 ) -> Figure:
     """Bars of each principal component's share and a line of the cumulative share."""
-    fig = _figure(fig, (5.0, 3.5), theme)
-    ax = fig.add_subplot(1, 1, 1)
+    fig, ax = _single_axes(fig, (5.0, 3.5), theme)
     k = np.arange(1, data.ratio.size + 1)
     ax.bar(k, data.ratio, color=theme["accent"], label="component")
     ax.plot(k, data.cumulative, "o-", color=theme["foreground"], ms=3, label="cumulative")
@@ -136,8 +143,7 @@ def importances_figure(
     data: plots.FeatureImportances, fig: Figure | None = None, theme: dict[str, str] = LIGHT
 ) -> Figure:
     """Horizontal bars of a pixel classifier's largest feature importances, largest on top."""
-    fig = _figure(fig, (5.0, 4.0), theme)
-    ax = fig.add_subplot(1, 1, 1)
+    fig, ax = _single_axes(fig, (5.0, 4.0), theme)
     y = np.arange(len(data.names))
     ax.barh(y, data.values, color=theme["accent"])
     ax.set_yticks(y, data.names, fontsize="small")
@@ -233,8 +239,8 @@ def error_table_figure(
     data: plots.ErrorTable, fig: Figure | None = None, theme: dict[str, str] = LIGHT
 ) -> Figure:
     """Mean reconstruction error per window and degree as a table (thesis table 5.1)."""
-    fig = _figure(fig, (1.5 + 0.9 * len(data.degrees), 0.8 + 0.35 * len(data.windows)), theme)
-    ax = fig.add_subplot(1, 1, 1)
+    size = (1.5 + 0.9 * len(data.degrees), 0.8 + 0.35 * len(data.windows))
+    fig, ax = _single_axes(fig, size, theme)
     ax.axis("off")
     cells = [[f"{v:.4g}" for v in row] for row in data.errors]
     table = ax.table(
@@ -398,9 +404,6 @@ def sweep_heatmap_figure(
     annotate : bool
         Write each cell's value into it.
     """
-    from matplotlib import colormaps
-    from matplotlib.patches import Rectangle
-
     if metrics is None:
         metrics = [
             m for m in SWEEP_METRICS if m != "seconds" and (m != "ari" or result.has_ground_truth)
@@ -416,60 +419,82 @@ def sweep_heatmap_figure(
         best = result.best_cell()
     except PolarsegError:
         best = None
-    fg = theme["foreground"]
     for r, metric in enumerate(metrics):
-        values = result.grid(metric)
-        finite = values[np.isfinite(values)]
-        lo, hi = (float(finite.min()), float(finite.max())) if finite.size else (0.0, 1.0)
-        if not hi > lo:
-            lo, hi = lo - 0.5, hi + 0.5
-        cmap = colormaps["viridis_r" if metric in ("mean_ncut", "seconds") else "viridis"]
-        cmap = cmap.with_extremes(bad=theme["background"])
-        axes = []
-        for k, n in enumerate(result.refractive_indices):
-            ax = fig.add_subplot(n_rows, n_cols, r * n_cols + k + 1)
-            axes.append(ax)
-            grid = np.ma.masked_invalid(values[k])
-            im = ax.imshow(grid, cmap=cmap, vmin=lo, vmax=hi, aspect="auto")
-            ax.set_xticks(range(nl), [str(d) for d in result.degrees])
-            ax.set_yticks(range(nw), [str(w) for w in result.windows])
-            ax.set_xlabel("degree L")
-            ax.set_ylabel("window w")
-            title = SWEEP_METRICS.get(metric, metric)
-            ax.set_title(f"{title}\nn = {n:g}" if n_cols > 1 else title, fontsize="medium")
-            _style(ax, theme)
-            for i in range(nw):
-                for j in range(nl):
-                    v = values[k, i, j]
-                    if not np.isfinite(v):
-                        ax.text(j, i, "×", ha="center", va="center", color=fg)
-                    elif annotate:
-                        shade = (v - lo) / (hi - lo)
-                        if metric in ("mean_ncut", "seconds"):
-                            shade = 1.0 - shade
-                        colour = "black" if shade > 0.55 else "white"
-                        ax.text(
-                            j,
-                            i,
-                            f"{v:.2f}",
-                            ha="center",
-                            va="center",
-                            color=colour,
-                            fontsize="small",
-                        )
-            if best is not None and best.index[0] == k:
-                _, i, j = best.index
-                ax.add_patch(
-                    Rectangle(
-                        (j - 0.5, i - 0.5), 1, 1, fill=False, edgecolor="#ff3b30", linewidth=2.5
-                    )
-                )
-        bar = fig.colorbar(im, ax=axes, shrink=0.9)
-        bar.ax.tick_params(colors=fg, labelsize="small")
+        _sweep_row(fig, result, metric, (r, n_rows), best, theme, annotate)
     if best is not None:
         fig.suptitle(
             f"best by {result.score}: w = {best.window}, L = {best.degree}, "
             f"n = {best.refractive_index:g}",
-            color=fg,
+            color=theme["foreground"],
         )
     return fig
+
+
+def _sweep_row(
+    fig: Figure,
+    result: SweepResult,
+    metric: str,
+    row: tuple[int, int],
+    best: SweepCell | None,
+    theme: dict[str, str],
+    annotate: bool,
+) -> None:
+    """Row ``row = (r, n_rows)`` of :func:`sweep_heatmap_figure`: ``metric``'s panel for
+    every refractive index, on one colour scale with one colour bar."""
+    from matplotlib import colormaps
+    from matplotlib.patches import Rectangle
+
+    r, n_rows = row
+    n_cols = len(result.refractive_indices)
+    values = result.grid(metric)
+    finite = values[np.isfinite(values)]
+    lo, hi = (float(finite.min()), float(finite.max())) if finite.size else (0.0, 1.0)
+    if not hi > lo:
+        lo, hi = lo - 0.5, hi + 0.5
+    cmap = colormaps["viridis_r" if metric in ("mean_ncut", "seconds") else "viridis"]
+    cmap = cmap.with_extremes(bad=theme["background"])
+    axes = []
+    for k, n in enumerate(result.refractive_indices):
+        ax = fig.add_subplot(n_rows, n_cols, r * n_cols + k + 1)
+        axes.append(ax)
+        grid = np.ma.masked_invalid(values[k])
+        im = ax.imshow(grid, cmap=cmap, vmin=lo, vmax=hi, aspect="auto")
+        ax.set_xticks(range(len(result.degrees)), [str(d) for d in result.degrees])
+        ax.set_yticks(range(len(result.windows)), [str(w) for w in result.windows])
+        ax.set_xlabel("degree L")
+        ax.set_ylabel("window w")
+        title = SWEEP_METRICS.get(metric, metric)
+        ax.set_title(f"{title}\nn = {n:g}" if n_cols > 1 else title, fontsize="medium")
+        _style(ax, theme)
+        _sweep_cells(ax, values[k], metric, (lo, hi), theme, annotate)
+        if best is not None and best.index[0] == k:
+            _, i, j = best.index
+            ax.add_patch(
+                Rectangle((j - 0.5, i - 0.5), 1, 1, fill=False, edgecolor="#ff3b30", linewidth=2.5)
+            )
+    bar = fig.colorbar(im, ax=axes, shrink=0.9)
+    bar.ax.tick_params(colors=theme["foreground"], labelsize="small")
+
+
+def _sweep_cells(
+    ax: Any,
+    values: np.ndarray,
+    metric: str,
+    scale: tuple[float, float],
+    theme: dict[str, str],
+    annotate: bool,
+) -> None:
+    """Mark the failed cells of one w × L panel with ×; with ``annotate``, write every
+    other cell's value, black on bright cells, white on dark ones."""
+    lo, hi = scale
+    for i in range(values.shape[0]):
+        for j in range(values.shape[1]):
+            v = values[i, j]
+            if not np.isfinite(v):
+                ax.text(j, i, "×", ha="center", va="center", color=theme["foreground"])
+            elif annotate:
+                shade = (v - lo) / (hi - lo)
+                if metric in ("mean_ncut", "seconds"):
+                    shade = 1.0 - shade
+                colour = "black" if shade > 0.55 else "white"
+                ax.text(j, i, f"{v:.2f}", ha="center", va="center", color=colour, fontsize="small")

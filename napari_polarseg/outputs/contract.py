@@ -1,0 +1,84 @@
+"""The names and metadata of the files in a ``segment`` result folder, and their error.
+
+The file names and the TIFF metadata every result folder's images carry
+(:data:`FLOAT_OUTPUTS`, :data:`MASK_META`, …), the error a writer raises
+(:class:`OutputError`), and the two images every folder derives from a result
+(:func:`labels_image`, :func:`used_pixels`). Shared by the result-folder writer
+(:mod:`napari_polarseg.outputs.result_folder`) and the batch runner's completeness check
+(:func:`napari_polarseg.batch.contract_files`).
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from ..engine import SegmentationResult
+
+#: The polarisation views every result folder holds beside the contract files.
+STOKES_FILE = "stokes.tif"
+COMPOSITE_FILE = "aolp_dolp.png"
+
+#: Output images: file name -> (result attribute, TIFF metadata).
+FLOAT_OUTPUTS = {
+    "intensity.tif": ("intensity", {"quantity": "mean intensity", "unit": "input units"}),
+    "dop.tif": ("dop", {"quantity": "degree of polarisation", "unit": "1"}),
+    "phase.tif": ("phase", {"quantity": "phase", "unit": "radians", "range": "[0, pi)"}),
+    "zenith.tif": ("zenith", {"quantity": "zenith angle", "unit": "radians"}),
+    "reconstruction_error.tif": (
+        "reconstruction_error",
+        {"quantity": "absolute reconstruction error of the mean intensity", "unit": "input units"},
+    ),
+    "residual.tif": (
+        "residual",
+        {"quantity": "RMS residual of the sinusoid fit", "unit": "input units"},
+    ),
+}
+
+MASK_META = {
+    "quantity": "pixels used by the fit and the features",
+    "values": "1 used, 0 excluded (saturated, black, not finite, outside the mask, or no "
+    "positive intensity)",
+}
+
+PROBABILITY_META = {
+    "quantity": "class probability from the pixel classifier",
+    "unit": "1",
+    "axes": "class, row, column (class k = the k-th smallest scribble value)",
+}
+
+UNCERTAINTY_META = {
+    "quantity": "uncertainty of the pixel classifier: 1 - (p1 - p2), one minus the margin "
+    "between the two most probable classes",
+    "unit": "1",
+}
+
+#: Figures of an ``evaluation.json`` that ``summary.json`` repeats under ``"evaluation"``.
+EVALUATION_SUMMARY_KEYS = (
+    "adjusted_rand_index",
+    "mean_iou",
+    "iou_per_segment",
+    "block_accuracy_worst",
+    "block_accuracy_optimistic",
+    "window",
+)
+
+
+class OutputError(Exception):
+    """The outputs could not be written (``polarseg`` exit code 1)."""
+
+
+def labels_image(labels: np.ndarray) -> np.ndarray:
+    """Labels as the smallest unsigned type that holds them (uint16, else uint32)."""
+    dtype = np.uint16 if labels.max(initial=0) < 2**16 else np.uint32
+    return labels.astype(dtype)
+
+
+def used_pixels(result: SegmentationResult) -> np.ndarray:
+    """``mask.tif``: 1 where the fit and the features used the pixel (uint8)."""
+    valid = result.valid
+    if valid is None:
+        return np.ones(result.labels.shape, np.uint8)
+    return np.asarray(valid, dtype=np.uint8)

@@ -1,0 +1,236 @@
+"""The ``overview.png`` of a result folder: every map of a segmentation side by side.
+
+:func:`overview_figure` draws the input, Î, ρ, φ, the AoLP/DoLP HSV composite, the
+segments, the ground truth (when known, in the colours of the segments it is matched to,
+:func:`segment_colours_for`) and the reconstruction error; :func:`render_overview` turns
+it into pixels. matplotlib is imported lazily, with its object-oriented API on an Agg
+canvas only (no pyplot, no window, safe in a worker thread).
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from ..engine.analysis.views import CompositeParams, aolp_dolp_composite, auto_dolp_max
+
+if TYPE_CHECKING:
+    from matplotlib.colors import Colormap
+    from matplotlib.figure import Figure
+
+    from ..engine import SegmentationResult
+
+#: One panel of the overview: (title, image, colour map or "rgb" or a label-panel key of
+#: the ticks, vmin, vmax).
+Panel = tuple[str, Any, str, Any, Any]
+#: Colour-bar ticks of the label panels by their key: (positions, tick labels).
+Ticks = dict[str, tuple[Any, list[str]]]
+
+
+def segment_colours_for(truth: np.ndarray, labels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Colour indices of the true materials and of the segments, matched by overlap.
+
+    The true labels are numbered 0, 1, … in increasing order; each segment gets the index
+    of the true material it is matched to (the largest total overlap, a linear
+    assignment on the contingency table), so a material and its segment share a colour.
+    Unmatched segments get the indices after the true materials'. Returns ``(truth
+    index (H, W), segment index by label value (n_labels,))``.
+    """
+    from scipy.optimize import linear_sum_assignment
+
+    true_values, true_index = np.unique(np.asarray(truth), return_inverse=True)
+    true_index = true_index.reshape(np.shape(truth))
+    n_labels = int(np.max(labels, initial=0)) + 1
+    table = np.zeros((true_values.size, n_labels))
+    np.add.at(table, (true_index.ravel(), np.asarray(labels).ravel()), 1.0)
+    rows, cols = linear_sum_assignment(table, maximize=True)
+    colour = np.full(n_labels, -1)
+    colour[cols] = rows
+    spare = iter(range(true_values.size, true_values.size + n_labels))
+    for j in np.flatnonzero(colour < 0):
+        colour[j] = next(spare)
+    return true_index, colour
+
+
+def segment_colormap(k: int) -> Colormap:
+    """The colours of ``k`` label values: tab10 (tab20 above 10), repeated as needed."""
+    from matplotlib import colormaps
+    from matplotlib.colors import ListedColormap
+
+    base = "tab10" if k <= 10 else "tab20"
+    return ListedColormap(colormaps[base](np.arange(k) % colormaps[base].N))
+
+
+def _label_panels(
+    result: SegmentationResult, truth: np.ndarray | None
+) -> tuple[list[Panel], Ticks, int]:
+    """The segments' panel and, with ``truth``, the ground truth's, matched in colour;
+    their colour-bar ticks; the number of colours."""
+    from ..engine.analysis.evaluation import adjusted_rand_index
+
+    labels = np.asarray(result.labels)
+    k = max(result.n_segments, 1)
+    seg_title = f"segments ({result.n_segments})"
+    # colour-bar ticks of the label panels: positions (colour indices) and their labels
+    ticks: Ticks = {"segments": (np.arange(k), [str(v) for v in range(k)])}
+    if truth is None:
+        return [(seg_title, labels, "segments", -0.5, k - 0.5)], ticks, k
+    true_index, colour = segment_colours_for(truth, labels)
+    true_values = np.unique(np.asarray(truth))
+    labels = colour[labels]
+    k = max(k, true_values.size, int(colour.max(initial=0)) + 1)
+    ticks["segments"] = (colour, [str(v) for v in range(colour.size)])
+    ticks["truth"] = (np.arange(true_values.size), [str(v) for v in true_values])
+    seg_title += f", ARI {adjusted_rand_index(truth, result.labels):.3f}"
+    return (
+        [
+            (seg_title, labels, "segments", -0.5, k - 0.5),
+            (f"ground truth ({true_values.size})", true_index, "truth", -0.5, k - 0.5),
+        ],
+        ticks,
+        k,
+    )
+
+
+def _panels(
+    first_frame: np.ndarray,
+    result: SegmentationResult,
+    truth: np.ndarray | None,
+    composite: np.ndarray | None,
+    dolp_max: float | None,
+) -> tuple[list[Panel], Ticks, int]:
+    """Every panel of the overview in order, the label panels' ticks, their colours."""
+    if composite is None:
+        if dolp_max is None:
+            dolp_max = auto_dolp_max(result.dop)
+        composite = aolp_dolp_composite(
+            result.intensity, result.dop, result.phase, CompositeParams(dolp_max=dolp_max)
+        )
+    hsv_title = "AoLP hue, DoLP saturation"
+    if dolp_max is not None:
+        hsv_title += f"\n(full at ρ = {dolp_max:g})"
+    label_panels, ticks, k = _label_panels(result, truth)
+    error = result.reconstruction_error
+    error = np.zeros_like(result.intensity) if error is None else error
+    finite_err = error[np.isfinite(error)]
+    err_max = float(np.percentile(finite_err, 99)) if finite_err.size else 1.0
+    panels: list[Panel] = [
+        ("input (first frame)", first_frame, "gray", None, None),
+        ("Î mean intensity", result.intensity, "gray", None, None),
+        ("ρ degree of polarisation", result.dop, "viridis", 0.0, None),
+        ("φ phase (rad)", result.phase, "twilight", 0.0, np.pi),
+        (hsv_title, composite, "rgb", None, None),
+        *label_panels,
+        ("reconstruction error", error, "magma", 0.0, err_max or None),
+    ]
+    return panels, ticks, k
+
+
+def _draw_panel(
+    fig: Figure, ax: Any, panel: Panel, ticks: Ticks, seg_cmap: Colormap, k: int
+) -> None:
+    """One panel and its colour bar (hue degrees for the composite, label ticks)."""
+    from matplotlib import colormaps
+    from matplotlib.cm import ScalarMappable
+    from matplotlib.colors import Normalize
+
+    title, image, cmap, vmin, vmax = panel
+    ax.set_title(title, fontsize=10)
+    ax.set_axis_off()
+    if cmap == "rgb":
+        ax.imshow(image, interpolation="nearest")
+        hue = ScalarMappable(Normalize(0.0, 180.0), colormaps["hsv"])
+        bar = fig.colorbar(hue, ax=ax, fraction=0.046, pad=0.02)
+        bar.set_ticks([0, 45, 90, 135, 180])
+        bar.set_label("AoLP (°)", fontsize=8)
+        return
+    is_labels = cmap in ticks
+    shown = ax.imshow(
+        np.asarray(image, dtype=float),
+        cmap=seg_cmap if is_labels else cmap,
+        vmin=vmin,
+        vmax=vmax,
+        interpolation="nearest",
+    )
+    bar = fig.colorbar(shown, ax=ax, fraction=0.046, pad=0.02)
+    if is_labels:
+        where, names = ticks[cmap]
+        if len(names) <= 12:
+            bar.set_ticks(np.asarray(where, dtype=float), labels=names)
+        else:
+            bar.set_ticks(np.linspace(0, k - 1, 5).round())
+
+
+def overview_figure(
+    first_frame: np.ndarray,
+    result: SegmentationResult,
+    *,
+    truth: np.ndarray | None = None,
+    composite: np.ndarray | None = None,
+    dolp_max: float | None = None,
+) -> Figure:
+    """The figure of ``overview.png``: one panel per map, side by side.
+
+    Input, Î, ρ, φ, the AoLP/DoLP HSV composite, the segments, the ground truth (when
+    given) and the reconstruction error. Uses matplotlib's object-oriented API on an Agg
+    canvas (no pyplot, so no global backend is switched and no window opens; safe in a
+    worker thread); :func:`render_overview` draws it into pixels.
+
+    Parameters
+    ----------
+    first_frame : array (H, W)
+        First frame of the angle stack.
+    result : SegmentationResult
+        The pipeline's result.
+    truth : array (H, W) of int, optional
+        The true materials: drawn beside the segments, in the colours of the segments
+        they are matched to, and the segments' title gives the adjusted Rand index.
+    composite : array (H, W, 3) uint8, optional
+        The AoLP/DoLP HSV composite
+        (:func:`napari_polarseg.engine.analysis.views.aolp_dolp_composite`);
+        computed with ρ_max = ``dolp_max`` (default
+        :func:`~napari_polarseg.engine.analysis.views.auto_dolp_max`) when not given.
+    dolp_max : float, optional
+        The composite's ρ_max, for its title.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        On an Agg canvas, laid out; ``fig.axes[:n]`` are the n panels in order, their
+        colour bars follow.
+    """
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    panels, ticks, k = _panels(first_frame, result, truth, composite, dolp_max)
+    seg_cmap = segment_colormap(k)
+    h, w = result.labels.shape
+    panel_w = 3.2
+    fig = Figure(figsize=(panel_w * len(panels), panel_w * h / w + 0.8), dpi=100)
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(1, len(panels))
+    for ax, panel in zip(axes, panels, strict=True):
+        _draw_panel(fig, ax, panel, ticks, seg_cmap, k)
+    fig.tight_layout()
+    return fig
+
+
+def render_overview(
+    first_frame: np.ndarray,
+    result: SegmentationResult,
+    *,
+    truth: np.ndarray | None = None,
+    composite: np.ndarray | None = None,
+    dolp_max: float | None = None,
+) -> np.ndarray:
+    """Draw :func:`overview_figure` (same arguments) into pixels.
+
+    Returns
+    -------
+    ndarray (rows, columns, 4) uint8
+        The RGBA figure, ready for :func:`napari_polarseg.io.write_png`.
+    """
+    fig = overview_figure(first_frame, result, truth=truth, composite=composite, dolp_max=dolp_max)
+    fig.canvas.draw()
+    return np.asarray(fig.canvas.buffer_rgba()).copy()

@@ -1,0 +1,502 @@
+"""A segmentation's results as a folder: what ``polarseg segment --out DIR`` writes.
+
+:func:`write_result_folder` writes, from a :class:`~napari_polarseg.engine.SegmentationResult`
+and the angle stack it came from, the files of the ``segment`` contract (the table in
+:mod:`napari_polarseg.cli`): ``labels.tif``, the float maps of
+:data:`~napari_polarseg.outputs.contract.FLOAT_OUTPUTS`, ``mask.tif``, ``segments.csv``,
+``params.json`` (its ``"params"`` entry is what ``polarseg segment --params`` and the
+plugin's *Load parameters…* read), ``summary.json``, and on request ``overview.png``
+(:mod:`napari_polarseg.outputs.overview`), ``plots/*.png``
+(:mod:`napari_polarseg.outputs.figures`), ``probabilities.tif`` (scribble classifier) and
+``evaluation.json`` (ground truth), and the polarisation views ``stokes.tif`` (S0, S1,
+S2) and ``aolp_dolp.png`` (the AoLP/DoLP HSV composite). The command line and the
+*Segment by material* widget's *Export results…* both write through it.
+
+Everything (statistics, figures, JSON) is computed before the first file is written, and
+every file is written to a temporary name and renamed (:func:`napari_polarseg.io.atomic_output`),
+so a failure never leaves a partial file where a good one was; a file that cannot be
+written raises :class:`~napari_polarseg.outputs.contract.OutputError` naming it. No
+napari, no Qt: usable from scripts.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .. import __version__
+from .. import io as pio
+from ..engine import SegmentationResult, valid_blocks
+from ..engine.analysis.evaluation import STATISTICS_COLUMNS, segment_statistics
+from ..engine.analysis.views import CompositeParams, aolp_dolp_composite, auto_dolp_max
+from ..engine.errors import PolarsegError
+from ..engine.physics.pixel_mask import PixelMask
+from ..engine.physics.polarimage import duplicate_angle_frames
+from ..engine.physics.stokes import STOKES_CONVENTION, stokes_components
+from .contract import (
+    COMPOSITE_FILE,
+    EVALUATION_SUMMARY_KEYS,
+    FLOAT_OUTPUTS,
+    MASK_META,
+    PROBABILITY_META,
+    STOKES_FILE,
+    UNCERTAINTY_META,
+    OutputError,
+    labels_image,
+    used_pixels,
+)
+from .overview import render_overview
+
+#: One file to write: (name relative to the folder, the writing, listed among the files
+#: written). The name is the one an :class:`OutputError` gives when the writing fails.
+Step = tuple[str, Callable[[], None], bool]
+
+# -- the pieces -----------------------------------------------------------------------------
+
+
+def segment_rows(result: SegmentationResult) -> list[dict[str, Any]]:
+    """Per-segment statistics of ``result`` (the rows of ``segments.csv``).
+
+    Means over the used pixels (``result.valid``) and, for the PCA features, over the
+    blocks that entered the graph (:func:`~napari_polarseg.engine.stages.valid_blocks`).
+    """
+    valid = result.valid
+    block_valid = None if valid is None else valid_blocks(valid, result.params.window)
+    return segment_statistics(
+        result.labels,
+        result.intensity,
+        result.dop,
+        result.zenith,
+        result.phase,
+        valid=valid,
+        block_labels=result.block_labels,
+        features=result.features,
+        block_valid=block_valid,
+    )
+
+
+def _csv_value(value: Any) -> str:
+    if isinstance(value, float):
+        return "" if not np.isfinite(value) else f"{value:.6g}"
+    return str(value)
+
+
+def write_segments_csv(path: str | os.PathLike[str], rows: list[dict[str, Any]]) -> None:
+    """Write per-segment statistics (:data:`STATISTICS_COLUMNS`) as CSV, atomically.
+
+    NaN (a segment with no used pixel or block, fewer than 3 PCA features) is empty.
+    """
+    lines = [",".join(STATISTICS_COLUMNS)]
+    lines += [",".join(_csv_value(row[c]) for c in STATISTICS_COLUMNS) for row in rows]
+    with pio.atomic_output(path) as tmp:
+        tmp.write_text("\n".join(lines) + "\n", encoding="utf-8")
+
+
+def run_info(
+    result: SegmentationResult,
+    *,
+    command: str,
+    stack_shape: Sequence[int],
+    angles_deg: Sequence[float],
+    source: str | None = None,
+    mask: PixelMask | None = None,
+    shifts: np.ndarray | None = None,
+    **extra: Any,
+) -> dict[str, Any]:
+    """The content of ``params.json``: the run's parameters, input and settings.
+
+    Every key ``polarseg segment`` writes is present (None where it does not apply, e.g.
+    the reader's settings for a stack that came from a napari layer); ``extra`` items
+    fill or add keys. ``"params"`` is ``result.params`` as a SegmentParams dict.
+    """
+    angles = np.asarray(angles_deg, dtype=float).ravel()
+    info: dict[str, Any] = {
+        "polarseg_version": __version__,
+        "command": command,
+        "input": source,
+        "input_format": None,
+        "input_files": None,
+        "stack_shape": [int(n) for n in stack_shape],
+        "output_shape": list(result.labels.shape),
+        "angles_deg": angles.tolist(),
+        "angles_from": None,
+        "mosaic_layout_deg": None,
+        "raw_shape": None,
+        "channel": None,
+        "demosaic": None,
+        "bayer": None,
+        "sensor": None,
+        "dark_frame": None,
+        "offset": None,
+        "saturation_level": None if mask is None else mask.saturation_level,
+        "bits_per_sample": None,
+        "dark_level": None if mask is None else mask.dark_level,
+        "mask_file": None,
+        "duplicate_angles": [
+            {
+                "angle_deg": float(angles[frames[0]]),
+                "frames": frames,
+                "handling": "averaged before the fit",
+            }
+            for frames in duplicate_angle_frames(np.deg2rad(angles))
+        ],
+        "registration": {
+            "ran": shifts is not None,
+            "reference_frame": 0 if shifts is not None else None,
+            "shifts_px": None if shifts is None else np.asarray(shifts).tolist(),
+        },
+        "params": result.params.to_dict(),
+    }
+    info.update(extra)
+    return info
+
+
+def evaluation_summary(evaluation: dict[str, Any]) -> dict[str, Any]:
+    """What ``summary.json`` repeats of an ``evaluation.json``."""
+    return {
+        "adjusted_rand_index": evaluation["adjusted_rand_index"],
+        "evaluation": {k: evaluation[k] for k in EVALUATION_SUMMARY_KEYS},
+    }
+
+
+def classifier_summary(segmentation: Any, labels_from: str) -> dict[str, Any]:
+    """What ``summary.json`` says of labels from the pixel classifier.
+
+    ``segmentation`` is a
+    :class:`~napari_polarseg.engine.analysis.pixel_segmentation.PixelSegmentation`;
+    ``labels_from`` is ``"scribbles"`` (trained on them) or ``"classifier"`` (a saved
+    classifier applied). Shared by ``polarseg segment`` and the plugin's export.
+    """
+    clf = segmentation.classifier
+    top = list(clf.importances().items())[:5]
+    return {
+        "labels_from": labels_from,
+        "scribble_classes": [int(c) for c in clf.classes],
+        "classifier": {
+            "model": clf.params.model,
+            "n_features": len(clf.feature_names),
+            "n_training_pixels": clf.n_training_pixels,
+            "seconds": {k: round(v, 6) for k, v in segmentation.seconds.items()},
+            "top_features": {k: round(v, 4) for k, v in top},
+        },
+    }
+
+
+# -- writing --------------------------------------------------------------------------------
+
+
+class _Folder:
+    """Writes the files of a result folder, each atomically; keeps the names written and
+    the path being written (the one an :class:`OutputError` names)."""
+
+    def __init__(self, out: Path) -> None:
+        self.out = out
+        self.written: list[str] = []
+        self.current = str(out)
+
+    def path(self, rel: str) -> Path:
+        """The path of ``rel``, named by the error of any failure from now on."""
+        self.current = str(self.out / rel)
+        return self.out / rel
+
+    def tiff(self, rel: str, image: np.ndarray, meta: dict[str, Any]) -> None:
+        pio.write_tiff(self.path(rel), image, meta)
+        self.written.append(rel)
+
+    def png(self, rel: str, image: np.ndarray) -> None:
+        pio.write_png(self.path(rel), image)
+        self.written.append(rel)
+
+    def json(self, rel: str, data: dict[str, Any]) -> None:
+        pio.write_json(self.path(rel), data)
+        self.written.append(rel)
+
+
+def _write_maps(
+    folder: _Folder,
+    result: SegmentationResult,
+    stokes: np.ndarray | None,
+    composite: np.ndarray | None,
+) -> None:
+    """``labels.tif``, the float maps, ``mask.tif`` and the polarisation views."""
+    labels_meta = {"quantity": "segment labels", "first_label": 0}
+    folder.tiff("labels.tif", labels_image(result.labels), labels_meta)
+    for fname, (attr, meta) in FLOAT_OUTPUTS.items():
+        folder.tiff(fname, np.asarray(getattr(result, attr), np.float32), meta)
+    folder.tiff("mask.tif", used_pixels(result), MASK_META)
+    if stokes is not None:
+        folder.tiff(STOKES_FILE, np.asarray(stokes, np.float32), STOKES_CONVENTION)
+    if composite is not None:
+        folder.png(COMPOSITE_FILE, composite)
+
+
+def _write_extras(
+    folder: _Folder,
+    segments: list[dict[str, Any]] | None,
+    probabilities: np.ndarray | None,
+    uncertainty: np.ndarray | None,
+    evaluation: dict[str, Any] | None,
+    overview: np.ndarray | None,
+) -> None:
+    """The files a run writes on request, in the contract's order."""
+    if segments is not None:
+        write_segments_csv(folder.path("segments.csv"), segments)
+        folder.written.append("segments.csv")
+    if probabilities is not None:
+        folder.tiff("probabilities.tif", probabilities.astype(np.float32), PROBABILITY_META)
+    if uncertainty is not None:
+        folder.tiff("uncertainty.tif", uncertainty.astype(np.float32), UNCERTAINTY_META)
+    if evaluation is not None:
+        folder.json("evaluation.json", evaluation)
+    if overview is not None:
+        folder.png("overview.png", overview)
+
+
+def _write_plots(folder: _Folder, plots: dict[str, bytes]) -> None:
+    """The folder ``plots/`` and each PNG in it (``plots/<name>.png``)."""
+    folder.path("plots").mkdir(parents=True, exist_ok=True)
+    for fname, content in plots.items():
+        with pio.atomic_output(folder.path(f"plots/{fname}")) as tmp:
+            tmp.write_bytes(content)
+        folder.written.append(f"plots/{fname}")
+
+
+def write_outputs(
+    out: str | os.PathLike[str],
+    result: SegmentationResult,
+    info: dict[str, Any],
+    summary: dict[str, Any],
+    overview: np.ndarray | None = None,
+    *,
+    segments: list[dict[str, Any]] | None = None,
+    probabilities: np.ndarray | None = None,
+    uncertainty: np.ndarray | None = None,
+    evaluation: dict[str, Any] | None = None,
+    plots: dict[str, bytes] | None = None,
+    stokes: np.ndarray | None = None,
+    composite: np.ndarray | None = None,
+) -> list[str]:
+    """Write already computed outputs into ``out`` (created), each file atomically.
+
+    ``stokes`` (3, H, W) goes to :data:`~napari_polarseg.outputs.contract.STOKES_FILE`
+    (float32; its planes and sign convention in the JSON ImageDescription,
+    :data:`napari_polarseg.engine.physics.stokes.STOKES_CONVENTION`), ``composite``
+    (H, W, 3) uint8 to :data:`~napari_polarseg.outputs.contract.COMPOSITE_FILE`.
+
+    Returns the files written, relative to ``out`` (``plots/<name>.png`` for plots), in
+    the order written. Records the writing time in ``summary["io_seconds"]["write"]``.
+    Raises :class:`~napari_polarseg.outputs.contract.OutputError` naming the file that
+    could not be written.
+    """
+    out = Path(out)
+    t0 = time.perf_counter()
+    folder = _Folder(out)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        _write_maps(folder, result, stokes, composite)
+        _write_extras(folder, segments, probabilities, uncertainty, evaluation, overview)
+        if plots is not None:
+            _write_plots(folder, plots)
+        folder.json("params.json", info)
+        summary["io_seconds"]["write"] = round(time.perf_counter() - t0, 6)
+        folder.json("summary.json", summary)
+    except OSError as exc:
+        reason = exc.strerror or str(exc)
+        raise OutputError(f"cannot write {folder.current}: {reason}") from exc
+    return folder.written
+
+
+def _checked_arrays(
+    result: SegmentationResult,
+    stack: np.ndarray,
+    angles_deg: Sequence[float],
+    probabilities: np.ndarray | None,
+    uncertainty: np.ndarray | None,
+    truth: np.ndarray | None,
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """``stack`` and ``probabilities`` as arrays, after checking that every array fits the
+    result's pixels and the angles the frames; raises :class:`PolarsegError`."""
+    stack = np.asarray(stack)
+    angles = np.asarray(angles_deg, dtype=float).ravel()
+    shape = tuple(result.labels.shape)
+    pixels = f"the result's {shape[0]} x {shape[1]} pixels"
+    if stack.ndim != 3 or tuple(stack.shape[1:]) != shape:
+        raise PolarsegError(f"the stack {stack.shape} does not match {pixels}")
+    if angles.size != stack.shape[0]:
+        raise PolarsegError(f"{stack.shape[0]} frames but {angles.size} angles")
+    if probabilities is not None:
+        probabilities = np.asarray(probabilities)
+        if probabilities.ndim != 3 or tuple(probabilities.shape[1:]) != shape:
+            raise PolarsegError(f"the probabilities {probabilities.shape} do not match {pixels}")
+    if truth is not None and np.shape(truth) != shape:
+        raise PolarsegError(f"the ground truth {np.shape(truth)} does not match {pixels}")
+    if uncertainty is not None and np.shape(uncertainty) != shape:
+        raise PolarsegError(f"the uncertainty {np.shape(uncertainty)} does not match {pixels}")
+    return stack, probabilities
+
+
+def _params_json(
+    result: SegmentationResult,
+    stack: np.ndarray,
+    angles_deg: Sequence[float],
+    command: str,
+    source: str | None,
+    mask: PixelMask | None,
+    shifts: np.ndarray | None,
+    info: dict[str, Any] | None,
+) -> dict[str, Any]:
+    """``params.json``: :func:`run_info` of the run, ``info``'s items added."""
+    return run_info(
+        result,
+        command=command,
+        stack_shape=stack.shape,
+        angles_deg=np.asarray(angles_deg, dtype=float).ravel(),
+        source=source,
+        mask=mask,
+        shifts=shifts,
+        **(info or {}),
+    )
+
+
+def _summary_json(
+    result: SegmentationResult, summary: dict[str, Any] | None, evaluation: dict[str, Any] | None
+) -> dict[str, Any]:
+    """``summary.json``: the result's summary, ``summary``'s items, the evaluation's."""
+    summary_json = {**result.summary(), "io_seconds": {}, "output_shape": list(result.labels.shape)}
+    summary_json.update(summary or {})
+    summary_json["io_seconds"] = dict(summary_json["io_seconds"])  # leave the caller's dict
+    if evaluation is not None:
+        summary_json.update(evaluation_summary(evaluation))
+    return summary_json
+
+
+def _pictures(
+    first_frame: np.ndarray,
+    result: SegmentationResult,
+    params_json: dict[str, Any],
+    truth: np.ndarray | None,
+    overview: bool,
+    plots: bool,
+    views: bool,
+    composite_params: CompositeParams | None,
+) -> dict[str, Any]:
+    """The images :func:`write_outputs` takes (``overview``, ``plots``, ``stokes``,
+    ``composite``); records the composite's settings in ``params_json["aolp_dolp"]``."""
+    composite = stokes = None
+    if views or overview:
+        if composite_params is None:
+            composite_params = CompositeParams(dolp_max=auto_dolp_max(result.dop))
+        composite = aolp_dolp_composite(
+            result.intensity, result.dop, result.phase, composite_params
+        )
+        params_json["aolp_dolp"] = dataclasses.asdict(composite_params)
+    if views:
+        stokes = stokes_components(result.intensity, result.dop, result.phase)
+    picture = None
+    if overview:
+        picture = render_overview(
+            first_frame,
+            result,
+            truth=truth,
+            composite=composite,
+            dolp_max=composite_params.dolp_max,
+        )
+    pngs = None
+    if plots:
+        from .figures import render_plots
+
+        pngs = render_plots(result)
+    return {
+        "overview": picture,
+        "plots": pngs,
+        "stokes": stokes,
+        "composite": composite if views else None,
+    }
+
+
+def write_result_folder(
+    out: str | os.PathLike[str],
+    *,
+    stack: np.ndarray,
+    angles_deg: Sequence[float],
+    result: SegmentationResult,
+    mask: PixelMask | None = None,
+    source: str | None = None,
+    command: str = "export",
+    overview: bool = True,
+    plots: bool = False,
+    probabilities: np.ndarray | None = None,
+    uncertainty: np.ndarray | None = None,
+    evaluation: dict[str, Any] | None = None,
+    shifts: np.ndarray | None = None,
+    info: dict[str, Any] | None = None,
+    summary: dict[str, Any] | None = None,
+    truth: np.ndarray | None = None,
+    views: bool = True,
+    composite_params: CompositeParams | None = None,
+) -> list[str]:
+    """Write a segmentation's results into the folder ``out``, as ``polarseg segment``.
+
+    Parameters
+    ----------
+    out : path
+        The folder (created if missing; files of the same names are replaced).
+    stack, angles_deg : array (N, H, W), sequence of N floats
+        The angle stack the result was computed from (after any registration; its first
+        frame is drawn in ``overview.png``) and each frame's polariser angle, degrees.
+    result : SegmentationResult
+        What to write; ``params.json`` records ``result.params``.
+    mask, source, command, shifts
+        What ``params.json`` records (:func:`run_info`): the pixel mask the pipeline used
+        (its saturation and dark levels; ``mask.tif`` is ``result.valid`` in any case),
+        where the stack came from (``"input"``), ``"command"`` (``"segment"``,
+        ``"demo"``, ``"napari"``, …), registration shifts (N, 2) in pixels.
+    overview, plots, views : bool
+        Also write ``overview.png`` (:func:`~napari_polarseg.outputs.overview.render_overview`),
+        the plots into ``plots/`` (:func:`napari_polarseg.outputs.figures.render_plots`),
+        and ``stokes.tif`` (S0, S1, S2) and ``aolp_dolp.png`` (the AoLP/DoLP HSV composite)
+        of :mod:`napari_polarseg.engine.analysis.views`.
+    probabilities, uncertainty : array (K, H, W), array (H, W), optional
+        Class probabilities and uncertainty of the pixel classifier: ``probabilities.tif``,
+        ``uncertainty.tif``.
+    evaluation : dict, optional
+        :func:`~napari_polarseg.engine.analysis.evaluation.evaluate` figures (plus e.g. the
+        ground truth's file): ``evaluation.json``, repeated in ``summary.json``.
+    info, summary : dict, optional
+        Items added to (or replacing those of) ``params.json`` (:func:`run_info`) and
+        ``summary.json`` (``result.summary()``, ``io_seconds``, ``output_shape``).
+    truth : array (H, W) of int, optional
+        The true materials, drawn beside the segments in ``overview.png`` (with the ARI).
+    composite_params : CompositeParams, optional
+        Settings of the composite (default: ρ_max from :func:`~napari_polarseg.engine.
+        analysis.views.auto_dolp_max`, value from Î); ``params.json``'s ``"aolp_dolp"``.
+
+    Returns
+    -------
+    list of str
+        The files written, relative to ``out``, in the order written.
+
+    Raises
+    ------
+    PolarsegError
+        The stack, angles, result and arrays do not fit (before any file is written).
+    OutputError
+        A file could not be written (the files written before it stay).
+    """
+    stack, probabilities = _checked_arrays(
+        result, stack, angles_deg, probabilities, uncertainty, truth
+    )
+    params_json = _params_json(result, stack, angles_deg, command, source, mask, shifts, info)
+    summary_json = _summary_json(result, summary, evaluation)
+    files = {"segments": segment_rows(result), "evaluation": evaluation}
+    files.update(probabilities=probabilities, uncertainty=uncertainty)
+    files.update(
+        _pictures(stack[0], result, params_json, truth, overview, plots, views, composite_params)
+    )
+    return write_outputs(out, result, params_json, summary_json, **files)
