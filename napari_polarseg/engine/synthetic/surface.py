@@ -186,27 +186,22 @@ def render_surface(
         Sub-pixels per pixel side, s >= 1.
     texture : array_like, shape (s·H, s·W), optional
         Positive multiplicative albedo texture (default: uniform 1).
-    light_zenith_deg : float, optional
-        Angle between the distant light and the view axis, degrees.
-    light_azimuth_deg : float, optional
-        Azimuth of the direction towards the light, degrees, measured from the column
-        axis towards the row axis (225° = from the upper left of the image).
-    ambient : float, optional
-        Ambient share of the illumination in [0, 1): shading is
+    light_zenith_deg, light_azimuth_deg, ambient : float, optional
+        The distant light: its angle from the view axis and its azimuth (degrees; from
+        the column axis towards the row axis, 225° = from the upper left), and the
+        ambient share of the illumination in [0, 1): shading is
         ``(1 − ambient) max(0, n·l) + ambient``.
     target_intensity : float or None, optional
-        If given, each material's albedo is chosen so that its mean Î over its
-        sub-pixels equals this value (fraction of full scale): matched albedo. If None,
-        every albedo is 1.
+        Matched albedo: each albedo group's mean Î over its sub-pixels is this value
+        (fraction of full scale); None: every albedo is 1.
     albedo_groups : sequence of int, optional
-        One group number per material; materials of one group share a single albedo,
-        calibrated on their combined sub-pixels (e.g. healthy and bruised skin of one
-        fruit: same pigment, so no intensity edge between them; their mean Î then
-        differ only by shading). Default: every material its own group.
+        One group number per material; the materials of a group share one albedo,
+        calibrated on their combined sub-pixels (healthy and bruised skin of one fruit:
+        no intensity edge, mean Î differing by shading only). Default: a group each.
     facets : int, optional
-        Random micro-facets per sub-pixel (>= 1); a pixel averages ``s² · facets`` facets.
-        More facets approach the many-facet limit of real micro-roughness, which lowers ρ
-        at large zenith but leaves little random ρ on flat surfaces.
+        Random micro-facets per sub-pixel (>= 1; a pixel averages ``s² · facets``): more
+        approach real micro-roughness, lowering ρ at large zenith but leaving little
+        random ρ on flat surfaces.
     rng : numpy.random.Generator or int or None, optional
         Source of the micro-facet slopes.
 
@@ -228,17 +223,27 @@ def render_surface(
     s, n_facets, k_mat = int(supersample), int(facets), len(materials)
     gen = np.random.default_rng(rng)
 
-    n_idx = np.array([m.refractive_index for m in materials])
     light = (light_zenith_deg, light_azimuth_deg, ambient)
     s0, s1, s2 = _facet_stokes(p, q, mat, materials, tex, light, n_facets, gen)
 
     # Albedo: every Stokes component is proportional to it.
     albedo, present = _albedo(mat, s0, groups, k_mat, target_intensity, n_facets)
     scale = np.where(present, albedo, 0.0)[mat] / n_facets
-    s0, s1, s2 = s0 * scale, s1 * scale, s2 * scale
+    return _pixel_render((s0 * scale, s1 * scale, s2 * scale), p, q, mat, s, materials, albedo)
 
-    S0, S1, S2 = (_block_mean(c, s) for c in (s0, s1, s2))
-    intensity = S0
+
+def _pixel_render(
+    stokes: tuple[FloatArray, FloatArray, FloatArray],
+    p: FloatArray,
+    q: FloatArray,
+    mat: NDArray,
+    s: int,
+    materials: Sequence[Material],
+    albedo: FloatArray,
+) -> SurfaceRender:
+    """The :class:`SurfaceRender` of sub-pixel Stokes sums (s0, s1, s2) with the albedo
+    applied: pixel means, the polarisation image, normals and majority labels."""
+    S0, S1, S2 = (_block_mean(c, s) for c in stokes)
     with np.errstate(invalid="ignore", divide="ignore"):
         dop = np.where(S0 > 0, np.hypot(S1, S2) / S0, 0.0)
     phase = np.mod(0.5 * np.arctan2(S2, S1), np.pi)
@@ -246,10 +251,11 @@ def render_surface(
     # Macroscopic normal (no roughness), averaged over the pixel.
     zenith, azimuth = _pixel_normal(p, q, s)
 
-    frac = np.stack([_block_mean((mat == k).astype(np.float64), s) for k in range(k_mat)])
+    frac = np.stack([_block_mean((mat == k).astype(np.float64), s) for k in range(len(materials))])
     labels = np.argmax(frac, axis=0).astype(np.intp)
+    n_idx = np.array([m.refractive_index for m in materials])
     return SurfaceRender(
-        intensity=intensity,
+        intensity=S0,
         dop=dop,
         phase=phase,
         zenith=zenith,
