@@ -396,7 +396,8 @@ PRESETS: dict[str, SegmentParams] = {
 #: What each preset is: the CLI's ``--preset`` help and the plugin's preset tooltip.
 PRESET_HELP: dict[str, str] = {
     "auto": "superpixels clustered by their polarisation, the best unsupervised method "
-    "measured on rendered and real frames",
+    "measured on rendered and real frames (a close-up of one smooth surface: by where "
+    "its polarisation departs from the surface's trend)",
     "thesis": "the thesis pipeline as published",
     "recommended": "the thesis pipeline with the block parameters that score best on the "
     "synthetic scenes (docs/quality.md)",
