@@ -38,7 +38,8 @@ import numpy as np
 import tifffile
 
 from .engine.physics.polarimage import distinct_angle_count
-from .io import FRAME_SUFFIXES, SENSOR_NAMES, angle_from_name, read_stack, single_frame_file
+from .io import SENSOR_NAMES, angle_from_name, read_stack, single_frame_file
+from .io.frames import frame_files
 
 #: Sony polarisation sensors named in raw files (mono ``…MZR``, colour ``…MYR``).
 MOSAIC_SENSOR_NAMES = SENSOR_NAMES
@@ -90,11 +91,7 @@ def _tiff_angles(path: Path) -> Any:
 
 
 def _folder_angles(path: Path) -> list[float] | None:
-    frames = [
-        f
-        for f in path.iterdir()
-        if f.is_file() and not f.name.startswith(".") and f.suffix.lower() in FRAME_SUFFIXES
-    ]
+    frames = frame_files(path)
     angles = [angle_from_name(f.name) for f in frames]
     if len(frames) < 3 or any(a is None for a in angles) or not _enough_angles(angles):
         return None

@@ -46,19 +46,25 @@ def natural_key(name: str) -> list[Any]:
     return [int(t) if t.isdigit() else t.lower() for t in re.split(r"(\d+)", name)]
 
 
+def frame_files(folder: Path) -> list[Path]:
+    """The files of a folder with an image frame's suffix (hidden files skipped), in the
+    folder's own order."""
+    return [
+        f
+        for f in folder.iterdir()
+        if f.is_file() and not f.name.startswith(".") and f.suffix.lower() in FRAME_SUFFIXES
+    ]
+
+
 def folder_frames(folder: Path) -> list[Path]:
-    """The image frames of a folder (hidden files skipped), in natural name order.
+    """The image frames of a folder (:func:`frame_files`), in natural name order.
 
     Raises
     ------
     PolarsegError
         If the folder holds no frame.
     """
-    files = [
-        f
-        for f in folder.iterdir()
-        if f.is_file() and not f.name.startswith(".") and f.suffix.lower() in FRAME_SUFFIXES
-    ]
+    files = frame_files(folder)
     if not files:
         raise input_error(folder, f"no image frames ({', '.join(FRAME_SUFFIXES)}) in the folder")
     return sorted(files, key=lambda f: natural_key(f.name))

@@ -10,6 +10,7 @@ import numpy as np
 
 from ...engine import PolarsegError
 from ...engine.physics.pixel_mask import mask_reasons
+from ...io.common import format_numbers
 from .runs import StageFailed
 
 
@@ -33,7 +34,7 @@ def error_message(exc: BaseException) -> str:
 
 def format_angles(angles_deg: Any) -> str:
     """``[0.0, 45.0]`` -> ``"0, 45"``."""
-    return ", ".join(f"{float(a):g}" for a in np.asarray(angles_deg, dtype=float).ravel())
+    return format_numbers(np.asarray(angles_deg, dtype=float).ravel())
 
 
 def degenerate_text(summary: dict[str, Any]) -> str:
