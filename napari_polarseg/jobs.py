@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from . import io as pio
-from .engine import STAGES, Pipeline, SegmentationResult
+from .engine import Pipeline, Scene, SegmentationResult
 from .engine.analysis.evaluation import adjusted_rand_index, evaluate
 from .engine.errors import PolarsegError
 from .engine.limits import check_pipeline_memory, memory_limit
@@ -35,8 +35,8 @@ from .status_line import StatusLine
 #: Prefix of every message line (the command's name).
 PROG = "polarseg"
 
-#: Pipeline progress callback: (stage, index, total).
-Progress = Callable[[str, int, int], None]
+#: Progress callback of a run: (stage, stages done, total), as a stage starts and within.
+Progress = Callable[[str, float, int], None]
 
 
 @dataclass(frozen=True)
@@ -180,6 +180,7 @@ class Run:
     mask: PixelMask | None = None
     pipeline: Pipeline | None = None
     colour_stack: np.ndarray | None = None
+    scene: Scene | None = None
 
 
 @dataclass
@@ -239,23 +240,30 @@ class LabelSource:
     classifier_file: str | None = None
     segmentation: Any = None
 
-    def label(self, run: Run) -> None:
+    def label(self, run: Run, progress: Progress | None = None) -> None:
         """Label ``run`` with the pixel classifier (sets ``run.result``)."""
         from .classifier_file import load_pixel_classifier
-        from .engine.analysis.pixel_segmentation import PixelSegmenter
+        from .engine.analysis.pixel_segmentation import PixelSegmentation
 
         classifier = None
         if self.classifier_file:
             classifier = load_pixel_classifier(self.classifier_file)
+        inputs = {"scribbles": self.scribbles, "classifier": classifier}
+        inputs["colour_stack"] = run.colour_stack
         try:
-            segmenter = PixelSegmenter(run.pipeline, colour_stack=run.colour_stack)
-            out = segmenter.segment(self.scribbles, classifier)
+            assert run.scene is not None
+            result = run.scene.segment(
+                run.params, inputs, maps=True, reconstruction=True, progress=progress
+            )
         except PolarsegError as exc:
             where = self.scribbles_file or self.classifier_file
             raise PolarsegError(f"{where}: {exc}") from None
-        self.segmentation = out
-        run.result = out.result
-        run.seconds["classifier"] = float(sum(out.seconds.values()))
+        extra = run.scene.method_output(run.params, inputs).extra
+        self.segmentation = PixelSegmentation(
+            result, extra["prediction"], extra["classifier"], extra["seconds"]
+        )
+        run.result = result
+        run.seconds["classifier"] = float(sum(extra["seconds"].values()))
 
     def summary(self) -> dict[str, Any]:
         """The classifier's items of ``summary.json``."""
@@ -291,15 +299,16 @@ def segment_data(
             if colour_stack is not None:
                 colour_stack = shift_frames(colour_stack, shifts)
     with timed(seconds, "segment"):
-        pipe = Pipeline(stack, data.angles_rad, params, mask=mask)
-        run = Run(data, params, stack, None, shifts, seconds, mask, pipe)  # type: ignore[arg-type]
+        scene = Scene(stack, data.angles_rad, mask=mask)
+        run = Run(data, params, stack, None, shifts, seconds, mask, scene.pipeline)  # type: ignore[arg-type]
         run.colour_stack = colour_stack
+        run.scene = scene
         if labels_by is None:
-            status.stage(STAGES[0], 1, len(STAGES), "segmenting:")
-            run.result = pipe.run(progress=progress)
+            status.stage("polarisation", 1, len(scene.stages(params, maps=True)), "segmenting:")
+            run.result = scene.segment(params, maps=True, reconstruction=True, progress=progress)
         else:
             status.show("pixel classifier: features, training and prediction")
-            labels_by.label(run)
+            labels_by.label(run, progress)
     return run
 
 

@@ -1,8 +1,9 @@
-"""The default preset ``auto`` (issue 13 item 4): superpixel clustering in the pipeline.
+"""The default preset ``auto``: the superpixel method, a peer of the thesis pipeline.
 
-``auto`` is the recommended block parameters with ``clustering="superpixels"``: the
-labels come from :func:`~napari_polarseg.engine.unsupervised.segmenter.segment_unsupervised`, no
-affinity or cut is computed, and the contract files are written as for every preset.
+``auto`` is the recommended block parameters with ``method="superpixels"``: the labels
+come from :func:`~napari_polarseg.engine.unsupervised.segmenter.segment_unsupervised`
+through :class:`~napari_polarseg.engine.Scene`, no block graph is built or cut, and the
+contract files are written as for every preset.
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ from test_unsupervised import planted
 
 from napari_polarseg import cli
 from napari_polarseg import io as pio
-from napari_polarseg.engine import Pipeline, PolarsegError, SegmentParams
+from napari_polarseg.engine import Pipeline, PolarsegError, Scene, SegmentParams
 from napari_polarseg.engine.analysis.timeseries import segment_timeseries
 from napari_polarseg.engine.params import AUTO, PRESETS, RECOMMENDED
 
@@ -33,29 +34,36 @@ def planted_stack(k: int = 3, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
 
 
 def test_auto_is_the_recommended_blocks_with_superpixel_labels():
-    assert AUTO.clustering == "superpixels"
-    assert AUTO.replace(clustering=RECOMMENDED.clustering) == RECOMMENDED
+    assert AUTO.method == "superpixels"
+    assert AUTO.replace(method="thesis") == RECOMMENDED
     assert PRESETS["auto"] == AUTO
+    # a params.json written before the methods were peers still reads
+    old = {**RECOMMENDED.to_dict(), "clustering": "superpixels"}
+    del old["method"]
+    assert SegmentParams.from_dict(old) == AUTO
 
 
 @pytest.mark.parametrize("k", [2, 3])
 def test_pipeline_default_recovers_planted_materials_exactly(k):
     stack, truth = planted_stack(k)
-    pipe = Pipeline(stack, ANGLES, AUTO.replace(n_segments=k))
-    result = pipe.run()
+    scene = Scene(stack, ANGLES)
+    result = scene.segment(AUTO.replace(n_segments=k), maps=True, reconstruction=True)
+    pipe = scene.pipeline
     assert adjusted_rand_score(truth.ravel(), result.labels.ravel()) == pytest.approx(1.0)
     assert result.labels.shape == truth.shape
-    # no block graph is built or cut; the thesis maps and the error map still are
+    # no block graph is built or cut; the thesis maps and the error map are, when asked
     assert pipe.calls["affinity"] == 0 and pipe.calls["cut"] == 0
     assert pipe.calls["harmonics"] == 1 and pipe.calls["reconstruction"] == 1
-    assert pipe.stages() == [
+    assert scene.stages(AUTO, maps=True, reconstruction=True) == [
         "polarisation",
         "normals",
+        "superpixels",
+        "clustering",
         "harmonics",
         "pca",
-        "labels",
         "reconstruction",
     ]
+    assert result.method == "superpixels"
     summary = result.summary()
     assert summary["degenerate"] is False
     assert result.ncut_values == []
@@ -66,15 +74,20 @@ def test_pipeline_default_recovers_planted_materials_exactly(k):
     )
 
 
-def test_changing_the_clustering_switches_between_cut_and_superpixels():
+def test_changing_the_method_switches_between_cut_and_superpixels():
     stack, truth = planted_stack(3)
-    pipe = Pipeline(stack, ANGLES, AUTO)
-    first = pipe.run(reconstruction=False).labels
-    pipe.run(pipe.params.replace(clustering="recursive"), reconstruction=False)
-    assert pipe.calls["cut"] == 1 and pipe.calls["labels"] == 2
-    again = pipe.run(pipe.params.replace(clustering="superpixels"), False).labels
+    scene = Scene(stack, ANGLES)
+    first = scene.segment(AUTO, maps=True).labels
+    scene.segment(AUTO.replace(method="thesis"), reconstruction=False)
+    pipe = scene.pipeline
+    assert pipe.calls["cut"] == 1 and pipe.calls["labels"] == 1
+    again = scene.segment(AUTO).labels
     assert pipe.calls["harmonics"] == 1  # the block stages are shared
+    assert scene.method_calls == {"superpixels": 1, "thesis": 1}  # kept, not rerun
     np.testing.assert_array_equal(first, again)
+    # a Pipeline alone cuts the block graph only
+    with pytest.raises(PolarsegError, match="Scene"):
+        Pipeline(stack, ANGLES, AUTO).run()
 
 
 def test_segment_and_demo_default_to_auto(tmp_path, capsys):
@@ -84,14 +97,14 @@ def test_segment_and_demo_default_to_auto(tmp_path, capsys):
     out = tmp_path / "out"
     assert cli.main(["segment", str(path), "--segments", "3", "--out", str(out)]) == 0
     params = json.loads((out / "params.json").read_text())["params"]
-    assert params["clustering"] == "superpixels"
+    assert params["method"] == "superpixels"
     labels = tifffile.imread(out / "labels.tif")
     assert adjusted_rand_score(truth.ravel(), labels.ravel()) == pytest.approx(1.0)
     # --preset thesis keeps the faithful pipeline
     out2 = tmp_path / "thesis"
     argv = ["segment", str(path), "--out", str(out2)]
     assert cli.main(argv + ["--preset", "thesis"]) == 0
-    assert json.loads((out2 / "params.json").read_text())["params"]["clustering"] == "recursive"
+    assert json.loads((out2 / "params.json").read_text())["params"]["method"] == "thesis"
     parser = cli.build_parser()
     assert parser.parse_args(["demo"]).preset == "auto"
     assert parser.parse_args(["segment", "x.tif", "--out", "o"]).preset == "auto"
@@ -102,5 +115,5 @@ def test_block_graph_commands_do_not_offer_auto():
     with pytest.raises(cli.UsageError, match="invalid choice: 'auto'"):
         parser.parse_args(["sweep", "x.tif", "--preset", "auto"])
     stack, _ = planted_stack(2)
-    with pytest.raises(PolarsegError, match="clustering must be recursive or kway"):
-        segment_timeseries([stack, stack], ANGLES, SegmentParams(clustering="superpixels"))
+    with pytest.raises(PolarsegError, match="the method must be thesis"):
+        segment_timeseries([stack, stack], ANGLES, SegmentParams(method="superpixels"))

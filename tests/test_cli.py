@@ -171,11 +171,12 @@ def test_segment_all_parameter_flags_reach_params_json(tmp_path, capsys, scene_t
         *("--features", "zonal"),
         *("--scale-mode", "median", "--spatial-radius", "1.5", "--spatial-sigma", "3"),
         *("--ncut-threshold", "0.8", "--min-segment-blocks", "2", "--fit", "robust"),
-        *("--affinity-graph", "sparse", "--clustering", "kway"),
+        *("--affinity-graph", "sparse", "--clustering", "kway", "--method", "thesis"),
     ]
     code, _, err = run(capsys, "segment", path, "--out", out, *flags)
     assert code == 0, err
     assert json.loads((out / "params.json").read_text())["params"] == {
+        "method": "thesis",
         "window": 9,
         "degree": 5,
         "refractive_index": 1.6,

@@ -44,8 +44,8 @@ def param_options(
     options: dict[str, tuple[str, dict[str, Any]]] = {}
     for name, spec in specs.items():
         kwargs: dict[str, Any] = {}
-        if spec.choices:
-            kwargs["choices"] = spec.choices
+        if spec.options():
+            kwargs["choices"] = spec.options()
         elif spec.optional:
             kwargs["type"] = threshold_arg
         else:
@@ -83,6 +83,10 @@ def add_param_options(
         The parameter table (default: :data:`PARAM_SPECS`).
     """
     defaults = {f.name: f.default for f in fields(SegmentParams)}
+    if presets == BLOCK_PRESETS:  # the block-graph commands run the thesis method only
+        specs = {
+            k: v for k, v in (PARAM_SPECS if specs is None else specs).items() if k != "method"
+        }
     group = parser.add_argument_group(
         "segmentation parameters",
         "start from --preset, then --params, then explicit flags; thesis defaults in brackets",

@@ -16,7 +16,6 @@ import numpy as np
 
 from .. import io as pio
 from .. import jobs
-from ..engine import STAGES
 from ..engine.errors import PolarsegError
 from ..engine.limits import memory_limit
 from ..engine.params import PARAM_SPECS, PRESETS, SegmentParams
@@ -38,26 +37,31 @@ def params_from_args(args: argparse.Namespace, base: dict[str, Any] | None = Non
         raise PolarsegError(f"{source}: {exc}") from None
     except TypeError as exc:
         raise PolarsegError(f"{source}: a parameter has the wrong type ({exc})") from None
-    changes = {name: getattr(args, name) for name in PARAM_SPECS}
+    changes = {name: getattr(args, name, None) for name in PARAM_SPECS}
     changes = {k: (None if v == "none" else v) for k, v in changes.items() if v is not None}
     return params.replace(**changes)
 
 
 def progress_report(verbose: bool, status: StatusLine | None = None) -> jobs.Progress | None:
-    """Pipeline progress callback: permanent lines with ``verbose``, else the status line
-    (which names the stage now running), else None."""
+    """Progress callback of a run (:class:`napari_polarseg.engine.Scene`, called as a
+    stage starts with the stages done, and within it): with ``verbose`` a permanent line
+    per stage as it starts, else the status line naming the stage now running, else
+    None."""
     if verbose:
+        started: list[str] = []
 
-        def report(stage: str, index: int, total: int) -> None:
-            print(f"{PROG}: [{index}/{total}] {stage}", file=sys.stderr, flush=True)
+        def report(stage: str, index: float, total: int) -> None:
+            if index < total and stage not in started:
+                started.append(stage)
+                print(f"{PROG}: [{int(index) + 1}/{total}] {stage}", file=sys.stderr, flush=True)
 
         return report
     if status is None or not status.enabled:
         return None
 
-    def show(stage: str, index: int, total: int) -> None:
+    def show(stage: str, index: float, total: int) -> None:
         if index < total:
-            status.stage(STAGES[index], index + 1, total, "segmenting:")
+            status.stage(stage, int(index) + 1, total, "segmenting:")
 
     return show
 

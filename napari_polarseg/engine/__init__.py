@@ -4,6 +4,11 @@ Stages (thesis section 4.5): :func:`polarisation_image` → :func:`zenith_from_d
 :func:`azimuth_from_phase` → :func:`block_coefficients` → :func:`pca_features` →
 :func:`affinity_matrix` → :func:`recursive_ncut` → :func:`upsample_block_labels`, and
 :func:`reconstruct_intensity`. :class:`Pipeline` chains them with a per-stage cache.
+
+Methods are peers (:mod:`.methods`): :class:`Scene` segments a stack with the method
+``SegmentParams.method`` names (``PRESETS["auto"]``: the superpixel clustering
+:func:`segment_unsupervised`; ``"thesis"``: the block pipeline) or, given scribbles, with
+the pixel classifier; :func:`register_method` adds one.
 Angles are radians throughout the engine.
 
 Beside the cut: :func:`pixel_features` (multi-scale per-pixel features) →
@@ -38,7 +43,16 @@ from .graph.affinity import affinity_matrix
 from .graph.eigensolver import fiedler_vector
 from .graph.ncut import CutTree, best_split, bipartition, recursive_ncut
 from .limits import check_pipeline_memory, estimate_pipeline_bytes
-from .params import SegmentParams
+from .methods import (
+    MethodOutput,
+    Scene,
+    Segmenter,
+    get_method,
+    method_names,
+    register_method,
+    segment,
+)
+from .params import PRESETS, SegmentParams
 from .physics.colour_mosaic import demosaic_colour, luminance
 from .physics.fresnel import (
     ZenithEstimate,
@@ -64,13 +78,24 @@ from .physics.polarimage import (
     validity_mask,
 )
 from .physics.registration import register_stack
-from .pipeline import Pipeline, intensity_baseline, segment
+from .pipeline import Pipeline, intensity_baseline
 from .result import SegmentationResult
 from .stages import STAGES, valid_blocks
+from .unsupervised.params import UnsupervisedParams
+from .unsupervised.segmenter import segment_unsupervised
 from .unsupervised.superpixels import region_means, superpixels
 
 __all__ = [
+    "PRESETS",
     "STAGES",
+    "MethodOutput",
+    "Scene",
+    "Segmenter",
+    "UnsupervisedParams",
+    "get_method",
+    "method_names",
+    "register_method",
+    "segment_unsupervised",
     "Cancelled",
     "ClassifierParams",
     "CutTree",

@@ -20,10 +20,15 @@ SPECULAR_BRANCHES = ("below-brewster", "above-brewster")
 COEFFICIENT_METHODS = ("thesis", "ridge")
 SCALE_MODES = ("absolute", "median")
 FEATURE_KINDS = ("thesis", "zonal", "energy", "polstats", "zonal+polstats")
-CLUSTERING_METHODS = ("recursive", "kway", "superpixels")
+CLUSTERING_METHODS = ("recursive", "kway")
 FIT_METHODS = ("lsq", "robust")
 AFFINITY_GRAPHS = ("auto", "dense", "sparse")
 MAX_DEGREE = 60
+
+#: The registered segmentation methods, name → menu text, in registration order: the
+#: choices of ``method``. Filled by :func:`napari_polarseg.engine.methods.register_method`
+#: (this module cannot import the methods, which read these parameters).
+METHOD_CHOICES: dict[str, str] = {}
 
 
 @dataclass(frozen=True)
@@ -55,6 +60,9 @@ class ParamSpec:
         Text shown in the menu for some of the choices.
     optional : bool
         The value may be None (the CLI takes ``none``).
+    registry : dict or None
+        A live mapping name → menu text whose names are the choices (the registered
+        segmentation methods); None: :attr:`choices`.
     """
 
     help: str
@@ -68,11 +76,19 @@ class ParamSpec:
     choices: tuple[str, ...] | None = None
     choice_names: dict[str, str] | None = None
     optional: bool = False
+    registry: dict[str, str] | None = None
+
+    def options(self) -> tuple[str, ...] | None:
+        """The values a menu offers now: :attr:`choices`, or the names in
+        :attr:`registry` (a live mapping name → text, e.g. :data:`METHOD_CHOICES`)."""
+        if self.registry is not None:
+            return tuple(self.registry)
+        return self.choices
 
     def menu(self) -> list[tuple[str, str]]:
-        """(text, value) pairs of a menu parameter, in the order of :attr:`choices`."""
-        names = self.choice_names or {}
-        return [(names.get(c, c), c) for c in self.choices or ()]
+        """(text, value) pairs of a menu parameter, in the order of :meth:`options`."""
+        names = {**(self.choice_names or {}), **(self.registry or {})}
+        return [(names.get(c, c), c) for c in self.options() or ()]
 
 
 def _param(default: Any, **spec: Any) -> Any:
@@ -88,6 +104,15 @@ class SegmentParams:
     :class:`ParamSpec` (:data:`PARAM_SPECS`); the attribute list below is made from them.
     """
 
+    method: str = _param(
+        "thesis",
+        help="Segmentation method: the thesis block pipeline (thesis), edge-following "
+        "superpixels clustered by their polarisation (superpixels), or any registered "
+        "method (a pixel classifier runs when scribbles or a classifier are given)",
+        flag="--method",
+        label="method",
+        registry=METHOD_CHOICES,
+    )
     window: int = _param(
         10,
         help="Side w of the non-overlapping w x w pixel blocks, in pixels",
@@ -228,19 +253,16 @@ class SegmentParams:
     )
     clustering: str = _param(
         "recursive",
-        help="How the graph is split into segments: recursive two-way normalized cuts "
-        "(thesis section 4.4.1), k-way spectral clustering (the first k generalized "
-        "eigenvectors, rows normalised, k-means; Ng, Jordan & Weiss 2002), or "
-        "superpixels: no block graph, edge-following superpixels clustered by their "
-        "polarisation, labels at pixel resolution (the block fields still give the "
-        "harmonic maps and the reconstruction-error map)",
+        help="How the thesis method splits the block graph into segments: recursive "
+        "two-way normalized cuts (thesis section 4.4.1) or k-way spectral clustering "
+        "(the first k generalized eigenvectors, rows normalised, k-means; Ng, Jordan & "
+        "Weiss 2002)",
         flag="--clustering",
         label="clustering",
         choices=CLUSTERING_METHODS,
         choice_names={
             "recursive": "recursive two-way",
             "kway": "k-way spectral",
-            "superpixels": "superpixels (unsupervised)",
         },
     )
     fit: str = _param(
@@ -268,7 +290,14 @@ class SegmentParams:
         self.validate()
 
     def validate(self) -> None:
-        """Raise :class:`PolarsegError` naming the first parameter that is out of range."""
+        """Raise :class:`PolarsegError` naming the first parameter that is out of range.
+
+        ``method`` is checked against the registered methods where it is looked up
+        (:func:`napari_polarseg.engine.methods.get_method`), so that a method
+        registered later is accepted.
+        """
+        if not isinstance(self.method, str) or not self.method:
+            raise PolarsegError(f"method must be a method's name, got {self.method!r}")
         if not _is_int(self.window) or self.window < 1:
             raise PolarsegError(f"window must be a positive integer, got {self.window!r}")
         if not _is_int(self.degree) or not 0 <= self.degree <= MAX_DEGREE:
@@ -325,6 +354,11 @@ class SegmentParams:
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> SegmentParams:
+        """Parameters from a mapping (``params.json``). A file written before the
+        methods were peers says ``clustering: "superpixels"`` for the superpixel
+        method: read as ``method: "superpixels"``."""
+        if data.get("clustering") == "superpixels" and "method" not in data:
+            data = {**data, "clustering": "recursive", "method": "superpixels"}
         unknown = set(data) - {f.name for f in fields(cls)}
         if unknown:
             raise PolarsegError(f"unknown parameter(s): {', '.join(sorted(unknown))}")
@@ -378,12 +412,12 @@ RECOMMENDED = SegmentParams(
 )
 
 
-#: The default of ``segment``, ``demo`` and the plugin (preset ``auto``): the recommended
-#: block parameters for the harmonic maps and the error map, labels from the
-#: unsupervised superpixel clustering (``clustering="superpixels"``), the best
-#: unsupervised method measured on the rendered scenes and the hand-labelled real frames
-#: together (``benchmarks/evaluate_unsupervised.py``).
-AUTO = RECOMMENDED.replace(clustering="superpixels")
+#: The default of ``segment``, ``demo`` and the plugin (preset ``auto``): the superpixel
+#: method (``method="superpixels"``), the best unsupervised method measured on the
+#: rendered scenes and the hand-labelled real frames together
+#: (``benchmarks/evaluate_unsupervised.py``); the recommended block parameters give the
+#: thesis maps when they are asked for.
+AUTO = RECOMMENDED.replace(method="superpixels")
 
 #: The named starting points of the CLI's ``--preset`` and the plugin's preset menu.
 PRESETS: dict[str, SegmentParams] = {

@@ -152,13 +152,8 @@ class Pipeline:
 
     def stages(self, reconstruction: bool = True, params: SegmentParams | None = None) -> list[str]:
         """Stages a run computes, in order: every stage of :data:`STAGES` but the
-        reconstruction when not asked for, and no affinity and cut when the labels come
-        from the superpixel clustering (``clustering="superpixels"``)."""
-        p = self._params if params is None else params
-        names = list(STAGES if reconstruction else STAGES[:-1])
-        if p.clustering == "superpixels":
-            names = [s for s in names if s not in ("affinity", "cut")]
-        return names
+        reconstruction when not asked for."""
+        return list(STAGES if reconstruction else STAGES[:-1])
 
     def stale_stages(
         self, reconstruction: bool = True, params: SegmentParams | None = None
@@ -222,12 +217,15 @@ class Pipeline:
         stage: str,
         params: SegmentParams | None = None,
         progress: Callable[[float], None] | None = None,
+        cancel: Callable[[], bool] | None = None,
     ) -> Any:
         """Value of a stage for ``params`` (default: the last run's), computing it if
         stale. ``progress`` is called with the share of ``stage`` done (0..1] by the
-        stages that loop in chunks (harmonics, reconstruction), after each chunk.
+        stages that loop in chunks (harmonics, reconstruction), after each chunk (it may
+        raise :class:`Cancelled` to stop the stage there); ``cancel`` is handed to the
+        normalized cut (checked before every product of its eigensolvers).
         """
-        run = StageRun(self.snapshot(params))
+        run = StageRun(self.snapshot(params), cancel=cancel)
         if progress is not None:
             run.within = (stage, progress)
         return self.stage_value(stage, run)
@@ -255,6 +253,7 @@ class Pipeline:
         stages done plus the share of this one done (e.g. 2.4 of 8 in the third stage).
         """
         p = self.snapshot(params)
+        thesis_only(p)
         with self._lock:
             self._recomputed = (p, [])
         names = self.stages(reconstruction, p)
@@ -345,6 +344,7 @@ class Pipeline:
         """The result for ``params`` (default: the last run's), assembled from the
         cache (stale stages are computed first)."""
         p = self.snapshot(params)
+        thesis_only(p)
         with self._lock:
             block, labels, ncut_values, limits, record = self.get("labels", p)
             names = self.stages(reconstruction, p)
@@ -409,6 +409,7 @@ class Pipeline:
             duplicate_angle_frames=polarimage.duplicate_angle_frames(self.angles),
             cut_limits=dict(cut_limits or {}),
             superpixels=dict(superpixels or {}),
+            method=run.params.method,
         )
 
     def scribble_segmentation(
@@ -493,14 +494,15 @@ class Pipeline:
         return block, labels, maps, classes, int(valid[blocks].sum())
 
 
-def segment(
-    stack: np.ndarray, angles: np.ndarray, params: SegmentParams | None = None, **changes: Any
-) -> SegmentationResult:
-    """One-shot convenience: run the whole pipeline on a stack (angles in radians)."""
-    params = (
-        (params or SegmentParams()).replace(**changes) if changes else (params or SegmentParams())
-    )
-    return Pipeline(stack, angles, params).run()
+def thesis_only(params: SegmentParams) -> None:
+    """Raise :class:`PolarsegError` unless ``params`` name the thesis method: a
+    :class:`Pipeline` runs the thesis block graph; every method (the superpixel default
+    too) runs through :class:`napari_polarseg.engine.Scene`."""
+    if params.method != "thesis":
+        raise PolarsegError(
+            f"a Pipeline cuts the thesis block graph; method {params.method!r} runs "
+            "through napari_polarseg.engine.Scene(stack, angles).segment(params)"
+        )
 
 
 def intensity_baseline(

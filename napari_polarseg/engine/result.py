@@ -55,9 +55,12 @@ class SegmentationResult:
     work counts (:meth:`~napari_polarseg.engine.graph.ncut.CutTree.cut_limits`: eigensolves
     capped, segments with an isolated block not solved, products); empty when labels
     came from elsewhere (scribbles). ``superpixels`` is the record of the superpixel
-    clustering (``clustering="superpixels"``): ``surface_share`` and ``close_up``
+    method (``method="superpixels"``): ``surface_share`` and ``close_up``
     (:class:`~napari_polarseg.engine.unsupervised.params.UnsupervisedResult`); empty
-    otherwise.
+    otherwise. ``method`` names the segmentation method that made ``labels`` and
+    ``method_record`` is what it reported. ``coefficients``, ``features`` and
+    ``explained_variance_ratio`` (the thesis maps) and the reconstruction are None when
+    the run did not compute them (other methods, unless asked for).
     """
 
     params: SegmentParams
@@ -68,9 +71,9 @@ class SegmentationResult:
     zenith: np.ndarray
     azimuth: np.ndarray
     clamped: np.ndarray
-    coefficients: np.ndarray
-    features: np.ndarray
-    explained_variance_ratio: np.ndarray
+    coefficients: np.ndarray | None
+    features: np.ndarray | None
+    explained_variance_ratio: np.ndarray | None
     block_labels: np.ndarray
     labels: np.ndarray
     ncut_values: list[float]
@@ -83,6 +86,8 @@ class SegmentationResult:
     duplicate_angle_frames: list[list[int]] = field(default_factory=list)
     cut_limits: dict[str, int] = field(default_factory=dict)
     superpixels: dict[str, Any] = field(default_factory=dict)
+    method: str = "thesis"
+    method_record: dict[str, Any] = field(default_factory=dict)
 
     @property
     def n_segments(self) -> int:
@@ -117,7 +122,9 @@ class SegmentationResult:
         :meth:`degenerate`; ``cut_limits``, ``superpixels``: see the class docstring.
         """
         check = self.degenerate()
+        evr = self.explained_variance_ratio
         return {
+            "method": self.method,
             "stage_seconds": {k: round(v, 6) for k, v in self.timings.items()},
             # stages this run computed (the others came from the cache) and their time
             "recomputed_stages": list(self.recomputed),
@@ -129,9 +136,9 @@ class SegmentationResult:
             "degenerate_reason": check.reason,
             "n_blocks": int(self.block_labels.size),
             "block_grid": list(self.block_labels.shape),
-            "n_components": int(self.features.shape[1]),
-            "explained_variance": float(np.sum(self.explained_variance_ratio)),
-            "explained_variance_ratio": [float(v) for v in self.explained_variance_ratio],
+            "n_components": None if self.features is None else int(self.features.shape[1]),
+            "explained_variance": None if evr is None else float(np.sum(evr)),
+            "explained_variance_ratio": None if evr is None else [float(v) for v in evr],
             "ncut_values": [float(v) for v in self.ncut_values],
             "clamped_pixels": self.n_clamped,
             "mean_reconstruction_error": self.mean_reconstruction_error,

@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from scipy import ndimage
 
-from .errors import Cancelled, PolarsegError
+from .errors import PolarsegError
 from .features import harmonics, polstats
 from .features import pca as feat
 from .graph import affinity, dense_graph, ncut, spectral
@@ -25,7 +25,6 @@ from .matrix_pool import DenseDistances
 from .params import SegmentParams
 from .physics import fresnel, polarimage
 from .result import Normals, Reconstruction
-from .unsupervised import segmenter as unsupervised
 
 if TYPE_CHECKING:
     from .pipeline import Pipeline
@@ -140,7 +139,7 @@ def own_key(stage: str, p: SegmentParams) -> tuple:
             return (p.min_segment_blocks, "kway")
         return (p.min_segment_blocks, p.ncut_threshold)
     if stage == "labels":
-        return (p.n_segments, p.clustering == "superpixels")
+        return (p.n_segments,)
     if stage == "reconstruction":
         return (p.window, p.degree, p.ridge)
     return ()
@@ -313,11 +312,8 @@ def cut_stage(pipe: Pipeline, run: StageRun) -> Any:
 
 
 def labels_stage(pipe: Pipeline, run: StageRun) -> tuple:
-    """(block labels, pixel labels, Ncut values, cut limits, superpixel clustering
-    record) for ``n_segments``; the record is empty when a graph was cut."""
+    """(block labels, pixel labels, Ncut values, cut limits, {}) for ``n_segments``."""
     p = run.params
-    if p.clustering == "superpixels":
-        return superpixel_labels(pipe, run)
     tree = pipe.stage_value("cut", run)
     coef = pipe.stage_value("harmonics", run)
     valid = block_valid(pipe, run).reshape(coef.shape[:2])
@@ -331,25 +327,6 @@ def labels_stage(pipe: Pipeline, run: StageRun) -> tuple:
     shape = pipe.stack.shape[1:]
     labels = harmonics.upsample_block_labels(block, shape, p.window)
     return block, labels, tree.ncut_values, limits, {}
-
-
-def superpixel_labels(pipe: Pipeline, run: StageRun) -> tuple:
-    """Labels stage of ``clustering="superpixels"``: (block, labels, [], None, record).
-
-    The pixel labels of :func:`.unsupervised.segment_unsupervised` (measured
-    defaults) on the polarisation image; block labels are the label at each block's
-    top-left pixel. No graph is cut, so there are no Ncut values and no cut limits;
-    the record says whether the frame was taken for a close-up of one smooth surface
-    (:attr:`.unsupervised.params.UnsupervisedResult.close_up`) and its surface share.
-    """
-    p = run.params
-    pol = pipe.stage_value("polarisation", run)
-    if run.cancel is not None and run.cancel():
-        raise Cancelled("cancelled before the superpixel clustering")
-    seg = unsupervised.segment_unsupervised(pol.intensity, pol.dop, pol.phase, p.n_segments)
-    block = harmonics.top_left_block_labels(seg.labels, p.window).astype(np.int32)
-    record = {"surface_share": round(seg.surface_share, 6), "close_up": seg.close_up}
-    return block, seg.labels.astype(np.int64), [], None, record
 
 
 def reconstruction_stage(pipe: Pipeline, run: StageRun) -> Reconstruction:

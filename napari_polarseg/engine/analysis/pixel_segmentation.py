@@ -33,6 +33,7 @@ from ..features.pixel_features import (
 )
 from ..params import SegmentParams
 from ..physics.colour_mosaic import COLOURS, colour_polarisation_images
+from ..physics.pixel_mask import fill_from_nearest
 from ..pipeline import Pipeline
 from ..result import SegmentationResult
 from ..timing import timed
@@ -137,15 +138,28 @@ class PixelSegmenter:
         colour = colour and self.colour_stack is not None
         key = (id(pol), params, colour)
         if self._features is None or self._features[0] != key:
+            maps = self.maps(segment_params)
             if colour:
-                images = [(pol.intensity, pol.dop, pol.phase)]
+                images = [maps]
                 colours = self.colour_images(segment_params)
                 images += [(c.intensity, c.dop, c.phase) for c in colours]
                 feats = multichannel_features(images, params, channels=["", *self.colours])
             else:
-                feats = pixel_features(pol.intensity, pol.dop, pol.phase, params)
+                feats = pixel_features(*maps, params)
             self._features = (key, feats)
         return self._features[1]
+
+    def maps(self, segment_params: SegmentParams | None = None) -> tuple[np.ndarray, ...]:
+        """Î, ρ, φ the features are computed on: the pipeline's polarisation image, and
+        outside the user's region (``pipeline.mask.region``) the nearest pixel inside it
+        (:func:`~napari_polarseg.engine.physics.pixel_mask.fill_from_nearest`), so the
+        filters carry nothing from outside the region into it."""
+        pol = self.pipeline.get("polarisation", segment_params)
+        region = self.pipeline.mask.region
+        maps = (pol.intensity, pol.dop, pol.phase)
+        if region is None:
+            return maps
+        return fill_from_nearest(np.asarray(region, dtype=bool), *maps)
 
     @property
     def cached_features(self) -> FeatureStack | None:
@@ -158,8 +172,8 @@ class PixelSegmenter:
 
     def guide(self, segment_params: SegmentParams | None = None) -> np.ndarray:
         """Guide image of the edge-aware smoothing: log Î."""
-        pol = self.pipeline.get("polarisation", segment_params)
-        return np.log(np.maximum(pol.intensity, EPS_INTENSITY)).astype(np.float32)
+        intensity = self.maps(segment_params)[0]
+        return np.log(np.maximum(intensity, EPS_INTENSITY)).astype(np.float32)
 
     def train(
         self,
@@ -192,6 +206,31 @@ class PixelSegmenter:
         last run's).
         """
         segment_params = segment_params or self.pipeline.params
+        prediction, classifier, seconds = self.classify(
+            scribbles,
+            classifier,
+            feature_params=feature_params,
+            params=params,
+            cancel=cancel,
+            segment_params=segment_params,
+        )
+        result = self.result(prediction.labels, reconstruction, seconds, segment_params)
+        return PixelSegmentation(result, prediction, classifier, seconds)
+
+    def classify(
+        self,
+        scribbles: np.ndarray | None = None,
+        classifier: PixelClassifier | None = None,
+        *,
+        feature_params: PixelFeatureParams | None = None,
+        params: ClassifierParams | None = None,
+        cancel: Any = None,
+        segment_params: SegmentParams | None = None,
+    ) -> tuple[PixelPrediction, PixelClassifier, dict[str, float]]:
+        """Train on ``scribbles`` (or apply ``classifier``) and predict every pixel:
+        (prediction, classifier, seconds of ``features``, ``train``, ``predict``); what
+        :meth:`segment` does before it assembles the result."""
+        segment_params = segment_params or self.pipeline.params
         if (scribbles is None) == (classifier is None):
             raise ValueError("give scribbles or a classifier, not both or neither")
         seconds: dict[str, float] = {}
@@ -208,8 +247,7 @@ class PixelSegmenter:
         with timed(seconds, "predict"):
             guide = self.guide(segment_params) if classifier.params.smoothing > 0 else None
             prediction = predict_pixels(classifier, feats, guide=guide, cancel=cancel)
-        result = self.result(prediction.labels, reconstruction, seconds, segment_params)
-        return PixelSegmentation(result, prediction, classifier, seconds)
+        return prediction, classifier, seconds
 
     def result(
         self,

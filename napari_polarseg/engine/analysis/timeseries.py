@@ -324,10 +324,10 @@ def _check_options(
     params = SegmentParams() if params is None else params
     if not isinstance(params, SegmentParams):
         raise PolarsegError("params must be a SegmentParams")
-    if params.clustering == "superpixels":
+    if params.method != "thesis":
         raise PolarsegError(
-            "the time series cuts one block graph of all days; clustering must be "
-            "recursive or kway, not superpixels"
+            "the time series cuts one block graph of all days; the method must be "
+            f"thesis, not {params.method}"
         )
     if method not in METHODS:
         raise PolarsegError(f"method must be one of {', '.join(METHODS)}; got {method!r}")

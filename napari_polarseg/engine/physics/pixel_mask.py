@@ -165,3 +165,28 @@ def auto_saturation_level(dtype: np.dtype, bits: int | None = None) -> float | N
     if bits is not None and 0 < bits < np.iinfo(dtype).bits:
         return min(top, float(2**bits - 1))
     return top
+
+
+def fill_from_nearest(valid: np.ndarray, *maps: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Every map with each pixel outside ``valid`` replaced by the nearest valid pixel's
+    value (Euclidean distance, :func:`scipy.ndimage.distance_transform_edt`).
+
+    What a method that filters or groups pixels (superpixels, Gaussian features) reads
+    instead of the raw maps when the user restricts it to a region: the filled maps are
+    a function of the valid pixels alone, so nothing outside the region can move a
+    label inside it. Maps are returned unchanged (not copied) when every pixel is valid.
+
+    Raises
+    ------
+    PolarsegError
+        No valid pixel at all.
+    """
+    from scipy import ndimage
+
+    valid = np.asarray(valid, dtype=bool)
+    if valid.all():
+        return maps
+    if not valid.any():
+        raise PolarsegError("the mask leaves no pixel to segment")
+    _, (ri, ci) = ndimage.distance_transform_edt(~valid, return_indices=True)
+    return tuple(np.asarray(m)[ri, ci] for m in maps)

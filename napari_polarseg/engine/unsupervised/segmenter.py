@@ -72,101 +72,32 @@ off single regions. The benchmark prints every variant.
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass, replace
 
 import numpy as np
 import scipy.sparse as sps
-from scipy import ndimage
 
 from ..analysis.degenerate import degenerate_result
 from ..errors import PolarsegError
 from ..features.pca import pca_features, whiten
 from ..features.pixel_features import EPS_DOP, EPS_INTENSITY, check_maps
+from ..physics.pixel_mask import fill_from_nearest
+from .boundaries import refined_labels
 from .kmeans import squared_distances, weighted_kmeans
 from .params import NODE_FEATURES, TREND, UnsupervisedParams, UnsupervisedResult
 from .region_diffusion import diffuse, diffusion_steps, edge_aware_adjacency
+from .region_graph import polarisation_superpixels, region_adjacency, relabel, superpixel_edges
 from .shape_trend import (
     polarisation_over_trend,
     region_centroids,
     region_polarisation,
     surface_trend_share,
 )
-from .superpixels import COMPACTNESS
 
-#: σ (pixels) of the smoothing before the edge maps of the superpixels are taken.
-EDGE_SIGMA = 1.5
-#: Most passes of :func:`refine_boundaries` (each moves a border by at most one pixel;
-#: the passes stop when one moves nothing).
-REFINE_PASSES = 5
 #: Seedings of the k-means (:func:`.kmeans.weighted_kmeans`; the lowest inertia wins).
 KMEANS_RESTARTS = 10
 #: Degree of the image-wide polynomial of :func:`dop_given_intensity`.
 RESIDUAL_DEGREE = 3
-
-
-def superpixel_edges(
-    intensity: np.ndarray,
-    dop: np.ndarray,
-    phase: np.ndarray,
-    polarisation_edge_weight: float = 1.0,
-) -> np.ndarray:
-    """Edge map (H, W), dimensionless: |∇(G * log Î)| / m_log + w · |∇(G * (s1, s2))| / m_s.
-
-    s1 = ρ cos 2φ and s2 = ρ sin 2φ are the Stokes components normalised by S0, G a
-    Gaussian of :data:`EDGE_SIGMA` px, each gradient divided by its median m over the
-    image (so the two edge maps weigh alike whatever the units) and
-    w = ``polarisation_edge_weight`` (0: log Î alone).
-    """
-    log_i = np.log(np.maximum(intensity, EPS_INTENSITY))
-    edges = ndimage.gaussian_gradient_magnitude(log_i, EDGE_SIGMA)
-    edges /= max(float(np.median(edges)), 1e-12)
-    if polarisation_edge_weight > 0:
-        pol = np.hypot(
-            ndimage.gaussian_gradient_magnitude(dop * np.cos(2 * phase), EDGE_SIGMA),
-            ndimage.gaussian_gradient_magnitude(dop * np.sin(2 * phase), EDGE_SIGMA),
-        )
-        edges += polarisation_edge_weight * pol / max(float(np.median(pol)), 1e-12)
-    return edges
-
-
-def polarisation_superpixels(
-    intensity: np.ndarray,
-    dop: np.ndarray,
-    phase: np.ndarray,
-    region_area: int,
-    polarisation_edge_weight: float = 1.0,
-    edges: np.ndarray | None = None,
-) -> np.ndarray:
-    """Superpixels (H, W) int32, 0 … n − 1, following intensity and polarisation edges.
-
-    A compact watershed from a grid of ``H·W / region_area`` seeds over the edge map of
-    :func:`superpixel_edges` (``edges``, computed when not given).
-    """
-    from skimage.segmentation import watershed
-
-    if edges is None:
-        edges = superpixel_edges(intensity, dop, phase, polarisation_edge_weight)
-    n = max(2, int(round(intensity.size / region_area)))
-    labels = watershed(edges, markers=n, compactness=COMPACTNESS)
-    return _relabel(labels)
-
-
-def _relabel(labels: np.ndarray) -> np.ndarray:
-    """Labels renumbered 0 … n − 1 (ascending, no gaps)."""
-    _, inverse = np.unique(labels.ravel(), return_inverse=True)
-    return inverse.reshape(labels.shape).astype(np.int32)
-
-
-def region_adjacency(regions: np.ndarray) -> sps.csr_matrix:
-    """Shared border length (4-neighbour pixel pairs) between every two regions, (n, n)."""
-    n = int(regions.max()) + 1
-    pairs = []
-    for a, b in ((regions[:, :-1], regions[:, 1:]), (regions[:-1], regions[1:])):
-        differ = a != b
-        pairs.append((a[differ], b[differ]))
-    rows = np.concatenate([p[0] for p in pairs])
-    cols = np.concatenate([p[1] for p in pairs])
-    m = sps.coo_matrix((np.ones(rows.size), (rows, cols)), shape=(n, n)).tocsr()
-    return (m + m.T).tocsr()
 
 
 def _region_sums(flat: np.ndarray, n: int, maps: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
@@ -342,59 +273,6 @@ def _cluster_graph(
     return SpectralClustering(W).labels(k)
 
 
-def refine_boundaries(
-    labels: np.ndarray,
-    intensity: np.ndarray,
-    dop: np.ndarray,
-    n_labels: int,
-    spread: np.ndarray | None = None,
-) -> np.ndarray:
-    """Pixels on a segment border moved to the neighbouring segment they resemble most.
-
-    For every pixel with a different label in its 3 × 3 neighbourhood: the label, among
-    those of the neighbourhood, whose segment mean of (log Î, ρ) is nearest in units of
-    ``spread``, the pooled within-segment spread of each (computed from ``labels`` when
-    not given). One pass (each moves a border by at most a pixel), vectorised over the
-    border pixels only.
-    """
-    log_i = np.log(np.maximum(intensity, EPS_INTENSITY)).astype(np.float64)
-    maps = np.stack([log_i, dop.astype(np.float64)])
-    flat = labels.ravel()
-    count = np.maximum(np.bincount(flat, minlength=n_labels), 1)
-    means = np.stack([np.bincount(flat, m.ravel(), n_labels) / count for m in maps])
-    if spread is None:
-        resid = maps - means[:, labels]
-        spread = np.sqrt((resid.reshape(2, -1) ** 2).mean(axis=1)) + 1e-12
-    # the labels of the 3 × 3 neighbourhood of every pixel (edge-padded), as 9 planes
-    pad = np.pad(labels, 1, mode="edge")
-    h, w = labels.shape
-    near = np.stack([pad[r : r + h, c : c + w] for r in range(3) for c in range(3)])
-    border = (near != labels).any(axis=0)
-    if not border.any():
-        return labels
-    cand = near[:, border]  # (9, b) candidate labels of each border pixel
-    x = maps[:, border] / spread[:, None]  # (2, b)
-    mu = means / spread[:, None]  # (2, k)
-    d = ((x[:, None, :] - mu[:, cand]) ** 2).sum(axis=0)  # (9, b)
-    out = labels.copy()
-    out[border] = cand[np.argmin(d, axis=0), np.arange(cand.shape[1])]
-    return out
-
-
-def within_spread(labels: np.ndarray, intensity: np.ndarray, dop: np.ndarray) -> np.ndarray:
-    """Pooled within-segment standard deviation of log Î and of ρ, (2,): the units of
-    :func:`refine_boundaries`."""
-    log_i = np.log(np.maximum(intensity, EPS_INTENSITY)).astype(np.float64)
-    flat = labels.ravel()
-    n = int(flat.max()) + 1
-    count = np.maximum(np.bincount(flat, minlength=n), 1)
-    out = []
-    for m in (log_i.ravel(), dop.astype(np.float64).ravel()):
-        mean = np.bincount(flat, m, n) / count
-        out.append(np.sqrt(np.mean((m - mean[flat]) ** 2)) + 1e-12)
-    return np.array(out)
-
-
 def _first_appearance(labels: np.ndarray, node_labels: np.ndarray) -> tuple[np.ndarray, ...]:
     """Segments renumbered in order of first appearance in ``labels`` (row-major)."""
     flat = labels.ravel()
@@ -429,42 +307,33 @@ def _region_features(
     return np.where(np.isfinite(x), x, 0.0), names
 
 
-def _cluster_regions(
+def _project(
     x: np.ndarray,
     weight: np.ndarray,
-    regions: np.ndarray,
-    edges: np.ndarray,
+    graph: sps.csr_matrix,
     adjacency: sps.csr_matrix,
-    k: int,
     p: UnsupervisedParams,
-) -> tuple[np.ndarray, np.ndarray]:
-    """(projected node features z, node labels) for k >= 2 segments: standardised and
-    clipped features, diffused over the region graph, projected (PCA or MAF), clustered."""
+) -> np.ndarray:
+    """Projected node features z (n, c): standardised and clipped features, diffused over
+    the edge-aware region ``graph``, projected (PCA or MAF). Independent of k."""
     xs = _standardise(x, weight)
     if p.clip > 0:
         xs = np.clip(xs, -p.clip, p.clip)
     steps = diffusion_steps(p.diffusion_range, x.shape[0], p.diffusion)
     if steps:  # after the standardising: a column of mere noise shrinks, not rescaled
-        graph = edge_aware_adjacency(regions, edges, p.diffusion_tau)
         xs = diffuse(xs, graph, p.diffusion, steps)
     if p.projection == "maf":
-        z = maf_features(xs, adjacency, weight, p.variance, p.components)
-    else:
-        z = pca_features(xs, p.variance).features
+        return maf_features(xs, adjacency, weight, p.variance, p.components)
+    return pca_features(xs, p.variance).features
+
+
+def _cluster(
+    z: np.ndarray, k: int, weight: np.ndarray, adjacency: sps.csr_matrix, p: UnsupervisedParams
+) -> np.ndarray:
+    """Node labels for k >= 2 segments of the projected features (``p.clustering``)."""
     if p.clustering in ("gmm", "kmeans"):
-        return z, _cluster_mixture(z, k, weight, adjacency, p)
-    return z, _cluster_graph(z, k, adjacency, p)
-
-
-def _refined(labels: np.ndarray, i: np.ndarray, d: np.ndarray, k: int) -> np.ndarray:
-    """Labels after up to :data:`REFINE_PASSES` passes of :func:`refine_boundaries`."""
-    spread = within_spread(labels, i, d)
-    for _ in range(REFINE_PASSES):
-        moved = refine_boundaries(labels, i, d, k, spread)
-        if np.array_equal(moved, labels):
-            break  # converged: no border pixel moved
-        labels = moved
-    return labels.astype(np.int32)
+        return _cluster_mixture(z, k, weight, adjacency, p)
+    return _cluster_graph(z, k, adjacency, p)
 
 
 def _checked_k(shape: tuple[int, ...], n_segments: int) -> int:
@@ -491,7 +360,157 @@ def _superpixels(
         return polarisation_superpixels(i, d, ph, area, edges=edges), edges
     from .superpixels import superpixels
 
-    return _relabel(superpixels(i, area)), edges
+    return relabel(superpixels(i, area)), edges
+
+
+@dataclass(frozen=True)
+class RegionModel:
+    """What the superpixel clustering computes before it knows k (steps 1 and 2 of the
+    module docstring): :func:`prepare_regions` makes it, :func:`cluster_regions` labels
+    it for any k in milliseconds.
+
+    Attributes
+    ----------
+    maps : tuple of ndarray (H, W)
+        Î, ρ, φ as read (outside the mask: the nearest valid pixel's values).
+    valid : ndarray (H, W) of bool or None
+        The pixels the clustering reads (None: every pixel).
+    regions : ndarray (H, W) int32
+        Superpixel of every pixel, 0 … n − 1; with a mask, pixels outside it form the
+        extra region n, which takes no part in the clustering.
+    n : int
+        Number of superpixels clustered.
+    weight : ndarray (n,)
+        Valid pixels per superpixel.
+    adjacency : scipy.sparse.csr_matrix (n, n)
+        Shared-border lengths between superpixels.
+    z : ndarray (n, c)
+        Projected node features (:func:`_project`).
+    feature_names : tuple of str
+    surface_share : float
+    close_up : bool
+    params : UnsupervisedParams
+        The parameters asked for (``close_up_params()`` of them were used when
+        ``close_up``).
+    """
+
+    maps: tuple[np.ndarray, np.ndarray, np.ndarray]
+    valid: np.ndarray | None
+    regions: np.ndarray
+    n: int
+    weight: np.ndarray
+    adjacency: sps.csr_matrix
+    z: np.ndarray
+    feature_names: tuple[str, ...]
+    surface_share: float
+    close_up: bool
+    params: UnsupervisedParams
+
+    @property
+    def used_params(self) -> UnsupervisedParams:
+        """The parameters the clustering uses (the close-up ones on a close-up)."""
+        return self.params.close_up_params() if self.close_up else self.params
+
+
+def _masked_regions(regions: np.ndarray, valid: np.ndarray | None) -> tuple[np.ndarray, int]:
+    """(regions, n): with a mask, the pixels outside it become region n (last) and the
+    superpixels with no valid pixel disappear."""
+    if valid is None:
+        return regions, int(regions.max()) + 1
+    marked = np.where(valid, regions, int(regions.max()) + 1)
+    marked = relabel(marked)
+    return marked, int(marked.max())  # the outside region is the last one
+
+
+def prepare_regions(
+    intensity: np.ndarray,
+    dop: np.ndarray,
+    phase: np.ndarray,
+    params: UnsupervisedParams | None = None,
+    valid: np.ndarray | None = None,
+) -> RegionModel:
+    """Superpixels, node features and their projection: everything but the clustering.
+
+    ``valid`` (H, W bool, True = segment here) restricts the clustering to a region: the
+    maps outside it are filled from the nearest valid pixel
+    (:func:`~napari_polarseg.engine.physics.pixel_mask.fill_from_nearest`) before the
+    superpixels are drawn, and the pixels outside form one extra region that takes no
+    part in the features' statistics, the projection or the clustering; so the labels
+    inside the region do not depend on anything outside it.
+    """
+    p = params or UnsupervisedParams()
+    i, d, ph = check_maps(intensity, dop, phase)
+    if valid is not None:
+        valid = np.asarray(valid, dtype=bool)
+        if valid.shape != i.shape:
+            raise PolarsegError(f"the mask is {valid.shape} but the maps are {i.shape}")
+        if valid.all():
+            valid = None
+        else:
+            i, d, ph = fill_from_nearest(valid, i, d, ph)
+    if min(i.shape) < 2:
+        raise PolarsegError(f"image too small to segment: {i.shape}")
+    regions, edges = _superpixels(i, d, ph, p)
+    regions, n = _masked_regions(regions, valid)
+    keep = slice(0, n)
+    z_region, count, centroid = region_polarisation(i, d, ph, regions)
+    share = surface_trend_share(z_region[keep], count[keep], centroid[keep], i.shape)
+    close_up = share > p.close_up_share
+    q = p.close_up_params() if close_up else p
+    x, names = _region_features(i, d, ph, regions, q)
+    weight = np.bincount(regions.ravel(), minlength=n).astype(float)[keep]
+    adjacency = region_adjacency(regions)[keep][:, keep].tocsr()
+    if n < 2:
+        z = np.zeros((n, 0))
+    else:
+        graph = None
+        if diffusion_steps(q.diffusion_range, n, q.diffusion):
+            graph = edge_aware_adjacency(regions, edges, q.diffusion_tau)[keep][:, keep].tocsr()
+        z = _project(x[keep], weight, graph, adjacency, q)
+    return RegionModel(
+        (i, d, ph), valid, regions, n, weight, adjacency, z, tuple(names), share, close_up, p
+    )
+
+
+def cluster_regions(model: RegionModel, n_segments: int) -> UnsupervisedResult:
+    """The labels of a :class:`RegionModel` for k = ``n_segments`` (step 3 of the module
+    docstring, then the border refinement); outside a mask, every pixel takes the label
+    of the nearest valid pixel."""
+    t0 = time.perf_counter()
+    i, d, ph = model.maps
+    k = _checked_k(i.shape, n_segments)
+    n, q = model.n, model.used_params
+    if n < k:
+        raise PolarsegError(
+            f"only {n} superpixels for {k} segments: ask for at most {n} segments"
+        )
+    if k == 1:
+        node_labels = np.zeros(n, dtype=np.int32)
+    else:
+        node_labels = _cluster(model.z, k, model.weight, model.adjacency, q)
+    node_labels = np.asarray(node_labels, dtype=np.int32)
+    if model.valid is not None:  # the outside region: relabelled from inside below
+        node_labels = np.append(node_labels, 0).astype(np.int32)
+    labels = node_labels[model.regions]
+    if model.valid is not None:
+        (labels,) = fill_from_nearest(model.valid, labels)
+    if q.refine_boundaries and k > 1:
+        labels = refined_labels(labels, i, d, int(node_labels.max()) + 1)
+        if model.valid is not None:
+            (labels,) = fill_from_nearest(model.valid, labels)
+    labels, node_labels = _first_appearance(labels, node_labels)
+    return UnsupervisedResult(
+        labels=labels,
+        node_labels=node_labels[:n],
+        regions=model.regions,
+        node_features=model.z,
+        feature_names=model.feature_names,
+        seconds=time.perf_counter() - t0,
+        degenerate=bool(degenerate_result(labels, requested=k).degenerate),
+        params=model.params,
+        surface_share=model.surface_share,
+        close_up=model.close_up,
+    )
 
 
 def segment_unsupervised(
@@ -500,8 +519,10 @@ def segment_unsupervised(
     phase: np.ndarray,
     n_segments: int,
     params: UnsupervisedParams | None = None,
+    valid: np.ndarray | None = None,
 ) -> UnsupervisedResult:
-    """Segment a polarisation image into materials without training (module docstring).
+    """Segment a polarisation image into materials without training (module docstring):
+    :func:`prepare_regions`, then :func:`cluster_regions`.
 
     Parameters
     ----------
@@ -511,11 +532,15 @@ def segment_unsupervised(
         Number of segments k (≥ 1).
     params : UnsupervisedParams, optional
         Superpixels, node features and clustering (default ``UnsupervisedParams()``).
+    valid : array (H, W) of bool, optional
+        Segment only these pixels (:func:`prepare_regions`); the others take the label
+        of the nearest one.
 
     Returns
     -------
     UnsupervisedResult
-        Pixel labels (each pixel its superpixel's), node labels, the superpixels.
+        Pixel labels (each pixel its superpixel's), node labels, the superpixels;
+        ``seconds`` is the whole segmentation's.
 
     Raises
     ------
@@ -523,42 +548,6 @@ def segment_unsupervised(
         Maps of different shapes or not 2-D, k < 1, or fewer superpixels than k.
     """
     t0 = time.perf_counter()
-    p = params or UnsupervisedParams()
-    i, d, ph = check_maps(intensity, dop, phase)
-    k = _checked_k(i.shape, n_segments)
-    regions, edges = _superpixels(i, d, ph, p)
-    n = int(regions.max()) + 1
-    if n < k:
-        area = p.area_of(i.shape)
-        raise PolarsegError(
-            f"only {n} superpixels for {k} segments: lower region_area (now {area} px)"
-        )
-    z_region, count, centroid = region_polarisation(i, d, ph, regions)
-    share = surface_trend_share(z_region, count, centroid, i.shape)
-    close_up = share > p.close_up_share
-    q = p.close_up_params() if close_up else p
-    x, names = _region_features(i, d, ph, regions, q)
-    weight = np.bincount(regions.ravel(), minlength=n).astype(float)
-    adjacency = region_adjacency(regions)
-    if k == 1:
-        node_labels = np.zeros(n, dtype=np.int32)
-        z = np.zeros((n, 0))
-    else:
-        z, node_labels = _cluster_regions(x, weight, regions, edges, adjacency, k, q)
-    node_labels = np.asarray(node_labels, dtype=np.int32)
-    labels = node_labels[regions]
-    if q.refine_boundaries and k > 1:
-        labels = _refined(labels, i, d, int(node_labels.max()) + 1)
-    labels, node_labels = _first_appearance(labels, node_labels)
-    return UnsupervisedResult(
-        labels=labels,
-        node_labels=node_labels,
-        regions=regions,
-        node_features=z,
-        feature_names=tuple(names),
-        seconds=time.perf_counter() - t0,
-        degenerate=bool(degenerate_result(labels, requested=k).degenerate),
-        params=p,
-        surface_share=share,
-        close_up=close_up,
-    )
+    model = prepare_regions(intensity, dop, phase, params, valid)
+    result = cluster_regions(model, n_segments)
+    return replace(result, seconds=time.perf_counter() - t0)

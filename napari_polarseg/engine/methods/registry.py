@@ -1,0 +1,60 @@
+"""The registered segmentation methods.
+
+Adding a method is one module with a class that follows
+:class:`~.base.Segmenter` and one line in :data:`BUILT_IN` (or, from outside the
+package, one call of :func:`register_method`): the CLI's ``--method``, the plugin's method
+menu and ``params.json`` then offer it.
+"""
+
+from __future__ import annotations
+
+import importlib
+
+from ..errors import PolarsegError
+from ..params import METHOD_CHOICES
+from .base import Segmenter
+
+#: The methods that come with the package: module (in this package) and class.
+BUILT_IN: tuple[tuple[str, str], ...] = (
+    ("superpixel_clustering", "SuperpixelClustering"),
+    ("thesis", "ThesisBlocks"),
+    ("pixel_classification", "PixelClassification"),
+)
+
+_METHODS: dict[str, Segmenter] = {}
+
+
+def register_method(method: Segmenter) -> Segmenter:
+    """Register ``method`` under its ``name`` (a later registration replaces it) and
+    return it; it becomes a choice of ``SegmentParams.method``."""
+    for attr in ("name", "title", "reads", "inputs", "stages", "segment"):
+        if not hasattr(method, attr):
+            raise PolarsegError(f"a segmentation method needs {attr!r}: {method!r}")
+    _METHODS[method.name] = method
+    METHOD_CHOICES[method.name] = method.title
+    return method
+
+
+def get_method(name: str) -> Segmenter:
+    """The method registered as ``name``; PolarsegError naming the known ones else."""
+    method = _METHODS.get(name)
+    if method is None:
+        known = ", ".join(_METHODS)
+        raise PolarsegError(f"unknown segmentation method {name!r}; known: {known}")
+    return method
+
+
+def method_names() -> tuple[str, ...]:
+    """Names of the registered methods, in registration order."""
+    return tuple(_METHODS)
+
+
+def unsupervised_names() -> tuple[str, ...]:
+    """The methods that need no input besides the image (the plugin's method menu)."""
+    return tuple(name for name, m in _METHODS.items() if not m.inputs)
+
+
+def register_built_in() -> None:
+    """Register the methods of :data:`BUILT_IN`."""
+    for module, cls in BUILT_IN:
+        register_method(getattr(importlib.import_module(f"{__package__}.{module}"), cls)())

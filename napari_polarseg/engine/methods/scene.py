@@ -1,0 +1,299 @@
+"""One angle stack, its shared polarisation image and feature cache, and every method on it.
+
+:class:`Scene` is what the CLI, the plugin and scripts segment: it holds the stack, the
+pixel mask and one :class:`~napari_polarseg.engine.Pipeline` whose ``polarisation``
+stage (Î, ρ, φ of thesis eq. 3.14, the invalid pixels) every method reads, and whose
+block stages are the thesis method's and the thesis maps' (harmonic coefficients, PCA,
+reconstruction error) when they are asked for. Each method's output is cached with the
+values of the parameters it reads (:attr:`~.base.Segmenter.reads`) and its inputs, so
+a change of any other parameter does not rerun it.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from ..features.harmonics import top_left_block_labels
+from ..params import SegmentParams
+from ..physics import polarimage
+from ..physics.pixel_mask import PixelMask
+from ..pipeline import Pipeline
+from ..result import SegmentationResult
+from .base import MethodOutput, MethodRun, Progress, Segmenter
+from .registry import get_method
+
+#: The thesis stages that give the maps of the result-folder contract beyond Î, ρ, φ, θ.
+MAP_STAGES = ("harmonics", "pca")
+
+
+def _input_key(inputs: dict[str, Any]) -> tuple:
+    """A cache key of a method's inputs: arrays by content digest, others by identity."""
+    key = []
+    for name in sorted(inputs):
+        value = inputs[name]
+        if isinstance(value, np.ndarray):
+            key.append((name, value.shape, value.dtype.str, hash(value.tobytes())))
+        else:
+            key.append((name, id(value)))
+    return tuple(key)
+
+
+class Scene:
+    """An angle stack ready to be segmented by any registered method.
+
+    Parameters
+    ----------
+    stack : array (N, H, W)
+        Angle stack.
+    angles : array (N,)
+        Polariser angles in radians.
+    mask : array (H, W) or PixelMask, optional
+        The user's region (non-zero = segment here) or a whole
+        :class:`~napari_polarseg.engine.PixelMask` (see
+        :class:`~napari_polarseg.engine.Pipeline`). Every method honours the region:
+        the labels inside it do not depend on the pixels outside.
+    pipeline : Pipeline, optional
+        An existing pipeline of the stack to share (its cache is reused).
+
+    Examples
+    --------
+    >>> from napari_polarseg.engine import Scene, PRESETS  # doctest: +SKIP
+    >>> scene = Scene(stack, angles)                         # doctest: +SKIP
+    >>> scene.segment(PRESETS["auto"].replace(n_segments=3)).labels  # doctest: +SKIP
+    """
+
+    def __init__(
+        self,
+        stack: np.ndarray | None = None,
+        angles: np.ndarray | None = None,
+        mask: np.ndarray | PixelMask | None = None,
+        pipeline: Pipeline | None = None,
+    ) -> None:
+        self.pipeline = pipeline if pipeline is not None else Pipeline(stack, angles, mask=mask)
+        #: how often each method ran (its labels were computed, not taken from the cache)
+        self.method_calls: dict[str, int] = {}
+        self._cache: dict[str, tuple[Any, Any]] = {}
+        self._seconds: dict[str, float] = {}  # each stage's last computation
+        self._lock = threading.RLock()
+
+    @property
+    def mask(self) -> PixelMask:
+        return self.pipeline.mask
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return tuple(self.pipeline.stack.shape[1:])  # type: ignore[return-value]
+
+    @property
+    def region(self) -> np.ndarray | None:
+        """The user's region (H, W bool, True = segment here) or None (every pixel)."""
+        region = self.mask.region
+        return None if region is None or np.all(region) else np.asarray(region, dtype=bool)
+
+    def polarisation(self, params: SegmentParams) -> polarimage.PolarisationImage:
+        """The shared polarisation image (Î, ρ, φ, invalid pixels) for ``params.fit``."""
+        return self.pipeline.get("polarisation", params)
+
+    def cached(self, name: str, key: Any, compute: Callable[[], Any]) -> Any:
+        """The feature cache: the value kept under ``name`` if it was made for ``key``,
+        else ``compute()`` (kept; one value per name)."""
+        with self._lock:
+            entry = self._cache.get(name)
+            if entry is not None and entry[0] == key:
+                return entry[1]
+            value = compute()
+            self._cache[name] = (key, value)
+            return value
+
+    # -- running ------------------------------------------------------------------------
+    def method_for(self, params: SegmentParams, inputs: dict[str, Any] | None) -> Segmenter:
+        """The method of a run: the one that takes the given inputs (scribbles, a
+        classifier), else ``params.method``."""
+        given = {k for k, v in (inputs or {}).items() if v is not None and k != "colour_stack"}
+        if given:
+            from .registry import method_names
+
+            for name in method_names():
+                method = get_method(name)
+                if given & set(method.inputs):
+                    return method
+        return get_method(params.method)
+
+    def stages(
+        self,
+        params: SegmentParams,
+        inputs: dict[str, Any] | None = None,
+        maps: bool = False,
+        reconstruction: bool = False,
+    ) -> list[str]:
+        """The stages a run goes through, in order (the progress bar's total)."""
+        method = self.method_for(params, inputs)
+        names = ["polarisation", "normals", *method.stages(params)]
+        if maps:
+            names += [s for s in MAP_STAGES if s not in names]
+        if reconstruction:
+            names.append("reconstruction")
+        return names
+
+    def method_key(self, method: Segmenter, params: SegmentParams, inputs: dict) -> tuple:
+        """What a method's labels depend on: the parameters it reads and its inputs."""
+        return (method.name, tuple(getattr(params, f) for f in method.reads), _input_key(inputs))
+
+    def segment(
+        self,
+        params: SegmentParams | None = None,
+        inputs: dict[str, Any] | None = None,
+        maps: bool | None = None,
+        reconstruction: bool | None = None,
+        cancel: Callable[[], bool] | None = None,
+        progress: Progress | None = None,
+    ) -> SegmentationResult:
+        """Segment with ``params.method`` (or the method that takes ``inputs``).
+
+        Parameters
+        ----------
+        params : SegmentParams, optional
+            Default ``SegmentParams()`` (the thesis method).
+        inputs : dict, optional
+            ``scribbles`` (H, W int, 0 = unlabelled) or ``classifier`` (a trained
+            pixel classifier), and ``colour_stack`` of a colour-polarisation frame.
+        maps, reconstruction : bool, optional
+            Also the thesis maps (harmonic coefficients and PCA features) and the
+            reconstruction-error map. Default: True for the thesis method (they are
+            its stages), False for the others.
+        cancel : callable() -> bool, optional
+            Checked before every stage and inside the long ones; True raises
+            :class:`~napari_polarseg.engine.errors.Cancelled`.
+        progress : callable(stage, index, total), optional
+            Called when a stage starts (``index`` = stages done) and within it.
+        """
+        p = params or SegmentParams()
+        inputs = {k: v for k, v in (inputs or {}).items() if v is not None}
+        method = self.method_for(p, inputs)
+        thesis = method.name == "thesis"
+        maps = thesis if maps is None else maps
+        reconstruction = thesis if reconstruction is None else reconstruction
+        run = MethodRun(self.stages(p, inputs, maps, reconstruction), cancel, progress)
+        timings: dict[str, float] = {}  # the stages computed in this call
+        with self._lock:
+            self.pipeline.snapshot(p)
+            for stage in ("polarisation", "normals"):
+                self._thesis_stage(stage, p, run, timings)
+            out = self._method_output(method, p, inputs, run, timings)
+            for stage in run.names[run.names.index(run.current) + 1 :]:
+                self._thesis_stage(stage, p, run, timings)
+            run.finish()
+            self._seconds.update(timings)
+            return self._result(p, out, maps, reconstruction, timings, method, run.names)
+
+    def method_output(
+        self, params: SegmentParams, inputs: dict[str, Any] | None = None
+    ) -> MethodOutput:
+        """The kept output of the method of the last :meth:`segment` with ``params`` and
+        ``inputs`` (computed now if it is not kept): labels, record and the method's
+        extra objects (a classifier's prediction)."""
+        inputs = {k: v for k, v in (inputs or {}).items() if v is not None}
+        method = self.method_for(params, inputs)
+        run = MethodRun(list(method.stages(params)))
+        with self._lock:
+            return self._method_output(method, params, inputs, run, {})
+
+    def _thesis_stage(
+        self, stage: str, p: SegmentParams, run: MethodRun, timings: dict[str, float]
+    ) -> Any:
+        run.begin(stage)
+        fresh = self.pipeline.is_fresh(stage, p)
+        value = self.pipeline.get(stage, p, progress=run.within, cancel=run.cancel)
+        if not fresh:
+            timings[stage] = self.pipeline.stage_seconds(stage)
+        return value
+
+    def _method_output(
+        self,
+        method: Segmenter,
+        p: SegmentParams,
+        inputs: dict[str, Any],
+        run: MethodRun,
+        timings: dict[str, float],
+    ) -> MethodOutput:
+        key = (self.method_key(method, p, inputs), id(self.polarisation(p)))
+        name = f"method:{method.name}"
+        entry = self._cache.get(name)
+        if entry is not None and entry[0] == key:
+            for stage in method.stages(p):
+                run.begin(stage)
+            return entry[1]
+        t0 = time.perf_counter()
+        out = method.segment(self, p, inputs, run)
+        timings.update(out.seconds or {method.name: time.perf_counter() - t0})
+        self.method_calls[method.name] = self.method_calls.get(method.name, 0) + 1
+        self._cache[name] = (key, out)
+        return out
+
+    def _result(
+        self,
+        p: SegmentParams,
+        out: MethodOutput,
+        maps: bool,
+        reconstruction: bool,
+        timings: dict[str, float],
+        method: Segmenter,
+        names: list[str],
+    ) -> SegmentationResult:
+        pipe = self.pipeline
+        pol, nrm = pipe.get("polarisation", p), pipe.get("normals", p)
+        coef = pca = rec = None
+        if maps:
+            coef, pca = pipe.get("harmonics", p), pipe.get("pca", p)
+        if reconstruction:
+            rec = pipe.get("reconstruction", p)
+        labels = np.asarray(out.labels).astype(np.int64)
+        return SegmentationResult(
+            params=p,
+            intensity=pol.intensity,
+            dop=pol.dop,
+            phase=pol.phase,
+            residual=pol.residual,
+            zenith=nrm.zenith,
+            azimuth=nrm.azimuth,
+            clamped=nrm.clamped,
+            coefficients=coef,
+            features=None if pca is None else pca.features,
+            explained_variance_ratio=None if pca is None else pca.explained_variance_ratio,
+            block_labels=top_left_block_labels(labels, p.window).astype(np.int32),
+            labels=labels,
+            ncut_values=list(out.ncut_values),
+            timings={
+                s: self._seconds.get(s, 0.0) for s in [*names, method.name] if s in self._seconds
+            },
+            recomputed=[s for s in [*names, method.name] if s in timings],
+            reconstruction=None if rec is None else rec.intensity,
+            reconstruction_error=None if rec is None else rec.error,
+            valid=~pol.invalid,
+            mask_counts=self.mask.counts(),
+            duplicate_angle_frames=polarimage.duplicate_angle_frames(pipe.angles),
+            cut_limits=dict(out.cut_limits),
+            superpixels=dict(out.record) if method.name == "superpixels" else {},
+            method=method.name,
+            method_record=dict(out.record),
+        )
+
+
+def segment(
+    stack: np.ndarray,
+    angles: np.ndarray,
+    params: SegmentParams | None = None,
+    mask: np.ndarray | PixelMask | None = None,
+    **changes: Any,
+) -> SegmentationResult:
+    """One-shot convenience: segment a stack (angles in radians) with ``params.method``
+    (default: the thesis method), ``changes`` applied to ``params``."""
+    params = params or SegmentParams()
+    if changes:
+        params = params.replace(**changes)
+    return Scene(stack, angles, mask).segment(params)
