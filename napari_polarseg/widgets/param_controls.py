@@ -2,7 +2,7 @@
 (:data:`~napari_polarseg.engine.params.PARAM_SPECS`).
 
 Every :class:`~napari_polarseg.engine.params.ParamSpec` with a ``label`` becomes one
-control: a menu (its ``choices``, shown with :meth:`ParamSpec.menu` names), a float box
+control: a menu (its ``choices``, or the registered methods, shown with :meth:`ParamSpec.menu` names), a float box
 (the spec has ``decimals``) or an integer box, with the spec's range and step; the
 tooltip is the spec's help and the thesis default.
 """
@@ -21,6 +21,7 @@ from ..engine.params import PARAM_SPECS, ParamSpec, SegmentParams
 #: Order of the controls in the Segment widget; labelled specs not listed follow, in
 #: table order (layout only: what each control is comes from the table).
 CONTROL_ORDER = (
+    "method",
     "window",
     "degree",
     "refractive_index",
@@ -75,7 +76,7 @@ def param_control(name: str, spec: ParamSpec, value: Any, **kwargs: Any) -> Valu
         "tooltip": control_tooltip(name, spec),
         **kwargs,
     }
-    if spec.choices is not None:
+    if spec.options() is not None:
         return ComboBox(choices=spec.menu(), **common)
     limits = {
         key: bound
@@ -106,6 +107,7 @@ def param_controls(
     controls = {}
     for name in controlled_names(specs) if names is None else names:
         spec = specs[name]
-        fallback = spec.choices[0] if spec.choices else spec.minimum
+        options = spec.options()
+        fallback = options[0] if options else spec.minimum
         controls[name] = param_control(name, spec, values.get(name, fallback))
     return controls

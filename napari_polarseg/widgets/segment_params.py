@@ -77,7 +77,7 @@ class ParameterControls(WidgetPart):
         values: dict[str, Any] = {}
         for name in self.controlled:
             spec, shown = self.param_specs[name], getattr(self, name).value
-            if spec.choices is not None:
+            if spec.options() is not None:
                 values[name] = str(shown)
             elif spec.decimals is None:
                 values[name] = int(shown)

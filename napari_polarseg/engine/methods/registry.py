@@ -26,12 +26,14 @@ _METHODS: dict[str, Segmenter] = {}
 
 def register_method(method: Segmenter) -> Segmenter:
     """Register ``method`` under its ``name`` (a later registration replaces it) and
-    return it; it becomes a choice of ``SegmentParams.method``."""
+    return it; a method that needs no inputs besides the image becomes a choice of
+    ``SegmentParams.method`` (``--method``, the plugin's menu)."""
     for attr in ("name", "title", "reads", "inputs", "stages", "segment"):
         if not hasattr(method, attr):
             raise PolarsegError(f"a segmentation method needs {attr!r}: {method!r}")
     _METHODS[method.name] = method
-    METHOD_CHOICES[method.name] = method.title
+    if not method.inputs:  # a method chosen by its inputs (scribbles) is no menu choice
+        METHOD_CHOICES[method.name] = method.title
     return method
 
 

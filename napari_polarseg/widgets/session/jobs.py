@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ...engine import STAGES, PolarsegError, SegmentParams
+from ...engine import PolarsegError, SegmentParams, get_method
 from .classify import CLASSIFIER_STAGES, ClassifierOutput, classifier_stages
 from .runs import Job, Partial, Result, Stage
 from .store import PipelineStore
@@ -37,12 +37,15 @@ def segment_job(
     cancel: Callable[[], bool] | None = None,
     report: Callable[[str, float, int], None] | None = None,
 ) -> Generator[Any, None, Any]:
-    """Worker job: run the stale stages of the layer's cached pipeline, then assemble.
+    """Worker job: the method ``params.method`` on the layer's kept
+    :class:`~napari_polarseg.engine.Scene` (it reruns only when a parameter it reads
+    changes), with the thesis maps, then the error map.
 
     ``region`` (H, W bool, True = use) restricts the segmentation; saturated and black
     samples are left out in any case (:meth:`PipelineStore.obtain`). Yields ``(stage,
-    index, total)`` after every stage; stopping the worker between two yields cancels the
-    run and leaves the stages computed so far cached. When the reconstruction (error map)
+    index, total)`` after the labels and after the error map; stopping the worker between
+    two yields cancels the run and leaves the stages computed so far cached. When the
+    reconstruction (error map)
     has to be recomputed, the result without it is yielded first as a
     :class:`~napari_polarseg.widgets.session.Partial`: the segments are shown while the
     last stage runs (after a change of n or w it is a third of the run).
@@ -63,31 +66,22 @@ def segment_job(
     yields (:meth:`Pipeline.run_iter <napari_polarseg.engine.Pipeline.run_iter>`).
     """
     pipe = store.obtain(key, data, angles_rad, params, region=region, mask_key=mask_key)
-    total = len(STAGES)
-    if pipe.is_fresh("reconstruction", params):
-        yield from pipe.run_iter(params, reconstruction=True, cancel=cancel, progress=report)
-    else:
-        within = None
-        if report is not None:
+    scene = store.scene(key)
+    assert scene is not None
+    total = len(scene.stages(params, maps=True, reconstruction=True))
 
-            def within(stage: str, index: float, _n: int) -> None:
-                report(stage, index, total)
+    def within(stage: str, index: float, _n: int) -> None:
+        if report is not None and stage != "done":
+            report(stage, index, total)
 
-        last = 0
-        for stage, index, _ in pipe.run_iter(params, False, cancel=cancel, progress=within):
-            last = index
-            yield stage, index, total
-        yield Partial(pipe.result(params, reconstruction=False))
-        share = None
-        if report is not None:
-
-            def share(done: float) -> None:
-                report(STAGES[-1], last + done * (total - last), total)
-
-        pipe.get("reconstruction", params, share)
-        yield STAGES[-1], total, total
-    result = pipe.result(params, reconstruction=True)
-    if prefetch:
+    result = scene.segment(params, maps=True, reconstruction=False, cancel=cancel, progress=within)
+    yield "labels", total - 1, total
+    if not pipe.is_fresh("reconstruction", params):
+        # the segments are shown while the error map is computed
+        yield Partial(result)
+    result = scene.segment(params, maps=True, reconstruction=True, cancel=cancel, progress=within)
+    yield "reconstruction", total, total
+    if prefetch and params.method == "thesis":
         yield Result(result)
         for _ in pipe.prefetch(params, cancel):
             yield "prefetch", total, total
@@ -183,7 +177,10 @@ def segment_request(
     strokes or the loaded one applied (:func:`classifier_job`)."""
     if scribbles is None and classifier is None:
         args = (store, key, data, angles_rad, params, region, mask_key, True)
-        return SegmentRequest(segment_job, args, len(STAGES), reports=True)
+        total = 2 + len(get_method(params.method).stages(params)) + 1
+        if params.method != "thesis":
+            total += 2  # the thesis maps (harmonics, PCA) beside its labels
+        return SegmentRequest(segment_job, args, total, reports=True)
     args = (store, key, data, angles_rad, params, scribbles, classifier)
     args += (region, mask_key, colour_stack)
     return SegmentRequest(classifier_job, args, len(CLASSIFIER_STAGES), reports=False)

@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from ...engine import Pipeline, SegmentParams, validity_mask
+from ...engine import Pipeline, Scene, SegmentParams, validity_mask
 from ...engine.analysis.pixel_segmentation import PixelSegmenter
 
 
@@ -42,6 +42,7 @@ class _Entry:
     region: np.ndarray | None
     pipeline: Pipeline
     segmenter: PixelSegmenter | None = None
+    scene: Scene | None = None
 
     def matches(
         self, data: Any, angles: tuple[float, ...], mask_key: str | None, region: Any
@@ -103,6 +104,18 @@ class PipelineStore:
             with self._lock:
                 self._entries[key] = entry
         return entry.pipeline
+
+    def scene(self, key: str) -> Scene | None:
+        """The :class:`~napari_polarseg.engine.Scene` around ``key``'s pipeline (made at
+        the first call, kept while the pipeline is; None without a pipeline): every
+        method runs on it, each rerun only when a parameter it reads changes."""
+        with self._lock:
+            entry = self._entries.get(key)
+            if entry is None:
+                return None
+            if entry.scene is None:
+                entry.scene = Scene(pipeline=entry.pipeline)
+            return entry.scene
 
     def segmenter(self, key: str, colour_stack: np.ndarray | None = None) -> PixelSegmenter | None:
         """The pixel segmenter beside ``key``'s pipeline (made at the first call; None
