@@ -10,7 +10,6 @@ from __future__ import annotations
 import argparse
 import typing
 from collections.abc import Sequence
-from dataclasses import fields
 from typing import Any
 
 from ..engine.params import PARAM_SPECS, PRESET_HELP, PRESETS, ParamSpec, SegmentParams
@@ -63,6 +62,11 @@ def _preset_help(presets: Sequence[str]) -> str:
     return "; ".join(f"{name}: {PRESET_HELP[name]}" for name in presets)
 
 
+def _flag_value(value: Any) -> str:
+    """A parameter value as its flag spells it (None: ``none``)."""
+    return "none" if value is None else str(value)
+
+
 def add_param_options(
     parser: argparse.ArgumentParser,
     preset: str = "auto",
@@ -82,10 +86,11 @@ def add_param_options(
     specs
         The parameter table (default: :data:`PARAM_SPECS`).
     """
-    defaults = {f.name: f.default for f in fields(SegmentParams)}
+    defaults = PRESETS[preset].to_dict()
     group = parser.add_argument_group(
         "segmentation parameters",
-        "start from --preset, then --params, then explicit flags; thesis defaults in brackets",
+        "start from --preset, then --params, then explicit flags; in brackets what a run "
+        f"without the flag uses (preset {preset}'s value)",
     )
     group.add_argument(
         "--preset",
@@ -100,7 +105,8 @@ def add_param_options(
     )
     for name, (flag, kwargs) in param_options(specs).items():
         kwargs = dict(kwargs)
-        kwargs["help"] = f"{kwargs['help']} [{defaults.get(name)}]".replace("%", "%%")
+        used = _flag_value(defaults.get(name))
+        kwargs["help"] = f"{kwargs['help']} [default: preset {preset}'s {used}]".replace("%", "%%")
         group.add_argument(flag, dest=name, default=None, **kwargs)
     parser.add_argument(
         "--overview", action="store_true", help="also write overview.png (matplotlib figure)"
