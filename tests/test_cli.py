@@ -345,23 +345,25 @@ def test_demo_on_the_bundled_leaves_scene(tmp_path, capsys):
     ari = json.loads((out / "summary.json").read_text())["adjusted_rand_index"]
     assert ari == pytest.approx(adjusted_rand_score(truth.ravel(), labels.ravel()))
     assert f"adjusted Rand index against the ground truth: {ari:.3f}" in stdout
-    # 0 and 180 degrees in the bundled scene: recorded, not announced on the first run
-    assert "share a polariser angle" not in stdout and err == ""
+    # 0 and 180 degrees in the bundled scene: one polariser state, averaged, said once
+    line = "polarseg: frames 0, 6 (0 and 180 degrees) are one polariser state: averaged"
+    assert stdout.count(line) == 1 and err == ""
     params = json.loads((out / "params.json").read_text())
     assert [d["frames"] for d in params["duplicate_angles"]] == [[0, 6]]
-    # the same file given as the user's own sample is announced
+    # `segment` on the same file says the same (issue 25)
     code, stdout, err = run(
         capsys,
-        "demo",
-        "--out",
-        out,
-        "--degree",
-        "4",
-        "--sample",
+        "segment",
         cli_demo.SAMPLE_DIR / "leaves.npz",
+        "--out",
+        tmp_path / "seg",
+        "--preset",
+        "recommended",
+        "--segments",
+        "4",
     )
     assert code == 0, err
-    assert "polarseg: frames 0, 6 share a polariser angle (modulo 180 degrees)" in stdout
+    assert stdout.count(line) == 1
 
 
 # -- bad input ----------------------------------------------------------------------------
