@@ -12,7 +12,14 @@ import typing
 from collections.abc import Sequence
 from typing import Any
 
-from ..engine.params import PARAM_SPECS, PRESET_HELP, PRESETS, ParamSpec, SegmentParams
+from ..engine.params import (
+    DEFAULT_PRESET,
+    PARAM_SPECS,
+    PRESET_HELP,
+    PRESETS,
+    ParamSpec,
+    SegmentParams,
+)
 from ..engine.physics.colour_mosaic import BAYER_ORDERS
 from ..engine.physics.mosaic import DEMOSAIC_METHODS
 from .arguments import angles_arg, bayer_arg, gib_arg, threshold_arg
@@ -69,7 +76,7 @@ def _flag_value(value: Any) -> str:
 
 def add_param_options(
     parser: argparse.ArgumentParser,
-    preset: str = "auto",
+    preset: str = DEFAULT_PRESET,
     presets: tuple[str, ...] = tuple(PRESETS),
     specs: dict[str, ParamSpec] | None = None,
 ) -> None:
