@@ -5,11 +5,13 @@ the "Segment by material" widget in a hidden viewer, sets its values, presses Ru
 for the worker thread and saves the ``segments`` labels layer with the plugin's TIFF
 writer. Segment k of the engine is label k + 1 in napari (0 is napari's background).
 
-Usage (napari needs an X display and OpenGL; Xvfb provides both on a headless machine)::
+It starts from the plugin's default, preset ``auto`` (``--preset`` offers every preset of
+the plugin's menu). Usage (napari needs an X display and OpenGL; Xvfb provides both on a
+headless machine)::
 
     xvfb-run -a python examples/segment_in_napari.py                      # bundled sample
-    xvfb-run -a python examples/segment_in_napari.py stack.tif --out labels.tif \\
-        --window 10 --degree 12 --segments 4
+    xvfb-run -a python examples/segment_in_napari.py examples/data/leaves_stack.tif \\
+        --out labels.tif --preset recommended --window 10 --degree 12 --segments 4
     xvfb-run -a python examples/segment_in_napari.py frames/ --angles 0,45,90,135
 
 The same steps work in a notebook or a script with a visible viewer
@@ -21,22 +23,33 @@ from __future__ import annotations
 import argparse
 import sys
 
-import napari
-
-from napari_polarseg.widgets import SegmentWidget
+from napari_polarseg.engine.params import DEFAULT_PRESET, PRESETS
 
 
-def main(argv: list[str] | None = None) -> int:
+def build_parser() -> argparse.ArgumentParser:
+    """The example's command line; ``--preset`` defaults to the plugin's default."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("stack", nargs="?", help="TIFF with angles, .npz or folder of frames")
     parser.add_argument("--angles", help="polariser angles in degrees, e.g. 0,45,90,135")
     parser.add_argument("--out", default="labels.tif", help="labels TIFF to write")
-    parser.add_argument("--preset", choices=["thesis", "recommended"], default="thesis")
+    parser.add_argument(
+        "--preset",
+        choices=list(PRESETS),
+        default=DEFAULT_PRESET,
+        help=f"starting parameters, as in the plugin's menu (default: {DEFAULT_PRESET})",
+    )
     parser.add_argument("--window", type=int, help="block size w in pixels")
     parser.add_argument("--degree", type=int, help="spherical-harmonic degree L")
     parser.add_argument("--refractive-index", type=float, help="refractive index n")
     parser.add_argument("--segments", type=int, help="number of segments")
-    args = parser.parse_args(argv)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    import napari  # only now: --help and the parser need no napari
+
+    from napari_polarseg.widgets import SegmentWidget
 
     viewer = napari.Viewer(show=False)
     try:

@@ -424,9 +424,10 @@ def report_messages(
             f"({', '.join(reasons)}; see mask.tif)"
         )
     for frames in result.duplicate_angle_frames if note_repeated else ():
+        angles = " and ".join(f"{run.data.angles_deg[k]:g}" for k in frames)
         lines.append(
-            f"{PROG}: frames {', '.join(map(str, frames))} share a polariser angle "
-            f"(modulo 180 degrees) and were averaged before the fit"
+            f"{PROG}: frames {', '.join(map(str, frames))} ({angles} degrees) are one "
+            "polariser state: averaged"
         )
     plots = [name for name in written if name.startswith("plots/")]
     listed = [name for name in written if name not in plots]

@@ -28,7 +28,7 @@ def test_a_new_field_of_the_table_gets_its_flag() -> None:
     specs = {**PARAM_SPECS, "new_knob": knob}
     parser = cli.build_parser(specs)
     help_text = _segment_parser(parser).format_help()
-    assert "--new-knob X" in help_text and "a new knob [None]" in help_text
+    assert "--new-knob X" in help_text and "a new knob [default: preset auto's none]" in help_text
     args = parser.parse_args(["segment", "in.tif", "--out", "o", "--new-knob", "7"])
     assert args.new_knob == "7"
     assert "--new-knob" not in _segment_parser(cli.build_parser()).format_help()

@@ -500,7 +500,7 @@ def test_cli_says_repeated_angles_were_averaged(tmp_path, capsys):
         capsys, "segment", path, "--out", out, "--window", "10", "--degree", "2"
     )
     assert code == 0, err
-    assert "frames 2, 4 share a polariser angle (modulo 180 degrees) and were averaged" in stdout
+    assert "frames 2, 4 (90 and 90 degrees) are one polariser state: averaged" in stdout
     params = json.loads((out / "params.json").read_text())
     assert params["duplicate_angles"] == [
         {"angle_deg": 90.0, "frames": [2, 4], "handling": "averaged before the fit"}

@@ -137,10 +137,45 @@ def test_overview_has_the_truth_panel_and_the_ari_when_the_truth_is_given(four_a
     # the HSV panel shows the composite
     hsv = np.asarray(with_truth.axes[4].images[0].get_array())
     assert hsv.shape == (*SHAPE, 3) and hsv.dtype == np.uint8
-    # one panel more, the same height
+    # the grid of 2 x 4 panels has room for the truth panel: the same size
     a = outputs.render_overview(scene.stack[0], result)
     b = outputs.render_overview(scene.stack[0], result, truth=scene.labels)
-    assert a.shape[0] == b.shape[0] and b.shape[1] / a.shape[1] == pytest.approx(8 / 7, rel=0.02)
+    assert a.shape == b.shape
+
+
+def _bar_ticks(fig, title_start):
+    """The tick values and labels of the colour bar of the panel titled ``title_start...``."""
+    (ax,) = [ax for ax in fig.axes if ax.get_title().startswith(title_start)]
+    bar = ax.images[0].colorbar
+    fig.canvas.draw()
+    return list(bar.get_ticks()), [t.get_text() for t in bar.ax.get_yticklabels()]
+
+
+def test_overview_is_a_grid_with_ordered_label_ticks(four_angle_run):
+    """Issue 25: a grid readable at normal size (not a 2560 x 375 strip); the label
+    panels' colour bars read 0, 1, 2, ... in order, and a segment keeps the colour of
+    the material it is matched to."""
+    scene, result = four_angle_run
+    truth = scene.labels
+    fig = overview_figure(scene.stack[0], result, truth=truth)
+    width, height = fig.get_size_inches()
+    assert 1.0 <= width / height <= 2.5
+    pixels = outputs.render_overview(scene.stack[0], result, truth=truth)
+    assert pixels.shape[1] <= 1600
+    for title in ("segments", "ground truth"):
+        values, names = _bar_ticks(fig, title)
+        numbers = [int(n) for n in names]
+        assert numbers == sorted(numbers) and values == sorted(values), (title, names)
+    assert [int(n) for n in _bar_ticks(fig, "segments")[1]] == list(range(result.n_segments))
+    (seg_ax,) = [ax for ax in fig.axes if ax.get_title().startswith("segments")]
+    (true_ax,) = [ax for ax in fig.axes if ax.get_title().startswith("ground truth")]
+    _, colour = segment_colours_for(truth, result.labels)
+    seg_im, true_im = seg_ax.images[0], true_ax.images[0]
+    for j in range(result.n_segments):
+        if colour[j] < np.unique(truth).size:
+            seg_rgba = seg_im.cmap(seg_im.norm(j))
+            true_rgba = true_im.cmap(true_im.norm(colour[j]))
+            assert seg_rgba == true_rgba
 
 
 @pytest.fixture

@@ -72,11 +72,8 @@ def run(args: argparse.Namespace) -> int:
         base["n_segments"] = int(np.unique(data.ground_truth).size)
     params = params_from_args(args, base)
     # The bundled scenes are rendered at 0..180 degrees (0 and 180 both, as the thesis
-    # captures): saying they were averaged would be a notice about our data, not the
-    # user's, on the first command a user runs. A --sample file is the user's: said.
-    done = segment_data(
-        args, "demo", data, read_seconds, params, {"scene": path.stem}, bool(args.sample)
-    )
+    # captures): one line says so, as `segment` says it of the same file.
+    done = segment_data(args, "demo", data, read_seconds, params, {"scene": path.stem})
     if "adjusted_rand_index" in done.summary:
         ari = done.summary["adjusted_rand_index"]
         print(f"{PROG}: adjusted Rand index against the ground truth: {ari:.3f}")

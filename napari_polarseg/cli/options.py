@@ -10,10 +10,16 @@ from __future__ import annotations
 import argparse
 import typing
 from collections.abc import Sequence
-from dataclasses import fields
 from typing import Any
 
-from ..engine.params import PARAM_SPECS, PRESET_HELP, PRESETS, ParamSpec, SegmentParams
+from ..engine.params import (
+    DEFAULT_PRESET,
+    PARAM_SPECS,
+    PRESET_HELP,
+    PRESETS,
+    ParamSpec,
+    SegmentParams,
+)
 from ..engine.physics.colour_mosaic import BAYER_ORDERS
 from ..engine.physics.mosaic import DEMOSAIC_METHODS
 from .arguments import angles_arg, bayer_arg, gib_arg, threshold_arg
@@ -63,9 +69,14 @@ def _preset_help(presets: Sequence[str]) -> str:
     return "; ".join(f"{name}: {PRESET_HELP[name]}" for name in presets)
 
 
+def _flag_value(value: Any) -> str:
+    """A parameter value as its flag spells it (None: ``none``)."""
+    return "none" if value is None else str(value)
+
+
 def add_param_options(
     parser: argparse.ArgumentParser,
-    preset: str = "auto",
+    preset: str = DEFAULT_PRESET,
     presets: tuple[str, ...] = tuple(PRESETS),
     specs: dict[str, ParamSpec] | None = None,
 ) -> None:
@@ -82,14 +93,15 @@ def add_param_options(
     specs
         The parameter table (default: :data:`PARAM_SPECS`).
     """
-    defaults = {f.name: f.default for f in fields(SegmentParams)}
+    defaults = PRESETS[preset].to_dict()
     if presets == BLOCK_PRESETS:  # the block-graph commands run the thesis method only
         specs = {
             k: v for k, v in (PARAM_SPECS if specs is None else specs).items() if k != "method"
         }
     group = parser.add_argument_group(
         "segmentation parameters",
-        "start from --preset, then --params, then explicit flags; thesis defaults in brackets",
+        "start from --preset, then --params, then explicit flags; in brackets what a run "
+        f"without the flag uses (preset {preset}'s value)",
     )
     group.add_argument(
         "--preset",
@@ -104,7 +116,8 @@ def add_param_options(
     )
     for name, (flag, kwargs) in param_options(specs).items():
         kwargs = dict(kwargs)
-        kwargs["help"] = f"{kwargs['help']} [{defaults.get(name)}]".replace("%", "%%")
+        used = _flag_value(defaults.get(name))
+        kwargs["help"] = f"{kwargs['help']} [default: preset {preset}'s {used}]".replace("%", "%%")
         group.add_argument(flag, dest=name, default=None, **kwargs)
     parser.add_argument(
         "--overview", action="store_true", help="also write overview.png (matplotlib figure)"

@@ -10,7 +10,7 @@ from .. import jobs
 from ..engine.errors import PolarsegError
 from ..engine.params import ParamSpec
 from ..engine.physics.mosaic import DEMOSAIC_METHODS
-from .arguments import angles_arg, dark_level_arg, gib_arg, level_arg, number_arg
+from .arguments import PROG, angles_arg, dark_level_arg, gib_arg, level_arg, number_arg
 from .options import (
     STACK_INPUT_HELP,
     add_bayer_option,
@@ -178,5 +178,8 @@ def run(args: argparse.Namespace) -> int:
         status=status,
         progress=progress_report(args.verbose, status),
     )
+    warning = done.run.data.metadata.get("mosaic_warning")
+    if warning:
+        print_messages([jobs.Message(f"{PROG}: warning: {warning}", "stderr")])
     print_messages(done.messages)
     return 0

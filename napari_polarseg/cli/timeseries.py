@@ -44,6 +44,7 @@ def add_parser(sub: Any, specs: dict[str, ParamSpec] | None = None) -> None:
     add_inputs_and_out(ts, "one angle stack per day, in time order")
     ts.add_argument(
         "--method",
+        dest="change_method",
         choices=("tracked", "reference", "joint"),
         default="tracked",
         help="tracked: cut day 1 and move only the blocks whose polarisation changed "
@@ -154,7 +155,7 @@ def _params_json(
         "command": "timeseries",
         "inputs": [str(Path(d.source).resolve()) for d in days.data],
         "angles_deg": [d.angles_deg.tolist() for d in days.data],
-        "method": args.method,
+        "method": args.change_method,
         "registered": bool(args.register),
         "files": timeseries_files(summary["score_threshold"]),
         "change_window": result.change_window,
@@ -175,7 +176,7 @@ def _report(
     h, w = result.labels.shape[1:]
     print(
         f"{PROG}: {result.n_days} days of {h} x {w} pixels, {result.n_segments} segments "
-        f"({args.method}, {summary['n_components']} shared PCA components)"
+        f"({args.change_method}, {summary['n_components']} shared PCA components)"
     )
     for t, frac in enumerate(result.changed_fraction()):
         st = result.change_statistics[t]
@@ -202,7 +203,7 @@ def run(args: argparse.Namespace) -> int:
         days.stacks,
         [d.angles_rad for d in days.data],
         params,
-        method=args.method,
+        method=args.change_method,
         change_window=args.change_window,
         false_alarm=args.false_alarm,
         change_from=args.change_from,

@@ -427,6 +427,11 @@ PRESETS: dict[str, SegmentParams] = {
 }
 
 
+#: The preset a run starts from when none is chosen: ``segment``, ``demo``, ``batch``, the
+#: plugin's preset menu and ``examples/segment_in_napari.py``.
+DEFAULT_PRESET = "auto"
+
+
 #: What each preset is: the CLI's ``--preset`` help and the plugin's preset tooltip.
 PRESET_HELP: dict[str, str] = {
     "auto": "superpixels clustered by their polarisation, the best unsupervised method "

@@ -30,6 +30,7 @@ from .angles import angle_from_name
 from .arrays import read_arrays
 from .common import dims, first_line, input_error, saturation_level
 from .frames import grey_frames, load_frame
+from .mosaic_checks import check_mosaic_channels, periodicity_warning
 from .stack_data import StackData, StackOptions
 from .tiff import colour_last, read_tiff
 
@@ -188,6 +189,8 @@ def read_mosaic(
     if path.is_dir():
         raise input_error(path, "a mosaic layout needs a single raw frame, not a folder")
     data, colour, bits = load_frame(path, opts.limit)
+    data = check_mosaic_channels(path, data, colour)
+    colour = colour and data.ndim == 3
     level = saturation_level(opts.saturation, data.dtype, bits)
     raw, saturated_raw = grey_frames(path, data, colour, opts.channel, False, level)
     if method == "interpolated":
@@ -198,6 +201,7 @@ def read_mosaic(
             opts.limit,
         )
     raw = opts.subtract(path, raw)
+    warning = periodicity_warning(path, raw)
     stack, angles, saturated, colour_stack = _decode_mosaic(
         path, raw, saturated_raw, layout, method, bayer
     )
@@ -213,6 +217,8 @@ def read_mosaic(
         info["colours"] = list(COLOURS)
     if bits is not None:
         info["bits_per_sample"] = bits
+    if warning is not None:
+        info["mosaic_warning"] = warning
     return StackData(
         stack, angles, os.fspath(path), info, saturated=saturated, colour_stack=colour_stack
     )

@@ -1,4 +1,4 @@
-"""The ``overview.png`` of a result folder: every map of a segmentation side by side.
+"""The ``overview.png`` of a result folder: every map of a segmentation, on a grid.
 
 :func:`overview_figure` draws the input, Î, ρ, φ, the AoLP/DoLP HSV composite, the
 segments, the ground truth (when known, in the colours of the segments it is matched to,
@@ -24,8 +24,10 @@ if TYPE_CHECKING:
 #: One panel of the overview: (title, image, colour map or "rgb" or a label-panel key of
 #: the ticks, vmin, vmax).
 Panel = tuple[str, Any, str, Any, Any]
-#: Colour-bar ticks of the label panels by their key: (positions, tick labels).
-Ticks = dict[str, tuple[Any, list[str]]]
+#: The label panels by their key: (label values, tick labels, colour index of each value).
+Ticks = dict[str, tuple[Any, list[str], Any]]
+#: Columns of the overview's grid (2 rows of 4 for the 7 or 8 panels).
+COLUMNS = 4
 
 
 def segment_colours_for(truth: np.ndarray, labels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -70,23 +72,26 @@ def _label_panels(
     from ..engine.analysis.evaluation import adjusted_rand_index
 
     labels = np.asarray(result.labels)
-    k = max(result.n_segments, 1)
+    n = max(result.n_segments, 1)
+    k = n
     seg_title = f"segments ({result.n_segments})"
-    # colour-bar ticks of the label panels: positions (colour indices) and their labels
-    ticks: Ticks = {"segments": (np.arange(k), [str(v) for v in range(k)])}
+    # each label panel shows its values 0, 1, ... in order; with the truth, a segment is
+    # drawn in the colour of the material it is matched to
+    ticks: Ticks = {"segments": (np.arange(n), [str(v) for v in range(n)], np.arange(n))}
     if truth is None:
-        return [(seg_title, labels, "segments", -0.5, k - 0.5)], ticks, k
+        return [(seg_title, labels, "segments", -0.5, n - 0.5)], ticks, k
     true_index, colour = segment_colours_for(truth, labels)
     true_values = np.unique(np.asarray(truth))
-    labels = colour[labels]
+    n = colour.size
     k = max(k, true_values.size, int(colour.max(initial=0)) + 1)
-    ticks["segments"] = (colour, [str(v) for v in range(colour.size)])
-    ticks["truth"] = (np.arange(true_values.size), [str(v) for v in true_values])
+    ticks["segments"] = (np.arange(n), [str(v) for v in range(n)], colour)
+    m = true_values.size
+    ticks["truth"] = (np.arange(m), [str(v) for v in true_values], np.arange(m))
     seg_title += f", ARI {adjusted_rand_index(truth, result.labels):.3f}"
     return (
         [
-            (seg_title, labels, "segments", -0.5, k - 0.5),
-            (f"ground truth ({true_values.size})", true_index, "truth", -0.5, k - 0.5),
+            (seg_title, labels, "segments", -0.5, n - 0.5),
+            (f"ground truth ({m})", true_index, "truth", -0.5, m - 0.5),
         ],
         ticks,
         k,
@@ -133,7 +138,7 @@ def _draw_panel(
     """One panel and its colour bar (hue degrees for the composite, label ticks)."""
     from matplotlib import colormaps
     from matplotlib.cm import ScalarMappable
-    from matplotlib.colors import Normalize
+    from matplotlib.colors import ListedColormap, Normalize
 
     title, image, cmap, vmin, vmax = panel
     ax.set_title(title, fontsize=10)
@@ -146,20 +151,24 @@ def _draw_panel(
         bar.set_label("AoLP (°)", fontsize=8)
         return
     is_labels = cmap in ticks
+    if is_labels:
+        values, names, colours = ticks[cmap]
+        panel_cmap: Any = ListedColormap(seg_cmap(np.asarray(colours, dtype=int)))
+    else:
+        panel_cmap = cmap
     shown = ax.imshow(
         np.asarray(image, dtype=float),
-        cmap=seg_cmap if is_labels else cmap,
+        cmap=panel_cmap,
         vmin=vmin,
         vmax=vmax,
         interpolation="nearest",
     )
     bar = fig.colorbar(shown, ax=ax, fraction=0.046, pad=0.02)
     if is_labels:
-        where, names = ticks[cmap]
         if len(names) <= 12:
-            bar.set_ticks(np.asarray(where, dtype=float), labels=names)
+            bar.set_ticks(np.asarray(values, dtype=float), labels=names)
         else:
-            bar.set_ticks(np.linspace(0, k - 1, 5).round())
+            bar.set_ticks(np.linspace(0, len(names) - 1, 5).round())
 
 
 def overview_figure(
@@ -170,7 +179,7 @@ def overview_figure(
     composite: np.ndarray | None = None,
     dolp_max: float | None = None,
 ) -> Figure:
-    """The figure of ``overview.png``: one panel per map, side by side.
+    """The figure of ``overview.png``: one panel per map, in rows of :data:`COLUMNS`.
 
     Input, Î, ρ, φ, the AoLP/DoLP HSV composite, the segments, the ground truth (when
     given) and the reconstruction error. Uses matplotlib's object-oriented API on an Agg
@@ -206,13 +215,16 @@ def overview_figure(
     panels, ticks, k = _panels(first_frame, result, truth, composite, dolp_max)
     seg_cmap = segment_colormap(k)
     h, w = result.labels.shape
-    panel_w = 3.2
-    fig = Figure(figsize=(panel_w * len(panels), panel_w * h / w + 0.8), dpi=100)
+    rows = -(-len(panels) // COLUMNS)
+    panel_w = 3.4  # inches per panel, its colour bar included
+    panel_h = (panel_w - 0.6) * h / w + 0.5  # the image, the title
+    fig = Figure(figsize=(panel_w * COLUMNS, panel_h * rows), dpi=100, layout="constrained")
     FigureCanvasAgg(fig)
-    axes = fig.subplots(1, len(panels))
-    for ax, panel in zip(axes, panels, strict=True):
+    axes = fig.subplots(rows, COLUMNS, squeeze=False).ravel()
+    for ax, panel in zip(axes, panels, strict=False):
         _draw_panel(fig, ax, panel, ticks, seg_cmap, k)
-    fig.tight_layout()
+    for ax in axes[len(panels) :]:
+        fig.delaxes(ax)
     return fig
 
 

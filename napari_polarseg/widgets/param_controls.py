@@ -2,9 +2,10 @@
 (:data:`~napari_polarseg.engine.params.PARAM_SPECS`).
 
 Every :class:`~napari_polarseg.engine.params.ParamSpec` with a ``label`` becomes one
-control: a menu (its ``choices``, or the registered methods, shown with :meth:`ParamSpec.menu` names), a float box
-(the spec has ``decimals``) or an integer box, with the spec's range and step; the
-tooltip is the spec's help and the thesis default.
+control: a menu (its ``choices``, or the registered methods, shown with
+:meth:`ParamSpec.menu` names), a float box (the spec has ``decimals``) or an integer
+box, with the spec's range and step; the tooltip is the spec's help and the thesis
+default.
 """
 
 from __future__ import annotations

@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING, Any
 from magicgui.widgets import ComboBox, Container, PushButton
 
 from ..engine import PolarsegError, SegmentParams
-from ..engine.params import PARAM_SPECS, PRESET_HELP, PRESETS, ParamSpec
+from ..engine.params import DEFAULT_PRESET, PARAM_SPECS, PRESET_HELP, PRESETS, ParamSpec
 from ..io import read_params_file
 from ._base import WidgetPart, ask_file
 from .param_controls import controlled_names, param_controls
@@ -31,13 +31,13 @@ class ParameterControls(WidgetPart):
 
     def _build_parameter_controls(self, specs: dict[str, ParamSpec] | None) -> None:
         """The preset menu, the parameter-file buttons and the parameter controls."""
-        d = PRESETS["auto"]
+        d = PRESETS[DEFAULT_PRESET]
         self._base = d  # values of the fields without a control
         self._params_dir = Path.home()
         self.preset = ComboBox(
             label="preset",
             choices=list(PRESETS),
-            value="auto",
+            value=DEFAULT_PRESET,
             tooltip="; ".join(f"{name}: {text}" for name, text in PRESET_HELP.items()),
         )
         self.load_button = PushButton(

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from _gui_helpers import engine_result, error_messages, run_and_wait
 
-from napari_polarseg.engine.params import AUTO
+from napari_polarseg.engine.params import AUTO, DEFAULT_PRESET
 
 
 def test_segment_widget_defaults_to_auto_and_matches_the_engine(
@@ -13,7 +13,7 @@ def test_segment_widget_defaults_to_auto_and_matches_the_engine(
 ):
     stack = open_sample("leaves")
     widget = add_widget("Segment by material", preset=None)
-    assert widget.preset.value == "auto"
+    assert widget.preset.value == "auto" == DEFAULT_PRESET
     assert widget.params() == AUTO
     assert widget.clustering.value == "superpixels"
     run_and_wait(qtbot, widget)
