@@ -27,7 +27,7 @@ from .. import __version__
 from .. import io as pio
 from ..engine.errors import Cancelled, PolarsegError
 from ..engine.params import SegmentParams
-from ..jobs import OutputOptions, ReadOptions, segment_args
+from ..job_options import OutputOptions, ReadOptions, segment_args
 from .plan import (
     COLUMNS,
     LOCK_FILE,

@@ -8,7 +8,7 @@ import numpy as np
 from napari.utils.notifications import notification_manager
 from qtpy.QtCore import Qt
 
-from napari_polarseg.engine import Pipeline, SegmentParams
+from napari_polarseg.engine import Scene, SegmentParams
 
 PLUGIN = "napari-polarseg"
 #: Sample keys of the plugin's manifest and the shape of their stacks.
@@ -41,7 +41,7 @@ def wait_idle(qtbot: Any, widget: Any, timeout: int = TIMEOUT_MS) -> None:
 def engine_result(layer: Any, params: SegmentParams) -> Any:
     """The engine's result for the same input, computed without the plugin."""
     angles = np.deg2rad(layer.metadata["angles_deg"])
-    return Pipeline(np.asarray(layer.data), angles, params).run()
+    return Scene(np.asarray(layer.data), angles).segment(params)
 
 
 def error_messages() -> list[str]:
