@@ -13,7 +13,7 @@ import pytest
 
 from napari_polarseg import cli, jobs
 from napari_polarseg.engine import Pipeline, SegmentParams
-from napari_polarseg.engine.analysis.degenerate import DEGENERATE_SHARE, degenerate_result
+from napari_polarseg.engine.degenerate import DEGENERATE_SHARE, degenerate_result
 from napari_polarseg.engine.params import RECOMMENDED
 
 SAMPLES = Path(__file__).resolve().parents[1] / "napari_polarseg" / "sample_data"

@@ -113,3 +113,34 @@ def test_the_graph_sees_relative_and_function_level_imports() -> None:
 def test_no_import_cycles() -> None:
     cycles = _cycles(_graph())
     assert not cycles, "import cycles: " + "; ".join(" <-> ".join(c) for c in cycles)
+
+
+def _room(module: str) -> str | None:
+    """The engine room of a module: its sub-package (``engine.graph``) or, for a module
+    directly in the engine, the module (``engine.pipeline``); None outside the engine."""
+    prefix = f"{PACKAGE}.engine."
+    if not module.startswith(prefix):
+        return None
+    return prefix + module[len(prefix) :].split(".", 1)[0]
+
+
+def engine_rooms() -> dict[str, set[str]]:
+    """Import arrows between the engine's rooms (function-level imports too)."""
+    rooms: dict[str, set[str]] = {}
+    for name, targets in _graph().items():
+        here = _room(name)
+        if here is None:
+            continue
+        rooms.setdefault(here, set())
+        for target in targets:
+            there = _room(target)
+            if there is not None and there != here:
+                rooms[here].add(there)
+    return rooms
+
+
+def test_no_cycle_between_engine_rooms() -> None:
+    rooms = engine_rooms()
+    assert f"{PACKAGE}.engine.methods" in rooms and f"{PACKAGE}.engine.unsupervised" in rooms
+    cycles = _cycles(rooms)
+    assert not cycles, "engine rooms in a cycle: " + "; ".join(" <-> ".join(c) for c in cycles)

@@ -16,7 +16,7 @@ from napari_polarseg.engine.features.pixel_features import (
     pyramid_factor,
     upsample,
 )
-from napari_polarseg.engine.unsupervised.superpixels import REGION_AREA, superpixels
+from napari_polarseg.engine.features.superpixels import REGION_AREA, superpixels
 
 
 def _image(shape=(96, 104), seed=0):

@@ -39,6 +39,7 @@ from .features.harmonics import (
 )
 from .features.pca import PCAResult, mahalanobis_sq, pca_features, whiten
 from .features.pixel_features import FeatureStack, PixelFeatureParams, pixel_features
+from .features.superpixels import region_means, superpixels
 from .graph.affinity import affinity_matrix
 from .graph.eigensolver import fiedler_vector
 from .graph.ncut import CutTree, best_split, bipartition, recursive_ncut
@@ -83,7 +84,6 @@ from .result import SegmentationResult
 from .stages import STAGES, valid_blocks
 from .unsupervised.params import UnsupervisedParams
 from .unsupervised.segmenter import segment_unsupervised
-from .unsupervised.superpixels import region_means, superpixels
 
 __all__ = [
     "PRESETS",

@@ -20,7 +20,6 @@ the cached cut tree and never recomputes harmonics.
 from __future__ import annotations
 
 import threading
-import warnings
 from collections import Counter
 from collections.abc import Callable, Iterator
 from typing import Any
@@ -34,7 +33,7 @@ from .matrix_pool import DenseDistances, MatrixPool
 from .params import SegmentParams
 from .physics import polarimage
 from .physics.pixel_mask import PixelMask
-from .result import ScribbleSegmentation, SegmentationResult
+from .result import SegmentationResult
 from .stages import (
     STAGE_FUNCTIONS,
     STAGES,
@@ -411,87 +410,6 @@ class Pipeline:
             superpixels=dict(superpixels or {}),
             method=run.params.method,
         )
-
-    def scribble_segmentation(
-        self,
-        scribbles: np.ndarray,
-        reconstruction: bool = True,
-        params: SegmentParams | None = None,
-    ) -> ScribbleSegmentation:
-        """The whole result of a scribble-guided run (:meth:`scribble_result`).
-
-        Returns the :class:`SegmentationResult` (labels = class index 0..K−1, no Ncut
-        values; affinity and cut are neither computed nor invalidated), the class
-        probabilities (K, H, W), the scribble value of every class and the number of
-        training blocks.
-        """
-        p = self.snapshot(params)
-        scribble_seconds: dict[str, float] = {}
-        with timed(scribble_seconds, "scribbles"):
-            block, labels, maps, classes, n_train = self._classify(scribbles, p)
-        names = ["polarisation", "normals", "harmonics", "pca"]
-        names += ["reconstruction"] if reconstruction else []
-        timings = {s: self._seconds.get(s, 0.0) for s in names}
-        timings.update(scribble_seconds)
-        done = self.recomputed_stages(p)
-        recomputed = [s for s in names if s in done] + ["scribbles"]
-        result = self.assemble_result(
-            block, labels, [], reconstruction, timings, recomputed, params=p
-        )
-        return ScribbleSegmentation(result, maps, classes, n_train)
-
-    def scribble_result(
-        self, scribbles: np.ndarray, params: SegmentParams | None = None
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """Labels from a classifier trained on user strokes instead of the normalized cut.
-
-        The block features of the ``pca`` stage (thesis section 4.3.3) of the blocks the
-        strokes cover train :func:`~napari_polarseg.engine.analysis.scribbles.classify_blocks`,
-        which labels every block; affinity and cut are not needed.
-
-        Parameters
-        ----------
-        scribbles : array (H, W) of int
-            Strokes over the stack's frames: 0 = unlabelled, 1, 2, … = materials (at
-            least two).
-
-        Returns
-        -------
-        labels : ndarray (H, W) of int
-            Class of every pixel (remainder strips take their nearest block's), as an
-            index 0..K-1 into the scribble values in ascending order.
-        probabilities : ndarray (K, H, W) float
-            Probability of each class per pixel (its block's); sums to 1 over K.
-        """
-        _, labels, maps, _, _ = self._classify(scribbles, self.snapshot(params))
-        return labels, maps
-
-    def _classify(
-        self, scribbles: np.ndarray, params: SegmentParams
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]:
-        """(block labels, pixel labels, probability maps, classes, training blocks)."""
-        from .analysis.scribbles import classify_blocks, training_blocks
-
-        scribbles = np.asarray(scribbles)
-        shape = self.stack.shape[1:]
-        if scribbles.shape != shape:
-            raise PolarsegError(
-                f"the scribbles are {' x '.join(map(str, scribbles.shape))} pixels but the "
-                f"frames are {shape[0]} x {shape[1]}"
-            )
-        window = params.window
-        grid = self.get("harmonics", params).shape[:2]
-        valid = self.block_valid(params)
-        block, proba, classes = classify_blocks(
-            self.get("pca", params).features, grid, scribbles, window, valid=valid
-        )
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")  # classify_blocks has warned already
-            blocks, _, _ = training_blocks(scribbles, grid, window)
-        rows, cols = harmonics.pixel_block_index(shape, window)
-        labels = harmonics.upsample_block_labels(block, shape, window)
-        maps = proba.T.reshape(-1, *grid)[:, rows[:, None], cols[None, :]]
-        return block, labels, maps, classes, int(valid[blocks].sum())
 
 
 def thesis_only(params: SegmentParams) -> None:

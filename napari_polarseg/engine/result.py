@@ -3,7 +3,7 @@
 :class:`Normals` and :class:`Reconstruction` are the values of the ``normals`` and
 ``reconstruction`` stages (:mod:`.stages`); :class:`SegmentationResult` is everything one
 run produced (:meth:`.pipeline.Pipeline.result`); :class:`ScribbleSegmentation` what
-:meth:`.pipeline.Pipeline.scribble_segmentation` returns.
+:func:`.analysis.scribbles.scribble_segmentation` returns.
 """
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from .analysis.degenerate import DegenerateCheck, degenerate_result
+from .degenerate import DegenerateCheck, degenerate_result
 from .params import SegmentParams
 
 
@@ -108,7 +108,7 @@ class SegmentationResult:
 
     def degenerate(self) -> DegenerateCheck:
         """Whether (nearly) every pixel is in one segment
-        (:func:`~napari_polarseg.engine.analysis.degenerate.degenerate_result`, minimum segment size
+        (:func:`~napari_polarseg.engine.degenerate.degenerate_result`, minimum segment size
         ``min_segment_blocks`` · w² pixels)."""
         p = self.params
         return degenerate_result(
@@ -151,7 +151,7 @@ class SegmentationResult:
 
 
 class ScribbleSegmentation(NamedTuple):
-    """What :meth:`Pipeline.scribble_segmentation` returns."""
+    """What :func:`~napari_polarseg.engine.analysis.scribbles.scribble_segmentation` returns."""
 
     result: SegmentationResult
     probabilities: np.ndarray

@@ -14,7 +14,12 @@ import warnings
 import numpy as np
 
 from ..errors import PolarsegError
+from ..features import harmonics
 from ..features.harmonics import pixel_block_index
+from ..params import SegmentParams
+from ..pipeline import Pipeline
+from ..result import ScribbleSegmentation
+from ..timing import timed
 from .pixel_classifier import check_scribbles
 
 #: A block is a training example of class c when at least this share of its scribbled
@@ -183,3 +188,83 @@ def classify_blocks(
         proba = proba[(ri * c + ci).ravel()]
     labels = np.argmax(proba, axis=1).reshape(r, c)
     return labels, proba, classes
+
+
+def scribble_segmentation(
+    pipe: Pipeline,
+    scribbles: np.ndarray,
+    reconstruction: bool = True,
+    params: SegmentParams | None = None,
+) -> ScribbleSegmentation:
+    """The whole result of a scribble-guided run (:func:`scribble_result`).
+
+    Returns the :class:`SegmentationResult` (labels = class index 0..K−1, no Ncut
+    values; affinity and cut are neither computed nor invalidated), the class
+    probabilities (K, H, W), the scribble value of every class and the number of
+    training blocks.
+    """
+    p = pipe.snapshot(params)
+    scribble_seconds: dict[str, float] = {}
+    with timed(scribble_seconds, "scribbles"):
+        block, labels, maps, classes, n_train = _classify(pipe, scribbles, p)
+    names = ["polarisation", "normals", "harmonics", "pca"]
+    names += ["reconstruction"] if reconstruction else []
+    timings = {s: pipe.stage_seconds(s) for s in names}
+    timings.update(scribble_seconds)
+    done = pipe.recomputed_stages(p)
+    recomputed = [s for s in names if s in done] + ["scribbles"]
+    result = pipe.assemble_result(
+        block, labels, [], reconstruction, timings, recomputed, params=p
+    )
+    return ScribbleSegmentation(result, maps, classes, n_train)
+
+def scribble_result(
+    pipe: Pipeline, scribbles: np.ndarray, params: SegmentParams | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """Labels from a classifier trained on user strokes instead of the normalized cut.
+
+    The block features of the ``pca`` stage (thesis section 4.3.3) of the blocks the
+    strokes cover train :func:`~napari_polarseg.engine.analysis.scribbles.classify_blocks`,
+    which labels every block; affinity and cut are not needed.
+
+    Parameters
+    ----------
+    scribbles : array (H, W) of int
+        Strokes over the stack's frames: 0 = unlabelled, 1, 2, … = materials (at
+        least two).
+
+    Returns
+    -------
+    labels : ndarray (H, W) of int
+        Class of every pixel (remainder strips take their nearest block's), as an
+        index 0..K-1 into the scribble values in ascending order.
+    probabilities : ndarray (K, H, W) float
+        Probability of each class per pixel (its block's); sums to 1 over K.
+    """
+    _, labels, maps, _, _ = _classify(pipe, scribbles, pipe.snapshot(params))
+    return labels, maps
+
+def _classify(
+    pipe: Pipeline, scribbles: np.ndarray, params: SegmentParams
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]:
+    """(block labels, pixel labels, probability maps, classes, training blocks)."""
+    scribbles = np.asarray(scribbles)
+    shape = pipe.stack.shape[1:]
+    if scribbles.shape != shape:
+        raise PolarsegError(
+            f"the scribbles are {' x '.join(map(str, scribbles.shape))} pixels but the "
+            f"frames are {shape[0]} x {shape[1]}"
+        )
+    window = params.window
+    grid = pipe.get("harmonics", params).shape[:2]
+    valid = pipe.block_valid(params)
+    block, proba, classes = classify_blocks(
+        pipe.get("pca", params).features, grid, scribbles, window, valid=valid
+    )
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # classify_blocks has warned already
+        blocks, _, _ = training_blocks(scribbles, grid, window)
+    rows, cols = harmonics.pixel_block_index(shape, window)
+    labels = harmonics.upsample_block_labels(block, shape, window)
+    maps = proba.T.reshape(-1, *grid)[:, rows[:, None], cols[None, :]]
+    return block, labels, maps, classes, int(valid[blocks].sum())

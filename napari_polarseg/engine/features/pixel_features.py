@@ -55,7 +55,7 @@ from scipy import ndimage
 
 from ..errors import PolarsegError
 from ..physics.fresnel import zenith_from_diffuse_dop
-from ..unsupervised.superpixels import auto_region_area, region_means, superpixels
+from .superpixels import auto_region_area, region_means, superpixels
 
 #: Feature groups (module docstring), in the order their features appear.
 GROUPS = ("intensity", "polarisation", "zenith", "filters", "invariant", "regions")

@@ -8,7 +8,13 @@ it at once).
 """
 
 from .base import MethodOutput, MethodRun, Segmenter
-from .registry import get_method, method_names, register_built_in, register_method
+from .registry import (
+    get_method,
+    method_names,
+    register_built_in,
+    register_method,
+    unregister_method,
+)
 from .scene import Scene, segment
 
 register_built_in()
@@ -22,4 +28,5 @@ __all__ = [
     "method_names",
     "register_method",
     "segment",
+    "unregister_method",
 ]

@@ -37,6 +37,12 @@ def register_method(method: Segmenter) -> Segmenter:
     return method
 
 
+def unregister_method(name: str) -> None:
+    """Forget the method registered as ``name`` (nothing if there is none)."""
+    _METHODS.pop(name, None)
+    METHOD_CHOICES.pop(name, None)
+
+
 def get_method(name: str) -> Segmenter:
     """The method registered as ``name``; PolarsegError naming the known ones else."""
     method = _METHODS.get(name)

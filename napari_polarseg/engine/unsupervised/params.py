@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import PolarsegError
-from .superpixels import auto_region_area
+from ..features.superpixels import auto_region_area
 
 #: Automatic superpixel area: the image's pixels / this, within the bounds below.
 REGIONS_PER_IMAGE = 3000
@@ -60,7 +60,7 @@ class UnsupervisedParams:
         within [:data:`MIN_REGION_AREA`, :data:`MAX_REGION_AREA`].
     boundary : {"polarisation", "intensity"}
         Edges the superpixels follow: log Î and the normalised Stokes components, or
-        log Î alone (:func:`.superpixels.superpixels`).
+        log Î alone (:func:`~napari_polarseg.engine.features.superpixels.superpixels`).
     polarisation_edge_weight : float
         Weight of the Stokes edge map against the log Î one (``boundary="polarisation"``).
     features : tuple of str

@@ -13,7 +13,7 @@ import scipy.sparse as sps
 from scipy import ndimage
 
 from ..features.pixel_features import EPS_INTENSITY
-from .superpixels import COMPACTNESS
+from ..features.superpixels import COMPACTNESS
 
 #: σ (pixels) of the smoothing before the edge maps of the superpixels are taken.
 EDGE_SIGMA = 1.5

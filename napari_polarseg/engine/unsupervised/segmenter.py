@@ -7,9 +7,10 @@ image, each described by a few statistics of its pixels, and the clustering work
 those few hundred to few thousand nodes:
 
 1. **Superpixels** (:func:`polarisation_superpixels`): a compact watershed (as
-   :func:`.superpixels.superpixels`) over the sum of the gradient magnitudes of the
-   smoothed log Î and of the smoothed normalised Stokes components s1 = S1/S0,
-   s2 = S2/S0 (so a region border sits on an intensity *or* a polarisation edge).
+   :func:`~napari_polarseg.engine.features.superpixels.superpixels`) over the sum of
+   the gradient magnitudes of the smoothed log Î and of the smoothed normalised
+   Stokes components s1 = S1/S0, s2 = S2/S0 (so a region border sits on an intensity
+   *or* a polarisation edge).
 2. **Node features** (:func:`node_features`), from region sums (``np.bincount``) of
    per-pixel products, each named once in :data:`NODE_FEATURES`: the region's mean
    log Î, its spread, mean ρ and its spread, the region's DoLP
@@ -77,7 +78,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 import scipy.sparse as sps
 
-from ..analysis.degenerate import degenerate_result
+from ..degenerate import degenerate_result
 from ..errors import PolarsegError
 from ..features.pca import pca_features, whiten
 from ..features.pixel_features import EPS_DOP, EPS_INTENSITY, check_maps
@@ -293,7 +294,7 @@ def _region_features(
     cols = [node_features(i, d, ph, regions, p.features, trend)] if p.features else []
     if p.pixel_scales:
         from ..features.pixel_features import PixelFeatureParams, pixel_features
-        from .superpixels import region_means
+        from ..features.superpixels import region_means
 
         stack = pixel_features(
             i,
@@ -358,7 +359,7 @@ def _superpixels(
     edges = superpixel_edges(i, d, ph, edge_weight)
     if p.boundary == "polarisation":
         return polarisation_superpixels(i, d, ph, area, edges=edges), edges
-    from .superpixels import superpixels
+    from ..features.superpixels import superpixels
 
     return relabel(superpixels(i, area)), edges
 
