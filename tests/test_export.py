@@ -16,6 +16,7 @@ from napari_polarseg import cli
 from napari_polarseg import io as pio
 from napari_polarseg.engine import Pipeline, PolarsegError, SegmentParams
 from napari_polarseg.engine.analysis.evaluation import evaluate
+from napari_polarseg.engine.analysis.scribbles import scribble_result
 from napari_polarseg.engine.synthetic.scenes import make_scene
 from napari_polarseg.io import read_params_dict
 from napari_polarseg.outputs import OutputError, write_result_folder
@@ -131,7 +132,7 @@ def test_scribble_probabilities_evaluation_plots_and_extra_items(tmp_path, scene
     pipe, result = run
     strokes = np.zeros(SHAPE, dtype=np.int32)  # a dotted grid over every material
     strokes[2::4, 2::4] = scene.labels[2::4, 2::4] + 1
-    labels, proba = pipe.scribble_result(strokes)
+    labels, proba = scribble_result(pipe, strokes)
     w, (r, c) = PARAMS.window, result.block_labels.shape
     block = labels[: r * w : w, : c * w : w]
     scribbled = dataclasses.replace(result, labels=labels, block_labels=block, ncut_values=[])

@@ -389,7 +389,10 @@ def test_run_iter_reports_progress_within_the_chunked_stages(coefficients):
         inside = [v for v in values if i < v < i + 1]
         assert len(inside) >= 2, (name, values)  # strictly between the stage boundaries
         assert values == sorted(values) and values[-1] == i + 1
-    assert {s for s, _, _ in reports} == {"harmonics", "reconstruction"}
+    # the chunked stages report within; polarisation (row bands) and pca (a checkpoint)
+    # may too, where Cancel is checked
+    assert {"harmonics", "reconstruction"} <= {s for s, _, _ in reports}
+    assert {s for s, _, _ in reports} <= {"polarisation", "harmonics", "pca", "reconstruction"}
     assert all(total == n for _, _, total in reports)
     # the yields and the result are those of a run without progress
     ref = Pipeline(stack, ANGLES, params)

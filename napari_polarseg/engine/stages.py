@@ -173,19 +173,45 @@ def block_vectors(
     return polstats.standardise(stats) if standardise else stats
 
 
+#: Rows per band of the least-squares fit when the stage reports progress: every pixel
+#: is fitted on its own, so bands give the same image and a checkpoint between them.
+FIT_BAND_ROWS = 128
+
+
 def polarisation_stage(pipe: Pipeline, run: StageRun) -> polarimage.PolarisationImage:
-    """Î, ρ, φ of the sinusoid fit (thesis eq. 3.14), masked samples down-weighted."""
+    """Î, ρ, φ of the sinusoid fit (thesis eq. 3.14), masked samples down-weighted.
+
+    The plain least-squares fit (no sample weights, every sample finite) runs in bands
+    of :data:`FIT_BAND_ROWS` rows when the stage reports progress (which may stop it
+    between bands); a weighted or robust fit in one piece."""
     mask = pipe.mask
     flagged = bool(np.any(mask.flags))
-    pol = polarimage.polarisation_image(
-        pipe.stack,
-        pipe.angles,
-        robust=run.params.fit == "robust",
-        weights=mask.sample_weights if flagged else None,
-    )
+    robust = run.params.fit == "robust"
+    weights = mask.sample_weights if flagged else None
+    progress = run.progress("polarisation")
+    h = pipe.stack.shape[1]
+    plain = weights is None and not robust and bool(np.isfinite(pipe.stack).all())
+    if progress is None or not plain or h <= FIT_BAND_ROWS:
+        pol = polarimage.polarisation_image(pipe.stack, pipe.angles, robust, weights=weights)
+    else:
+        bands = []
+        for top in range(0, h, FIT_BAND_ROWS):
+            band = pipe.stack[:, top : top + FIT_BAND_ROWS]
+            bands.append(polarimage.polarisation_image(band, pipe.angles))
+            progress(min(top + FIT_BAND_ROWS, h) / h)
+        pol = _stacked_rows(bands)
     if flagged or mask.region is not None:
         pol = replace(pol, invalid=pol.invalid | ~mask.valid)
     return pol
+
+
+def _stacked_rows(
+    bands: list[polarimage.PolarisationImage],
+) -> polarimage.PolarisationImage:
+    """One polarisation image of the unweighted fits of consecutive row bands."""
+    names = ("intensity", "dop", "phase", "residual", "invalid")
+    rows = {name: np.concatenate([getattr(b, name) for b in bands], axis=0) for name in names}
+    return replace(bands[0], **rows)
 
 
 def normals_stage(pipe: Pipeline, run: StageRun) -> Normals:
@@ -224,7 +250,9 @@ def pca_stage(pipe: Pipeline, run: StageRun) -> feat.PCAResult:
             f"window size {p.window} leaves fewer than 2 blocks in a "
             f"{pipe.stack.shape[1]} x {pipe.stack.shape[2]} image"
         )
+    progress = run.progress("pca") or (lambda share: None)
     vectors = block_vectors(pipe, run, coef)
+    progress(0.5)  # a checkpoint: the vectors of many small blocks take a while
     valid = block_valid(pipe, run)
     if valid.all():
         return feat.pca_features(vectors, p.variance)
@@ -249,7 +277,9 @@ def affinity_stage(pipe: Pipeline, run: StageRun) -> Any:
     kind = affinity_graph_kind(n, p)
     grid = pipe.stage_value("harmonics", run).shape[:2]
     if kind == "knn":
-        return affinity.knn_affinity(features, p.scale, p.scale_mode)
+        return affinity.knn_affinity(
+            features, p.scale, p.scale_mode, progress=run.progress("affinity")
+        )
     if kind == "spatial":
         W = affinity.spatial_affinity(
             pca.features, grid, p.spatial_radius, p.spatial_sigma, p.scale, p.scale_mode

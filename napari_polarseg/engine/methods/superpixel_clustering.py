@@ -43,7 +43,9 @@ class SuperpixelClustering:
         region = scene.region
 
         def prepare() -> Any:
-            return prepare_regions(pol.intensity, pol.dop, pol.phase, self.params, region)
+            return prepare_regions(
+                pol.intensity, pol.dop, pol.phase, self.params, region, run.within
+            )
 
         model = scene.cached("superpixels", (id(pol), self.params), prepare)
         run.begin("clustering")

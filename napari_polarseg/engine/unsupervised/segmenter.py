@@ -73,6 +73,7 @@ off single regions. The benchmark prints every variant.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -429,6 +430,7 @@ def prepare_regions(
     phase: np.ndarray,
     params: UnsupervisedParams | None = None,
     valid: np.ndarray | None = None,
+    progress: Callable[[float], None] | None = None,
 ) -> RegionModel:
     """Superpixels, node features and their projection: everything but the clustering.
 
@@ -437,8 +439,10 @@ def prepare_regions(
     (:func:`~napari_polarseg.engine.physics.pixel_mask.fill_from_nearest`) before the
     superpixels are drawn, and the pixels outside form one extra region that takes no
     part in the features' statistics, the projection or the clustering; so the labels
-    inside the region do not depend on anything outside it.
+    inside the region do not depend on anything outside it. ``progress`` is called with
+    the share done after each step (it may raise to stop there).
     """
+    step = progress or (lambda share: None)
     p = params or UnsupervisedParams()
     i, d, ph = check_maps(intensity, dop, phase)
     if valid is not None:
@@ -451,7 +455,9 @@ def prepare_regions(
             i, d, ph = fill_from_nearest(valid, i, d, ph)
     if min(i.shape) < 2:
         raise PolarsegError(f"image too small to segment: {i.shape}")
+    step(0.05)
     regions, edges = _superpixels(i, d, ph, p)
+    step(0.5)
     regions, n = _masked_regions(regions, valid)
     keep = slice(0, n)
     z_region, count, centroid = region_polarisation(i, d, ph, regions)
@@ -459,6 +465,7 @@ def prepare_regions(
     close_up = share > p.close_up_share
     q = p.close_up_params() if close_up else p
     x, names = _region_features(i, d, ph, regions, q)
+    step(0.8)
     weight = np.bincount(regions.ravel(), minlength=n).astype(float)[keep]
     adjacency = region_adjacency(regions)[keep][:, keep].tocsr()
     if n < 2:
