@@ -80,11 +80,17 @@ class OutputOptions:
         ``overview.png`` (matplotlib figure); the analyst's plots as PNGs in ``plots/``.
     save_classifier : str or None
         With scribbles: also write the trained classifier to this file.
+    thesis_maps : bool
+        Also compute the thesis maps for a method that does not need them (harmonic
+        coefficients and PCA features: the feature columns of ``segments.csv`` and the
+        plots; the reconstruction-error map ``reconstruction_error.tif``). The thesis
+        method always computes them; ``plots`` asks for them too.
     """
 
     overview: bool = False
     plots: bool = False
     save_classifier: str | None = None
+    thesis_maps: bool = False
 
 
 def _angles_text(values: Sequence[float]) -> str:
@@ -125,6 +131,7 @@ def segment_args(read: ReadOptions, outputs: OutputOptions) -> list[str]:
         ("--register", read.register),
         ("--overview", outputs.overview),
         ("--plots", outputs.plots),
+        ("--thesis-maps", outputs.thesis_maps),
     ]
     out += [flag for flag, on in flags if on]
     if outputs.save_classifier:

@@ -121,7 +121,7 @@ class LabelSource:
     classifier_file: str | None = None
     segmentation: Any = None
 
-    def label(self, run: Run, progress: Progress | None = None) -> None:
+    def label(self, run: Run, progress: Progress | None = None, maps: bool = True) -> None:
         """Label ``run`` with the pixel classifier (sets ``run.result``)."""
         from .classifier_file import load_pixel_classifier
         from .engine.analysis.pixel_segmentation import PixelSegmentation
@@ -134,7 +134,7 @@ class LabelSource:
         try:
             assert run.scene is not None
             result = run.scene.segment(
-                run.params, inputs, maps=True, reconstruction=True, progress=progress
+                run.params, inputs, maps=maps, reconstruction=maps, progress=progress
             )
         except PolarsegError as exc:
             where = self.scribbles_file or self.classifier_file
@@ -161,8 +161,12 @@ def segment_data(
     labels_by: LabelSource | None = None,
     status: StatusLine | None = None,
     progress: Progress | None = None,
+    maps: bool = True,
 ) -> Run:
-    """Register (optionally) and segment an angle stack in memory; seconds per step."""
+    """Register (optionally) and segment an angle stack in memory; seconds per step.
+
+    ``maps``: also the thesis maps and the reconstruction-error map (the thesis method
+    computes them in any case)."""
     status = status or StatusLine(False, PROG)
     seconds: dict[str, float] = {}
     stack, shifts = data.stack, None
@@ -184,12 +188,14 @@ def segment_data(
         run = Run(data, params, stack, None, shifts, seconds, mask, scene.pipeline)  # type: ignore[arg-type]
         run.colour_stack = colour_stack
         run.scene = scene
+        maps = maps or params.method == "thesis" and labels_by is None
         if labels_by is None:
-            status.stage("polarisation", 1, len(scene.stages(params, maps=True)), "segmenting:")
-            run.result = scene.segment(params, maps=True, reconstruction=True, progress=progress)
+            total = len(scene.stages(params, maps=maps, reconstruction=maps))
+            status.stage("polarisation", 1, total, "segmenting:")
+            run.result = scene.segment(params, maps=maps, reconstruction=maps, progress=progress)
         else:
             status.show("pixel classifier: features, training and prediction")
-            labels_by.label(run, progress)
+            labels_by.label(run, progress, maps)
     return run
 
 
@@ -442,8 +448,9 @@ def data_to_folder(
     truth_file = read.ground_truth
     truth = pio.read_labels(truth_file, shape, "ground truth") if truth_file else None
     source = _label_source(read, outputs, scribbles)
+    maps = outputs.thesis_maps or outputs.plots
     run = segment_data(
-        data, params, read.register, mask, read.max_bytes(), source, status, progress
+        data, params, read.register, mask, read.max_bytes(), source, status, progress, maps
     )
     probabilities = uncertainty = None
     summary = {**_seconds_summary(run, read_seconds), **(extra or {})}

@@ -27,13 +27,13 @@ H, W = 57, 63  # not multiples of the window
 # the thesis pipeline (the default preset "auto" is tested in test_auto_preset.py): the
 # scene's two materials differ in how Î follows the tilt, not in ρ
 FAST = ["--preset", "thesis", "--window", "10", "--degree", "4", "--segments", "2"]
+#: What every result folder holds (the default method computes no thesis maps).
 CONTRACT = {
     "labels.tif",
     "intensity.tif",
     "dop.tif",
     "phase.tif",
     "zenith.tif",
-    "reconstruction_error.tif",
     "residual.tif",
     "mask.tif",
     "segments.csv",
@@ -451,7 +451,7 @@ BAD_INPUTS = {
         "window size 80 is larger than the image (57 x 63 pixels)",
     ),
     "window leaving one block": (
-        lambda t: [_stack_file(t), "--window", "40"],
+        lambda t: [_stack_file(t), "--window", "40", "--method", "thesis"],
         "window size 40 leaves fewer than 2 blocks",
     ),
     "refractive index n = 1": (
@@ -773,3 +773,26 @@ def test_bad_scribbles_or_ground_truth_one_line_error(tmp_path, capsys, case, sc
     assert words in lines[0]
     assert "Traceback" not in err + stdout
     assert os.listdir(out) == ["labels.tif"] and (out / "labels.tif").read_bytes() == good
+
+
+#: What a run with the thesis maps (``--method thesis``, ``--thesis-maps``) adds.
+THESIS_MAPS = {"reconstruction_error.tif"}
+
+
+@pytest.mark.parametrize(
+    "flags", [(), ("--thesis-maps",), ("--method", "thesis"), ("--preset", "recommended")]
+)
+def test_the_thesis_maps_are_written_when_the_method_needs_them_or_asked(
+    tmp_path, capsys, scene_tif, flags
+):
+    path, _, _ = scene_tif
+    out = tmp_path / "out"
+    code, _, err = run(capsys, "segment", path, "--out", out, "--segments", "2", *flags)
+    assert code == 0, err
+    summary = json.loads((out / "summary.json").read_text())
+    wanted = bool(flags)
+    assert set(os.listdir(out)) == (CONTRACT | THESIS_MAPS if wanted else CONTRACT)
+    assert summary["thesis_maps"] is wanted and summary["reconstruction_error_map"] is wanted
+    assert (summary["explained_variance"] is not None) is wanted
+    rows = (out / "segments.csv").read_text().splitlines()
+    assert len(rows) == 3  # the header and two segments, with or without the maps

@@ -127,6 +127,7 @@ def output_options(args: argparse.Namespace) -> jobs.OutputOptions:
         overview=bool(args.overview),
         plots=bool(getattr(args, "plots", False)),
         save_classifier=getattr(args, "save_classifier", None),
+        thesis_maps=bool(getattr(args, "thesis_maps", False)),
     )
 
 

@@ -115,6 +115,14 @@ def _add_capture_options(seg: argparse.ArgumentParser) -> None:
         "--channel", type=int, metavar="C", help="colour channel to use (default: BT.601 luma)"
     )
     seg.add_argument(
+        "--thesis-maps",
+        action="store_true",
+        help="also compute the thesis maps when the method does not need them: the "
+        "reconstruction-error map (reconstruction_error.tif) and the PCA features of the "
+        "blocks (feature columns of segments.csv); always on with --method thesis and "
+        "with --plots",
+    )
+    seg.add_argument(
         "--register",
         action="store_true",
         help="align the frames to the first by sub-pixel phase correlation first (shifts "

@@ -125,6 +125,9 @@ class SegmentationResult:
         evr = self.explained_variance_ratio
         return {
             "method": self.method,
+            # which maps of the thesis method this run computed (others: when asked)
+            "thesis_maps": self.features is not None,
+            "reconstruction_error_map": self.reconstruction_error is not None,
             "stage_seconds": {k: round(v, 6) for k, v in self.timings.items()},
             # stages this run computed (the others came from the cache) and their time
             "recomputed_stages": list(self.recomputed),

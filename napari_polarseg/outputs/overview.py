@@ -117,7 +117,10 @@ def _panels(
         hsv_title += f"\n(full at ρ = {dolp_max:g})"
     label_panels, ticks, k = _label_panels(result, truth)
     error = result.reconstruction_error
-    error = np.zeros_like(result.intensity) if error is None else error
+    error_title = "reconstruction error"
+    if error is None:
+        error_title += "\n(not computed: --thesis-maps)"
+        error = np.zeros_like(result.intensity)
     finite_err = error[np.isfinite(error)]
     err_max = float(np.percentile(finite_err, 99)) if finite_err.size else 1.0
     panels: list[Panel] = [
@@ -127,7 +130,7 @@ def _panels(
         ("φ phase (rad)", result.phase, "twilight", 0.0, np.pi),
         (hsv_title, composite, "rgb", None, None),
         *label_panels,
-        ("reconstruction error", error, "magma", 0.0, err_max or None),
+        (error_title, error, "magma", 0.0, err_max or None),
     ]
     return panels, ticks, k
 

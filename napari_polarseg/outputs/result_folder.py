@@ -228,7 +228,9 @@ def _write_maps(
     labels_meta = {"quantity": "segment labels", "first_label": 0}
     folder.tiff("labels.tif", labels_image(result.labels), labels_meta)
     for fname, (attr, meta) in FLOAT_OUTPUTS.items():
-        folder.tiff(fname, np.asarray(getattr(result, attr), np.float32), meta)
+        value = getattr(result, attr)
+        if value is not None:  # the reconstruction error: the thesis maps, when computed
+            folder.tiff(fname, np.asarray(value, np.float32), meta)
     folder.tiff("mask.tif", used_pixels(result), MASK_META)
     if stokes is not None:
         folder.tiff(STOKES_FILE, np.asarray(stokes, np.float32), STOKES_CONVENTION)
