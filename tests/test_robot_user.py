@@ -107,3 +107,14 @@ def test_the_three_methods_run_on_a_small_scene(robot):
         assert len(r["ari"]) == 3 and all(-1 <= a <= 1 for a in r["ari"])
         assert -1 <= r["bound"] <= 1
     assert "dev (1 scenes)" in robot.half_means(rows, 2)[0]
+
+
+def test_the_bound_is_marked_when_the_halves_hold_other_materials(robot):
+    truth = np.ones((10, 20), dtype=np.int32)
+    truth[:, 3] = 2
+    truth[:, 15] = 2
+    assert robot.halves_comparable(truth)
+    truth[:, 3] = 1  # material 2 only on the right: the left half cannot teach it
+    assert not robot.halves_comparable(truth)
+    truth[:, 15] = 1  # one material everywhere
+    assert not robot.halves_comparable(truth)
