@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import logging
 import os
+import warnings
 
 import numpy as np
 import pytest
@@ -128,7 +130,7 @@ def test_cli_and_write_result_folder_write_the_same_folder(tmp_path, scene, run,
     assert extra == {"segment_seconds"}  # the CLI also times its own run
 
 
-def test_scribble_probabilities_evaluation_plots_and_extra_items(tmp_path, scene, run):
+def test_scribble_probabilities_evaluation_plots_and_extra_items(tmp_path, scene, run, caplog):
     pipe, result = run
     strokes = np.zeros(SHAPE, dtype=np.int32)  # a dotted grid over every material
     strokes[2::4, 2::4] = scene.labels[2::4, 2::4] + 1
@@ -157,7 +159,16 @@ def test_scribble_probabilities_evaluation_plots_and_extra_items(tmp_path, scene
         "evaluation.json",
         "plots",
     }
-    stored = tifffile.imread(out / "probabilities.tif")
+    # read without a warning (tifffile warns through its logger, not only warnings)
+    with warnings.catch_warnings(), caplog.at_level(logging.WARNING):
+        warnings.simplefilter("error")
+        stored = tifffile.imread(out / "probabilities.tif")
+        with tifffile.TiffFile(out / "probabilities.tif") as tif:
+            meta, axes = tif.shaped_metadata[0], tif.series[0].axes
+    assert not caplog.records, [r.getMessage() for r in caplog.records]
+    assert axes == meta["axes"] == "CYX"
+    assert "k-th smallest scribble value" in meta["dimensions"]
+    assert meta["quantity"] == "class probability from the pixel classifier"
     assert stored.shape == proba.shape and stored.dtype == np.float32
     np.testing.assert_array_equal(np.argmax(stored, axis=0), tifffile.imread(out / "labels.tif"))
     summary = json.loads((out / "summary.json").read_text())

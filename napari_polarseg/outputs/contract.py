@@ -43,10 +43,14 @@ MASK_META = {
     "positive intensity)",
 }
 
+#: ``axes`` is tifffile's own key (one letter per dimension: C planes, Y rows, X columns),
+#: so readers take it as the series' axes; the words go under ``dimensions`` (as in
+#: ``stokes.tif``). Free text under ``axes`` made every read warn.
 PROBABILITY_META = {
     "quantity": "class probability from the pixel classifier",
     "unit": "1",
-    "axes": "class, row, column (class k = the k-th smallest scribble value)",
+    "axes": "CYX",
+    "dimensions": "class, row, column (class k = the k-th smallest scribble value)",
 }
 
 UNCERTAINTY_META = {
