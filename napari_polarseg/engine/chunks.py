@@ -63,7 +63,8 @@ def run_chunks(
     ``work`` must write only to its own slice of preallocated outputs. Small jobs (fewer
     than :data:`MIN_PARALLEL_POINTS` points) run in the calling thread. ``progress`` is
     called in the calling thread with the share of the chunks done after each one (in
-    chunk order), the last time with 1.
+    chunk order), the last time with 1; an exception it raises (a stop request) stops
+    the work after the chunks already running.
     """
     n = len(bounds)
     with single_threaded_blas():
@@ -77,10 +78,18 @@ def run_chunks(
                 _local.__dict__.clear()  # scratch of the calling thread is not kept
             return
         with ThreadPoolExecutor(min(N_THREADS, n)) as pool:
-            for i, f in enumerate([pool.submit(work, a, b) for a, b in bounds]):
-                f.result()
-                if progress is not None:
-                    progress((i + 1) / n)
+            futures = [pool.submit(work, a, b) for a, b in bounds]
+            try:
+                for i, f in enumerate(futures):
+                    f.result()
+                    if progress is not None:
+                        progress((i + 1) / n)
+            except BaseException:
+                # progress may stop the work (Cancel): drop the chunks not yet started, so
+                # leaving the pool waits for the running ones only
+                for f in futures:
+                    f.cancel()
+                raise
 
 
 def chunk_bounds(n: int, step: int) -> list[tuple[int, int]]:
