@@ -29,7 +29,8 @@ from .engine.physics.pixel_mask import PixelMask, mask_reasons
 from .engine.physics.polarimage import validity_mask
 from .engine.physics.registration import register_stack, shift_frames
 from .engine.timing import timed
-from .job_options import OutputOptions, ReadOptions
+from .io.read_options import ReadOptions
+from .job_options import OutputOptions
 from .outputs import classifier_summary, write_result_folder
 from .status_line import StatusLine
 
@@ -341,18 +342,7 @@ def segment_to_folder(
     status.show(f"reading {Path(first).name}")
     seconds: dict[str, float] = {}
     with timed(seconds, "read"):
-        data = pio.read_stack(
-            input,
-            angles_deg=None if read.angles_deg is None else np.asarray(read.angles_deg, float),
-            mosaic=None if read.mosaic_deg is None else np.asarray(read.mosaic_deg, float),
-            channel=read.channel,
-            demosaic=read.demosaic,
-            bayer=read.bayer,
-            dark=read.dark_frame,
-            offset=read.offset,
-            saturation=read.saturation,
-            max_bytes=read.max_bytes(),
-        )
+        data = pio.read_stack(input, options=read)
     return data_to_folder(
         data,
         out,

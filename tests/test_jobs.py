@@ -11,7 +11,7 @@ import pytest
 import tifffile
 from test_cli import CONTRACT
 
-from napari_polarseg import batch, jobs
+from napari_polarseg import batch, job_options, jobs
 from napari_polarseg.engine import PolarsegError
 from napari_polarseg.engine.params import RECOMMENDED, SegmentParams
 
@@ -76,7 +76,7 @@ def test_segment_args_are_the_flags_of_the_options() -> None:
         saturation=None,
         dark_level=2.5,
     )
-    args = jobs.segment_args(read, jobs.OutputOptions(overview=True))
+    args = job_options.segment_args(read, jobs.OutputOptions(overview=True))
     assert args == [
         "--angles",
         "0,45,90",
@@ -91,7 +91,7 @@ def test_segment_args_are_the_flags_of_the_options() -> None:
         "--register",
         "--overview",
     ]
-    assert jobs.segment_args(jobs.ReadOptions(), jobs.OutputOptions()) == []
+    assert job_options.segment_args(jobs.ReadOptions(), jobs.OutputOptions()) == []
 
 
 def test_batch_imports_no_cli() -> None:
