@@ -28,18 +28,16 @@ angles, ``.npz`` without ``angles``, folders of other files) gets ``None`` from
 
 from __future__ import annotations
 
-import json
 import os
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-import tifffile
 
-from .engine.physics.polarimage import distinct_angle_count
-from .io import SENSOR_NAMES, angle_from_name, read_stack, single_frame_file
+from .io import SENSOR_NAMES, STACK_FORMATS, angle_from_name, read_stack, single_frame_file
 from .io.frames import frame_files
+from .io.stack_formats import enough_angles
 
 #: Sony polarisation sensors named in raw files (mono ``…MZR``, colour ``…MYR``).
 MOSAIC_SENSOR_NAMES = SENSOR_NAMES
@@ -56,44 +54,10 @@ def _single_path(path: str | list[str]) -> Path | None:
     return Path(os.fspath(path))
 
 
-def _enough_angles(angles: Any) -> bool:
-    try:
-        values = np.asarray(angles, dtype=float).ravel()
-    except (TypeError, ValueError):
-        return False
-    return bool(np.all(np.isfinite(values))) and distinct_angle_count(np.deg2rad(values)) >= 3
-
-
-def _npz_has_stack(path: Path) -> bool:
-    try:
-        with np.load(path, allow_pickle=False) as data:
-            return "stack" in data.files and "angles" in data.files
-    except Exception:
-        return False
-
-
-def _tiff_angles(path: Path) -> Any:
-    """The ``angles`` entry of a TIFF's JSON metadata, or None (never raises)."""
-    try:
-        with tifffile.TiffFile(path) as tif:
-            if len(tif.pages) < 1:
-                return None
-            shaped = tif.shaped_metadata
-            if shaped:
-                return dict(shaped[0]).get("angles")
-            description = tif.pages[0].description or ""
-            if description.lstrip().startswith("{"):
-                meta = json.loads(description)
-                return meta.get("angles") if isinstance(meta, dict) else None
-    except Exception:
-        return None
-    return None
-
-
 def _folder_angles(path: Path) -> list[float] | None:
     frames = frame_files(path)
     angles = [angle_from_name(f.name) for f in frames]
-    if len(frames) < 3 or any(a is None for a in angles) or not _enough_angles(angles):
+    if len(frames) < 3 or any(a is None for a in angles) or not enough_angles(angles):
         return None
     return angles
 
@@ -101,9 +65,10 @@ def _folder_angles(path: Path) -> list[float] | None:
 def get_reader(path: str | list[str]) -> ReaderFunction | None:
     """Return :func:`read_angle_stack` if ``path`` is an angle stack this plugin reads.
 
-    Only cheap checks are made here (file type, the names of the arrays in an ``.npz``,
-    the TIFF's metadata, the names of a folder's files); the data is read by the
-    returned function.
+    Only cheap checks are made here (the file type, then the stack format's
+    ``carries_angles`` of :data:`napari_polarseg.io.STACK_FORMATS`: the names of the arrays
+    in an ``.npz``, the TIFF's metadata; the names of a folder's files); the data is read
+    by the returned function.
 
     Parameters
     ----------
@@ -120,18 +85,11 @@ def get_reader(path: str | list[str]) -> ReaderFunction | None:
         return None
     if p.is_dir():
         return read_angle_stack if _folder_angles(p) is not None else None
-    suffix = p.suffix.lower()
-    if (
-        suffix in (".png", ".tif", ".tiff")
-        and MOSAIC_SENSOR_NAMES.search(p.stem)
-        and single_frame_file(p)
-    ):
+    if MOSAIC_SENSOR_NAMES.search(p.stem) and single_frame_file(p):
         return read_mosaic_frame
-    if suffix == ".npz":
-        return read_angle_stack if _npz_has_stack(p) else None
-    if suffix in (".tif", ".tiff"):
-        angles = _tiff_angles(p)
-        return read_angle_stack if angles is not None and _enough_angles(angles) else None
+    stack_format = STACK_FORMATS.get(p.suffix.lower())
+    if stack_format is not None and stack_format.carries_angles(p):
+        return read_angle_stack
     return None
 
 

@@ -5,9 +5,10 @@ cut, or a pixel classifier trained on scribbles or loaded from a file), and writ
 ``segment`` result folder (:func:`napari_polarseg.outputs.write_result_folder`) with the
 optional files of :class:`OutputOptions`. Everything is computed before the first file is
 written. What a command line would say about the run (its summary line, the warning of a
-degenerate result, the classifier and evaluation lines) comes back as
-:class:`Message` data in the :class:`FolderResult`; nothing is printed here. This module
-never imports napari, Qt or the command line.
+degenerate result, the classifier and evaluation lines, worded in
+:mod:`napari_polarseg.messages`) comes back as :class:`Message` data in the
+:class:`FolderResult`; nothing is printed here. This module never imports napari, Qt or
+the command line.
 """
 
 from __future__ import annotations
@@ -24,28 +25,26 @@ from .engine import Pipeline, Scene, SegmentationResult
 from .engine.analysis.evaluation import adjusted_rand_index, evaluate
 from .engine.errors import PolarsegError
 from .engine.limits import check_pipeline_memory
-from .engine.params import PRESETS, SegmentParams
-from .engine.physics.pixel_mask import PixelMask, mask_reasons
+from .engine.params import SegmentParams
+from .engine.physics.pixel_mask import PixelMask
 from .engine.physics.polarimage import validity_mask
 from .engine.physics.registration import register_stack, shift_frames
 from .engine.timing import timed
-from .job_options import OutputOptions, ReadOptions
+from .io.read_options import ReadOptions
+from .job_options import OutputOptions
+from .messages import (
+    PROG,
+    Message,
+    classifier_messages,
+    degenerate_warning,
+    evaluation_message,
+    report_messages,
+)
 from .outputs import classifier_summary, write_result_folder
 from .status_line import StatusLine
 
-#: Prefix of every message line (the command's name).
-PROG = "polarseg"
-
 #: Progress callback of a run: (stage, stages done, total), as a stage starts and within.
 Progress = Callable[[str, float, int], None]
-
-
-@dataclass(frozen=True)
-class Message:
-    """One line a command line shows about a run, and its stream (stdout or stderr)."""
-
-    text: str
-    stream: str = "stdout"
 
 
 @dataclass
@@ -234,96 +233,6 @@ def _seconds_summary(run: Run, read_seconds: float) -> dict[str, Any]:
     }
 
 
-def degenerate_warning(run: Run) -> str | None:
-    """The one-line warning of a degenerate result (``SegmentationResult.degenerate``:
-    one segment holds >= 95 % of the pixels, or every other is below the minimum size),
-    with what to try; None when the result is not degenerate."""
-    check = run.result.degenerate()
-    if not check.degenerate:
-        return None
-    if "classifier" in run.seconds:  # labels from a pixel classifier, not the cut
-        advice = "paint strokes on every material (--scribbles) or retrain the classifier"
-    else:
-        tries = ["fewer or more segments (--segments)", "a larger window (--window)"]
-        recommended = PRESETS["recommended"].replace(n_segments=run.params.n_segments)
-        if run.params != recommended:
-            tries.insert(0, "--preset recommended")
-        advice = f"try {', '.join(tries)}, or scribbles (--scribbles)"
-    return f"{PROG}: warning: degenerate result: {check.reason}; {advice}"
-
-
-def _limit_lines(run: Run) -> list[str]:
-    """What the cut gave up on, the close-up of one surface, and the registration
-    shifts."""
-    lines = []
-    limits = run.result.cut_limits
-    done = []
-    if limits.get("eigensolver_capped"):
-        done.append(
-            f"stopped {limits['eigensolver_capped']} eigensolve(s) at their cap of "
-            f"{limits.get('max_products')} products"
-        )
-    if limits.get("isolated_skipped"):
-        done.append(f"peeled {limits['isolated_skipped']} isolated block(s) off unsolved")
-    if done:
-        lines.append(f"{PROG}: the cut {' and '.join(done)} (cut_limits in summary.json)")
-    record = run.result.superpixels
-    if record.get("close_up"):
-        lines.append(
-            f"{PROG}: one smooth surface fills the frame (it explains "
-            f"{record['surface_share']:.0%} of the polarisation): the segments follow where "
-            "the polarisation departs from that surface's trend (superpixels in summary.json)"
-        )
-    if run.shifts is not None:
-        biggest = float(np.max(np.hypot(run.shifts[:, 0], run.shifts[:, 1])))
-        lines.append(
-            f"{PROG}: registered {len(run.shifts)} frames to frame 0, largest shift "
-            f"{biggest:.2f} px (rows, columns per frame in params.json)"
-        )
-    return lines
-
-
-def report_messages(
-    out: Path, run: Run, written: list[str], note_repeated: bool = True
-) -> list[Message]:
-    """The run's lines; ``note_repeated=False`` leaves out the information that frames at
-    a repeated angle were averaged (the bundled samples, made that way; it stays in
-    params.json and summary.json)."""
-    result = run.result
-    err = result.mean_reconstruction_error
-    err_text = "n/a" if err is None else f"{err:.4g}"
-    h, w = result.labels.shape
-    messages = [
-        Message(
-            f"{PROG}: {result.n_segments} segments over {h} x {w} pixels, "
-            f"mean reconstruction error {err_text}"
-        )
-    ]
-    warning = degenerate_warning(run)
-    if warning is not None:
-        messages.append(Message(warning, "stderr"))
-    lines = _limit_lines(run)
-    counts = result.mask_counts
-    if counts.get("masked_pixels"):
-        reasons = mask_reasons(counts)
-        lines.append(
-            f"{PROG}: left out {counts['masked_pixels']} of {h * w} pixels "
-            f"({', '.join(reasons)}; see mask.tif)"
-        )
-    for frames in result.duplicate_angle_frames if note_repeated else ():
-        angles = " and ".join(f"{run.data.angles_deg[k]:g}" for k in frames)
-        lines.append(
-            f"{PROG}: frames {', '.join(map(str, frames))} ({angles} degrees) are one "
-            "polariser state: averaged"
-        )
-    plots = [name for name in written if name.startswith("plots/")]
-    listed = [name for name in written if name not in plots]
-    if plots:
-        listed.insert(-2, f"plots/ ({len(plots)} PNGs)")  # before params.json, summary.json
-    lines.append(f"{PROG}: wrote {', '.join(listed)} to {out}")
-    return messages + [Message(line) for line in lines]
-
-
 def segment_to_folder(
     input: pio.PathLike | Sequence[pio.PathLike],
     out: pio.PathLike,
@@ -347,18 +256,7 @@ def segment_to_folder(
     status.show(f"reading {Path(first).name}")
     seconds: dict[str, float] = {}
     with timed(seconds, "read"):
-        data = pio.read_stack(
-            input,
-            angles_deg=None if read.angles_deg is None else np.asarray(read.angles_deg, float),
-            mosaic=None if read.mosaic_deg is None else np.asarray(read.mosaic_deg, float),
-            channel=read.channel,
-            demosaic=read.demosaic,
-            bayer=read.bayer,
-            dark=read.dark_frame,
-            offset=read.offset,
-            saturation=read.saturation,
-            max_bytes=read.max_bytes(),
-        )
+        data = pio.read_stack(input, options=read)
     return data_to_folder(
         data,
         out,
@@ -394,33 +292,6 @@ def _files_info(read: ReadOptions) -> dict[str, Any]:
         if name:
             info[key] = str(Path(name).resolve())
     return info
-
-
-def _classifier_messages(source: LabelSource, save_file: str | None) -> list[Message]:
-    """Say what the classifier did; write it to ``save_file`` if asked."""
-    clf = source.segmentation.classifier
-    if source.classifier_file:
-        lines = [f"{PROG}: applied the classifier {source.classifier_file} (not retrained)"]
-    else:
-        lines = [
-            f"{PROG}: pixel classifier trained on {clf.n_training_pixels} scribbled "
-            f"pixels of {clf.classes.size} materials, {len(clf.feature_names)} features"
-        ]
-    if save_file:
-        from .classifier_file import save_pixel_classifier
-
-        save_pixel_classifier(save_file, clf)
-        lines.append(f"{PROG}: wrote the classifier to {save_file}")
-    return [Message(line) for line in lines]
-
-
-def _evaluation_message(evaluation: dict[str, Any]) -> Message:
-    return Message(
-        f"{PROG}: against the ground truth: adjusted Rand index "
-        f"{evaluation['adjusted_rand_index']:.3f}, mean IoU {evaluation['mean_iou']:.3f}, "
-        f"block accuracy {evaluation['block_accuracy_worst']:.3f} (worst) .. "
-        f"{evaluation['block_accuracy_optimistic']:.3f} (optimistic)"
-    )
 
 
 def data_to_folder(
@@ -490,7 +361,11 @@ def data_to_folder(
     status.clear()
     messages = report_messages(out, run, written, note_repeated)
     if source is not None:
-        messages += _classifier_messages(source, outputs.save_classifier)
+        if outputs.save_classifier:
+            from .classifier_file import save_pixel_classifier
+
+            save_pixel_classifier(outputs.save_classifier, source.segmentation.classifier)
+        messages += classifier_messages(source, outputs.save_classifier)
     if evaluation is not None:
-        messages.append(_evaluation_message(evaluation))
+        messages.append(evaluation_message(evaluation))
     return FolderResult(out, written, run, summary, messages, degenerate_warning(run), evaluation)

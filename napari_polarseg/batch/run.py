@@ -27,7 +27,8 @@ from .. import __version__
 from .. import io as pio
 from ..engine.errors import Cancelled, PolarsegError
 from ..engine.params import SegmentParams
-from ..job_options import OutputOptions, ReadOptions, segment_args
+from ..io.read_options import ReadOptions
+from ..job_options import OutputOptions, segment_args
 from .plan import (
     COLUMNS,
     LOCK_FILE,

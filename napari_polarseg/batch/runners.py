@@ -16,7 +16,7 @@ from collections.abc import Callable, Generator
 from typing import Any
 
 from ..engine.errors import Cancelled, PolarsegError
-from ..job_options import ReadOptions
+from ..io.read_options import ReadOptions
 from .plan import MEMORY_SHARE
 
 

@@ -112,7 +112,7 @@ def run_scene(job: dict[str, Any]) -> dict[str, Any]:
     ----------
     job : dict
         ``name``, ``input``, ``output`` (the final folder), ``params`` (SegmentParams as
-        a dict), ``read`` (:class:`~napari_polarseg.job_options.ReadOptions`, with the memory
+        a dict), ``read`` (:class:`~napari_polarseg.io.read_options.ReadOptions`, with the memory
         cap), ``outputs`` (:class:`~napari_polarseg.job_options.OutputOptions`) and
         ``segment_args`` (the same options as ``segment`` flags, for the marker).
 

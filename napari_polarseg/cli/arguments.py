@@ -14,9 +14,7 @@ import numpy as np
 from .. import io as pio
 from ..engine.errors import PolarsegError
 from ..engine.physics.colour_mosaic import BAYER_ORDERS
-
-#: The program name: the parser's ``prog`` and the head of every message line.
-PROG = "polarseg"
+from ..messages import PROG as PROG  # the parser's prog and the head of every message line
 
 
 class UsageError(PolarsegError):

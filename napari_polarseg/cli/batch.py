@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 import time
 from collections.abc import Callable
@@ -13,8 +14,8 @@ from .. import jobs
 from ..engine.errors import PolarsegError
 from ..engine.params import ParamSpec
 from .arguments import PROG
-from .options import add_input_options, add_inputs_and_out, add_param_options
-from .running import angles_tuple, params_from_args
+from .options import add_input_options, add_inputs_and_out, add_param_options, add_read_options
+from .running import params_from_args, read_options
 
 
 def add_parser(sub: Any, specs: dict[str, ParamSpec] | None = None) -> None:
@@ -56,11 +57,13 @@ def add_parser(sub: Any, specs: dict[str, ParamSpec] | None = None) -> None:
         action="store_false",
         help="redo every scene, also those already complete",
     )
-    bat.add_argument(
-        "--classifier",
-        metavar="FILE",
-        help="label every scene with this saved pixel classifier (.polarseg-clf) instead of "
-        "the normalized cut",
+    add_read_options(
+        bat,
+        ("classifier",),
+        helps={
+            "classifier": "label every scene with this saved pixel classifier "
+            "(.polarseg-clf) instead of the normalized cut"
+        },
     )
     add_input_options(bat, "scene")
     add_param_options(bat, specs=specs)
@@ -69,16 +72,9 @@ def add_parser(sub: Any, specs: dict[str, ParamSpec] | None = None) -> None:
 
 def _batch_options(args: argparse.Namespace) -> tuple[jobs.ReadOptions, jobs.OutputOptions]:
     """The reading and output options a ``batch`` command line gives every scene."""
-    read = jobs.ReadOptions(
-        angles_deg=angles_tuple(args.angles),
-        mosaic_deg=angles_tuple(args.mosaic),
-        demosaic=args.demosaic,
-        bayer=args.bayer,
-        channel=args.channel,
-        register=bool(args.register),
-        max_memory_gib=args.max_memory,
-        classifier=None if args.classifier is None else str(Path(args.classifier).resolve()),
-    )
+    read = read_options(args)
+    if read.classifier is not None:  # the record in each scene's marker, wherever it runs
+        read = dataclasses.replace(read, classifier=str(Path(read.classifier).resolve()))
     return read, jobs.OutputOptions(overview=bool(args.overview))
 
 

@@ -1,15 +1,17 @@
 """Options that several ``polarseg`` subcommands share.
 
 The segmentation flags are made from the parameter table
-(:data:`napari_polarseg.engine.params.PARAM_SPECS`); the reading, Bayer, plots and
-INPUT/--out options are added by one function each, so every subcommand spells them alike.
+(:data:`napari_polarseg.engine.params.PARAM_SPECS`), the reading flags from the reading
+options' specs (:func:`napari_polarseg.io.read_specs`, :func:`add_read_options`); the
+plots and INPUT/--out options are added by one function each, so every subcommand spells
+them alike.
 """
 
 from __future__ import annotations
 
 import argparse
 import typing
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 from ..engine.params import (
@@ -20,9 +22,16 @@ from ..engine.params import (
     ParamSpec,
     SegmentParams,
 )
-from ..engine.physics.colour_mosaic import BAYER_ORDERS
-from ..engine.physics.mosaic import DEMOSAIC_METHODS
-from .arguments import angles_arg, bayer_arg, gib_arg, threshold_arg
+from ..io import ReadOptions, read_specs
+from .arguments import (
+    angles_arg,
+    bayer_arg,
+    dark_level_arg,
+    gib_arg,
+    level_arg,
+    number_arg,
+    threshold_arg,
+)
 
 #: Presets of the commands whose own analysis cuts the block graph (sweep, timeseries).
 BLOCK_PRESETS = ("thesis", "recommended")
@@ -142,36 +151,95 @@ def add_inputs_and_out(parser: argparse.ArgumentParser, inputs_help: str) -> Non
     parser.add_argument("-o", "--out", required=True, metavar="DIR", help="output folder")
 
 
+#: The reading options of the commands that read one INPUT per stack, scene or day
+#: (``sweep``, ``batch``, ``timeseries``), in the order --help lists them.
+INPUT_OPTIONS = (
+    "angles_deg",
+    "mosaic_deg",
+    "demosaic",
+    "bayer",
+    "channel",
+    "register",
+    "max_memory_gib",
+)
+
+#: How the words of each kind of reading option are parsed (:attr:`ReadSpec.kind`).
+_READ_TYPES: dict[str, Callable[[str], Any]] = {
+    "angles": angles_arg,
+    "number": number_arg,
+    "level": level_arg,
+    "dark_level": dark_level_arg,
+    "gib": gib_arg,
+    "bayer": bayer_arg,
+    "int": int,
+}
+
+
+def read_option_kwargs(name: str, unit: str = "stack") -> tuple[str, dict[str, Any]]:
+    """The flag and argparse keywords of the :class:`~napari_polarseg.io.ReadOptions`
+    field ``name``, made from its :class:`~napari_polarseg.io.ReadSpec` (``unit``: what one
+    INPUT is to the command, for the help)."""
+    spec = read_specs()[name]
+    default = getattr(ReadOptions(), name)
+    kwargs: dict[str, Any] = {"help": spec.help_for(unit)}
+    if spec.kind == "switch":
+        kwargs["action"] = "store_true"
+        return spec.flag, kwargs
+    if spec.kind == "choice":
+        kwargs["choices"] = spec.choices
+    elif spec.kind in _READ_TYPES:
+        kwargs["type"] = _READ_TYPES[spec.kind]
+    if default is not None:
+        kwargs["default"] = default
+    if spec.metavar:
+        kwargs["metavar"] = spec.metavar
+    return spec.flag, kwargs
+
+
+def add_read_options(
+    parser: Any,
+    names: Sequence[str],
+    unit: str = "stack",
+    helps: dict[str, str] | None = None,
+) -> None:
+    """Add the reading flags of the :class:`~napari_polarseg.io.ReadOptions` fields
+    ``names`` to ``parser`` (a parser or an argument group), in that order.
+
+    Parameters
+    ----------
+    parser
+        Where the flags go.
+    names
+        ReadOptions fields.
+    unit
+        What one INPUT is to the command (``stack``, ``scene``, ``day``), for the help.
+    helps
+        A command's own help of some of the fields (what the option means there).
+    """
+    for name in names:
+        flag, kwargs = read_option_kwargs(name, unit)
+        if helps and name in helps:
+            kwargs["help"] = helps[name]
+        parser.add_argument(flag, **kwargs)
+
+
 def add_input_options(parser: argparse.ArgumentParser, unit: str) -> None:
     """Reading options shared by ``sweep``, ``batch`` and ``timeseries`` (one INPUT per
-    ``unit``)."""
-    parser.add_argument(
-        "--angles", type=angles_arg, metavar="A,B,...", help=f"polariser angles of every {unit}"
-    )
-    parser.add_argument(
-        "--mosaic", type=angles_arg, metavar="A,B,C,D", help="every INPUT is a raw mosaic frame"
-    )
-    parser.add_argument("--demosaic", choices=DEMOSAIC_METHODS, default="superpixel")
-    add_bayer_option(parser)
-    parser.add_argument("--channel", type=int, metavar="C", help="colour channel to use")
-    parser.add_argument("--register", action="store_true", help=f"align the frames of each {unit}")
-    parser.add_argument(
-        "--max-memory", type=gib_arg, metavar="GIB", help=f"memory limit of one {unit}, GiB"
-    )
+    ``unit``): the flags of :data:`INPUT_OPTIONS`; what --register and --max-memory do is
+    said per ``unit`` (these commands record no shifts in a params.json of their own,
+    and a batch's default limit is its workers')."""
+    helps = {
+        "register": f"align the frames of each {unit} to its first by sub-pixel phase "
+        "correlation first",
+        "max_memory_gib": f"memory limit of one {unit}, GiB: a {unit} whose reading or run "
+        "would need more is refused",
+    }
+    add_read_options(parser, INPUT_OPTIONS, unit, helps)
 
 
 def add_bayer_option(parser: argparse.ArgumentParser) -> None:
     """Add --bayer (the Bayer order of a colour-polarisation mosaic)."""
-    parser.add_argument(
-        "--bayer",
-        type=bayer_arg,
-        metavar="ORDER",
-        help="with --mosaic: the raw frame is a colour-polarisation mosaic whose 2x2 "
-        "polariser super-pixels lie under this Bayer colour order, row-major "
-        f"({', '.join(BAYER_ORDERS)}; Sony IMX250MYR/IMX253MYR: RGGB). Outputs are then a "
-        "quarter of the raw frame's height and width (full size with --demosaic "
-        "interpolated); the luminance 0.299 R + 0.587 G + 0.114 B is segmented",
-    )
+    add_read_options(parser, ("bayer",))
 
 
 def add_plots_option(parser: argparse.ArgumentParser) -> None:

@@ -12,12 +12,9 @@ import sys
 from collections.abc import Sequence
 from typing import Any
 
-import numpy as np
-
 from .. import io as pio
 from .. import jobs
 from ..engine.errors import PolarsegError
-from ..engine.limits import memory_limit
 from ..engine.params import PARAM_SPECS, PRESETS, SegmentParams
 from ..status_line import StatusLine
 from .arguments import PROG
@@ -72,53 +69,21 @@ def status_line(args: argparse.Namespace) -> StatusLine:
     return status if isinstance(status, StatusLine) else StatusLine(False, PROG)
 
 
+def read_options(args: argparse.Namespace) -> pio.ReadOptions:
+    """The reading options of a command line (an option the command has not: its
+    default; :func:`napari_polarseg.io.options_from_values`)."""
+    return pio.options_from_values(vars(args))
+
+
 def max_bytes(args: argparse.Namespace) -> int:
     """The memory limit in bytes: ``--max-memory`` GiB, else ``$POLARSEG_MAX_BYTES`` or
     the default (:func:`napari_polarseg.engine.limits.memory_limit`)."""
-    gib = getattr(args, "max_memory", None)
-    return memory_limit(None if gib is None else gib * 2**30)
-
-
-def angles_tuple(values: np.ndarray | None) -> tuple[float, ...] | None:
-    """Parsed angles as a tuple of floats (None stays None)."""
-    return None if values is None else tuple(float(v) for v in values)
+    return read_options(args).max_bytes()
 
 
 def read_input(source: str | Sequence[str], args: argparse.Namespace) -> pio.StackData:
-    """Read ``source`` with the reading options of :func:`add_input_options
-    <napari_polarseg.cli.options.add_input_options>` and the memory limit."""
-    return pio.read_stack(
-        source,
-        angles_deg=args.angles,
-        mosaic=args.mosaic,
-        channel=args.channel,
-        demosaic=args.demosaic,
-        bayer=args.bayer,
-        max_bytes=max_bytes(args),
-    )
-
-
-def read_options(args: argparse.Namespace) -> jobs.ReadOptions:
-    """The reading options of a command line (a command without an option: its default)."""
-    saturation = getattr(args, "saturation", "auto")
-    dark_level = getattr(args, "dark_level", 0.0)
-    return jobs.ReadOptions(
-        angles_deg=angles_tuple(getattr(args, "angles", None)),
-        mosaic_deg=angles_tuple(getattr(args, "mosaic", None)),
-        demosaic=getattr(args, "demosaic", "superpixel"),
-        bayer=getattr(args, "bayer", None),
-        channel=getattr(args, "channel", None),
-        dark_frame=getattr(args, "dark_frame", None),
-        offset=getattr(args, "offset", None),
-        saturation=None if saturation == "none" else saturation,
-        dark_level=None if dark_level == "none" else dark_level,
-        mask=getattr(args, "mask", None),
-        register=bool(getattr(args, "register", False)),
-        max_memory_gib=getattr(args, "max_memory", None),
-        scribbles=getattr(args, "scribbles", None),
-        classifier=getattr(args, "classifier", None),
-        ground_truth=getattr(args, "ground_truth", None),
-    )
+    """Read ``source`` with the reading options of the command line."""
+    return pio.read_stack(source, options=read_options(args))
 
 
 def output_options(args: argparse.Namespace) -> jobs.OutputOptions:

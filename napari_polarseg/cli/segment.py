@@ -9,14 +9,13 @@ from .. import io as pio
 from .. import jobs
 from ..engine.errors import PolarsegError
 from ..engine.params import ParamSpec
-from ..engine.physics.mosaic import DEMOSAIC_METHODS
-from .arguments import PROG, angles_arg, dark_level_arg, gib_arg, level_arg, number_arg
+from .arguments import PROG
 from .options import (
     STACK_INPUT_HELP,
-    add_bayer_option,
     add_inputs_and_out,
     add_param_options,
     add_plots_option,
+    add_read_options,
 )
 from .running import (
     output_options,
@@ -25,6 +24,19 @@ from .running import (
     progress_report,
     read_options,
     status_line,
+)
+
+#: The real-capture options: dark frame, offset, saturation and dark levels, mask, memory
+#: limit, colour channel, registration (:class:`~napari_polarseg.io.ReadOptions` fields).
+CAPTURE_OPTIONS = (
+    "dark_frame",
+    "offset",
+    "saturation",
+    "dark_level",
+    "mask",
+    "max_memory_gib",
+    "channel",
+    "register",
 )
 
 
@@ -37,83 +49,17 @@ def add_parser(sub: Any, specs: dict[str, ParamSpec] | None = None) -> None:
         "raw polarisation-camera frame with --mosaic) and write the results into --out.",
     )
     add_inputs_and_out(seg, STACK_INPUT_HELP)
+    add_read_options(seg, ("angles_deg", "mosaic_deg", "bayer", "demosaic"))
+    add_read_options(seg, CAPTURE_OPTIONS)
+    labels_from = seg.add_mutually_exclusive_group()
+    add_read_options(labels_from, ("scribbles", "classifier"))
     seg.add_argument(
-        "--angles",
-        type=angles_arg,
-        metavar="A,B,...",
-        help="polariser angle of each frame in degrees, in frame order (overrides the file)",
+        "--save-classifier",
+        metavar="FILE",
+        help="with --scribbles: also write the trained classifier to FILE (.polarseg-clf)",
     )
-    seg.add_argument(
-        "--mosaic",
-        type=angles_arg,
-        metavar="A,B,C,D",
-        help="INPUT is one raw polarisation-camera frame; the 2x2 super-pixel angles in "
-        "row-major order (Sony IMX250MZR: 90,45,135,0). Outputs are then half the raw "
-        "frame's height and width (full size with --demosaic interpolated). A frame named "
-        "after a Sony sensor (..._IMX250MZR.png, ..._IMX250MYR.png) needs no --mosaic",
-    )
-    add_bayer_option(seg)
-    seg.add_argument(
-        "--demosaic",
-        choices=DEMOSAIC_METHODS,
-        default="superpixel",
-        help="mosaic decoding: one output pixel per 2x2 super-pixel, or full resolution by "
-        "bilinear interpolation of each angle [superpixel]",
-    )
-    _add_capture_options(seg)
-    _add_labels_options(seg)
+    add_read_options(seg, ("ground_truth",))
     add_plots_option(seg)
-    add_param_options(seg, specs=specs)
-    seg.set_defaults(func=run)
-
-
-def _add_capture_options(seg: argparse.ArgumentParser) -> None:
-    """The real-capture options: dark frame, offset, saturation and dark levels, mask,
-    memory limit, colour channel, registration."""
-    seg.add_argument(
-        "--dark-frame",
-        metavar="FILE",
-        help="dark frame (lens capped) subtracted from every frame, or from the raw mosaic",
-    )
-    seg.add_argument(
-        "--offset",
-        type=number_arg,
-        metavar="V",
-        help="constant black level subtracted from every sample (after --dark-frame)",
-    )
-    seg.add_argument(
-        "--saturation",
-        type=level_arg,
-        default="auto",
-        metavar="LEVEL",
-        help="samples at or above LEVEL (in the file's units, before --dark-frame/--offset) "
-        "are saturated and their pixels left out; 'auto' = the integer type's maximum (255, "
-        "65535; 4095 for a 12-bit TIFF), 'none' = no check [auto]",
-    )
-    seg.add_argument(
-        "--dark-level",
-        type=dark_level_arg,
-        default=0.0,
-        metavar="LEVEL",
-        help="samples at or below LEVEL (after subtraction) are black and their pixels left "
-        "out; 'none' = no check [0]",
-    )
-    seg.add_argument(
-        "--mask",
-        metavar="FILE",
-        help="a region (labels image: TIFF, PNG, .npy; non-zero = use): only its pixels "
-        "enter the fit and the block features",
-    )
-    seg.add_argument(
-        "--max-memory",
-        type=gib_arg,
-        metavar="GIB",
-        help="refuse inputs and runs that would need more memory than this many GiB "
-        "[$POLARSEG_MAX_BYTES or 8]",
-    )
-    seg.add_argument(
-        "--channel", type=int, metavar="C", help="colour channel to use (default: BT.601 luma)"
-    )
     seg.add_argument(
         "--thesis-maps",
         action="store_true",
@@ -122,44 +68,8 @@ def _add_capture_options(seg: argparse.ArgumentParser) -> None:
         "blocks (feature columns of segments.csv); always on with --method thesis and "
         "with --plots",
     )
-    seg.add_argument(
-        "--register",
-        action="store_true",
-        help="align the frames to the first by sub-pixel phase correlation first (shifts "
-        "are reported and written to params.json)",
-    )
-
-
-def _add_labels_options(seg: argparse.ArgumentParser) -> None:
-    """Where the labels come from (--scribbles or --classifier), --save-classifier and
-    --ground-truth."""
-    labels_from = seg.add_mutually_exclusive_group()
-    labels_from.add_argument(
-        "--scribbles",
-        metavar="FILE",
-        help="strokes (labels image: TIFF, PNG, .npy/.npz; the outputs' height x width; 0 = "
-        "unlabelled, 1, 2, ... = materials, at least two): the labels come from a pixel "
-        "classifier (random forest on multi-scale polarisation features) trained on the "
-        "scribbled pixels instead of the normalized cut; also writes probabilities.tif and "
-        "uncertainty.tif",
-    )
-    labels_from.add_argument(
-        "--classifier",
-        metavar="FILE",
-        help="apply a saved pixel classifier (.polarseg-clf, from --save-classifier or the "
-        "plugin's Save classifier...) instead of the normalized cut; nothing is retrained",
-    )
-    seg.add_argument(
-        "--save-classifier",
-        metavar="FILE",
-        help="with --scribbles: also write the trained classifier to FILE (.polarseg-clf)",
-    )
-    seg.add_argument(
-        "--ground-truth",
-        metavar="FILE",
-        help="true materials (labels image, the outputs' size): writes evaluation.json "
-        "(adjusted Rand index, IoU per segment, block accuracy) and adds it to summary.json",
-    )
+    add_param_options(seg, specs=specs)
+    seg.set_defaults(func=run)
 
 
 def _check_demosaic_args(args: argparse.Namespace) -> None:

@@ -8,7 +8,10 @@ The package's modules:
 
 - :mod:`~napari_polarseg.io.readers`: :func:`read_stack` (the formats it reads, the
   file-name rule, bit depth, saturation, black level and the checks are its module's
-  docstring); :mod:`~napari_polarseg.io.stack_formats`, one reader per kind of stack;
+  docstring); :mod:`~napari_polarseg.io.read_options`, :class:`ReadOptions` (how an input
+  is read, each option described once, the command line's reading flags made from it);
+  :mod:`~napari_polarseg.io.stack_formats`, one reader per kind of stack and
+  :data:`STACK_FORMATS`, the suffix -> reader table (also the napari reader's);
   :mod:`~napari_polarseg.io.stack_data`, :class:`StackData`;
 - :mod:`~napari_polarseg.io.frames`: single image files (:func:`read_frame`,
   :func:`to_grey`, :func:`natural_key`); :mod:`~napari_polarseg.io.tiff`, the first series
@@ -47,8 +50,10 @@ from .frames import (
 )
 from .masks import MASK_SUFFIXES, read_labels, read_mask
 from .params_files import read_params_dict, read_params_file
+from .read_options import ReadOptions, ReadSpec, options_from_values, read_specs
 from .readers import STACK_SUFFIXES, read_stack
 from .stack_data import StackData
+from .stack_formats import STACK_FORMATS, StackFormat
 from .writers import atomic_output, write_json, write_png, write_stack_tiff, write_tiff
 
 __all__ = [
@@ -57,13 +62,18 @@ __all__ = [
     "LUMA_BT601",
     "MASK_SUFFIXES",
     "SENSOR_NAMES",
+    "STACK_FORMATS",
     "STACK_SUFFIXES",
     "PathLike",
+    "ReadOptions",
+    "ReadSpec",
     "SensorDefaults",
     "StackData",
+    "StackFormat",
     "angle_from_name",
     "atomic_output",
     "natural_key",
+    "options_from_values",
     "parse_angles",
     "read_arrays",
     "read_frame",
@@ -71,6 +81,7 @@ __all__ = [
     "read_mask",
     "read_params_dict",
     "read_params_file",
+    "read_specs",
     "read_stack",
     "sensor_from_name",
     "single_frame_file",

@@ -81,13 +81,13 @@ from __future__ import annotations
 
 import os
 from collections.abc import Sequence
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from ..engine.errors import PolarsegError
-from ..engine.limits import memory_limit
 from ..engine.physics.colour_mosaic import check_bayer
 from ..engine.physics.mosaic import DEMOSAIC_METHODS
 from ..engine.physics.polarimage import distinct_angle_count
@@ -95,11 +95,12 @@ from .angles import sensor_from_name
 from .arrays import read_arrays
 from .common import PathLike, finite_number, format_numbers, input_error
 from .frames import FRAME_SUFFIXES, folder_frames, read_frame, single_frame_file
-from .stack_data import StackData, StackOptions
-from .stack_formats import read_array_stack, read_frame_files, read_mosaic, read_tiff_stack
+from .read_options import ReadOptions
+from .stack_data import BlackLevel, StackData
+from .stack_formats import STACK_FORMATS, read_frame_files, read_mosaic
 
-#: File types read as whole stacks.
-STACK_SUFFIXES = (".tif", ".tiff", ".npz", ".npy")
+#: File types read as whole stacks (the suffixes of :data:`STACK_FORMATS`).
+STACK_SUFFIXES = tuple(STACK_FORMATS)
 
 
 def _frame_label(k: int, angles: np.ndarray) -> str:
@@ -215,67 +216,53 @@ def _input_paths(path: PathLike | Sequence[PathLike]) -> tuple[Path, list[Path] 
     return files[0], (files if len(files) > 1 else None)
 
 
-def _stack_options(
-    channel: int | None,
-    saturation: float | str | None,
-    offset: float | None,
-    dark: PathLike | np.ndarray | None,
-    max_bytes: int | None,
-) -> StackOptions:
-    """The reading options, checked (the dark frame read)."""
+def _checked(read: ReadOptions) -> ReadOptions:
+    """The reading options checked: demosaicing method, Bayer order (upper case),
+    saturation level and offset (finite numbers)."""
+    if read.demosaic not in DEMOSAIC_METHODS:
+        raise PolarsegError(
+            f"demosaic method must be one of {', '.join(DEMOSAIC_METHODS)}; got {read.demosaic!r}"
+        )
+    bayer = None if read.bayer is None else check_bayer(read.bayer)
+    saturation, offset = read.saturation, read.offset
     if isinstance(saturation, str) and saturation != "auto":
         raise PolarsegError(f"saturation must be a number, 'auto' or None; got {saturation!r}")
     if saturation is not None and not isinstance(saturation, str):
         saturation = finite_number(saturation, "the saturation level")
     if offset is not None:
         offset = finite_number(offset, "the offset")
-    dark_array, dark_name = _resolve_dark(dark, channel)
-    return StackOptions(
-        channel=channel,
-        saturation=saturation,
-        limit=memory_limit(max_bytes),
-        dark=dark_array,
-        dark_name=dark_name,
-        offset=offset,
-    )
+    read.max_bytes()  # a bad limit stops here
+    return replace(read, bayer=bayer, saturation=saturation, offset=offset)
 
 
-def _check_decoding(demosaic: str, bayer: str | None) -> str | None:
-    """Check the demosaicing method; the Bayer order in upper case (None if not given)."""
-    if demosaic not in DEMOSAIC_METHODS:
-        raise PolarsegError(
-            f"demosaic method must be one of {', '.join(DEMOSAIC_METHODS)}; got {demosaic!r}"
-        )
-    return None if bayer is None else check_bayer(bayer)
+def _black_level(read: ReadOptions) -> BlackLevel:
+    """What is subtracted from the samples (the dark frame read)."""
+    dark, dark_name = _resolve_dark(read.dark_frame, read.channel)
+    return BlackLevel(dark, dark_name, read.offset)
 
 
 def _read_file_list(
-    first: Path,
-    files: list[Path],
-    angles_deg: Any,
-    decoding: bool,
-    opts: StackOptions,
+    first: Path, files: list[Path], read: ReadOptions, black: BlackLevel
 ) -> StackData:
-    """Several frame files, one per angle (``decoding``: a mosaic or Bayer order given)."""
+    """Several frame files, one per angle."""
     for f in files:
         if not f.exists():
             raise input_error(f, "no such file")
         if f.is_dir():
             raise input_error(f, "a list of frames must name image files, not folders")
-    if decoding:
+    if read.mosaic_deg is not None or read.bayer is not None:
         raise input_error(first, "a mosaic layout needs a single raw frame, not a list of files")
-    if angles_deg is not None and len(np.ravel(angles_deg)) != len(files):
-        raise input_error(first, f"{len(files)} files but {len(np.ravel(angles_deg))} angles")
-    return read_frame_files(first, files, angles_deg is not None, opts, "files")
+    angles = read.angles_deg
+    if angles is not None and len(angles) != len(files):
+        raise input_error(first, f"{len(files)} files but {len(angles)} angles")
+    return read_frame_files(first, files, angles is not None, read, black, "files")
 
 
-def _read_stack_file(p: Path, opts: StackOptions) -> StackData:
-    """A file that holds a whole stack (TIFF, NumPy), by its type."""
+def _read_stack_file(p: Path, read: ReadOptions, black: BlackLevel) -> StackData:
+    """A file that holds a whole stack (TIFF, NumPy), by its type (:data:`STACK_FORMATS`)."""
     suffix = p.suffix.lower()
-    if suffix in (".tif", ".tiff"):
-        return read_tiff_stack(p, opts)
-    if suffix in (".npz", ".npy"):
-        return read_array_stack(p, opts)
+    if suffix in STACK_FORMATS:
+        return STACK_FORMATS[suffix].read(p, read, black)
     if suffix in FRAME_SUFFIXES:
         raise input_error(
             p,
@@ -286,49 +273,69 @@ def _read_stack_file(p: Path, opts: StackOptions) -> StackData:
     raise input_error(p, f"unsupported file type {suffix or '(none)'!r} (expected {kinds})")
 
 
-def _read_path(
-    p: Path,
-    angles_deg: Any,
-    mosaic: Sequence[float] | None,
-    bayer: str | None,
-    method: str,
-    opts: StackOptions,
-) -> StackData:
+def _read_path(p: Path, read: ReadOptions, black: BlackLevel) -> StackData:
     """One file or folder: a raw mosaic (given, or named after a sensor), a folder of
     frames, or a stack file."""
     if not p.exists():
         raise input_error(p, "no such file or folder")
-    if angles_deg is not None and (mosaic is not None or bayer is not None):
+    mosaic, bayer, given = read.mosaic_deg, read.bayer, read.angles_deg is not None
+    if given and (mosaic is not None or bayer is not None):
         raise input_error(p, "give either the polariser angles or a mosaic layout, not both")
     sensor = sensor_from_name(p) if single_frame_file(p) else None
-    if sensor is not None and angles_deg is None:
+    if sensor is not None and not given:
         mosaic = sensor.layout_deg if mosaic is None else mosaic
         bayer = sensor.bayer if bayer is None else bayer
     if bayer is not None and mosaic is None:
         raise input_error(p, "a Bayer order needs a mosaic layout (--mosaic)")
     if mosaic is not None:
-        data = read_mosaic(p, mosaic, method, opts, bayer)
+        layout = tuple(float(a) for a in np.ravel(mosaic))
+        data = read_mosaic(p, replace(read, mosaic_deg=layout, bayer=bayer), black)
         if sensor is not None:
             data.metadata["sensor"] = sensor.sensor
         return data
     if p.is_dir():
-        return read_frame_files(p, folder_frames(p), angles_deg is not None, opts, "folder")
-    return _read_stack_file(p, opts)
+        return read_frame_files(p, folder_frames(p), given, read, black, "folder")
+    return _read_stack_file(p, read, black)
 
 
-def _note_reading(data: StackData, opts: StackOptions, angles_deg: Any) -> None:
+def _note_reading(data: StackData, black: BlackLevel, angles_deg: Any) -> None:
     """Record the dark frame, the offset and where the angles came from; given angles
     replace those of the file."""
-    if opts.dark is not None:
-        data.metadata["dark_frame"] = opts.dark_name or "array"
-    if opts.offset is not None:
-        data.metadata["offset"] = float(opts.offset)
+    if black.dark is not None:
+        data.metadata["dark_frame"] = black.dark_name or "array"
+    if black.offset is not None:
+        data.metadata["offset"] = float(black.offset)
     if angles_deg is not None:
         data.angles_deg = np.asarray(angles_deg, dtype=np.float64).ravel()
         data.metadata["angles_from"] = "given"
     else:
         kind = data.metadata["format"]
         data.metadata.setdefault("angles_from", "names" if kind == "files" else kind)
+
+
+def _options(options: ReadOptions | None, keywords: dict[str, Any]) -> ReadOptions:
+    """``options``, or the options the keywords of :func:`read_stack` ask for (not both)."""
+    defaults = {"demosaic": "superpixel", "saturation": "auto"}
+    changed = [k for k, v in keywords.items() if not _is(v, defaults.get(k))]
+    if options is not None:
+        if changed:
+            raise TypeError(
+                f"read_stack takes options or the keywords {', '.join(changed)}, not both"
+            )
+        return options
+    angles, mosaic, max_bytes = (keywords.pop(k) for k in ("angles_deg", "mosaic", "max_bytes"))
+    return ReadOptions(
+        angles_deg=None if angles is None else tuple(np.ravel(angles).tolist()),
+        mosaic_deg=None if mosaic is None else tuple(np.ravel(mosaic).tolist()),
+        max_memory_gib=None if max_bytes is None else max_bytes / 2**30,
+        dark_frame=keywords.pop("dark"),
+        **keywords,
+    )
+
+
+def _is(value: Any, default: Any) -> bool:
+    """Whether a keyword still has its default (an array never has)."""
+    return not isinstance(value, np.ndarray) and (value is default or value == default)
 
 
 def read_stack(
@@ -343,6 +350,7 @@ def read_stack(
     offset: float | None = None,
     saturation: float | str | None = "auto",
     max_bytes: int | None = None,
+    options: ReadOptions | None = None,
 ) -> StackData:
     """Read an angle stack from a TIFF, an ``.npz``/``.npy``, a folder, files or a mosaic.
 
@@ -379,6 +387,9 @@ def read_stack(
         per sample), nothing for float data; None = do not check.
     max_bytes : int, optional
         Memory limit for reading (default: :func:`~napari_polarseg.engine.limits.memory_limit`).
+    options : ReadOptions, optional
+        All of the above in one :class:`~napari_polarseg.io.read_options.ReadOptions`
+        (its other fields are the job's), instead of the keywords: give one or the other.
 
     Returns
     -------
@@ -397,13 +408,13 @@ def read_stack(
     --------
     >>> data = read_stack("scene.tif", angles_deg=[0, 45, 90, 135])  # doctest: +SKIP
     """
+    keywords = {k: v for k, v in locals().items() if k not in ("path", "options")}
     first, files = _input_paths(path)
-    bayer = _check_decoding(demosaic, bayer)
-    opts = _stack_options(channel, saturation, offset, dark, max_bytes)
+    read = _checked(_options(options, keywords))
+    black = _black_level(read)
     if files is not None:
-        decoding = mosaic is not None or bayer is not None
-        data = _read_file_list(first, files, angles_deg, decoding, opts)
+        data = _read_file_list(first, files, read, black)
     else:
-        data = _read_path(first, angles_deg, mosaic, bayer, demosaic, opts)
-    _note_reading(data, opts, angles_deg)
+        data = _read_path(first, read, black)
+    _note_reading(data, black, read.angles_deg)
     return _check_stack_data(first, data)

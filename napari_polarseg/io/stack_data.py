@@ -1,5 +1,5 @@
-"""What reading an angle stack gives (:class:`StackData`) and the options every format
-reader takes (:class:`StackOptions`)."""
+"""What reading an angle stack gives (:class:`StackData`) and what is subtracted from
+its samples (:class:`BlackLevel`)."""
 
 from __future__ import annotations
 
@@ -57,29 +57,21 @@ class StackData:
         return np.deg2rad(self.angles_deg)
 
 
-@dataclass
-class StackOptions:
-    """Reading options shared by the format readers.
+@dataclass(frozen=True)
+class BlackLevel:
+    """What is subtracted from every sample once saturation was found (resolved from
+    :class:`~napari_polarseg.io.read_options.ReadOptions`: the dark frame read).
 
     Attributes
     ----------
-    channel : int or None
-        Colour channel to use (None: BT.601 luma).
-    saturation : float, "auto" or None
-        Saturation level (:func:`napari_polarseg.io.common.saturation_level`).
-    limit : int
-        Memory limit in bytes (0: the default limit).
     dark : ndarray (H, W) or None
-        Dark frame subtracted after saturation was found.
+        Dark frame.
     dark_name : str or None
         The file the dark frame was read from, for messages.
     offset : float or None
-        Constant black level subtracted the same way.
+        Constant black level.
     """
 
-    channel: int | None = None
-    saturation: float | str | None = "auto"
-    limit: int = 0
     dark: np.ndarray | None = None
     dark_name: str | None = None
     offset: float | None = None

@@ -1,5 +1,6 @@
 """One reader per kind of angle stack: a multi-page TIFF, an ``.npz``/``.npy``, frame files
-(a folder or a list), a raw mono or colour-polarisation mosaic.
+(a folder or a list), a raw mono or colour-polarisation mosaic; :data:`STACK_FORMATS`, the
+suffix -> reader table of the stack files.
 
 Each returns a :class:`~napari_polarseg.io.stack_data.StackData` whose angles may still be
 missing; :func:`napari_polarseg.io.readers.read_stack` picks the reader and checks the
@@ -10,11 +11,13 @@ from __future__ import annotations
 
 import json
 import os
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+import tifffile
 
 from ..engine.errors import PolarsegError
 from ..engine.limits import check_bytes
@@ -25,13 +28,15 @@ from ..engine.physics.colour_mosaic import (
     luminance,
 )
 from ..engine.physics.mosaic import demosaic, demosaic_flags
+from ..engine.physics.polarimage import distinct_angle_count
 from ..tiff_angles import FROM_JSON
 from .angles import angle_from_name
 from .arrays import read_arrays
 from .common import dims, first_line, input_error, saturation_level
 from .frames import grey_frames, load_frame
 from .mosaic_checks import check_mosaic_channels, periodicity_warning
-from .stack_data import StackData, StackOptions
+from .read_options import ReadOptions
+from .stack_data import BlackLevel, StackData
 from .tiff import colour_last, read_tiff
 
 
@@ -48,9 +53,9 @@ def _metadata_angles(path: Path, angles: Any) -> np.ndarray | None:
     return values
 
 
-def read_tiff_stack(path: Path, opts: StackOptions) -> StackData:
+def read_tiff_stack(path: Path, opts: ReadOptions, black: BlackLevel) -> StackData:
     """A multi-page TIFF, its angles from its metadata (if any)."""
-    data, axes, meta = read_tiff(path, opts.limit)
+    data, axes, meta = read_tiff(path, opts.max_bytes())
     data, colour = colour_last(data, axes)
     if data.ndim == (3 if colour else 2):
         raise input_error(
@@ -61,7 +66,7 @@ def read_tiff_stack(path: Path, opts: StackOptions) -> StackData:
     bits = meta.get("bits_per_sample")
     level = saturation_level(opts.saturation, data.dtype, bits)
     stack, saturated = grey_frames(path, data, colour, opts.channel, True, level)
-    stack = opts.subtract(path, stack)
+    stack = black.subtract(path, stack)
     info = {"format": "tiff", **{k: v for k, v in meta.items() if k != "description"}}
     info["saturation_level"] = level
     angles = _metadata_angles(path, meta["description"].get("angles"))
@@ -70,12 +75,16 @@ def read_tiff_stack(path: Path, opts: StackOptions) -> StackData:
     return StackData(stack, angles, os.fspath(path), info, saturated=saturated)
 
 
-def read_array_stack(path: Path, opts: StackOptions) -> StackData:
+def read_array_stack(path: Path, opts: ReadOptions, black: BlackLevel) -> StackData:
     """An ``.npy`` stack, or an ``.npz`` with ``stack`` and optionally ``angles``,
     ``labels`` (ground truth) and ``params`` (a JSON string)."""
     info: dict[str, Any] = {"format": path.suffix.lower().lstrip(".")}
     data, more = read_arrays(
-        path, ("stack",), optional=("angles", "labels", "params"), only=False, limit=opts.limit
+        path,
+        ("stack",),
+        optional=("angles", "labels", "params"),
+        only=False,
+        limit=opts.max_bytes(),
     )
     angles, ground_truth = more.get("angles"), more.get("labels")
     if "params" in more:
@@ -86,7 +95,7 @@ def read_array_stack(path: Path, opts: StackOptions) -> StackData:
     colour = data.ndim == 4 and data.shape[-1] in (2, 3, 4)
     level = saturation_level(opts.saturation, data.dtype)
     stack, saturated = grey_frames(path, data, colour, opts.channel, True, level)
-    stack = opts.subtract(path, stack)
+    stack = black.subtract(path, stack)
     info["saturation_level"] = level
     if angles is not None:
         if angles.dtype.kind not in "uif":
@@ -117,7 +126,12 @@ def _sorted_by_angle(files: list[Path]) -> tuple[list[Path], np.ndarray]:
 
 
 def read_frame_files(
-    source: Path, files: list[Path], angles_given: bool, opts: StackOptions, kind: str
+    source: Path,
+    files: list[Path],
+    angles_given: bool,
+    opts: ReadOptions,
+    black: BlackLevel,
+    kind: str,
 ) -> StackData:
     """One frame a file (``kind`` ``"folder"`` or ``"files"``); without given angles, the
     angles come from the file names and the frames are sorted by them."""
@@ -126,7 +140,7 @@ def read_frame_files(
         files, angles = _sorted_by_angle(files)
     frames, flags, levels = [], [], []
     for f in files:
-        data, colour, bits = load_frame(f, opts.limit)
+        data, colour, bits = load_frame(f, opts.max_bytes())
         level = saturation_level(opts.saturation, data.dtype, bits)
         frame, saturated = grey_frames(f, data, colour, opts.channel, False, level)
         if frames and frame.shape != frames[0].shape:
@@ -139,13 +153,13 @@ def read_frame_files(
             check_bytes(
                 len(files) * frame.size * 16.0,
                 f"{os.fspath(source)}: reading {len(files)} frames of {dims(frame.shape)} pixels",
-                opts.limit,
+                opts.max_bytes(),
             )
         frames.append(frame)
         flags.append(saturated)
         levels.append(level)
     saturated = np.stack(flags) if all(s is not None for s in flags) else None
-    stack = opts.subtract(source, np.stack(frames))
+    stack = black.subtract(source, np.stack(frames))
     info = {"format": kind, "files": [f.name if kind == "folder" else os.fspath(f) for f in files]}
     known = [lv for lv in levels if lv is not None]
     info["saturation_level"] = min(known) if known else None
@@ -178,17 +192,14 @@ def _decode_mosaic(
         raise input_error(path, str(exc)) from None
 
 
-def read_mosaic(
-    path: Path,
-    layout: Sequence[float],
-    method: str,
-    opts: StackOptions,
-    bayer: str | None = None,
-) -> StackData:
-    """A raw mono (``bayer`` None) or colour-polarisation frame, decoded."""
+def read_mosaic(path: Path, opts: ReadOptions, black: BlackLevel) -> StackData:
+    """A raw mono (``opts.bayer`` None) or colour-polarisation frame, decoded with the
+    layout ``opts.mosaic_deg`` by ``opts.demosaic``."""
+    layout, method, bayer = opts.mosaic_deg, opts.demosaic, opts.bayer
+    assert layout is not None
     if path.is_dir():
         raise input_error(path, "a mosaic layout needs a single raw frame, not a folder")
-    data, colour, bits = load_frame(path, opts.limit)
+    data, colour, bits = load_frame(path, opts.max_bytes())
     data = check_mosaic_channels(path, data, colour)
     colour = colour and data.ndim == 3
     level = saturation_level(opts.saturation, data.dtype, bits)
@@ -198,9 +209,9 @@ def read_mosaic(
         check_bytes(
             raw.size * 8.0 * planes,
             f"{os.fspath(path)}: interpolating a {dims(raw.shape)} mosaic",
-            opts.limit,
+            opts.max_bytes(),
         )
-    raw = opts.subtract(path, raw)
+    raw = black.subtract(path, raw)
     warning = periodicity_warning(path, raw)
     stack, angles, saturated, colour_stack = _decode_mosaic(
         path, raw, saturated_raw, layout, method, bayer
@@ -222,3 +233,81 @@ def read_mosaic(
     return StackData(
         stack, angles, os.fspath(path), info, saturated=saturated, colour_stack=colour_stack
     )
+
+
+def _tiff_json_angles(path: Path) -> Any:
+    """The ``angles`` entry of a TIFF's JSON metadata (tifffile's shaped metadata, else
+    the first page's JSON description), or None (never raises)."""
+    try:
+        with tifffile.TiffFile(path) as tif:
+            if len(tif.pages) < 1:
+                return None
+            shaped = tif.shaped_metadata
+            if shaped:
+                return dict(shaped[0]).get("angles")
+            description = tif.pages[0].description or ""
+            if description.lstrip().startswith("{"):
+                meta = json.loads(description)
+                return meta.get("angles") if isinstance(meta, dict) else None
+    except Exception:
+        return None
+    return None
+
+
+def enough_angles(angles: Any) -> bool:
+    """Whether ``angles`` (degrees) are finite numbers with at least 3 distinct modulo
+    180 degrees (never raises)."""
+    try:
+        values = np.asarray(angles, dtype=float).ravel()
+    except (TypeError, ValueError):
+        return False
+    return bool(np.all(np.isfinite(values))) and distinct_angle_count(np.deg2rad(values)) >= 3
+
+
+def _tiff_carries_angles(path: Path) -> bool:
+    return enough_angles(_tiff_json_angles(path))
+
+
+def _npz_carries_angles(path: Path) -> bool:
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            return "stack" in data.files and "angles" in data.files
+    except Exception:
+        return False
+
+
+def _never(path: Path) -> bool:
+    return False
+
+
+@dataclass(frozen=True)
+class StackFormat:
+    """A kind of file that holds a whole angle stack.
+
+    Attributes
+    ----------
+    read : callable
+        ``read(path, options, black_level) -> StackData`` (angles may still be missing).
+    carries_angles : callable
+        ``carries_angles(path) -> bool``, a cheap look at the file (its header, the names
+        of its arrays): whether it names its own polariser angles, so that it can be
+        opened without being told them (the napari reader claims only those files).
+    """
+
+    read: Callable[[Path, ReadOptions, BlackLevel], StackData]
+    carries_angles: Callable[[Path], bool]
+
+
+_TIFF = StackFormat(read_tiff_stack, _tiff_carries_angles)
+_NPZ = StackFormat(read_array_stack, _npz_carries_angles)
+
+#: File suffix (lower case) -> the format of a file that holds a whole stack; the one
+#: table :func:`~napari_polarseg.io.read_stack` and the napari reader pick a reader by.
+#: Single image files (:data:`~napari_polarseg.io.frames.FRAME_SUFFIXES`) are frames of
+#: a folder or a list, or raw mosaic frames.
+STACK_FORMATS: dict[str, StackFormat] = {
+    ".tif": _TIFF,
+    ".tiff": _TIFF,
+    ".npz": _NPZ,
+    ".npy": StackFormat(read_array_stack, _never),
+}

@@ -1,0 +1,148 @@
+"""The lines a command line shows about a segment job (:mod:`napari_polarseg.jobs`): its
+summary line, the warning of a degenerate result with what to try, what the cut gave up
+on, the pixels left out, the files written, the classifier's and the evaluation's lines.
+
+They are built as :class:`Message` data (text and stream), which the job returns in its
+:class:`~napari_polarseg.jobs.FolderResult`, the command line prints and a batch keeps as
+each scene's log; nothing is printed here. Every line starts with :data:`PROG`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from .engine.params import PRESETS
+from .engine.physics.pixel_mask import mask_reasons
+
+if TYPE_CHECKING:
+    from .jobs import LabelSource, Run
+
+#: Prefix of every message line (the command's name).
+PROG = "polarseg"
+
+
+@dataclass(frozen=True)
+class Message:
+    """One line a command line shows about a run, and its stream (stdout or stderr)."""
+
+    text: str
+    stream: str = "stdout"
+
+
+def degenerate_warning(run: Run) -> str | None:
+    """The one-line warning of a degenerate result (``SegmentationResult.degenerate``:
+    one segment holds >= 95 % of the pixels, or every other is below the minimum size),
+    with what to try; None when the result is not degenerate."""
+    check = run.result.degenerate()
+    if not check.degenerate:
+        return None
+    if "classifier" in run.seconds:  # labels from a pixel classifier, not the cut
+        advice = "paint strokes on every material (--scribbles) or retrain the classifier"
+    else:
+        tries = ["fewer or more segments (--segments)", "a larger window (--window)"]
+        recommended = PRESETS["recommended"].replace(n_segments=run.params.n_segments)
+        if run.params != recommended:
+            tries.insert(0, "--preset recommended")
+        advice = f"try {', '.join(tries)}, or scribbles (--scribbles)"
+    return f"{PROG}: warning: degenerate result: {check.reason}; {advice}"
+
+
+def limit_lines(run: Run) -> list[str]:
+    """What the cut gave up on, the close-up of one surface, and the registration
+    shifts."""
+    lines = []
+    limits = run.result.cut_limits
+    done = []
+    if limits.get("eigensolver_capped"):
+        done.append(
+            f"stopped {limits['eigensolver_capped']} eigensolve(s) at their cap of "
+            f"{limits.get('max_products')} products"
+        )
+    if limits.get("isolated_skipped"):
+        done.append(f"peeled {limits['isolated_skipped']} isolated block(s) off unsolved")
+    if done:
+        lines.append(f"{PROG}: the cut {' and '.join(done)} (cut_limits in summary.json)")
+    record = run.result.superpixels
+    if record.get("close_up"):
+        lines.append(
+            f"{PROG}: one smooth surface fills the frame (it explains "
+            f"{record['surface_share']:.0%} of the polarisation): the segments follow where "
+            "the polarisation departs from that surface's trend (superpixels in summary.json)"
+        )
+    if run.shifts is not None:
+        biggest = float(np.max(np.hypot(run.shifts[:, 0], run.shifts[:, 1])))
+        lines.append(
+            f"{PROG}: registered {len(run.shifts)} frames to frame 0, largest shift "
+            f"{biggest:.2f} px (rows, columns per frame in params.json)"
+        )
+    return lines
+
+
+def report_messages(
+    out: Path, run: Run, written: list[str], note_repeated: bool = True
+) -> list[Message]:
+    """The run's lines; ``note_repeated=False`` leaves out the information that frames at
+    a repeated angle were averaged (the bundled samples, made that way; it stays in
+    params.json and summary.json)."""
+    result = run.result
+    err = result.mean_reconstruction_error
+    err_text = "n/a" if err is None else f"{err:.4g}"
+    h, w = result.labels.shape
+    messages = [
+        Message(
+            f"{PROG}: {result.n_segments} segments over {h} x {w} pixels, "
+            f"mean reconstruction error {err_text}"
+        )
+    ]
+    warning = degenerate_warning(run)
+    if warning is not None:
+        messages.append(Message(warning, "stderr"))
+    lines = limit_lines(run)
+    counts = result.mask_counts
+    if counts.get("masked_pixels"):
+        reasons = mask_reasons(counts)
+        lines.append(
+            f"{PROG}: left out {counts['masked_pixels']} of {h * w} pixels "
+            f"({', '.join(reasons)}; see mask.tif)"
+        )
+    for frames in result.duplicate_angle_frames if note_repeated else ():
+        angles = " and ".join(f"{run.data.angles_deg[k]:g}" for k in frames)
+        lines.append(
+            f"{PROG}: frames {', '.join(map(str, frames))} ({angles} degrees) are one "
+            "polariser state: averaged"
+        )
+    plots = [name for name in written if name.startswith("plots/")]
+    listed = [name for name in written if name not in plots]
+    if plots:
+        listed.insert(-2, f"plots/ ({len(plots)} PNGs)")  # before params.json, summary.json
+    lines.append(f"{PROG}: wrote {', '.join(listed)} to {out}")
+    return messages + [Message(line) for line in lines]
+
+
+def classifier_messages(source: LabelSource, save_file: str | None) -> list[Message]:
+    """Say what the classifier did (and that it was written to ``save_file``, if asked)."""
+    clf = source.segmentation.classifier
+    if source.classifier_file:
+        lines = [f"{PROG}: applied the classifier {source.classifier_file} (not retrained)"]
+    else:
+        lines = [
+            f"{PROG}: pixel classifier trained on {clf.n_training_pixels} scribbled "
+            f"pixels of {clf.classes.size} materials, {len(clf.feature_names)} features"
+        ]
+    if save_file:
+        lines.append(f"{PROG}: wrote the classifier to {save_file}")
+    return [Message(line) for line in lines]
+
+
+def evaluation_message(evaluation: dict[str, Any]) -> Message:
+    """The line of the evaluation against a ground truth."""
+    return Message(
+        f"{PROG}: against the ground truth: adjusted Rand index "
+        f"{evaluation['adjusted_rand_index']:.3f}, mean IoU {evaluation['mean_iou']:.3f}, "
+        f"block accuracy {evaluation['block_accuracy_worst']:.3f} (worst) .. "
+        f"{evaluation['block_accuracy_optimistic']:.3f} (optimistic)"
+    )
