@@ -128,6 +128,7 @@ class PixelSegmenter:
         params: PixelFeatureParams | None = None,
         colour: bool = True,
         segment_params: SegmentParams | None = None,
+        progress: Any = None,
     ) -> FeatureStack:
         """The feature stack for ``params`` (kept while the image and params stay):
         the luminance image's features and, with ``colour`` and a colour stack, every
@@ -145,7 +146,7 @@ class PixelSegmenter:
                 images += [(c.intensity, c.dop, c.phase) for c in colours]
                 feats = multichannel_features(images, params, channels=["", *self.colours])
             else:
-                feats = pixel_features(*maps, params)
+                feats = pixel_features(*maps, params, progress=progress)
             self._features = (key, feats)
         return self._features[1]
 

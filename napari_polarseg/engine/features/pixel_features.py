@@ -46,7 +46,7 @@ multi-channel inputs.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
@@ -398,6 +398,7 @@ def pixel_features(
     params: PixelFeatureParams | None = None,
     *,
     channel: str = "",
+    progress: Callable[[float], None] | None = None,
 ) -> FeatureStack:
     """The feature stack (H, W, F) of one polarisation image.
 
@@ -409,6 +410,8 @@ def pixel_features(
         Scales and groups (default :class:`PixelFeatureParams()`).
     channel : str, optional
         Prefix of every name (``"<channel>:"``) for multi-channel inputs.
+    progress : callable(share), optional
+        Called with the share of the scales done after each (it may raise to stop).
 
     Returns
     -------
@@ -441,6 +444,8 @@ def pixel_features(
         for v in _level_features(levels[f], sigma, f, params).values():
             out[k] = upsample(v.astype(np.float32, copy=False), f, i.shape)
             k += 1
+        if progress is not None:
+            progress(0.9 * (params.scales.index(sigma) + 1) / len(params.scales))
     local = [q for q in range(k) if _scale_of(names[q]) <= REGION_MAX_SIGMA]
     if "regions" in params.groups and local:
         regions = superpixels(i, params.regions_of(i.shape))

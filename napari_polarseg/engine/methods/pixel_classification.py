@@ -48,10 +48,10 @@ class PixelClassification:
         seg = self.segmenter(scene, inputs.get("colour_stack"))
         classifier = inputs.get("classifier")
         if classifier is None:
-            seg.features(segment_params=params)
+            seg.features(segment_params=params, progress=run.within)
         else:
             colour = any(n.split(":", 1)[0] in seg.colours for n in classifier.feature_names)
-            seg.features(classifier.feature_params, colour, params)
+            seg.features(classifier.feature_params, colour, params, progress=run.within)
         run.begin("classifier")
         prediction, classifier, seconds = seg.classify(
             inputs.get("scribbles"),
