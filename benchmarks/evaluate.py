@@ -28,6 +28,10 @@ the ARI against ground truth of every option the "Segmentation quality" table
   ``RECOMMENDED`` cut into as many segments as there are classes, the plain baseline and
   the pixel classifier on the truth file's strokes, and the in-sample bound (trained on
   the frame's own truth); ARI over the labelled pixels, degenerate results marked;
+- the material tables (``materials.py``): the rendered scenes (development half, seeds
+  0–11, and test half, seeds 12–23, each with its means) and the real frames, one row
+  per frame: intensity k-means, smoothed k-means, the default (preset ``auto``) and the
+  truth-trained left→right bounds; degenerate results marked ‡ and counted;
 - with ``--sweep``: the best cell of a parameter grid per scene (chosen on the same
   scene, so an optimistic upper bound, not a fair score), and the cells with the best
   worst case over all scenes and seeds (how ``RECOMMENDED`` was chosen);
@@ -39,6 +43,8 @@ Usage::
     .venv/bin/python benchmarks/evaluate.py --docs     # and rewrite docs/quality.md's tables
     .venv/bin/python benchmarks/evaluate.py --limits   # the limits analysis, ~1 minute
     .venv/bin/python benchmarks/evaluate.py --sweep    # plus the grid search, ~5 minutes
+    .venv/bin/python benchmarks/evaluate.py --rendered dev      # only the rendered dev half
+    .venv/bin/python benchmarks/evaluate.py --rendered all --real --bounds plain
 """
 
 from __future__ import annotations
@@ -48,6 +54,7 @@ import itertools
 import time
 from pathlib import Path
 
+import materials
 import numpy as np
 from baselines import intensity_kmeans, plain_baseline, real_frames
 from sklearn.metrics import adjusted_rand_score
@@ -317,11 +324,17 @@ def main(argv: list[str] | None = None) -> None:  # noqa: PLR0915 - a report scr
     parser.add_argument(
         "--real-dir", type=Path, default=REAL_DIR, help=f"the real frames [{REAL_DIR}]"
     )
+    materials.add_arguments(parser)
     args = parser.parse_args(argv)
     if args.limits:
         from limits import main as limits_main
 
         limits_main()
+        return
+    if args.no_bound:
+        args.bounds = "none"
+    if materials.subset_only(args):
+        materials.run(args, args.real_dir)
         return
     seeds = [int(s) for s in args.seeds.split(",")]
     cols = list(OPTIONS)
@@ -361,7 +374,8 @@ def main(argv: list[str] | None = None) -> None:  # noqa: PLR0915 - a report scr
             print(real_report(r))
     else:
         print(f"\nno real frames in {args.real_dir}: the real-frame table is skipped")
-    print(f"\n{time.perf_counter() - t0:.1f} s")
+    materials.run(args, args.real_dir)
+    print(f"\n{time.perf_counter() - t0:.1f} s wall in all")
     if args.docs:
         cmd = "python benchmarks/evaluate.py --docs"
         if args.seeds != "0,1,2":
