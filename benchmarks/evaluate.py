@@ -303,7 +303,8 @@ def write_docs(table: str, command: str, page: Path = QUALITY_PAGE) -> None:
     page.write_text(head + block + tail, encoding="utf-8")
 
 
-def main(argv: list[str] | None = None) -> None:  # noqa: PLR0915 - a report script
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    """The command line of :func:`main`."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--sweep", action="store_true", help="also search the grid")
     parser.add_argument("--seeds", default="0,1,2", help="scene seeds (0 = bundled sample)")
@@ -319,20 +320,27 @@ def main(argv: list[str] | None = None) -> None:  # noqa: PLR0915 - a report scr
         "--limits", action="store_true", help="only the limits analysis (limits.py), no table"
     )
     parser.add_argument(
-        "--no-bound", action="store_true", help="skip the truth-trained bounds (~1 minute)"
+        "--no-bound",
+        action="store_true",
+        help="skip the truth-trained bounds (~1 minute; also --bounds none)",
     )
     parser.add_argument(
         "--real-dir", type=Path, default=REAL_DIR, help=f"the real frames [{REAL_DIR}]"
     )
     materials.add_arguments(parser)
     args = parser.parse_args(argv)
+    if args.no_bound:
+        args.bounds = "none"
+    return args
+
+
+def main(argv: list[str] | None = None) -> None:  # noqa: PLR0915 - a report script
+    args = parse_args(argv)
     if args.limits:
         from limits import main as limits_main
 
         limits_main()
         return
-    if args.no_bound:
-        args.bounds = "none"
     if materials.subset_only(args):
         materials.run(args, args.real_dir)
         return
