@@ -7,6 +7,13 @@
   engine's feature code, so it stays a fixed yardstick when that code changes.
 - :func:`intensity_kmeans`: k-means (k = number of classes, 10 restarts, seed 0) on
   log Î smoothed at σ = 2 and 8 px — "intensity alone", no polarisation, no training.
+- :func:`smoothed_kmeans`: k-means (10 restarts, seed 0) on the plain baseline's 20
+  features, standardised — the plain *unsupervised* yardstick: what clustering the
+  smoothed polarisation features does with no superpixels, no graph and no training.
+- :func:`truth_bound_halves`: a random forest on the same 20 features (or those plus the
+  engine's pixel features) trained on the *truth* of a scene's left half and scored on
+  its right half: what these features can tell apart given labels, without scoring
+  pixels the forest saw.
 """
 
 from __future__ import annotations
@@ -18,6 +25,7 @@ import numpy as np
 from scipy import ndimage
 from sklearn.cluster import KMeans
 from sklearn.ensemble import RandomForestClassifier
+from threadpoolctl import threadpool_limits
 
 PLAIN_SIGMAS = (1, 2, 4, 8, 16)
 EPS = 1e-6
@@ -62,8 +70,100 @@ def intensity_kmeans(intensity: np.ndarray, k: int) -> np.ndarray:
     f = np.stack([ndimage.gaussian_filter(log_i, s) for s in (2, 8)], axis=-1)
     x = f.reshape(-1, 2)
     x = (x - x.mean(axis=0)) / (x.std(axis=0) + EPS)
-    km = KMeans(k, n_init=10, random_state=0).fit(x[:: max(1, x.shape[0] // 200_000)])
-    return km.predict(x).reshape(intensity.shape)
+    return _kmeans(x, x, k).reshape(intensity.shape)
+
+
+def _kmeans(fit: np.ndarray, x: np.ndarray, k: int) -> np.ndarray:
+    """k-means (10 restarts, seed 0) fitted on ``fit`` (evenly subsampled to about
+    200 000 rows), nearest centre of every row of ``x``. One OpenMP thread: on a small
+    shared machine k-means' threads cost more than they gain (2 s against 0.2 s for a
+    240 × 320 scene, measured with other jobs running)."""
+    with threadpool_limits(1, user_api="openmp"):
+        km = KMeans(k, n_init=10, random_state=0).fit(fit[:: max(1, fit.shape[0] // 200_000)])
+        return km.predict(x)
+
+
+def smoothed_kmeans(
+    intensity: np.ndarray,
+    dop: np.ndarray,
+    phase: np.ndarray,
+    k: int,
+    valid: np.ndarray | None = None,
+) -> np.ndarray:
+    """Labels (H, W) of k-means on the plain baseline's 20 smoothed features.
+
+    The features of :func:`plain_features` (log Î, log ρ, log Stokes-averaged DoLP and
+    the local spread of ρ, each Gaussian-smoothed at σ = 1, 2, 4, 8, 16 px) are
+    standardised (zero mean, unit variance over the fitted pixels) and clustered by
+    k-means into ``k`` clusters (10 restarts, seed 0). The centres are fitted on the
+    pixels where ``valid`` is True (all when None; at most about 200 000 of them, evenly
+    subsampled) and every pixel gets its nearest centre. Unsupervised and spatially
+    naive: no superpixels, no graph, no smoothing of the labels.
+    """
+    f = plain_features(intensity, dop, phase)
+    x = f.reshape(-1, f.shape[-1]).astype(np.float64)
+    fit = x if valid is None else x[np.asarray(valid, bool).ravel()]
+    mean, std = fit.mean(axis=0), fit.std(axis=0) + EPS
+    return _kmeans((fit - mean) / std, (x - mean) / std, k).reshape(intensity.shape)
+
+
+#: Feature sets of :func:`truth_bound_halves`.
+BOUND_FEATURE_SETS = ("plain", "rich")
+#: Training pixels sampled from the left half's truth.
+BOUND_HALF_PIXELS = 20_000
+
+
+def bound_features(
+    intensity: np.ndarray, dop: np.ndarray, phase: np.ndarray, features: str = "plain"
+) -> np.ndarray:
+    """(H, W, F) features of the bound: ``plain`` = the 20 of :func:`plain_features`;
+    ``rich`` = those plus the engine's default pixel feature stack
+    (``napari_polarseg.engine.pixel_features``, 88 features at σ = 1..16)."""
+    if features not in BOUND_FEATURE_SETS:
+        raise ValueError(f"features must be one of {BOUND_FEATURE_SETS}, got {features!r}")
+    f = plain_features(intensity, dop, phase)
+    if features == "plain":
+        return f
+    from napari_polarseg.engine import pixel_features
+
+    rich = pixel_features(intensity, dop, phase).data
+    return np.concatenate([f, rich], axis=-1)
+
+
+def truth_bound_halves(
+    intensity: np.ndarray,
+    dop: np.ndarray,
+    phase: np.ndarray,
+    truth: np.ndarray,
+    features: str = "plain",
+) -> tuple[float, bool]:
+    """(ARI, every class seen) of a random forest trained on the truth of the LEFT half.
+
+    A random forest (100 trees, seed 0, balanced classes) on :func:`bound_features`
+    learns from up to :data:`BOUND_HALF_PIXELS` labelled pixels (``truth > 0``) of the
+    columns left of the middle and predicts the labelled pixels right of it; the ARI is
+    over those right-half pixels. The features are computed on the whole image (a
+    smoothing scale reaches across the middle, as it would for any method). The flag is
+    False when a class labelled in the right half has no pixel in the left half (the
+    forest cannot name it: the bound is lower than the features allow).
+    """
+    from sklearn.metrics import adjusted_rand_score
+
+    f = bound_features(intensity, dop, phase, features)
+    half = truth.shape[1] // 2
+    left, right = truth[:, :half], truth[:, half:]
+    train = np.flatnonzero((left > 0).ravel())
+    scored = right > 0
+    if train.size == 0 or not scored.any():
+        return float("nan"), False
+    rng = np.random.default_rng(0)
+    train = rng.choice(train, min(BOUND_HALF_PIXELS, train.size), replace=False)
+    fl = f[:, :half].reshape(-1, f.shape[-1])
+    model = RandomForestClassifier(100, n_jobs=-1, random_state=0, class_weight="balanced")
+    model.fit(fl[train], left.ravel()[train])
+    pred = model.predict(f[:, half:][scored])
+    seen = set(np.unique(right[scored])) <= set(model.classes_)
+    return float(adjusted_rand_score(right[scored], pred)), bool(seen)
 
 
 def real_frames(folder: Path) -> Iterator[tuple]:

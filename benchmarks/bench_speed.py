@@ -504,7 +504,7 @@ def auto_child(task: str, path: Path) -> dict:
     """The default preset's (``auto``) whole run, cold, in this fresh process: on the
     720 × 660 reference, the synthetic 1224 × 1024 camera frame, or a real frame."""
     from napari_polarseg import io as pio
-    from napari_polarseg.engine import Pipeline
+    from napari_polarseg.engine import Scene
     from napari_polarseg.engine.params import AUTO
 
     if task == "auto-frame":
@@ -513,7 +513,7 @@ def auto_child(task: str, path: Path) -> dict:
     else:
         stack, angles = load(path)
     t0 = time.perf_counter()
-    res = Pipeline(stack, angles, AUTO.replace(n_segments=3)).run()
+    res = Scene(stack, angles).segment(AUTO.replace(n_segments=3))
     seconds = time.perf_counter() - t0
     return {
         "seconds": seconds,

@@ -28,6 +28,10 @@ the ARI against ground truth of every option the "Segmentation quality" table
   ``RECOMMENDED`` cut into as many segments as there are classes, the plain baseline and
   the pixel classifier on the truth file's strokes, and the in-sample bound (trained on
   the frame's own truth); ARI over the labelled pixels, degenerate results marked;
+- the material tables (``materials.py``): the rendered scenes (development half, seeds
+  0–11, and test half, seeds 12–23, each with its means) and the real frames, one row
+  per frame: intensity k-means, smoothed k-means, the default (preset ``auto``) and the
+  truth-trained left→right bounds; degenerate results marked ‡ and counted;
 - with ``--sweep``: the best cell of a parameter grid per scene (chosen on the same
   scene, so an optimistic upper bound, not a fair score), and the cells with the best
   worst case over all scenes and seeds (how ``RECOMMENDED`` was chosen);
@@ -39,6 +43,8 @@ Usage::
     .venv/bin/python benchmarks/evaluate.py --docs     # and rewrite docs/quality.md's tables
     .venv/bin/python benchmarks/evaluate.py --limits   # the limits analysis, ~1 minute
     .venv/bin/python benchmarks/evaluate.py --sweep    # plus the grid search, ~5 minutes
+    .venv/bin/python benchmarks/evaluate.py --rendered dev      # only the rendered dev half
+    .venv/bin/python benchmarks/evaluate.py --rendered all --real --bounds plain
 """
 
 from __future__ import annotations
@@ -48,13 +54,15 @@ import itertools
 import time
 from pathlib import Path
 
+import materials
 import numpy as np
 from baselines import intensity_kmeans, plain_baseline, real_frames
 from sklearn.metrics import adjusted_rand_score
 
-from napari_polarseg.engine import Pipeline, SegmentParams, intensity_baseline
+from napari_polarseg.engine import Pipeline, Scene, SegmentParams, intensity_baseline
 from napari_polarseg.engine.analysis.pixel_classifier import ClassifierParams, make_model
 from napari_polarseg.engine.analysis.pixel_segmentation import PixelSegmenter
+from napari_polarseg.engine.analysis.scribbles import scribble_result
 from napari_polarseg.engine.features.pixel_features import (
     GROUPS,
     PixelFeatureParams,
@@ -133,9 +141,14 @@ def evaluate(name: str, seed: int, sweep: bool) -> dict:
     pipe = Pipeline(stack, angles, SegmentParams(n_segments=k))
     for column, params in OPTIONS.items():
         if params is not None:
-            row[column] = ari(truth, pipe.run(params.replace(n_segments=k), False).labels)
+            row[column] = ari(
+                truth,
+                Scene(pipeline=pipe)
+                .segment(params.replace(n_segments=k), reconstruction=False)
+                .labels,
+            )
     strokes = scribble_strokes(truth, seed=0)
-    labels, _ = pipe.scribble_result(strokes, RECOMMENDED.replace(window=SCRIBBLE_WINDOW))
+    labels, _ = scribble_result(pipe, strokes, RECOMMENDED.replace(window=SCRIBBLE_WINDOW))
     row["block scribbles"] = ari(truth, labels)
     pol = pipe.get("polarisation")
     row["plain baseline"] = ari(truth, plain_baseline(pol.intensity, pol.dop, pol.phase, strokes))
@@ -145,7 +158,9 @@ def evaluate(name: str, seed: int, sweep: bool) -> dict:
         for values in itertools.product(*GRID.values()):
             change = dict(zip(GRID, values, strict=True))
             params = SegmentParams(n_segments=k, **change)
-            row["grid"][values] = ari(truth, pipe.run(params, False).labels)
+            row["grid"][values] = ari(
+                truth, Scene(pipeline=pipe).segment(params, reconstruction=False).labels
+            )
         best = max(row["grid"], key=row["grid"].get)
         row["best of grid"] = row["grid"][best]
         row["best params"] = dict(zip(GRID, best, strict=True))
@@ -224,7 +239,11 @@ def evaluate_real(folder: Path) -> list[dict]:
         )
         for column, params in presets:
             t0 = time.perf_counter()
-            labels = pipe.run(params.replace(n_segments=k), False).labels
+            labels = (
+                Scene(pipeline=pipe)
+                .segment(params.replace(n_segments=k), reconstruction=False)
+                .labels
+            )
             row[column] = ari_where(truth, labels, where)
             row[f"{column} seconds"] = time.perf_counter() - t0
             if largest_share(labels) >= DEGENERATE_SHARE:
@@ -296,7 +315,8 @@ def write_docs(table: str, command: str, page: Path = QUALITY_PAGE) -> None:
     page.write_text(head + block + tail, encoding="utf-8")
 
 
-def main(argv: list[str] | None = None) -> None:  # noqa: PLR0915 - a report script
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    """The command line of :func:`main`."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--sweep", action="store_true", help="also search the grid")
     parser.add_argument("--seeds", default="0,1,2", help="scene seeds (0 = bundled sample)")
@@ -312,16 +332,29 @@ def main(argv: list[str] | None = None) -> None:  # noqa: PLR0915 - a report scr
         "--limits", action="store_true", help="only the limits analysis (limits.py), no table"
     )
     parser.add_argument(
-        "--no-bound", action="store_true", help="skip the truth-trained bounds (~1 minute)"
+        "--no-bound",
+        action="store_true",
+        help="skip the truth-trained bounds (~1 minute; also --bounds none)",
     )
     parser.add_argument(
         "--real-dir", type=Path, default=REAL_DIR, help=f"the real frames [{REAL_DIR}]"
     )
+    materials.add_arguments(parser)
     args = parser.parse_args(argv)
+    if args.no_bound:
+        args.bounds = "none"
+    return args
+
+
+def main(argv: list[str] | None = None) -> None:  # noqa: PLR0915 - a report script
+    args = parse_args(argv)
     if args.limits:
         from limits import main as limits_main
 
         limits_main()
+        return
+    if materials.subset_only(args):
+        materials.run(args, args.real_dir)
         return
     seeds = [int(s) for s in args.seeds.split(",")]
     cols = list(OPTIONS)
@@ -361,7 +394,8 @@ def main(argv: list[str] | None = None) -> None:  # noqa: PLR0915 - a report scr
             print(real_report(r))
     else:
         print(f"\nno real frames in {args.real_dir}: the real-frame table is skipped")
-    print(f"\n{time.perf_counter() - t0:.1f} s")
+    materials.run(args, args.real_dir)
+    print(f"\n{time.perf_counter() - t0:.1f} s wall in all")
     if args.docs:
         cmd = "python benchmarks/evaluate.py --docs"
         if args.seeds != "0,1,2":

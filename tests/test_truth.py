@@ -44,10 +44,14 @@ EXPECTED_TRUTH = {
         "banana": 217695,
     },
     "camera_IMX250MZR.json": {"mat": 586867, "body": 29190, "lens_cap": 7405},
+    "carps_IMX250MZR.json": {"water": 180905, "tree_reflection": 37557, "fish": 6367},
+    "polarizer_IMX250MZR.json": {"outdoor_scene": 182075, "filter": 87909, "interior": 195690},
 }
 EXPECTED_STROKES = {
     "fruits_IMX250MZR.json": {"background": 404, "apple": 324, "orange": 233, "banana": 304},
     "camera_IMX250MZR.json": {"mat": 384, "body": 284, "lens_cap": 142},
+    "carps_IMX250MZR.json": {"water": 273, "tree_reflection": 273, "fish": 175},
+    "polarizer_IMX250MZR.json": {"outdoor_scene": 283, "filter": 274, "interior": 303},
 }
 BUNDLED = sorted(EXPECTED_TRUTH)
 
@@ -358,6 +362,34 @@ def test_camera_physics():
     assert med_rho["mat"] < 0.25 * med_rho["body"]
     assert med_rho["lens_cap"] > 2 * med_rho["body"]
     assert med_rho["lens_cap"] > 0.6 and med_rho["mat"] < 0.05
+
+
+@needs_real_data
+def test_carps_physics():
+    """Measured: median Î 72 / 17 / 151 and ρ 0.644 / 0.286 / 0.409 for water /
+    tree_reflection / fish."""
+    med_i, med_rho = _class_medians("carps_IMX250MZR.json")
+    # Î: the pale koi outshine the water; where the surface mirrors the dark tree it is darkest
+    assert med_i["fish"] > 1.8 * med_i["water"]
+    assert med_i["water"] > 3 * med_i["tree_reflection"]
+    # ρ: the sky's reflection off the surface polarises most; where it mirrors the dark tree
+    # the unpolarised light from below dominates
+    assert med_rho["water"] > 1.3 * med_rho["fish"]
+    assert med_rho["fish"] > 1.2 * med_rho["tree_reflection"]
+
+
+@needs_real_data
+def test_polarizer_physics():
+    """Measured: median Î 129 / 63 / 22 and ρ 0.026 / 0.437 / 0.113 for outdoor_scene /
+    filter / interior."""
+    med_i, med_rho = _class_medians("polarizer_IMX250MZR.json")
+    # Î: the filters pass about half the window's light; the room below is dark
+    assert med_i["outdoor_scene"] > 1.6 * med_i["filter"]
+    assert med_i["filter"] > 2 * med_i["interior"]
+    # ρ: the linear polariser film polarises what it passes; the scene through the glass hardly
+    assert med_rho["filter"] > 10 * med_rho["outdoor_scene"]
+    assert med_rho["filter"] > 3 * med_rho["interior"]
+    assert med_rho["outdoor_scene"] < 0.05
 
 
 @needs_real_data

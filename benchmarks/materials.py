@@ -1,0 +1,209 @@
+"""The material tables of evaluate.py and evaluate_unsupervised.py: rendered scenes and
+hand-labelled real frames, one row per frame, the same columns for both.
+
+- **Rendered scenes** (``../shared/data/rendered/scene_<seed>.npz``, Mitsuba 3, 24
+  seeds): a *development* half (seeds 0–11: pick methods and parameters on these) and a
+  *test* half (seeds 12–23: report on these, never tune on them). Every table names its
+  half and ends with that half's means. k = the classes present (``labels > 0``); ARI
+  over the pixels with ``labels > 0`` (the sky, 0, is ignored).
+- **Real frames** (``napari_polarseg/sample_data/truth``, frames in
+  ``../shared/data/polanalyser``): k = the truth file's classes; ARI over the labelled
+  pixels.
+
+Columns (:data:`COLUMNS`): ``intensity k-means`` (``baselines.intensity_kmeans``),
+``smoothed k-means`` (``baselines.smoothed_kmeans``: k-means on 20 smoothed
+polarisation features), ``auto (default)`` (what ``polarseg segment`` does: the
+pipeline with preset ``auto`` cut into k segments), then the truth-trained bounds
+(``baselines.truth_bound_halves``): a random forest trained on the truth of the frame's
+left half and scored on its right half, on the 20 plain features and on those plus the
+engine's pixel features. The bounds are supervised: a reference for what the features
+allow, not a competitor.
+
+Markers: ``‡`` = degenerate (one segment holds ≥ 90 % of the scored pixels, and 5 points
+more than the truth's largest class); ``†`` = a
+bound whose left half lacks a class of the right half. Marked cells are counted and the
+means are printed with and without them; nothing is dropped silently.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+from baselines import intensity_kmeans, real_frames, smoothed_kmeans, truth_bound_halves
+from sklearn.metrics import adjusted_rand_score
+
+from napari_polarseg.engine import Pipeline, Scene
+from napari_polarseg.engine.params import PRESETS
+
+#: The rendered scenes beside the repository.
+RENDERED_DIR = Path(__file__).resolve().parents[2] / "shared" / "data" / "rendered"
+#: Seeds of each half of the rendered set.
+HALVES = {"dev": tuple(range(12)), "test": tuple(range(12, 24))}
+HALF_NAMES = {"dev": "development half (seeds 0–11)", "test": "test half (seeds 12–23)"}
+#: A result is degenerate when one segment holds this share of the scored pixels.
+DEGENERATE_SHARE = 0.90
+UNSUPERVISED = ("intensity k-means", "smoothed k-means", "auto (default)")
+BOUNDS = {"bound L→R: 20 features": "plain", "bound L→R: rich": "rich"}
+COLUMNS = UNSUPERVISED + tuple(BOUNDS)
+
+
+def load_rendered(seed: int, folder: Path = RENDERED_DIR):
+    """(stack, angles in radians, labels) of ``scene_<seed>.npz``."""
+    with np.load(Path(folder) / f"scene_{seed}.npz", allow_pickle=False) as f:
+        return f["stack"], np.deg2rad(f["angles"]), f["labels"].astype(np.int32)
+
+
+def degenerate(labels: np.ndarray, truth: np.ndarray) -> bool:
+    """One segment holds ≥ :data:`DEGENERATE_SHARE` of the scored pixels (``truth > 0``)
+    and more than the truth's own largest class does, plus 5 points (a frame that is
+    94 % one class, such as the camera's mat, is not degenerate when cut right)."""
+    scored = truth > 0
+    counts = np.bincount(np.asarray(labels)[scored].ravel())
+    share = counts.max() / counts.sum()
+    truth_share = np.bincount(truth[scored].ravel()).max() / counts.sum()
+    return bool(share >= max(DEGENERATE_SHARE, truth_share + 0.05))
+
+
+def score_frame(name: str, stack, angles, truth: np.ndarray, k: int, bounds: str) -> dict:
+    """One row: every column's ARI over ``truth > 0``, its markers and seconds.
+
+    ``bounds``: ``all`` (both bounds), ``plain`` (the 20-feature one) or ``none``."""
+    scored = truth > 0
+    row: dict = {"frame": name, "k": k, "marks": {}, "seconds": {}}
+    t0 = time.perf_counter()
+    pipe = Pipeline(stack, angles, PRESETS["auto"].replace(n_segments=k))
+    pol = pipe.get("polarisation")
+    valid = ~np.asarray(pol.invalid, bool)
+    prep = time.perf_counter() - t0
+    runs = {
+        "intensity k-means": lambda: intensity_kmeans(pol.intensity, k),
+        "smoothed k-means": lambda: smoothed_kmeans(pol.intensity, pol.dop, pol.phase, k, valid),
+        "auto (default)": lambda: Scene(pipeline=pipe).segment(pipe.params).labels,
+    }
+    for column, run in runs.items():
+        t0 = time.perf_counter()
+        labels = run()
+        row["seconds"][column] = (
+            time.perf_counter() - t0 + (prep if column == "auto (default)" else 0)
+        )
+        row[column] = float(adjusted_rand_score(truth[scored], labels[scored]))
+        if degenerate(labels, truth):
+            row["marks"][column] = "‡"
+    for column, features in BOUNDS.items():
+        if bounds == "none" or (bounds == "plain" and features != "plain"):
+            continue
+        t0 = time.perf_counter()
+        value, seen = truth_bound_halves(pol.intensity, pol.dop, pol.phase, truth, features)
+        row["seconds"][column] = time.perf_counter() - t0
+        row[column] = value
+        if not seen:
+            row["marks"][column] = "†"
+    return row
+
+
+def rendered_rows(seeds, bounds: str, folder: Path = RENDERED_DIR) -> list[dict]:
+    """:func:`score_frame` of every rendered seed."""
+    rows = []
+    for seed in seeds:
+        stack, angles, truth = load_rendered(seed, folder)
+        k = len(np.unique(truth[truth > 0]))
+        rows.append(score_frame(f"scene_{seed}", stack, angles, truth, k, bounds))
+    return rows
+
+
+def real_rows(folder: Path, bounds: str) -> list[dict]:
+    """:func:`score_frame` of every hand-labelled real frame found in ``folder``."""
+    rows = []
+    for tf, data in real_frames(folder):
+        k = len(tf.classes)
+        rows.append(score_frame(tf.frame, data.stack, data.angles_rad, tf.truth, k, bounds))
+    return rows
+
+
+def _mean(values: list[float]) -> str:
+    values = [v for v in values if np.isfinite(v)]
+    return f"{np.mean(values):.3f}" if values else "–"
+
+
+def table(rows: list[dict], title: str) -> str:
+    """Markdown table of ``rows`` under ``title``: one line per frame, then the mean of
+    every column over all frames, over the unmarked ones (and how many are left), the
+    count of marked cells and the total seconds."""
+    cols = [c for c in COLUMNS if any(c in r for r in rows)]
+    lines = [
+        f"{title}: ARI over the labelled pixels (‡ = degenerate, one segment ≥ "
+        f"{DEGENERATE_SHARE:.0%} of them and > the truth's largest class + 5 points; "
+        "† = bound's left half lacks a class)",
+        "",
+        "| frame | k | " + " | ".join(cols) + " |",
+        "|---|---:|" + "---:|" * len(cols),
+    ]
+
+    def cell(r: dict, c: str) -> str:
+        return f"{r[c]:.3f}" + (" " + r["marks"][c] if c in r["marks"] else "") if c in r else "–"
+
+    for r in rows:
+        lines.append(f"| {r['frame']} | {r['k']} | " + " | ".join(cell(r, c) for c in cols) + " |")
+    every = [_mean([r[c] for r in rows if c in r]) for c in cols]
+    clean = [
+        f"{_mean([r[c] for r in rows if c in r and c not in r['marks']])} "
+        f"(n={sum(c in r and c not in r['marks'] for r in rows)})"
+        for c in cols
+    ]
+    marked = [str(sum(c in r["marks"] for r in rows)) for c in cols]
+    seconds = [f"{sum(r['seconds'].get(c, 0.0) for r in rows):.1f}" for c in cols]
+    lines.append("| **mean, all** | | " + " | ".join(f"**{v}**" for v in every) + " |")
+    lines.append("| mean without ‡/† | | " + " | ".join(clean) + " |")
+    lines.append("| marked (‡/†) | | " + " | ".join(marked) + " |")
+    lines.append("| seconds, total | | " + " | ".join(seconds) + " |")
+    return "\n".join(lines)
+
+
+def add_arguments(parser) -> None:
+    """The subset flags shared by both evaluate scripts."""
+    parser.add_argument(
+        "--rendered",
+        choices=("dev", "test", "all"),
+        help="only the rendered scenes of this half (with --real: and the real frames); "
+        "without --rendered and --real everything runs",
+    )
+    parser.add_argument(
+        "--real",
+        action="store_true",
+        help="only the real frames' material table (with --rendered: and those scenes)",
+    )
+    parser.add_argument(
+        "--bounds",
+        choices=("all", "plain", "none"),
+        default="all",
+        help="truth-trained left→right bounds of the material tables [all]",
+    )
+    parser.add_argument("--rendered-dir", type=Path, default=RENDERED_DIR, help=f"[{RENDERED_DIR}]")
+
+
+def subset_only(args) -> bool:
+    """True when the flags pick a subset of the material tables (skip everything else)."""
+    return bool(args.rendered or args.real)
+
+
+def run(args, real_dir: Path) -> None:
+    """Print the material tables the flags ask for (all of them when none is given)."""
+    t0 = time.perf_counter()
+    halves = {"all": ("dev", "test"), None: ("dev", "test"), "dev": ("dev",)}
+    halves["test"] = ("test",)
+    if args.rendered or not args.real:
+        if not Path(args.rendered_dir).is_dir():
+            print(f"\nno rendered scenes in {args.rendered_dir}: their tables are skipped")
+        else:
+            for half in halves[args.rendered]:
+                rows = rendered_rows(HALVES[half], args.bounds, args.rendered_dir)
+                print(f"\n{table(rows, 'rendered scenes, ' + HALF_NAMES[half])}")
+    if args.real or not args.rendered:
+        rows = real_rows(real_dir, args.bounds) if Path(real_dir).is_dir() else []
+        if rows:
+            print(f"\n{table(rows, 'real frames (hand-labelled truth)')}")
+        else:
+            print(f"\nno real frames in {real_dir}: their material table is skipped")
+    print(f"\nmaterial tables: {time.perf_counter() - t0:.1f} s wall")
