@@ -26,6 +26,8 @@ ANGLES = np.arange(0.0, 180.0, 30.0)  # 6 frames
 H, W = 57, 63  # not multiples of the window
 # the thesis pipeline (the default preset "auto" is tested in test_auto_preset.py): the
 # scene's two materials differ in how Î follows the tilt, not in ρ
+#: What a run with the thesis maps (``--method thesis``, ``--thesis-maps``) adds.
+THESIS_MAPS = {"reconstruction_error.tif"}
 FAST = ["--preset", "thesis", "--window", "10", "--degree", "4", "--segments", "2"]
 #: What every result folder holds (the default method computes no thesis maps).
 CONTRACT = {
@@ -105,7 +107,7 @@ def test_segment_writes_the_contract_for_a_size_not_multiple_of_w(tmp_path, caps
     code, stdout, err = run(capsys, "segment", path, "--out", out, *FAST)
     assert code == 0, err
     assert err == ""
-    assert set(os.listdir(out)) == CONTRACT
+    assert set(os.listdir(out)) == CONTRACT | THESIS_MAPS
     assert str(out) in stdout and "2 segments" in stdout
 
     labels = read_tif(out / "labels.tif")
@@ -249,7 +251,7 @@ def test_segment_overwrites_previous_results(tmp_path, capsys, scene_tif):
     code, _, err = run(capsys, "segment", path, "--out", out, *FAST, "--overview")
     assert code == 0, err
     assert read_tif(out / "labels.tif").shape == (H, W)
-    assert set(os.listdir(out)) == CONTRACT | {"overview.png"}
+    assert set(os.listdir(out)) == CONTRACT | THESIS_MAPS | {"overview.png"}
 
 
 def test_console_script_in_a_subprocess(tmp_path, scene_tif):
@@ -265,7 +267,7 @@ def test_console_script_in_a_subprocess(tmp_path, scene_tif):
     )
     assert done.returncode == 0, done.stderr
     assert done.stderr == ""
-    assert set(os.listdir(out)) == CONTRACT
+    assert set(os.listdir(out)) == CONTRACT | THESIS_MAPS
     assert "2 segments" in done.stdout
 
 
@@ -297,7 +299,7 @@ def test_demo_writes_outputs_overview_and_rand_index(tmp_path, capsys, toy_sampl
         capsys, "demo", "--out", out, "--scene", "toy", "--preset", "thesis", "--degree", "4"
     )
     assert code == 0, err
-    assert set(os.listdir(out)) == CONTRACT | {"overview.png"}
+    assert set(os.listdir(out)) == CONTRACT | THESIS_MAPS | {"overview.png"}
     assert str(out) in stdout
     assert "adjusted Rand index against the ground truth: 1.000" in stdout
     summary = json.loads((out / "summary.json").read_text())
@@ -321,7 +323,7 @@ def test_demo_with_sample_file_and_default_out(tmp_path, capsys, toy_samples, mo
     )
     assert code == 0, err
     out = tmp_path / "polarseg-demo"
-    assert set(os.listdir(out)) == CONTRACT | {"overview.png"}
+    assert set(os.listdir(out)) == CONTRACT | THESIS_MAPS | {"overview.png"}
     assert json.loads((out / "summary.json").read_text())["n_segments"] == 3
 
 
@@ -682,7 +684,7 @@ def test_segment_ground_truth_only_and_segments_csv(tmp_path, capsys, scene_tif)
     out = tmp_path / "out"
     code, _, err = run(capsys, "segment", path, "--out", out, *FAST, "--ground-truth", gt)
     assert code == 0, err
-    assert set(os.listdir(out)) == CONTRACT | {"evaluation.json"}
+    assert set(os.listdir(out)) == CONTRACT | THESIS_MAPS | {"evaluation.json"}
     labels = read_tif(out / "labels.tif")
     evaluation = json.loads((out / "evaluation.json").read_text())
     assert evaluation["adjusted_rand_index"] == pytest.approx(
@@ -773,10 +775,6 @@ def test_bad_scribbles_or_ground_truth_one_line_error(tmp_path, capsys, case, sc
     assert words in lines[0]
     assert "Traceback" not in err + stdout
     assert os.listdir(out) == ["labels.tif"] and (out / "labels.tif").read_bytes() == good
-
-
-#: What a run with the thesis maps (``--method thesis``, ``--thesis-maps``) adds.
-THESIS_MAPS = {"reconstruction_error.tif"}
 
 
 @pytest.mark.parametrize(

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 import tifffile
 from skimage import io as skio
-from test_cli import CONTRACT
+from test_cli import CONTRACT, THESIS_MAPS
 
 from napari_polarseg import cli
 from napari_polarseg import io as pio
@@ -26,7 +26,7 @@ from napari_polarseg.outputs import OutputError, write_result_folder
 SHAPE = (64, 72)
 PARAMS = SegmentParams(window=8, degree=4, n_segments=3)
 #: The files `polarseg segment --overview` writes.
-FOLDER = CONTRACT | {"overview.png"}
+FOLDER = CONTRACT | THESIS_MAPS | {"overview.png"}  # results of the thesis method
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
 
