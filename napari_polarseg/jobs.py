@@ -28,7 +28,6 @@ from .engine.limits import check_pipeline_memory
 from .engine.params import SegmentParams
 from .engine.physics.pixel_mask import PixelMask
 from .engine.physics.polarimage import validity_mask
-from .engine.physics.registration import register_stack, shift_frames
 from .engine.timing import timed
 from .io.read_options import ReadOptions
 from .job_options import OutputOptions
@@ -176,6 +175,9 @@ def segment_data(
         )
     colour_stack = data.colour_stack
     if register:
+        # scipy.signal (a second of imports) only when registering
+        from .engine.physics.registration import register_stack, shift_frames
+
         status.show("registering the frames")
         with timed(seconds, "register"):
             stack, shifts = register_stack(stack)
@@ -203,7 +205,8 @@ def _resolved(name: str | None) -> str | None:
 
 
 def input_info(data: pio.StackData, read: ReadOptions) -> dict[str, Any]:
-    """What ``params.json`` records of the reading, beyond :func:`export.run_info`."""
+    """What ``params.json`` records of the reading, beyond
+    :func:`~napari_polarseg.outputs.result_folder.run_info`."""
     meta = data.metadata
     return {
         "input_format": meta.get("format"),

@@ -232,7 +232,7 @@ class _Run:
         self.t_run = time.perf_counter()
 
     def sort(self, resume: bool) -> None:
-        """Scenes to run (:attr:`todo`) and rows of those complete already (:attr:`skipped`)."""
+        """Scenes to run (``todo``) and rows of those complete already (``skipped``)."""
         for scene in self.scenes:
             expect = marker_expect(scene, self.params, self.args)
             if resume and is_complete(scene.output, expect):

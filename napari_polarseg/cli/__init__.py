@@ -145,7 +145,8 @@ COMMANDS = (segment, demo, sweep, batch, timeseries)
 
 def build_parser(specs: dict[str, ParamSpec] | None = None) -> CommandParser:
     """The argument parser of ``polarseg`` (errors raise :class:`UsageError`); the
-    segmentation flags are made from ``specs`` (default: :data:`PARAM_SPECS`)."""
+    segmentation flags are made from ``specs`` (default:
+    :data:`~napari_polarseg.engine.params.PARAM_SPECS`)."""
     parser = CommandParser(
         prog=PROG,
         description="Material segmentation from polarisation images (thesis pipeline: "

@@ -18,7 +18,6 @@ from .. import io as pio
 from ..engine.errors import PolarsegError
 from ..engine.params import ParamSpec
 from ..engine.physics.pixel_mask import PixelMask
-from ..engine.physics.registration import register_stack
 from ..status_line import StatusLine
 from .arguments import PROG, number_list_arg
 from .options import (
@@ -169,6 +168,8 @@ def _read_scene(args: argparse.Namespace, status: StatusLine) -> _Scene:
     mask = jobs.pixel_mask(data, read_options(args))
     stack, shifts = data.stack, None
     if args.register:
+        from ..engine.physics.registration import register_stack  # scipy.signal: slow import
+
         status.show("registering the frames")
         stack, shifts = register_stack(stack)
         mask = mask.shifted(shifts)

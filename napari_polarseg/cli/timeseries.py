@@ -21,7 +21,6 @@ from ..engine.limits import check_pipeline_memory
 from ..engine.params import ParamSpec, SegmentParams
 from ..engine.physics.pixel_mask import PixelMask
 from ..engine.physics.polarimage import validity_mask
-from ..engine.physics.registration import register_stack, shift_frames
 from .arguments import PROG
 from .options import BLOCK_PRESETS, add_input_options, add_inputs_and_out, add_param_options
 from .running import max_bytes, params_from_args, progress_report, read_input
@@ -113,6 +112,8 @@ def _read_days(args: argparse.Namespace, params: SegmentParams) -> _Days:
             stack, saturation=data.metadata.get("saturation_level"), saturated=data.saturated
         )
         if args.register:
+            from ..engine.physics.registration import register_stack, shift_frames
+
             stack, shifts = register_stack(stack)
             mask = mask.shifted(shifts)
             if data.colour_stack is not None:

@@ -16,152 +16,162 @@ Beside the cut: :func:`pixel_features` (multi-scale per-pixel features) →
 pipeline's polarisation image by :class:`PixelSegmenter`.
 """
 
-from .analysis.pixel_classifier import (
-    ClassifierParams,
-    PixelClassifier,
-    PixelPrediction,
-    predict_pixels,
-    train_pixel_classifier,
-)
-from .analysis.pixel_segmentation import PixelSegmentation, PixelSegmenter
-from .analysis.sweep_result import SweepCell, SweepResult  # sweep(): analysis.sweep.sweep
-from .errors import Cancelled, PolarsegError
-from .features.harmonics import (
-    block_coefficients,
-    block_grid,
-    coefficient_index,
-    degree_order,
-    n_coefficients,
-    pixel_block_index,
-    real_sph_harm,
-    reconstruct_intensity,
-    upsample_block_labels,
-)
-from .features.pca import PCAResult, mahalanobis_sq, pca_features, whiten
-from .features.pixel_features import FeatureStack, PixelFeatureParams, pixel_features
-from .features.superpixels import region_means, superpixels
-from .graph.affinity import affinity_matrix
-from .graph.eigensolver import fiedler_vector
-from .graph.ncut import CutTree, best_split, bipartition, recursive_ncut
-from .limits import check_pipeline_memory, estimate_pipeline_bytes
-from .methods import (
-    MethodOutput,
-    Scene,
-    Segmenter,
-    get_method,
-    method_names,
-    register_method,
-    segment,
-)
-from .params import PRESETS, SegmentParams
-from .physics.colour_mosaic import demosaic_colour, luminance
-from .physics.fresnel import (
-    ZenithEstimate,
-    azimuth_from_phase,
-    brewster_angle,
-    diffuse_dop,
-    diffuse_dop_ceiling,
-    diffuse_dop_fresnel,
-    fresnel_reflectance,
-    specular_dop,
-    specular_dop_fresnel,
-    zenith_from_diffuse_dop,
-    zenith_from_dop,
-    zenith_from_specular_dop,
-)
-from .physics.mosaic import demosaic, demosaic_interpolated, demosaic_superpixel, subtract_dark
-from .physics.pixel_mask import PixelMask
-from .physics.polarimage import (
-    PolarisationImage,
-    average_duplicate_angles,
-    distinct_angle_count,
-    polarisation_image,
-    validity_mask,
-)
-from .physics.registration import register_stack
-from .pipeline import Pipeline, intensity_baseline
-from .result import SegmentationResult
-from .stages import STAGES, valid_blocks
-from .unsupervised.params import UnsupervisedParams
-from .unsupervised.segmenter import segment_unsupervised
+from __future__ import annotations
 
+import importlib
+from typing import Any
+
+# the methods register themselves on import: the choices of SegmentParams.method (and
+# so of --method and the plugin's menu) are there as soon as the engine is
+from . import methods as methods
+from .errors import Cancelled, PolarsegError
+from .params import PRESETS, SegmentParams
+
+#: Every public name of the engine and the module that defines it; imported on first use
+#: (PEP 562, as scikit-image does), so ``import napari_polarseg.engine`` stays light.
+PUBLIC: dict[str, str] = {
+    # analysis.pixel_classifier
+    "ClassifierParams": ".analysis.pixel_classifier",
+    "PixelClassifier": ".analysis.pixel_classifier",
+    "PixelPrediction": ".analysis.pixel_classifier",
+    "predict_pixels": ".analysis.pixel_classifier",
+    "train_pixel_classifier": ".analysis.pixel_classifier",
+    # analysis.pixel_segmentation
+    "PixelSegmentation": ".analysis.pixel_segmentation",
+    "PixelSegmenter": ".analysis.pixel_segmentation",
+    # errors
+    "Cancelled": ".errors",
+    "PolarsegError": ".errors",
+    # features.harmonics
+    "block_coefficients": ".features.harmonics",
+    "block_grid": ".features.harmonics",
+    "coefficient_index": ".features.harmonics",
+    "degree_order": ".features.harmonics",
+    "n_coefficients": ".features.harmonics",
+    "pixel_block_index": ".features.harmonics",
+    "real_sph_harm": ".features.harmonics",
+    "reconstruct_intensity": ".features.harmonics",
+    "upsample_block_labels": ".features.harmonics",
+    # features.pca
+    "PCAResult": ".features.pca",
+    "mahalanobis_sq": ".features.pca",
+    "pca_features": ".features.pca",
+    "whiten": ".features.pca",
+    # features.pixel_features
+    "FeatureStack": ".features.pixel_features",
+    "PixelFeatureParams": ".features.pixel_features",
+    "pixel_features": ".features.pixel_features",
+    # features.superpixels
+    "region_means": ".features.superpixels",
+    "superpixels": ".features.superpixels",
+    # graph.affinity
+    "affinity_matrix": ".graph.affinity",
+    # graph.eigensolver
+    "fiedler_vector": ".graph.eigensolver",
+    # graph.ncut
+    "CutTree": ".graph.ncut",
+    "best_split": ".graph.ncut",
+    "bipartition": ".graph.ncut",
+    "recursive_ncut": ".graph.ncut",
+    # limits
+    "check_pipeline_memory": ".limits",
+    "estimate_pipeline_bytes": ".limits",
+    # methods
+    "MethodOutput": ".methods",
+    "Scene": ".methods",
+    "Segmenter": ".methods",
+    "get_method": ".methods",
+    "method_names": ".methods",
+    "register_method": ".methods",
+    "segment": ".methods",
+    # params
+    "PRESETS": ".params",
+    "SegmentParams": ".params",
+    # physics.colour_mosaic
+    "demosaic_colour": ".physics.colour_mosaic",
+    "luminance": ".physics.colour_mosaic",
+    # physics.fresnel
+    "ZenithEstimate": ".physics.fresnel",
+    "azimuth_from_phase": ".physics.fresnel",
+    "brewster_angle": ".physics.fresnel",
+    "diffuse_dop": ".physics.fresnel",
+    "diffuse_dop_ceiling": ".physics.fresnel",
+    "diffuse_dop_fresnel": ".physics.fresnel",
+    "fresnel_reflectance": ".physics.fresnel",
+    "specular_dop": ".physics.fresnel",
+    "specular_dop_fresnel": ".physics.fresnel",
+    "zenith_from_diffuse_dop": ".physics.fresnel",
+    "zenith_from_dop": ".physics.fresnel",
+    "zenith_from_specular_dop": ".physics.fresnel",
+    # physics.mosaic
+    "demosaic": ".physics.mosaic",
+    "demosaic_interpolated": ".physics.mosaic",
+    "demosaic_superpixel": ".physics.mosaic",
+    "subtract_dark": ".physics.mosaic",
+    # physics.pixel_mask
+    "PixelMask": ".physics.pixel_mask",
+    # physics.polarimage
+    "PolarisationImage": ".physics.polarimage",
+    "average_duplicate_angles": ".physics.polarimage",
+    "distinct_angle_count": ".physics.polarimage",
+    "polarisation_image": ".physics.polarimage",
+    "validity_mask": ".physics.polarimage",
+    # physics.registration
+    "register_stack": ".physics.registration",
+    # pipeline
+    "Pipeline": ".pipeline",
+    "intensity_baseline": ".pipeline",
+    # result
+    "SegmentationResult": ".result",
+    # stages
+    "STAGES": ".stages",
+    "valid_blocks": ".stages",
+    # unsupervised.params
+    "UnsupervisedParams": ".unsupervised.params",
+    # unsupervised.segmenter
+    "segment_unsupervised": ".unsupervised.segmenter",
+}
+
+#: The names most scripts need (``from napari_polarseg.engine import *``); every name of
+#: :data:`PUBLIC` is importable.
 __all__ = [
-    "PRESETS",
-    "STAGES",
-    "MethodOutput",
     "Scene",
-    "Segmenter",
-    "UnsupervisedParams",
-    "get_method",
-    "method_names",
-    "register_method",
-    "segment_unsupervised",
-    "Cancelled",
-    "ClassifierParams",
-    "CutTree",
-    "FeatureStack",
-    "PCAResult",
-    "PixelClassifier",
-    "PixelFeatureParams",
-    "PixelMask",
-    "PixelPrediction",
-    "PixelSegmentation",
-    "PixelSegmenter",
-    "Pipeline",
-    "PolarisationImage",
-    "PolarsegError",
+    "PRESETS",
     "SegmentParams",
     "SegmentationResult",
-    "SweepCell",
-    "SweepResult",
-    "ZenithEstimate",
-    "affinity_matrix",
-    "average_duplicate_angles",
-    "azimuth_from_phase",
-    "best_split",
-    "bipartition",
-    "block_coefficients",
-    "block_grid",
-    "brewster_angle",
-    "check_pipeline_memory",
-    "demosaic",
-    "demosaic_colour",
-    "demosaic_interpolated",
-    "demosaic_superpixel",
-    "coefficient_index",
-    "degree_order",
-    "diffuse_dop",
-    "diffuse_dop_ceiling",
-    "diffuse_dop_fresnel",
-    "distinct_angle_count",
-    "estimate_pipeline_bytes",
-    "fiedler_vector",
-    "fresnel_reflectance",
-    "intensity_baseline",
-    "luminance",
-    "mahalanobis_sq",
-    "n_coefficients",
-    "pca_features",
-    "pixel_block_index",
-    "pixel_features",
-    "polarisation_image",
-    "predict_pixels",
-    "real_sph_harm",
-    "register_stack",
-    "reconstruct_intensity",
-    "region_means",
-    "recursive_ncut",
     "segment",
-    "specular_dop",
-    "specular_dop_fresnel",
-    "subtract_dark",
-    "superpixels",
+    "segment_unsupervised",
+    "UnsupervisedParams",
+    "Pipeline",
+    "PixelSegmenter",
+    "ClassifierParams",
+    "PixelClassifier",
     "train_pixel_classifier",
-    "upsample_block_labels",
-    "validity_mask",
-    "whiten",
-    "zenith_from_diffuse_dop",
+    "predict_pixels",
+    "pixel_features",
+    "PixelFeatureParams",
+    "register_method",
+    "method_names",
+    "get_method",
+    "Segmenter",
+    "MethodOutput",
+    "polarisation_image",
     "zenith_from_dop",
-    "zenith_from_specular_dop",
-    "valid_blocks",
+    "PixelMask",
+    "validity_mask",
+    "Cancelled",
+    "PolarsegError",
 ]
+
+
+def __getattr__(name: str) -> Any:
+    module = PUBLIC.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(module, __name__), name)
+    globals()[name] = value  # later lookups skip this function
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(PUBLIC))

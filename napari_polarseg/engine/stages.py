@@ -156,8 +156,9 @@ def block_vectors(
 ) -> np.ndarray:
     """Feature vector of every block (rows·cols, F) for ``features``.
 
-    Harmonic kinds come from the coefficients (:func:`~.features.harmonic_features`);
-    ``"polstats"`` from the polarisation image directly (:mod:`.polstats`), z-scored
+    Harmonic kinds come from the coefficients
+    (:func:`~napari_polarseg.engine.features.pca.harmonic_features`); ``"polstats"`` from the
+    polarisation image directly (:mod:`.polstats`), z-scored
     because its columns have different units; ``"zonal+polstats"`` puts the z-scored
     zonal coefficients and statistics side by side.
     """

@@ -125,7 +125,7 @@ def write_png(path: PathLike, image: np.ndarray) -> None:
     Boolean images are written as 0/255. Other dtypes raise :class:`PolarsegError`
     (scale them to an integer type first).
     """
-    from skimage import io as skio
+    from PIL import Image
 
     image = np.asarray(image)
     if image.dtype == np.bool_:
@@ -137,4 +137,6 @@ def write_png(path: PathLike, image: np.ndarray) -> None:
             f"a PNG image must be (H, W), (H, W, 3) or (H, W, 4), got {image.shape}"
         )
     with atomic_output(path) as tmp:
-        skio.imsave(tmp, image, check_contrast=False)
+        # zlib level 1: a camera frame's composite in a fifth of the time of the default
+        # level, for files about a third larger
+        Image.fromarray(image).save(tmp, format="PNG", compress_level=1)

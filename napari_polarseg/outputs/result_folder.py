@@ -476,8 +476,9 @@ def write_result_folder(
     truth : array (H, W) of int, optional
         The true materials, drawn beside the segments in ``overview.png`` (with the ARI).
     composite_params : CompositeParams, optional
-        Settings of the composite (default: ρ_max from :func:`~napari_polarseg.engine.
-        analysis.views.auto_dolp_max`, value from Î); ``params.json``'s ``"aolp_dolp"``.
+        Settings of the composite (default: ρ_max from
+        :func:`~napari_polarseg.engine.analysis.views.auto_dolp_max`, value from Î);
+        ``params.json``'s ``"aolp_dolp"``.
 
     Returns
     -------

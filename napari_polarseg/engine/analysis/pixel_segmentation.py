@@ -8,11 +8,13 @@ assembles a :class:`~.pipeline.SegmentationResult` whose labels are the classifi
 the thesis stages (harmonics, PCA, reconstruction) still give the maps and the error map
 of the segmentation contract; affinity and cut are not computed.
 
-For a colour-polarisation camera (:mod:`.colour_mosaic`) the pipeline runs on the
+For a colour-polarisation camera (:mod:`~napari_polarseg.engine.physics.colour_mosaic`) the pipeline
+runs on the
 luminance stack and the segmenter is also given the (colour, angle, H, W) stack: the
 features are then those of the luminance image (plain names, as for a mono camera)
 followed by those of every colour's own polarisation image (names prefixed ``"R:"``,
-``"G:"``, ``"B:"``; :func:`~.pixel_features.multichannel_features`), so the classifier
+``"G:"``, ``"B:"``; :func:`~napari_polarseg.engine.features.pixel_features.multichannel_features`),
+so the classifier
 can tell materials apart by the colour of their polarised reflection as well.
 """
 

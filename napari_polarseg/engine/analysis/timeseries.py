@@ -38,7 +38,7 @@ them, so every day is described in the same basis and Mahalanobis metric. Then:
    - ``"joint"``: one affinity over the blocks of all days and one cut of that graph
      (a material that day 1 does not show can get a segment of its own; the dense
      affinity over T × the blocks of one day is limited to
-     :data:`~.pipeline.MAX_DENSE_BLOCKS`);
+     :data:`~napari_polarseg.engine.stages.MAX_DENSE_BLOCKS`);
 
    either way segment k means the same material on every day.
 3. **Maps** per pair of consecutive days: the change map (pixels, block-shaped, whose
@@ -365,7 +365,7 @@ class _Steps:
         return out
 
     def done(self, stage: str) -> None:
-        """Report ``stage`` (timed into :attr:`timings`), raise Cancelled if asked."""
+        """Report ``stage`` (timed into ``timings``), raise Cancelled if asked."""
         self.step += 1
         if self.progress is not None:
             self.progress(stage, self.step, self.total)

@@ -71,7 +71,8 @@ class TimeSeriesResult:
         Segments of the cut (day 1 for ``tracked`` and ``reference``).
     changed_segments : list of dict
         ``tracked`` only: for every segment after the base ones, the day it first
-        appears, its change blocks and their mean change (:data:`CHANGE_COMPONENTS`).
+        appears, its change blocks and their mean change
+        (:data:`~napari_polarseg.engine.analysis.change_test.CHANGE_COMPONENTS`).
     label_window, change_window : int
         Sides of the label-grid and change blocks.
     false_alarm : float

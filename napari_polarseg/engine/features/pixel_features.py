@@ -3,7 +3,8 @@
 The thesis segments w × w blocks. A pixel classifier (ilastik, napari-apoc, convpaint)
 instead describes every pixel by filters of the image at a few scales, so its labels
 follow the material boundaries rather than the block grid. This module computes such a
-stack from the polarisation image (Î, ρ, φ) of :func:`~.polarimage.polarisation_image`.
+stack from the polarisation image (Î, ρ, φ) of
+:func:`~napari_polarseg.engine.physics.polarimage.polarisation_image`.
 
 The linear Stokes components of eq. 3.14, I(α) = Î (1 + ρ cos(2α − 2φ)), are
 ``S0 = Î``, ``S1 = Î ρ cos 2φ``, ``S2 = Î ρ sin 2φ`` (units of the input; the S0 of
@@ -407,7 +408,7 @@ def pixel_features(
     intensity, dop, phase : array (H, W)
         Î (units of the input), ρ in [0, 1], φ radians (thesis eq. 3.14).
     params : PixelFeatureParams, optional
-        Scales and groups (default :class:`PixelFeatureParams()`).
+        Scales and groups (default ``PixelFeatureParams()``).
     channel : str, optional
         Prefix of every name (``"<channel>:"``) for multi-channel inputs.
     progress : callable(share), optional

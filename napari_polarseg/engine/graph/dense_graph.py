@@ -66,7 +66,8 @@ def operator_matrix(W):
     """The matrix the sparse and fallback solvers multiply with (float32 if dense and big).
 
     The products are memory-bound (one pass over n² values each), so float32 halves their
-    time, and float32 round-off (~1e-7) is ten times below :data:`EIG_TOL`.
+    time, and float32 round-off (~1e-7) is ten times below
+    :data:`~napari_polarseg.engine.graph.eigensolver.EIG_TOL`.
     """
     if not sps.issparse(W) and W.shape[0] >= FLOAT32_MIN_NODES:
         return np.asarray(W, dtype=np.float32)

@@ -14,7 +14,8 @@ Bounded work, isolated blocks, Cancel
 - Every eigensolve of a segment may make at most ``max_products`` products with the
   affinity (:data:`MAX_CUT_PRODUCTS` by default; a product is one vector, so a block
   LOBPCG iteration with four active vectors makes four), all solvers of the solve
-  together; Lanczos, when it goes first, may take :data:`LANCZOS_SHARE` of them. When
+  together; Lanczos, when it goes first, may take
+  :data:`~napari_polarseg.engine.graph.eigensolver.LANCZOS_SHARE` of them. When
   the budget is spent, the cut is made along the best vector the block LOBPCG has (its
   lowest Ritz vector) and :meth:`CutTree.cut_limits` counts the solve as capped. The
   cap is set well above the largest solves of normal inputs, so that it only stops

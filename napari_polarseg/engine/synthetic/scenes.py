@@ -17,7 +17,8 @@ Conventions
   the zenith of its normal. Azimuth = ``atan2(n_row, n_col)``.
 - Diffuse polarisation: φ equals the normal's azimuth (mod π) and ρ comes from the
   Fresnel *transmission* coefficients for light leaving the material
-  (:func:`diffuse_dop_from_transmission`). This route is deliberately independent of
+  (:func:`~napari_polarseg.engine.synthetic.optics.diffuse_dop_from_transmission`). This route is
+  deliberately independent of
   the closed form (corrected eq. 3.13) in :mod:`napari_polarseg.engine.physics.fresnel`, so the
   test suite can compare the two.
 - Radians everywhere, except parameters whose name ends in ``_deg``.

@@ -70,7 +70,8 @@ class UnsupervisedParams:
         σ (pixels) of the :mod:`.pixel_features` stack averaged per region and added to
         the node features; () = none.
     pixel_groups : tuple of str
-        Groups of that stack (:data:`.pixel_features.GROUPS`, without ``regions``).
+        Groups of that stack (:data:`~napari_polarseg.engine.features.pixel_features.GROUPS`,
+        without ``regions``).
     variance : float
         Share of the variance the PCA of the standardised node features keeps, (0, 1].
     clustering : {"gmm", "kmeans", "ncut", "kway"}
@@ -93,7 +94,7 @@ class UnsupervisedParams:
     diffusion_range : float
         Reach of that diffusion as a share of the image's side √(H·W): after t steps a
         feature has spread over about √(λ t) regions of side √area, so
-        t = ⌈range² · n / λ⌉ for n superpixels (:func:`diffusion_steps`), the same
+        t = ⌈range² · n / λ⌉ for n superpixels (:func:`.region_diffusion.diffusion_steps`), the same
         share of the frame whatever its resolution.
     diffusion_tau : float
         τ of its border weights exp(−(e / τ)²), in units of the median border strength.

@@ -24,16 +24,19 @@ those few hundred to few thousand nodes:
    The features are standardised (weighted by region area), may be diffused over the
    region graph but not across its edges (``UnsupervisedParams.diffusion``) and are
    reduced by PCA to the
-   components that explain ``variance`` of the total (:func:`.features.pca_features`).
+   components that explain ``variance`` of the total
+   (:func:`~napari_polarseg.engine.features.pca.pca_features`).
 3. **Clustering** (``UnsupervisedParams.clustering``): a Gaussian mixture (scikit-learn
    ``GaussianMixture``, full covariances, seeded) or k-means weighted by region area
    (:func:`.kmeans.weighted_kmeans`) on the node features, with an
    optional smoothing of the posteriors over the region adjacency (a few iterations of
    P ← (1 − λ) P + λ A P, A the row-normalised shared-border lengths), or the thesis's
-   Mahalanobis affinity exp(−D / s) (:func:`.features.whiten`, s = ``scale`` × the
+   Mahalanobis affinity exp(−D / s) (:func:`~napari_polarseg.engine.features.pca.whiten`, s =
+   ``scale`` × the
    median D over the graph's edges) restricted to neighbouring regions, cut by recursive
-   normalized cuts (:func:`.ncut.recursive_ncut`) or k-way spectral clustering
-   (:class:`.spectral.SpectralClustering`).
+   normalized cuts (:func:`~napari_polarseg.engine.graph.ncut.recursive_ncut`) or k-way spectral
+   clustering
+   (:class:`~napari_polarseg.engine.graph.spectral.SpectralClustering`).
 
 **Close-ups of one smooth surface** (:mod:`.shape_trend`): when the square of one
 linear field explains more than ``close_up_share`` of the superpixels' complex
@@ -44,8 +47,9 @@ departure of the polarisation from that surface's trend alone
 result says so (``UnsupervisedResult.close_up``, ``surface_share``).
 
 Every pixel takes its region's label; then the pixels on a segment border move to the
-neighbouring segment whose mean (log Î, ρ) they resemble most (:func:`refine_boundaries`,
-:data:`REFINE_PASSES` one-pixel passes: a watershed border on a straight edge can sit
+neighbouring segment whose mean (log Î, ρ) they resemble most
+(:func:`.boundaries.refine_boundaries`,
+:data:`.boundaries.REFINE_PASSES` one-pixel passes: a watershed border on a straight edge can sit
 a few pixels off).
 Deterministic: every random step is seeded.
 
