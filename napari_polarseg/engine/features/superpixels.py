@@ -5,7 +5,7 @@ not. :func:`superpixels` grows compact watershed regions (scikit-image ``watersh
 with ``compactness``, Neubert & Protzel 2014) from a regular grid of seeds over the
 gradient magnitude of the smoothed log intensity, so region borders sit on intensity
 edges. It is used instead of SLIC because it is several times faster on a camera frame
-(about 1 s for 1224 × 1024 pixels) and adheres as well to the edges of the real frames.
+(``docs/performance.md``) and adheres as well to the edges of the real frames.
 :func:`region_means` averages any per-pixel maps over the regions (vectorised with
 ``np.bincount``).
 """

@@ -5,8 +5,8 @@ inertia, in the units of x squared) by alternating assignment to the nearest cen
 weighted centre means, from ``n_init`` seedings; the lowest inertia wins.
 
 Written by hand, not taken from scikit-learn, for one reason: importing
-``sklearn.cluster`` costs about 0.75 s in a fresh process, half the time the default
-preset is allowed on a 720 × 660 frame, for a problem of ~3,000 superpixels in three
+``sklearn.cluster`` in a fresh process costs a large share of the default method's time
+budget (``docs/performance.md``), for a problem of a few thousand superpixels in a few
 dimensions that numpy solves in milliseconds; scipy's ``kmeans2`` takes no sample
 weights (the superpixels' areas). The seeding and the stopping rule follow
 scikit-learn's ``KMeans`` (greedy k-means++ with 2 + ⌊ln k⌋ trials per centre; stop when
