@@ -249,6 +249,10 @@ class Run:
             self.slot.on_status("cancelled")
 
     def finished(self) -> None:
+        if not self.ended and self.stop():
+            # the job returned after a stop request: superqt then emits neither
+            # ``returned`` nor ``aborted``; the run was cancelled all the same
+            self.aborted()
         # close a generator stopped between stages now (not at garbage collection), so
         # its ``finally`` clauses (the BLAS limit) run at once
         with contextlib.suppress(Exception):

@@ -167,9 +167,9 @@ class ClassifierFiles:
 
         def on_result(run_id: int, written: Path) -> None:
             self._classifier_dir = written.parent
-            self._set_status(f"saved the classifier to {written}")
+            self._status(f"saved the classifier to {written}")
 
-        self._set_status(f"saving the classifier to {path}…")
+        self._status(f"saving the classifier to {path}…")
         self.slot.submit(write_classifier_job, (path, classifier), 1, on_result)
         return True
 
@@ -201,7 +201,7 @@ class ClassifierFiles:
             if self._host.stack_layer.value is not None:
                 self._host.run()
 
-        self._set_status(f"reading the classifier {path}…")
+        self._status(f"reading the classifier {path}…")
         self.slot.submit(read_classifier_job, (path,), 1, on_result)
         return True
 
