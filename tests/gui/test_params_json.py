@@ -39,6 +39,7 @@ CUSTOM = SegmentParams(
     clustering="kway",
     fit="robust",
     affinity_graph="sparse",
+    method="superpixels",
 )
 
 
