@@ -52,6 +52,9 @@ class ResultLayers(WidgetPart):
         self.classes: np.ndarray | None = None
         #: Uncertainty (H, W) of the last scribble run shown (None after an unsupervised run).
         self.uncertainty: np.ndarray | None = None
+        #: Per stack key: the fit residual the diagnostics layers show (the cached
+        #: polarisation image's array: the same object while the image is unchanged).
+        self._diagnostics: dict[str, Any] = {}
         self.views = CheckBox(
             text="HSV and Stokes layers",
             value=False,
@@ -120,9 +123,7 @@ class ResultLayers(WidgetPart):
             self._show_below_segments("error", error, layer, meta)
         masked = shown.masked()
         if self._shows_diagnostics(layer, result, masked):
-            residual = np.array(result.residual)
-            self._show_below_segments("residual", residual, layer, meta)
-            self._show_below_segments("masked", masked, layer, meta)
+            self._show_diagnostics(layer, result, masked, meta)
         if self.views.value:
             self._show_views(layer, result, meta)
 
@@ -137,6 +138,22 @@ class ResultLayers(WidgetPart):
             below = layers.index(segments)
             if layers.index(shown) > below:
                 layers.move(layers.index(shown), below)
+
+    def _show_diagnostics(
+        self, layer: Layer, result: Any, masked: np.ndarray, meta: dict[str, Any]
+    ) -> None:
+        """Add/update ``fit residual`` and ``masked pixels``; when both show the same
+        polarisation image already (a rerun that changed e.g. only the number of
+        segments), only their metadata follow."""
+        key, roles = source_key(layer), ("residual", "masked")
+        found = [find_output(self._viewer, role, layer) for role in roles]
+        if self._diagnostics.get(key) is result.residual and all(found):
+            for shown in found:
+                shown.metadata = {**shown.metadata, **meta}
+            return
+        self._show_below_segments("residual", np.array(result.residual), layer, meta)
+        self._show_below_segments("masked", masked, layer, meta)
+        self._diagnostics[key] = result.residual
 
     def _shows_diagnostics(self, layer: Layer, result: Any, masked: np.ndarray) -> bool:
         """Whether to add/update ``masked pixels`` and ``fit residual`` for this result.
