@@ -116,8 +116,10 @@ class SegmentWidget(ResultLayers, MaskAndScribbles, StackWidget, SegmentDock):
     segment over every pixel; segment k of the engine is label k + 1 because napari
     draws label 0 as transparent background; with scribbles, each pixel gets the label
     of the scribbled material the classifier chose, so segments and strokes share their
-    colours) and ``reconstruction error`` (Image, per-pixel |Î rebuilt from the block
-    harmonics − Î|, added hidden below the segments; its mean is in the status line).
+    colours) and, when the run computes the thesis maps (the thesis method always, the
+    others with *thesis maps and error map*, :meth:`wants_maps`), ``reconstruction
+    error`` (Image, per-pixel |Î rebuilt from the block harmonics − Î|, added hidden
+    below the segments; its mean is in the status line; removed by a run without them).
     Once a run leaves pixels out (mask, saturated, black) or uses the robust fit, also
     ``masked pixels`` (Labels, 1 where a pixel was left out of the fit and the features)
     and ``fit residual`` (Image, RMS residual of the per-pixel sinusoid fit), both added
