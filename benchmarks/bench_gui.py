@@ -13,6 +13,12 @@ on the kept features and predicted again; target ≤ 1 s). Prints one table with
 issues' targets and, per row, the seconds of the engine's recomputed stages and of the
 widget showing the result (layers, plots); the rest is the worker thread and the Qt event
 loop. Not part of the test run.
+
+With ``--frame PATH`` (a camera frame, e.g. a 1224 × 1024 polarisation mosaic read with
+``--mosaic 90,45,135,0``) it times the default preset (the superpixel method) in a fresh
+viewer instead: segments k → k + 1 and a change of parameters the method does not read
+(refractive index, window), each from the change to the labels on screen, split into the
+engine's stages and the widget's own time (its overhead).
 """
 
 from __future__ import annotations
@@ -27,6 +33,8 @@ CACHE = Path("/tmp/napari-polarseg-bench")
 #: Seconds of idle event loop before each change (the previous result gets drawn).
 SETTLE = 0.5
 TARGETS = {"n_segments": 0.2, "scale": 0.5, "refractive_index": 1.0, "window": 1.0}
+#: Issue 22: targets of the default method on a camera frame (--frame).
+FRAME_TARGETS = {"n_segments": 0.3, "refractive_index": 0.05, "window": 0.05}
 #: Issue 12: a painted stroke to the updated segments on the reference stack.
 STROKE_TARGET = 1.0
 #: Strokes per material of the first scribbles, and their length (pixels).
@@ -65,7 +73,12 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--preset", default="recommended", choices=["recommended", "thesis"])
     parser.add_argument("--cache", type=Path, default=CACHE)
     parser.add_argument("--stages", action="store_true", help="print the seconds per stage")
+    parser.add_argument("--frame", type=Path, help="time the default preset on this frame")
+    parser.add_argument("--mosaic", default="90,45,135,0", help="the frame's mosaic angles")
     args = parser.parse_args(argv)
+    if args.frame is not None:
+        frame_main(args.frame, tuple(int(a) for a in args.mosaic.split(",")))
+        return
 
     import napari
     from qtpy.QtCore import QEventLoop, QTimer
@@ -84,18 +97,17 @@ def main(argv: list[str] | None = None) -> None:
     shown: dict[str, float] = {}
     show = widget._show
 
-    def timed_show(layer, angles_deg, result, *args, **kwargs):  # noqa: ANN001, ANN202
+    def timed_show(layer, angles_deg, result, seconds, inputs=None, partial=False, snap=None):  # noqa: ANN001, ANN202
         res = getattr(result, "result", None) or result
-        partial = res.reconstruction_error is None
         t = time.perf_counter()
         try:
-            return show(layer, angles_deg, result, *args, **kwargs)
+            return show(layer, angles_deg, result, seconds, inputs, partial, snap)
         finally:
             now = time.perf_counter()
             shown.setdefault("segments", now)
             if not partial:
                 shown["all"] = now
-                split["engine"] = sum(res.timings.get(s, 0.0) for s in res.recomputed)
+                split["engine"] = sum(res.timings.get(s, 0.0) for s in set(res.recomputed))
                 split["stages"] = {s: res.timings.get(s, 0.0) for s in res.recomputed}
                 seg = getattr(result, "segmentation", None)  # the pixel classifier's
                 if seg is not None:
@@ -213,6 +225,101 @@ def main(argv: list[str] | None = None) -> None:
         for label, *_, parts in rows:
             stages = ", ".join(f"{k} {v:.3f}" for k, v in parts.get("stages", {}).items())
             print(f"  {label}: {stages}")
+    viewer.close()
+
+
+def frame_main(path: Path, mosaic: tuple[int, ...]) -> None:
+    """Issue 22's figures: the default preset on a camera frame in a fresh viewer."""
+    import napari
+    from qtpy.QtCore import QEventLoop, QTimer
+
+    from napari_polarseg.io import read_stack
+    from napari_polarseg.widgets.segment import LIVE_DELAY_MS
+
+    data = read_stack(path, mosaic=mosaic)
+    viewer = napari.Viewer(show=True)
+    meta = {"angles_deg": [float(a) for a in data.angles_deg]}
+    viewer.add_image(data.stack, name=path.stem, metadata=meta)
+    _, widget = viewer.window.add_plugin_dock_widget("napari-polarseg", "Segment by material")
+    done: dict[str, float] = {}
+    engine: dict[str, float] = {}
+    show = widget._show
+
+    def timed_show(layer, angles_deg, result, seconds, inputs=None, partial=False, snap=None):  # noqa: ANN001, ANN202
+        t = time.perf_counter()
+        show(layer, angles_deg, result, seconds, inputs, partial, snap)
+        done["shown"], done["show"] = time.perf_counter(), time.perf_counter() - t
+        res = getattr(result, "result", None) or result
+        engine.update({s: res.timings.get(s, 0.0) for s in set(res.recomputed)})
+
+    widget._show = timed_show
+    reshow = widget._reshow
+
+    def timed_reshow(layer, snap):  # noqa: ANN001, ANN202
+        t = time.perf_counter()
+        again = reshow(layer, snap)
+        if again:  # nothing recomputed: the re-show is the widget's whole work
+            done["shown"], done["show"] = time.perf_counter(), time.perf_counter() - t
+        return again
+
+    widget._reshow = timed_reshow
+
+    def run_events(until, timeout: float = 120.0) -> None:  # noqa: ANN001
+        loop, timer = QEventLoop(), QTimer()
+        deadline = time.perf_counter() + timeout
+        timer.setInterval(2)
+        timer.timeout.connect(lambda: (until() or time.perf_counter() > deadline) and loop.quit())
+        timer.start()
+        loop.exec()
+        timer.stop()
+
+    def idle() -> bool:
+        return not (widget.busy or widget._waiting())
+
+    def measure(action, live: bool = True):  # noqa: ANN001, ANN202
+        run_events(lambda: False, timeout=SETTLE)
+        done.clear()
+        engine.clear()
+        t0 = time.perf_counter()
+        action()
+        run_events(lambda: not idle() or time.perf_counter() - t0 > 5)
+        run_events(idle)
+        end = done.get("shown", time.perf_counter())
+        return (
+            end - t0 - (LIVE_DELAY_MS / 1000 if live else 0.0),
+            dict(engine),
+            done.get("show", 0.0),
+        )
+
+    rows = [("cold run (Run button)", *measure(widget.run_button.clicked.emit, live=False), None)]
+    widget.live.value = True
+    run_events(idle)
+    base = widget.params()
+    for name, value in (
+        ("n_segments", base.n_segments + 1),
+        ("refractive_index", 1.6),
+        ("window", base.window + 2),
+    ):
+        row = measure(lambda: widget.set_params(**{name: value}))  # noqa: B023
+        rows.append((f"change {name} -> {value:g}", *row, FRAME_TARGETS[name]))
+    h, w = data.stack.shape[1:]
+    print(f"napari plugin, {w} x {h} x {data.stack.shape[0]} frame {path.name}, preset auto")
+    print("seconds from the change to the segments on screen (minus the live debounce);")
+    print("engine: the stages the run computed; widget: the rest (worker, Qt, layers);")
+    print("show: the widget's layers and status (or its re-show of an unchanged result);")
+    print("the debounce timer may fire a few ms early: a re-show can come out below 0")
+    print(f"{'change':<30}| segments | engine | widget | show  | target | result")
+    for label, total, stages, shown_s, target in rows:
+        eng = sum(stages.values())
+        verdict = "—" if target is None else ("met" if total <= target else "MISSED")
+        goal = "     —" if target is None else f"{target:6.2f}"
+        print(
+            f"{label:<30}| {total:8.3f} | {eng:6.3f} | {total - eng:6.3f} | {shown_s:5.3f} | "
+            f"{goal} | {verdict}"
+        )
+        if stages:
+            print("    " + ", ".join(f"{k} {v:.3f}" for k, v in stages.items()))
+    print(f"status: {widget.status.value}")
     viewer.close()
 
 

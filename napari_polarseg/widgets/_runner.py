@@ -89,6 +89,7 @@ class Run:
         self.ended = False
         self.delivered = False  # the job yielded its Result: what follows is quiet
         self.partial = False  # a Partial was shown: its status line stays until the result
+        self.silenced = False  # dropped without a word (WorkerSlot.drop)
         self.index: float = 0  # stages finished (a float within a stage)
         self.stage = ""  # name of the last stage reported by the job
         self.last_report = time.monotonic()  # time of the last report
@@ -129,7 +130,9 @@ class Run:
             QTimer.singleShot(round(slot.activity_delay * 1000), self.show_activity)
 
     def stop(self) -> bool:
-        """True once the run is asked to stop (the ``cancel`` callable of the job)."""
+        """True once the run is asked to stop (the ``cancel`` callable of the job): from
+        then on nothing it reports reaches the status line, so Cancel's "cancelling…"
+        and "cancelled" are never overwritten by a late stage report."""
         return self.worker is not None and bool(self.worker.abort_requested)
 
     def report_within(self, stage: str, index: float, total: int) -> None:
@@ -146,7 +149,7 @@ class Run:
     @property
     def quiet(self) -> bool:
         """True once nothing more is to be reported (ended, idle work, or superseded)."""
-        return self.ended or self.delivered or not self.current
+        return self.ended or self.delivered or self.silenced or not self.current
 
     # -- reports ----------------------------------------------------------------------
     def report(self) -> None:
@@ -155,12 +158,15 @@ class Run:
         if self.quiet:
             return
         slot, index, stage = self.slot, self.index, self.stage
+        if self.stop():
+            return  # Cancel (or a newer request) said so in the status line
         if not self.partial:
             slot.on_status(stage_text(stage, index, self.total))
         slot.on_progress(index, self.total)
         pbar = slot.activity
         if pbar is not None and slot.worker is self.worker:
             pbar.set_description(f"{slot.desc}: {stage}")
+            pbar.total = self.total * PROGRESS_STEPS
             pbar.update(round(index * PROGRESS_STEPS) - pbar.n)
 
     def show_activity(self) -> None:
@@ -176,9 +182,13 @@ class Run:
         slot.activity = progress(total=self.total * PROGRESS_STEPS, desc=desc)
         slot.activity.update(round(self.index * PROGRESS_STEPS))
 
-    def staged(self, stage: str, index: float) -> None:
-        """A stage ended (or a share of one): report it now or once the interval is up."""
+    def staged(self, stage: str, index: float, total: int | None = None) -> None:
+        """A stage started (or a share of one is done): report it now or once the
+        interval is up. ``total``: the job's count of its stages (it knows what runs),
+        which replaces the one it was submitted with."""
         self.index, self.stage = index, stage
+        if total:
+            self.total = total
         wait = self.last_report + self.slot.report_interval - time.monotonic()
         if wait <= 0:
             self.report()
@@ -189,7 +199,10 @@ class Run:
     # -- the worker's signals ---------------------------------------------------------
     def deliver(self, value: Any) -> None:
         """Hand the result to the widget unless a newer request came."""
-        if self.current and self.slot.pending is None:
+        if self.current and self.slot.pending is None and not self.silenced:
+            if self.stop():  # Cancel came after the last stage: the run stays cancelled
+                self.slot.on_status("cancelled")
+                return
             self.slot.on_progress(self.total, self.total)
             self.request.on_result(self.run_id, value)
 
@@ -205,12 +218,12 @@ class Run:
             self.deliver(value.value)
         elif isinstance(value, Partial):
             on_partial = self.request.on_partial
-            if on_partial is not None and slot.pending is None:
+            if on_partial is not None and slot.pending is None and not self.stop():
                 self.partial = True
                 on_partial(self.run_id, value.value)
         else:
-            stage, index, _ = value
-            self.staged(stage, index)
+            stage, index, total = value
+            self.staged(stage, index, total)
 
     def returned(self, value: Any) -> None:
         self.ended = True
@@ -223,7 +236,7 @@ class Run:
             return
         self.ended = True
         slot = self.slot
-        if not self.current or slot.pending is not None or self.delivered:
+        if not self.current or slot.pending is not None or self.delivered or self.silenced:
             return  # a newer run is queued (it reports its own problems), or idle work
         message = error_message(exc)
         slot.last_error = message
@@ -232,10 +245,14 @@ class Run:
 
     def aborted(self) -> None:
         self.ended = True
-        if self.current and self.slot.pending is None and not self.delivered:
+        if self.current and self.slot.pending is None and not (self.delivered or self.silenced):
             self.slot.on_status("cancelled")
 
     def finished(self) -> None:
+        if not self.ended and self.stop():
+            # the job returned after a stop request: superqt then emits neither
+            # ``returned`` nor ``aborted``; the run was cancelled all the same
+            self.aborted()
         # close a generator stopped between stages now (not at garbage collection), so
         # its ``finally`` clauses (the BLAS limit) run at once
         with contextlib.suppress(Exception):
@@ -292,6 +309,7 @@ class WorkerSlot:
         self.pending: Request | None = None
         self.last_error: str | None = None
         self._runs: set[Run] = set()  # started and not finished: kept alive for Qt
+        self._current: Run | None = None  # the newest run
 
     @property
     def busy(self) -> bool:
@@ -348,10 +366,20 @@ class WorkerSlot:
             if not self.quiet:
                 self.on_status("cancelling…")
 
+    def drop(self) -> None:
+        """Stop the running job and drop a queued one without a word (the caller shows
+        what is current): no "cancelled", no result."""
+        self.pending = None
+        run = self._current
+        if self.worker is not None and run is not None and run.worker is self.worker:
+            run.silenced = True
+            self.worker.quit()
+
     def _launch(self, request: Request) -> None:
         """Start ``request`` in a new worker as the newest run."""
         self.run_id += 1
         run = Run(self, request, self.run_id)
+        self._current = run
         worker = run.start()
         self._runs.add(run)
         self.worker = worker

@@ -41,11 +41,11 @@ from ..engine import PolarsegError, SegmentParams
 from ..engine.analysis.change_test import DEFAULT_FALSE_ALARM
 from ..engine.analysis.timeseries import METHODS, segment_timeseries
 from ..engine.analysis.timeseries_result import TimeSeriesResult
-from ..engine.params import AUTO, RECOMMENDED
-from ..io import parse_angles, read_params_file
+from ..io import parse_angles
 from ._base import ScrollingContainer, is_angle_stack
 from ._layers import ANGLES_KEY, label_colormap
 from ._runner import WorkerSlot
+from .param_sources import PARAM_SOURCES, params_from
 from .session import relay
 
 if TYPE_CHECKING:
@@ -53,7 +53,6 @@ if TYPE_CHECKING:
     from napari.layers import Layer
 
 #: Where the batch parameters come from.
-PARAM_SOURCES = ("Segment by material widget", "auto", "recommended", "thesis", "JSON file")
 #: False-alarm rates (per change block and pair of days) the time-series widget offers.
 FALSE_ALARM_CHOICES = (1e-2, 1e-3, 1e-4, 1e-6)
 #: Columns of the summary table in the widget.
@@ -96,34 +95,6 @@ def batch_job(
         return f"{row['scene']}: {row['status']}", next(index), len(scenes)
 
     return (yield from relay(rows, stage))
-
-
-def params_from(viewer: napari.viewer.Viewer, source: str, path: Any = None) -> SegmentParams:
-    """Parameters from one of :data:`PARAM_SOURCES` (raises PolarsegError).
-
-    ``"Segment by material widget"``: the values of the first such widget docked in
-    ``viewer``; a preset; or a SegmentParams JSON file at ``path``.
-    """
-    if source == "auto":
-        return AUTO
-    if source == "recommended":
-        return RECOMMENDED
-    if source == "thesis":
-        return SegmentParams()
-    if source == "JSON file":
-        if path is None:
-            raise PolarsegError("None: cannot read the parameters file (no file chosen)")
-        # a SegmentParams JSON or a params.json written by polarseg, as `segment --params`
-        return read_params_file(path)
-    from .segment import SegmentWidget
-
-    for widget in viewer.window.dock_widgets.values():
-        if isinstance(widget, SegmentWidget):
-            return widget.params()
-    raise PolarsegError(
-        "no 'Segment by material' widget is open: open it, or choose a preset or a JSON "
-        "file as the parameters"
-    )
 
 
 class BatchWidget(ScrollingContainer):

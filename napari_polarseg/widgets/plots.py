@@ -7,18 +7,19 @@ engine in a worker when needed and shows a matplotlib canvas themed like napari.
 
 from __future__ import annotations
 
-from collections.abc import Generator
+from collections.abc import Callable, Generator
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from magicgui.widgets import ComboBox, PushButton
 
-from ..engine import STAGES, PolarsegError, SegmentParams
+from ..engine import STAGES, PolarsegError, Scene, SegmentParams
 from ..engine.analysis import plots
 from ..outputs import figures
 from ._base import StackWidget
 from ._layers import TAG, find_output, fitted_limits, source_key
 from .canvas import figure_canvas, napari_theme, show_message
+from .docks import SegmentDock, docked
 from .session import (
     CLASSIFIER_STAGES,
     ClassifierOutput,
@@ -51,6 +52,12 @@ HISTOGRAM_DEGREES = (4, 12, 20)
 HISTOGRAM_BLOCKS = 1000
 #: Pixels drawn at most in a scatter plot.
 MAX_POINTS = 20000
+#: What the variance plot and the component maps say of a result without PCA features.
+NO_MAPS = (
+    "no PCA features: the segmentation was made without the thesis maps; tick 'thesis "
+    "maps and error map' (advanced settings of 'Segment by material') or choose the "
+    "thesis preset, run, and load the segmentation again"
+)
 #: Principal components "Add component maps" adds.
 N_COMPONENTS = 3
 
@@ -67,13 +74,15 @@ def segment_job(
     region: np.ndarray | None = None,
     scribbles: np.ndarray | None = None,
     classifier_file: str | None = None,
+    report: Callable[[str, float, int], None] | None = None,
 ) -> Generator[Any, None, SegmentationResult | ClassifierOutput]:
     """Worker job: the segmentation of a stack with ``params`` (as the Segment widget).
 
     ``region`` (H, W bool, True = use) is the user's mask; with ``scribbles`` (H, W
     labels) the pixel classifier trained on them replaces the normalized cut, with
     ``classifier_file`` the classifier saved there (read again, checked, not retrained).
-    Returns the result, or for the classifier the
+    Returns the result (of the method ``params.method``, with the thesis maps and the
+    error map; ``report`` receives its stages as they start), or for the classifier the
     :class:`~napari_polarseg.widgets.session.ClassifierOutput` (result and classifier).
     """
     from ..engine.analysis.pixel_segmentation import PixelSegmenter
@@ -91,8 +100,13 @@ def segment_job(
             where = "scribbles" if out.trained else "classifier"
             raise PolarsegError(f"{where}: {out.problem}")
         return out
-    yield from pipe.run_iter(params, reconstruction=True)
-    return pipe.result(params, reconstruction=True)
+
+    def progress(stage: str, index: float, total: int) -> None:
+        if report is not None and stage != "done":
+            report(stage, index, total)
+
+    # the method the segments came from (params.method), with the maps the plots draw
+    return Scene(pipeline=pipe).segment(params, maps=True, reconstruction=True, progress=progress)
 
 
 def histogram_job(
@@ -198,16 +212,13 @@ class PlotsWidget(StackWidget):
 
     def _segment_widget_classifier(self) -> PixelClassifier | None:
         """The docked Segment widget's pixel classifier of the chosen stack, if any."""
-        from .segment import SegmentWidget
-
         layer = self.stack_layer.value
         if layer is None:
             return None
-        for widget in self._viewer.window.dock_widgets.values():
-            if isinstance(widget, SegmentWidget):
-                classifier = widget.shown_classifier(layer)
-                if classifier is not None:
-                    return classifier
+        for widget in docked(self._viewer, SegmentDock):
+            classifier = widget.shown_classifier(layer)
+            if classifier is not None:
+                return classifier
         return None
 
     def _layer_by_key(self, key: Any) -> Layer | None:
@@ -226,13 +237,10 @@ class PlotsWidget(StackWidget):
     ) -> tuple[SegmentationResult, PixelClassifier | None] | None:
         """The docked Segment widget's result behind ``layer``'s segments and its
         pixel classifier (None when the labels came from the cut)."""
-        from .segment import SegmentWidget
-
-        for widget in self._viewer.window.dock_widgets.values():
-            if isinstance(widget, SegmentWidget):
-                result = widget.shown_result(layer)
-                if result is not None and result.params == params:
-                    return result, widget.shown_classifier(layer)
+        for widget in docked(self._viewer, SegmentDock):
+            result = widget.shown_result(layer)
+            if result is not None and result.params == params:
+                return result, widget.shown_classifier(layer)
         return None
 
     def run(self, *_: Any) -> None:
@@ -263,8 +271,9 @@ class PlotsWidget(StackWidget):
 
         args = (layer.data, np.deg2rad(angles_deg), params, region, scribbles, classifier_file)
         classify = scribbles is not None or classifier_file is not None
+        # the scene reports its own stage count of an unsupervised run
         total = len(CLASSIFIER_STAGES) if classify else len(STAGES)
-        self._submit(segment_job, args, total, on_result)
+        self._submit(segment_job, args, total, on_result, reports=not classify)
 
     def set_result(
         self,
@@ -277,7 +286,11 @@ class PlotsWidget(StackWidget):
         classifier its labels came from, for the feature importances)."""
         self.result, self._source, self.histograms = result, layer, None
         self.classifier = classifier
-        parts = [f"{result.n_segments} segments", f"{result.features.shape[1]} components"]
+        parts = [f"{result.n_segments} segments"]
+        if result.features is not None:
+            parts.append(f"{result.features.shape[1]} components")
+        else:
+            parts.append(f"no PCA features ({result.method} without the thesis maps)")
         self._done(" · ".join([*parts, *(notes or [])]))
         self.draw()
 
@@ -319,6 +332,8 @@ class PlotsWidget(StackWidget):
             data = plots.scatter_data(result, MAX_POINTS)
             # numbered as the segments layer shows them (label + 1)
             figures.scatter_figure(data, kind.split("_")[1], fig=fig, theme=theme, first_label=1)
+        elif kind == "variance" and result.explained_variance_ratio is None:
+            self._message(NO_MAPS)
         elif kind == "variance":
             figures.explained_variance_figure(plots.explained_variance(result), fig, theme)
         elif self.histograms is not None:
@@ -362,6 +377,9 @@ class PlotsWidget(StackWidget):
         """Add (or replace in place) the first principal components as image layers."""
         if self.result is None or self._source is None or self._source not in self._viewer.layers:
             self._fail(PolarsegError("load a segmentation first"))
+            return []
+        if self.result.features is None:
+            self._fail(PolarsegError(NO_MAPS))
             return []
         source, comp = self._source, plots.component_maps(self.result, N_COMPONENTS)
         out = []

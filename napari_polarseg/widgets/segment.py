@@ -1,36 +1,41 @@
 """The "Segment by material" widget: the cached engine pipeline, run in a worker thread.
 
 Thin: the jobs, pipelines and result texts are the session layer
-(:mod:`napari_polarseg.widgets.session`); the widget's parts are mixins, one module each:
-:mod:`~napari_polarseg.widgets.segment_params` (the parameter controls and files),
-:mod:`~napari_polarseg.widgets.segment_inputs` (mask, scribbles, snapshot),
-:mod:`~napari_polarseg.widgets.segment_files` (classifier files, *Export results…*) and
-:mod:`~napari_polarseg.widgets.segment_layers` (the output layers). This module builds
-the widget and runs it.
+(:mod:`napari_polarseg.widgets.session`). The widget holds its parts as objects: the
+parameter controls (:class:`~napari_polarseg.widgets.segment_params.ParameterControls`,
+:attr:`SegmentWidget.controls`), the classifier files and *Export results…*
+(:mod:`~napari_polarseg.widgets.segment_files`, :attr:`SegmentWidget.classifier_files`,
+:attr:`SegmentWidget.export`); the mask and scribbles
+(:mod:`~napari_polarseg.widgets.segment_inputs`, with the :class:`Snapshot` of a
+request) and the output layers (:mod:`~napari_polarseg.widgets.segment_layers`) are
+still mixins. This module builds the widget and runs it.
 """
 
 from __future__ import annotations
 
 import functools
 import time
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from magicgui.widgets import CheckBox, Container
 from qtpy.QtCore import QTimer
 
-from ..engine import Pipeline, PolarsegError, SegmentationResult
+from ..engine import Pipeline, PolarsegError, SegmentationResult, SegmentParams
 from ..engine.params import PARAM_SPECS, PRESETS, ParamSpec
 from ._base import StackWidget
 from ._layers import find_output, source_key
+from .docks import SegmentDock
 from .param_controls import controlled_names
 from .segment_files import ClassifierFiles, ResultExport
-from .segment_inputs import CUT_ONLY, NO_MASK, NO_SCRIBBLES, MaskAndScribbles
-from .segment_layers import ResultLayers
+from .segment_inputs import CUT_ONLY, NO_MASK, NO_SCRIBBLES, MaskAndScribbles, Snapshot
+from .segment_layers import ResultLayers, ShownEntry
 from .segment_params import ParameterControls
 from .session import (
     ClassifierOutput,
     Delivery,
+    LoadedClassifier,
     PipelineStore,
     colour_stack_of,
     input_info,
@@ -42,6 +47,8 @@ if TYPE_CHECKING:
     import napari
     from napari.layers import Layer
 
+    from ..engine.analysis.pixel_classifier import PixelClassifier
+
 # Names importers take from this module (tests, benchmarks): defined beside the mixins.
 __all__ = [
     "CONTROLLED",
@@ -52,6 +59,7 @@ __all__ = [
     "NO_SCRIBBLES",
     "PRESETS",
     "SegmentWidget",
+    "Snapshot",
 ]
 
 #: Milliseconds the live update waits after the last change before it reruns.
@@ -66,14 +74,7 @@ CONTROLLED = controlled_names(PARAM_SPECS)
 FIRST_CONTROLS = ("n_segments",)
 
 
-class SegmentWidget(
-    ResultLayers,
-    ClassifierFiles,
-    ResultExport,
-    MaskAndScribbles,
-    ParameterControls,
-    StackWidget,
-):
+class SegmentWidget(ResultLayers, MaskAndScribbles, StackWidget, SegmentDock):
     """Segment an angle stack by material (thesis section 4.5) with live parameters.
 
     Controls: a preset (thesis values or the recommended ones), *Load parameters…* and
@@ -115,8 +116,10 @@ class SegmentWidget(
     segment over every pixel; segment k of the engine is label k + 1 because napari
     draws label 0 as transparent background; with scribbles, each pixel gets the label
     of the scribbled material the classifier chose, so segments and strokes share their
-    colours) and ``reconstruction error`` (Image, per-pixel |Î rebuilt from the block
-    harmonics − Î|, added hidden below the segments; its mean is in the status line).
+    colours) and, when the run computes the thesis maps (the thesis method always, the
+    others with *thesis maps and error map*, :meth:`wants_maps`), ``reconstruction
+    error`` (Image, per-pixel |Î rebuilt from the block harmonics − Î|, added hidden
+    below the segments; its mean is in the status line; removed by a run without them).
     Once a run leaves pixels out (mask, saturated, black) or uses the robust fit, also
     ``masked pixels`` (Labels, 1 where a pixel was left out of the fit and the features)
     and ``fit residual`` (Image, RMS residual of the per-pixel sinusoid fit), both added
@@ -142,7 +145,8 @@ class SegmentWidget(
     run_text = "Run"
     run_tooltip = (
         "Segment the chosen stack by material with the parameters below (or the "
-        "scribbles) and add the segments and the reconstruction-error map as layers"
+        "scribbles) and add the segments (and, with the thesis maps, the "
+        "reconstruction-error map) as layers"
     )
     progress_desc = "Segment by material"
 
@@ -151,14 +155,19 @@ class SegmentWidget(
     ) -> None:
         super().__init__(viewer)
         self.store = PipelineStore()
-        #: Per stack key: (result, inputs) behind the stack's ``segments`` layer.
-        self._shown: dict[str, tuple[SegmentationResult, dict[str, Any]]] = {}
-        self._requested: tuple[Any, ...] | None = None  # snapshot of the last request
+        #: Per stack key: the result behind the stack's ``segments`` layer.
+        self._shown: dict[str, ShownEntry] = {}
+        self._requested: Snapshot | None = None  # snapshot of the last request
         self._force = False  # a control changed: the next live run is not skipped
         self._live_run = False  # run() was called by the live update
-        self._build_classifier_controls()
-        self._build_export_controls()
-        self._build_parameter_controls(specs)
+        #: The parts the widget holds: the parameter controls, the classifier files and
+        #: *Export results…*.
+        self.controls = ParameterControls(specs, self._set_status, self._fail, lambda: self.native)
+        self.classifier_files = ClassifierFiles(
+            self, viewer, self._set_status, self._fail, self._on_value_changed, self._on_inputs
+        )
+        self.export = ResultExport(self, self._set_status, self._fail)
+        self._adopt_controls()
         self.live = CheckBox(
             text="live update",
             value=False,
@@ -175,6 +184,24 @@ class SegmentWidget(
         self._connect()
         self._unwatch_when_closed()
 
+    def _adopt_controls(self) -> None:
+        """The parts' controls as attributes of the widget (``widget.n_segments``, …)."""
+        controls, files = self.controls, self.classifier_files
+        for name, control in controls.controls.items():
+            setattr(self, name, control)
+        for name in ("preset", "load_button", "save_button", "params_file", "thesis_maps"):
+            setattr(self, name, getattr(controls, name))
+        self.controlled, self.param_specs = controls.controlled, controls.param_specs
+        self.parameter_widgets = controls.parameter_widgets
+        for name in (
+            "load_classifier_button",
+            "save_classifier_button",
+            "clear_classifier_button",
+            "classifier_file",
+        ):
+            setattr(self, name, getattr(files, name))
+        self.export_button = self.export.export_button
+
     def _lay_out(self) -> None:
         """The first controls, then the collapsed *advanced settings*; Export after Run."""
         # the few controls a user touches first stay in view; the rest (every parameter
@@ -183,6 +210,7 @@ class SegmentWidget(
             widgets=[
                 self.params_file,
                 *(getattr(self, name) for name in self.controlled if name not in FIRST_CONTROLS),
+                self.thesis_maps,
                 self.mask_layer,
                 self.classifier_file,
                 self.views,
@@ -196,8 +224,8 @@ class SegmentWidget(
         self.show_advanced = CheckBox(
             text="advanced settings",
             value=False,
-            tooltip="Show every parameter of the pipeline (the preset sets them), the mask, "
-            "and the parameter and classifier files",
+            tooltip="Show every parameter of the pipeline (the preset sets them), the thesis "
+            "maps option, the mask, and the parameter and classifier files",
         )
         self._add_parameters(
             [
@@ -213,34 +241,86 @@ class SegmentWidget(
         self.insert(self.index(self.progress), self.export_button)  # after Run and Cancel
 
     def _connect(self) -> None:
-        """Connect the controls to their handlers (the order of the original widget)."""
+        """Connect the controls to their handlers (the parts connect their own)."""
         self.show_advanced.changed.connect(self._on_show_advanced)
         self.views.changed.connect(self._on_views_changed)
         self.view_mode.changed.connect(self._on_views_changed)
         self.stack_layer.changed.connect(self.mask_layer.reset_choices)
         self.stack_layer.changed.connect(self.scribbles_layer.reset_choices)
         watched = [self.stack_layer, self.angles, self.mask_layer, self.scribbles_layer]
-        for w in [*self.parameter_widgets, *watched]:
+        for w in [*self.parameter_widgets, self.thesis_maps, *watched]:
             w.changed.connect(self._on_value_changed)
         self.live.changed.connect(self._on_value_changed)
-        self.model.changed.connect(self._on_model_changed)
-        self.preset.changed.connect(self._on_preset_changed)
         self.mask_layer.changed.connect(self._sync_watches)
         self.scribbles_layer.changed.connect(self._sync_watches)
         self.scribbles_layer.changed.connect(self._on_scribbles_changed)
         self.new_scribbles_button.changed.connect(self.new_scribbles_layer)
-        self.load_button.changed.connect(self._on_load_clicked)
-        self.save_button.changed.connect(self._on_save_clicked)
-        self.export_button.changed.connect(self._on_export_clicked)
-        self.load_classifier_button.changed.connect(self._on_load_classifier_clicked)
-        self.save_classifier_button.changed.connect(self._on_save_classifier_clicked)
-        self.clear_classifier_button.changed.connect(self.clear_classifier)
-        self.stack_layer.changed.connect(self._update_classifier_buttons)
-        self.stack_layer.changed.connect(self._update_export_button)
+
+    # -- the parts' public members ----------------------------------------------------
+    def params(self) -> SegmentParams:
+        """The engine parameters the controls describe (:meth:`ParameterControls.params
+        <napari_polarseg.widgets.segment_params.ParameterControls.params>`)."""
+        return self.controls.params()
+
+    def set_params(self, params: SegmentParams | None = None, **changes: Any) -> None:
+        """Set the controls (:meth:`ParameterControls.set_params
+        <napari_polarseg.widgets.segment_params.ParameterControls.set_params>`)."""
+        self.controls.set_params(params, **changes)
+
+    def save_params(self, path: str | Path) -> bool:
+        """Write the parameters as JSON (see ``ParameterControls.save_params``)."""
+        return self.controls.save_params(path)
+
+    def load_params(self, path: str | Path) -> bool:
+        """Set every control from a parameters file (see ``ParameterControls.load_params``)."""
+        return self.controls.load_params(path)
+
+    def wants_maps(self, params: SegmentParams | None = None) -> bool:
+        """Whether a run computes the thesis maps and the error map (the thesis method,
+        or *thesis maps and error map* ticked)."""
+        return self.controls.maps(params)
+
+    @property
+    def loaded(self) -> LoadedClassifier | None:
+        """The classifier *Load classifier…* read, while it is applied."""
+        return self.classifier_files.loaded
+
+    @property
+    def classifier(self) -> PixelClassifier | None:
+        """The pixel classifier behind the chosen stack's segments (what *Save
+        classifier…* writes)."""
+        return self.classifier_files.classifier
+
+    def shown_classifier(self, layer: Layer) -> PixelClassifier | None:
+        """The pixel classifier behind ``layer``'s ``segments`` layer, if any."""
+        return self.classifier_files.shown_classifier(layer)
+
+    def load_classifier(self, path: str | Path) -> bool:
+        """Read a classifier file in a worker and apply it (see ``ClassifierFiles``)."""
+        return self.classifier_files.load_classifier(path)
+
+    def save_classifier(self, path: str | Path) -> bool:
+        """Write the chosen stack's pixel classifier (see ``ClassifierFiles``)."""
+        return self.classifier_files.save_classifier(path)
+
+    def clear_classifier(self, *_: Any) -> None:
+        """Stop applying the loaded classifier (see ``ClassifierFiles``)."""
+        self.classifier_files.clear_classifier()
+
+    def export_results(
+        self, folder: str | Path, *, overview: bool = True, plots: bool = False
+    ) -> bool:
+        """Write the chosen stack's last result into ``folder`` in a worker (the folder
+        of ``polarseg segment --out``; see ``ResultExport.export_results``)."""
+        return self.export.export_results(folder, overview=overview, plots=plots)
 
     # -- sections -----------------------------------------------------------------------
     def _on_show_advanced(self, shown: bool) -> None:
         self.advanced.visible = bool(shown)
+
+    def _on_inputs(self) -> None:
+        """The loaded classifier changed: the cut's controls follow."""
+        self._on_scribbles_changed()
 
     # -- stacks, pipelines and results ------------------------------------------------
     def _refresh_stacks(self) -> None:
@@ -269,28 +349,20 @@ class SegmentWidget(
         segments = find_output(self._viewer, "segments", layer)
         if entry is None or segments is None:
             return None
-        result, inputs = entry
-        if segments.metadata.get("polarseg_inputs") != inputs:
+        if segments.metadata.get("polarseg_inputs") != entry.inputs:
             return None  # another widget has written the layer since
-        return result
+        return entry.result
 
     def _forget(self, keep: set[str]) -> None:
         store = getattr(self, "store", None)  # None while the base class initialises
         if store is not None:
             store.discard(keep)
-        updates = {
-            "_shown": None,
-            "_exports": self._update_export_button,
-            "_classifiers": self._update_classifier_buttons,
-        }
-        for name, update in updates.items():
-            kept = getattr(self, name, None)  # None while the widget is built
-            if kept is None:
-                continue
-            for key in set(kept) - keep:
-                del kept[key]
-            if update is not None:
-                update()
+        for key in set(getattr(self, "_shown", None) or {}) - keep:
+            del self._shown[key]
+        for part in ("export", "classifier_files"):
+            found = getattr(self, part, None)  # None while the widget is built
+            if found is not None:
+                found.forget(keep)
 
     def _on_value_changed(self, *_: Any) -> None:
         if self.live.value:
@@ -308,17 +380,21 @@ class SegmentWidget(
             self._live_run = False
 
     def _waiting(self) -> bool:
-        return self._timer.isActive() or self._export_slot.busy or self._classifier_slot.busy
+        return (
+            self._timer.isActive() or self.export.slot.busy or self.classifier_files.slot.busy
+        )
 
     # -- running ----------------------------------------------------------------------
     def run(self, *_: Any) -> None:
         """Start (or queue) a run with the current values in a worker; returns at once.
 
         With a scribbles layer chosen, the pixel classifier trained on its strokes
-        replaces the normalized cut; strokes of fewer than two materials are reported in
-        the status line and nothing runs. A loaded classifier is applied instead of
-        training while the strokes are as they were when it was loaded; once they have
-        changed, it is dropped and the strokes train the classifier again.
+        replaces the unsupervised method; strokes of fewer than two materials are
+        reported in the status line and nothing runs. A loaded classifier is applied
+        instead of training while the strokes are as they were when it was loaded; once
+        they have changed, it is dropped and the strokes train the classifier again. A
+        change of parameters the shown result's method does not read (and no thesis
+        maps asked for) only shows that result again (:meth:`_reshow`).
         """
         self._timer.stop()
         self._force = False
@@ -333,45 +409,91 @@ class SegmentWidget(
             return
         snap = self._snapshot_of(params, mask_key, region, scribble_key, scribbles)
         self._requested = snap
-        loaded = self._applied(scribble_key, snap[6])
-        if self.loaded is not None and loaded is None:  # painted since: train again
-            self.loaded = None
-            self._update_classifier_buttons()
+        files = self.classifier_files
+        loaded = self._applied(scribble_key, snap.scribbles_digest)
+        if files.loaded is not None and loaded is None:  # painted since: train again
+            files.loaded = None
+            files.update_buttons()
             self._on_scribbles_changed()
         if scribbles is not None and loaded is None:
             problem = scribble_problem(scribbles)
             if problem is not None:
                 self._set_status(f"scribbles: {problem}")
                 return
+        if scribbles is None and loaded is None and self._reshow(layer, snap):
+            return
         inputs = {
-            "mask": input_info(self.mask_layer.value, mask_key, snap[4]),
+            "mask": input_info(self.mask_layer.value, mask_key, snap.mask_digest),
             "scribbles": None
             if loaded is not None
-            else input_info(self.scribbles_layer.value, scribble_key, snap[6]),
+            else input_info(self.scribbles_layer.value, scribble_key, snap.scribbles_digest),
             "classifier": None if loaded is None else str(loaded.path),
         }
+        self._start(layer, angles_deg, snap, inputs, region, loaded, scribbles)
+
+    def _start(
+        self,
+        layer: Layer,
+        angles_deg: np.ndarray,
+        snap: Snapshot,
+        inputs: dict[str, Any],
+        region: np.ndarray | None,
+        loaded: LoadedClassifier | None,
+        scribbles: np.ndarray | None,
+    ) -> None:
+        """Submit the run's job (the method, or the pixel classifier) to the worker slot."""
         delivery = Delivery(layer, angles_deg, snap, inputs, time.perf_counter())
-        angles_rad = np.deg2rad(angles_deg)
-        classifier = None if loaded is None else loaded.classifier
-        strokes = None if loaded is not None else scribbles
         request = segment_request(
             self.store,
             source_key(layer),
             layer.data,
-            angles_rad,
-            params,
+            np.deg2rad(angles_deg),
+            snap.params,
             region,
-            mask_key,
-            strokes,
-            classifier,
+            snap.mask_key,
+            None if loaded is not None else scribbles,
+            None if loaded is None else loaded.classifier,
             colour_stack_of(layer),
+            maps=snap.maps,
         )
-        # a new stroke or request stops the prediction, or the cut's eigensolver, at once;
-        # the cut reports progress within the harmonics and reconstruction
+        # a new stroke or request stops the prediction, or the method's stage, at once
         on_result = functools.partial(self._on_result, delivery)
         on_partial = functools.partial(self._on_partial, delivery)
         job, args, total = request.job, request.args, request.total
         self._submit(job, args, total, on_result, on_partial, self._live_run, True, request.reports)
+
+    def _reshow(self, layer: Layer, snap: Snapshot) -> bool:
+        """Show the stack's result again when only parameters its method does not read
+        changed (e.g. the refractive index under the superpixel method) and no thesis
+        maps are asked for: nothing is recomputed. True if it did."""
+        key = source_key(layer)
+        entry = self._shown.get(key)
+        scene = self.store.scene(key)
+        if entry is None or entry.snap is None or scene is None or snap.maps:
+            return False
+        changed = snap.differs_only_in_params(entry.snap)
+        if changed is None or self.shown_result(layer) is None:
+            return False
+        old, new = entry.result.params, snap.params
+        method = scene.method_for(new, None)
+        if method.name != entry.result.method or scene.method_key(
+            method, old, {}
+        ) != scene.method_key(method, new, {}):
+            return False
+        segments = find_output(self._viewer, "segments", layer)
+        assert segments is not None  # shown_result found it
+        angles = segments.metadata.get("polarseg_params", {}).get("angles_deg")
+        params_meta = {**new.to_dict(), "angles_deg": angles}
+        segments.metadata = {**segments.metadata, "polarseg_params": params_meta}
+        self._shown[key] = ShownEntry(entry.result, entry.inputs, snap)
+        self.export.reshown(layer, new)
+        self._slot.drop()  # a run of other values still going is outdated: no word of it
+        fields = ", ".join(changed) if changed else "nothing"
+        self._set_status(
+            f"{entry.result.n_segments} segments, unchanged: the {method.name} method does "
+            f"not read {fields}"
+        )
+        return True
 
     def _on_result(self, run: Delivery, run_id: int, result: Any) -> None:
         """A run's result (GUI thread): shown unless the inputs changed meanwhile."""
@@ -382,9 +504,9 @@ class SegmentWidget(
             where = "scribbles" if result.trained else "classifier"
             self._set_status(f"{where}: {result.problem}")
             return
-        self._show(run.layer, run.angles_deg, result, run.seconds(), run.inputs)
+        self._show(run.layer, run.angles_deg, result, run.seconds(), run.inputs, False, run.snap)
 
     def _on_partial(self, run: Delivery, run_id: int, result: Any) -> None:
         """The segments (or classes) before the error map; dropped like a result."""
         if run.snap == self.snapshot() and run.layer in self._viewer.layers:
-            self._show(run.layer, run.angles_deg, result, run.seconds(), run.inputs)
+            self._show(run.layer, run.angles_deg, result, run.seconds(), run.inputs, True)

@@ -1,9 +1,10 @@
 """The Segment widget's inputs beside the stack: the mask and scribbles layers (and the
-edits painted into them), and the snapshot of everything a result depends on."""
+edits painted into them), and the :class:`Snapshot` of everything a result depends on."""
 
 from __future__ import annotations
 
 import contextlib
+from dataclasses import dataclass, fields
 from typing import Any
 
 import numpy as np
@@ -29,12 +30,61 @@ EDIT_EVENTS = ("paint", "data", "set_data")
 CUT_ONLY = ("scale", "scale_mode", "clustering", "min_segment_blocks", "n_segments")
 
 
+@dataclass(frozen=True)
+class Snapshot:
+    """Everything a Segment-widget result depends on (compared to tell whether a result
+    still matches the controls, or whether a live update has anything to run).
+
+    Attributes
+    ----------
+    stack_key : str or None
+        The chosen stack layer (``source_key``).
+    angles : str
+        The angles field as typed.
+    params : SegmentParams
+        The parameters.
+    mask_key, mask_digest : str or None
+        The mask layer and a digest of its region.
+    scribbles_key, scribbles_digest : str or None
+        The scribbles layer and a digest of its strokes.
+    classifier_serial : int or None
+        Which *Load classifier…* is applied (None: none).
+    maps : bool
+        Whether the run computes the thesis maps and the error map.
+    """
+
+    stack_key: str | None
+    angles: str
+    params: SegmentParams
+    mask_key: str | None
+    mask_digest: str | None
+    scribbles_key: str | None
+    scribbles_digest: str | None
+    classifier_serial: int | None
+    maps: bool
+
+    def differs_only_in_params(self, other: Snapshot) -> tuple[str, ...] | None:
+        """The SegmentParams fields that differ when nothing else does (None otherwise)."""
+        same = all(
+            getattr(self, f.name) == getattr(other, f.name)
+            for f in fields(self)
+            if f.name != "params"
+        )
+        if not same:
+            return None
+        return tuple(
+            f.name
+            for f in fields(self.params)
+            if getattr(self.params, f.name) != getattr(other.params, f.name)
+        )
+
+
 class MaskAndScribbles(WidgetPart):
     """Mixin of :class:`~napari_polarseg.widgets.segment.SegmentWidget`: the mask and
     scribbles choosers, the edits painted into the chosen layers, the snapshot.
 
-    Uses the widget's viewer, stack chooser, angles, :meth:`params`, the loaded
-    classifier (``loaded``), the live check box and timer, and its status line.
+    Uses the widget's viewer, stack chooser, angles, :meth:`params`, ``wants_maps``, the
+    loaded classifier (``loaded``), the live check box and timer, and its status line.
     """
 
     angles: Any
@@ -43,6 +93,7 @@ class MaskAndScribbles(WidgetPart):
     _timer: Any
     _labels_box: Any
     params: Any
+    wants_maps: Any
 
     def _build_input_controls(self) -> None:
         """The mask and scribbles choosers and *New scribbles layer*."""
@@ -162,7 +213,7 @@ class MaskAndScribbles(WidgetPart):
         except RuntimeError:  # the widget was deleted
             pass
 
-    def snapshot(self) -> tuple[Any, ...] | None:
+    def snapshot(self) -> Snapshot | None:
         """Everything a result depends on, or None if the values are invalid."""
         try:
             params = self.params()
@@ -179,20 +230,21 @@ class MaskAndScribbles(WidgetPart):
         region: np.ndarray | None,
         scribble_key: str | None,
         scribbles: np.ndarray | None,
-    ) -> tuple[Any, ...]:
+    ) -> Snapshot:
         layer = self.stack_layer.value
         key = None if layer is None else source_key(layer)
         digest = content_digest(scribbles)
         loaded = self._applied(scribble_key, digest)
-        return (
-            key,
-            self.angles.value,
-            params,
-            mask_key,
-            region_digest(region),
-            scribble_key,
-            digest,
-            None if loaded is None else loaded.serial,
+        return Snapshot(
+            stack_key=key,
+            angles=self.angles.value,
+            params=params,
+            mask_key=mask_key,
+            mask_digest=region_digest(region),
+            scribbles_key=scribble_key,
+            scribbles_digest=digest,
+            classifier_serial=None if loaded is None else loaded.serial,
+            maps=self.wants_maps(params),
         )
 
     def _applied(self, scribble_key: str | None, digest: str | None) -> LoadedClassifier | None:

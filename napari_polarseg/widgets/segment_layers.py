@@ -3,6 +3,7 @@ error map, diagnostics, class probability and uncertainty, the HSV and Stokes vi
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -11,8 +12,8 @@ from magicgui.widgets import CheckBox
 from ..engine.physics.stokes import stokes_components
 from ._base import WidgetPart
 from ._layers import find_output, remove_output, show_output, source_key
-from .polarisation import VIEW_OUTPUTS, composite_for, view_mode_box
 from .session import ClassifierOutput, ShownResult, shown_result
+from .views import VIEW_OUTPUTS, composite_for, view_mode_box
 
 if TYPE_CHECKING:
     from napari.layers import Layer
@@ -20,18 +21,28 @@ if TYPE_CHECKING:
     from ..engine import SegmentationResult
 
 
+@dataclass(frozen=True)
+class ShownEntry:
+    """What a stack's ``segments`` layer shows: the result, the inputs it used (the
+    layer's ``polarseg_inputs``) and the snapshot of the controls it was made with."""
+
+    result: SegmentationResult
+    inputs: dict[str, Any]
+    snap: Any = None
+
+
 class ResultLayers(WidgetPart):
     """Mixin of :class:`~napari_polarseg.widgets.segment.SegmentWidget`: the layers of
     its results and the *HSV and Stokes layers* option.
 
-    Uses the widget's viewer, stack chooser, shown results (``_shown``), the records of
-    the classifier and the export (``_record_classifier``, ``_record_export``) and its
-    status line.
+    Uses the widget's viewer, stack chooser, the shown results (``_shown``), its
+    classifier and export parts (``classifier_files``, ``export``; their ``record``) and
+    its status line.
     """
 
-    _shown: dict[str, tuple[SegmentationResult, dict[str, Any]]]
-    _record_classifier: Any
-    _record_export: Any
+    _shown: dict[str, ShownEntry]
+    classifier_files: Any
+    export: Any
 
     def _build_view_controls(self) -> None:
         """*HSV and Stokes layers* and the *HSV view* menu; the last result's arrays."""
@@ -41,6 +52,9 @@ class ResultLayers(WidgetPart):
         self.classes: np.ndarray | None = None
         #: Uncertainty (H, W) of the last scribble run shown (None after an unsupervised run).
         self.uncertainty: np.ndarray | None = None
+        #: Per stack key: the fit residual the diagnostics layers show (the cached
+        #: polarisation image's array: the same object while the image is unchanged).
+        self._diagnostics: dict[str, Any] = {}
         self.views = CheckBox(
             text="HSV and Stokes layers",
             value=False,
@@ -56,15 +70,18 @@ class ResultLayers(WidgetPart):
         result: SegmentationResult | ClassifierOutput,
         seconds: float,
         inputs: dict[str, Any] | None = None,
+        partial: bool = False,
+        snap: Any = None,
     ) -> None:
         """Show a run's layers and summary.
 
-        A partial result (no reconstruction yet: the worker yielded it before its last
+        A ``partial`` result (no reconstruction yet: the worker yielded it before its last
         stage) updates the segments (and class probability, uncertainty) layers and the
         status line only; the complete result that follows updates the rest. Labels equal
-        to those already shown only update the segments' metadata.
+        to those already shown only update the segments' metadata. ``snap``: the
+        snapshot of the controls the run was requested with.
         """
-        shown = shown_result(result, angles_deg, inputs)
+        shown = shown_result(result, angles_deg, inputs, partial)
         meta, out = shown.meta, shown.out
         if not shown.partial:
             self._show_complete(layer, shown)
@@ -87,23 +104,26 @@ class ResultLayers(WidgetPart):
         if shown.partial:
             self._set_status(shown.status(seconds))
             return
-        self._shown[source_key(layer)] = (shown.result, shown.inputs)
-        self._record_classifier(layer, None if out is None else out.classifier)
-        self._record_export(layer, angles_deg, shown)
+        self._shown[source_key(layer)] = ShownEntry(shown.result, shown.inputs, snap)
+        self.classifier_files.record(layer, None if out is None else out.classifier)
+        self.export.record(layer, angles_deg, shown)
         self._done(shown.status(seconds))
 
     def _show_complete(self, layer: Layer, shown: ShownResult) -> None:
         """The layers of a complete result below the segments: the error map, the
         diagnostics (masked pixels, fit residual) and the HSV and Stokes views."""
         result, meta = shown.result, shown.meta
-        # the error map (added hidden) goes below the segments, which overlay the stack
-        error = np.array(result.reconstruction_error)
-        self._show_below_segments("error", error, layer, meta)
+        if result.reconstruction_error is None:
+            # a run without the thesis maps: an error map of earlier parameters would
+            # pass for this result's
+            remove_output(self._viewer, "error", layer)
+        else:
+            # the error map (added hidden) goes below the segments, which overlay the stack
+            error = np.array(result.reconstruction_error)
+            self._show_below_segments("error", error, layer, meta)
         masked = shown.masked()
         if self._shows_diagnostics(layer, result, masked):
-            residual = np.array(result.residual)
-            self._show_below_segments("residual", residual, layer, meta)
-            self._show_below_segments("masked", masked, layer, meta)
+            self._show_diagnostics(layer, result, masked, meta)
         if self.views.value:
             self._show_views(layer, result, meta)
 
@@ -118,6 +138,22 @@ class ResultLayers(WidgetPart):
             below = layers.index(segments)
             if layers.index(shown) > below:
                 layers.move(layers.index(shown), below)
+
+    def _show_diagnostics(
+        self, layer: Layer, result: Any, masked: np.ndarray, meta: dict[str, Any]
+    ) -> None:
+        """Add/update ``fit residual`` and ``masked pixels``; when both show the same
+        polarisation image already (a rerun that changed e.g. only the number of
+        segments), only their metadata follow."""
+        key, roles = source_key(layer), ("residual", "masked")
+        found = [find_output(self._viewer, role, layer) for role in roles]
+        if self._diagnostics.get(key) is result.residual and all(found):
+            for shown in found:
+                shown.metadata = {**shown.metadata, **meta}
+            return
+        self._show_below_segments("residual", np.array(result.residual), layer, meta)
+        self._show_below_segments("masked", masked, layer, meta)
+        self._diagnostics[key] = result.residual
 
     def _shows_diagnostics(self, layer: Layer, result: Any, masked: np.ndarray) -> bool:
         """Whether to add/update ``masked pixels`` and ``fit residual`` for this result.
@@ -140,11 +176,11 @@ class ResultLayers(WidgetPart):
                 if segments is None
                 else {"polarseg_params": segments.metadata.get("polarseg_params")}
             )
-            self._show_views(layer, shown[0], meta)
+            self._show_views(layer, shown.result, meta)
 
     def _show_views(self, layer: Layer, result: SegmentationResult, meta: dict) -> None:
         """The S0, S1, S2 Stokes layers (hidden) and the AoLP/DoLP HSV view of ``result``
-        in the chosen *HSV view* (:data:`~napari_polarseg.widgets.polarisation.VIEW_MODES`),
+        in the chosen *HSV view* (:data:`~napari_polarseg.widgets.views.VIEW_MODES`),
         below the segments; the Polarisation image widget shares these layers."""
         arrays = (np.asarray(result.intensity), np.asarray(result.dop), np.asarray(result.phase))
         for role, data in zip(VIEW_OUTPUTS[:-1], stokes_components(*arrays), strict=True):

@@ -1,36 +1,58 @@
 """The Segment widget's parameters: the preset, one control per labelled spec of the
-parameter table, and the parameter files (*Load parameters…*, *Save parameters…*)."""
+parameter table, the thesis-maps option and the parameter files (*Load parameters…*,
+*Save parameters…*), as one object the widget holds (:class:`ParameterControls`)."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from magicgui.widgets import ComboBox, Container, PushButton
+from magicgui.widgets import CheckBox, ComboBox, Container, PushButton
 
 from ..engine import PolarsegError, SegmentParams
 from ..engine.params import DEFAULT_PRESET, PARAM_SPECS, PRESET_HELP, PRESETS, ParamSpec
 from ..io import read_params_file
-from ._base import WidgetPart, ask_file
+from ._base import ask_file
 from .param_controls import controlled_names, param_controls
-from .session import write_params_json
+from .session import wants_maps, write_params_json
 
 if TYPE_CHECKING:
     from magicgui.widgets import Widget
+    from magicgui.widgets.bases import ValueWidget
+    from qtpy.QtWidgets import QWidget
+
+#: Text of the option that adds the thesis maps and the error map to other methods' runs.
+THESIS_MAPS_TEXT = "thesis maps and error map"
 
 
-class ParameterControls(WidgetPart):
-    """Mixin of :class:`~napari_polarseg.widgets.segment.SegmentWidget`: its parameters.
+class ParameterControls:
+    """The parameters of :class:`~napari_polarseg.widgets.segment.SegmentWidget`.
 
-    :meth:`_build_parameter_controls` makes the preset menu, the parameter-file buttons
-    and one control per labelled spec (attributes named like the SegmentParams fields);
-    :meth:`params` reads them, :meth:`set_params` sets them. Uses the widget's
-    ``native``, ``_set_status`` and ``_fail`` (of
-    :class:`~napari_polarseg.widgets._base.StackWidget`).
+    The preset menu, the parameter-file buttons, one control per labelled spec
+    (:attr:`controls`, by SegmentParams field name; also attributes of that name) and
+    the *thesis maps and error map* option (:attr:`thesis_maps`). :meth:`params` reads
+    them, :meth:`set_params` sets them; :meth:`maps` says whether a run computes the
+    thesis maps.
+
+    Parameters
+    ----------
+    specs : dict, optional
+        The parameter table the controls are made from (default ``PARAM_SPECS``).
+    status, fail : callable
+        The widget's status line (a text) and its error report (a PolarsegError).
+    parent : callable() -> QWidget
+        The widget file dialogs open over.
     """
 
-    def _build_parameter_controls(self, specs: dict[str, ParamSpec] | None) -> None:
-        """The preset menu, the parameter-file buttons and the parameter controls."""
+    def __init__(
+        self,
+        specs: dict[str, ParamSpec] | None,
+        status: Callable[[str], None],
+        fail: Callable[[PolarsegError], None],
+        parent: Callable[[], QWidget],
+    ) -> None:
+        self._status, self._fail, self._parent = status, fail, parent
         d = PRESETS[DEFAULT_PRESET]
         self._base = d  # values of the fields without a control
         self._params_dir = Path.home()
@@ -59,10 +81,53 @@ class ParameterControls(WidgetPart):
         #: The parameter table the controls are made from (one control per labelled spec).
         self.param_specs = dict(specs or PARAM_SPECS)
         self.controlled = controlled_names(self.param_specs)
-        for name, control in param_controls(d.to_dict(), self.param_specs).items():
+        #: One control per labelled spec, by SegmentParams field name.
+        self.controls: dict[str, ValueWidget] = param_controls(d.to_dict(), self.param_specs)
+        for name, control in self.controls.items():
             setattr(self, name, control)
         self.specular_branch.visible = False
+        self.thesis_maps = CheckBox(
+            text=THESIS_MAPS_TEXT,
+            value=False,
+            tooltip="Also compute the thesis maps (harmonic coefficients, PCA features: the "
+            "plots' explained variance and component maps) and the reconstruction-error "
+            "layer with another method than the thesis one. Off: those runs compute none "
+            "of them (faster), and the error layer is removed. The thesis method always "
+            "computes them",
+        )
+        self._maps_choice = False  # the option's value for the other methods
         self.parameter_widgets: list[Widget] = [getattr(self, n) for n in self.controlled]
+        self.preset.changed.connect(self._on_preset_changed)
+        self.model.changed.connect(self._on_model_changed)
+        if "method" in self.controls:
+            self.controls["method"].changed.connect(self._on_method_changed)
+            self._on_method_changed(self.controls["method"].value)
+        self.thesis_maps.changed.connect(self.on_maps_toggled)
+        self.load_button.changed.connect(self._on_load_clicked)
+        self.save_button.changed.connect(self._on_save_clicked)
+
+    def maps(self, params: SegmentParams | None = None) -> bool:
+        """Whether a run with ``params`` (default: the current ones) computes the thesis
+        maps and the error map: always under the thesis method, else when the option is
+        ticked."""
+        params = params if params is not None else self.params()
+        return wants_maps(params, self._maps_choice)
+
+    def _on_method_changed(self, method: Any) -> None:
+        """The thesis method always computes the maps: the option shows them ticked and
+        cannot be changed; another method gets the user's choice back."""
+        box = self.thesis_maps
+        if str(method) == "thesis":
+            if box.enabled:
+                self._maps_choice = bool(box.value)
+            box.enabled, box.value = False, True  # disabled first: not the user's choice
+        elif not box.enabled:
+            box.enabled, box.value = True, self._maps_choice
+
+    def on_maps_toggled(self, value: bool) -> None:
+        """The option was ticked or unticked (under a method other than the thesis one)."""
+        if self.thesis_maps.enabled:
+            self._maps_choice = bool(value)
 
     # -- parameters -------------------------------------------------------------------
     def params(self) -> SegmentParams:
@@ -135,7 +200,7 @@ class ParameterControls(WidgetPart):
             self._fail(PolarsegError(f"{path}: cannot write the parameters file ({reason})"))
             return False
         self._params_dir = path.parent
-        self._set_status(f"saved the parameters to {path}")
+        self._status(f"saved the parameters to {path}")
         return True
 
     def load_params(self, path: str | Path) -> bool:
@@ -157,23 +222,23 @@ class ParameterControls(WidgetPart):
             self._fail(exc)
             return False
         self._params_dir = path.parent
-        self._set_status(f"loaded the parameters from {path}")
+        self._status(f"loaded the parameters from {path}")
         return True
 
-    def _ask_path(self, save: bool) -> str | None:
-        """A file chosen in a Qt dialog (None when cancelled)."""
+    def ask_path(self, save: bool) -> str | None:
+        """A parameters file chosen in a Qt dialog (None when cancelled)."""
         filters = "JSON (*.json);;All files (*)"
         if save:
             start = str(self._params_dir / "params.json")
-            return ask_file(self.native, "Save parameters", start, filters, save=True)
-        return ask_file(self.native, "Load parameters", str(self._params_dir), filters)
+            return ask_file(self._parent(), "Save parameters", start, filters, save=True)
+        return ask_file(self._parent(), "Load parameters", str(self._params_dir), filters)
 
     def _on_save_clicked(self, *_: Any) -> None:
-        path = self._ask_path(save=True)
+        path = self.ask_path(save=True)
         if path:
             self.save_params(path if Path(path).suffix else f"{path}.json")
 
     def _on_load_clicked(self, *_: Any) -> None:
-        path = self._ask_path(save=False)
+        path = self.ask_path(save=False)
         if path:
             self.load_params(path)

@@ -24,8 +24,9 @@ from ..engine.analysis.sweep import check_grid, iter_sweep
 from ..engine.analysis.sweep_result import DEFAULT_SCORE, SCORES, SweepResult
 from ..outputs import figures
 from ._base import StackWidget, ask_file
-from .batch import params_from
 from .canvas import figure_canvas, napari_theme, show_message
+from .docks import segment_dock
+from .param_sources import params_from
 from .session import relay, write_params_json
 
 if TYPE_CHECKING:
@@ -325,11 +326,9 @@ class SweepWidget(StackWidget):
 
     def segment_widget(self) -> SegmentWidget:
         """The docked *Segment by material* widget, docked now if it is not."""
-        from .segment import SegmentWidget
-
-        for widget in self._viewer.window.dock_widgets.values():
-            if isinstance(widget, SegmentWidget):
-                return widget
+        widget = segment_dock(self._viewer)
+        if widget is not None:
+            return widget
         _, widget = self._viewer.window.add_plugin_dock_widget("napari-polarseg", SEGMENT_WIDGET)
         return widget
 

@@ -117,7 +117,8 @@ def test_import_does_not_load_napari_or_qt():
 def test_example_script_segments_headless(tmp_path):
     import tifffile
 
-    from napari_polarseg.engine import Pipeline, SegmentParams
+    from napari_polarseg.engine import Scene, validity_mask
+    from napari_polarseg.engine.params import DEFAULT_PRESET, PRESETS
 
     out = tmp_path / "labels.tif"
     script = ROOT / "examples" / "segment_in_napari.py"
@@ -134,7 +135,9 @@ def test_example_script_segments_headless(tmp_path):
     assert "3 segments" in done.stdout
     labels = tifffile.imread(out)
     with np.load(ROOT / "napari_polarseg" / "sample_data" / "leaves.npz") as data:
-        ref = Pipeline(
-            data["stack"], np.deg2rad(data["angles"]), SegmentParams(degree=6, n_segments=3)
-        ).run()
+        # the example starts from the plugin's default preset (its method), as a user does
+        stack = data["stack"]
+        mask = validity_mask(stack, saturation="auto", dark_level=0)
+        params = PRESETS[DEFAULT_PRESET].replace(degree=6, n_segments=3)
+        ref = Scene(stack, np.deg2rad(data["angles"]), mask).segment(params)
     np.testing.assert_array_equal(labels, ref.labels + 1)

@@ -13,7 +13,8 @@ from napari_polarseg._sample_data import SAMPLE_DIR
 from napari_polarseg.engine import SegmentParams
 from napari_polarseg.engine.params import CLUSTERING_METHODS, FEATURE_KINDS, RECOMMENDED
 from napari_polarseg.io import read_params_dict
-from napari_polarseg.widgets.segment import CONTROLLED, SegmentWidget
+from napari_polarseg.widgets.segment import CONTROLLED
+from napari_polarseg.widgets.segment_params import ParameterControls
 
 pytestmark = pytest.mark.gui
 
@@ -38,6 +39,7 @@ CUSTOM = SegmentParams(
     clustering="kway",
     fit="robust",
     affinity_graph="sparse",
+    method="superpixels",
 )
 
 
@@ -150,7 +152,7 @@ def test_buttons_ask_for_a_file(viewer, add_widget, qtbot, tmp_path, monkeypatch
     widget.set_params(CUSTOM)
     answers: list = [str(tmp_path / "from_button")]  # no suffix: .json is added
     # (on the class: magicgui containers take ``del widget.name`` for removing a widget)
-    monkeypatch.setattr(SegmentWidget, "_ask_path", lambda self, save: answers.pop(0))
+    monkeypatch.setattr(ParameterControls, "ask_path", lambda self, save: answers.pop(0))
     click(qtbot, widget.save_button)
     saved = tmp_path / "from_button.json"
     assert SegmentParams.from_json(saved.read_text(encoding="utf-8")) == CUSTOM

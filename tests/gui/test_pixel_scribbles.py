@@ -20,7 +20,8 @@ from napari_polarseg.engine.errors import Cancelled
 from napari_polarseg.engine.synthetic.scenes import scribble_strokes
 from napari_polarseg.widgets._layers import source_key
 from napari_polarseg.widgets.plots import TOP_FEATURES
-from napari_polarseg.widgets.segment import CUT_ONLY, SegmentWidget
+from napari_polarseg.widgets.segment import CUT_ONLY
+from napari_polarseg.widgets.segment_files import ClassifierFiles
 
 pytestmark = pytest.mark.gui
 
@@ -201,7 +202,7 @@ def test_save_and_load_classifier_round_trip(
 
     # Save classifier… (the dialog patched as in test_params_json): the suffix is added
     answers: list = [str(tmp_path / "leaves")]
-    monkeypatch.setattr(SegmentWidget, "_ask_classifier_path", lambda self, save: answers.pop(0))
+    monkeypatch.setattr(ClassifierFiles, "ask_path", lambda self, save: answers.pop(0))
     click(qtbot, widget.save_classifier_button)
     wait_idle(qtbot, widget)
     path = tmp_path / f"leaves{SUFFIX}"

@@ -9,7 +9,9 @@ import numpy as np
 import pytest
 from _gui_helpers import click, engine_result, error_messages, run_and_wait, wait_idle
 
+from napari_polarseg.engine.methods import MethodOutput, register_method, unregister_method
 from napari_polarseg.widgets import _runner
+from napari_polarseg.widgets._layers import source_key
 from napari_polarseg.widgets._runner import REPORT_INTERVAL, Result, WorkerSlot
 
 pytestmark = pytest.mark.gui
@@ -190,3 +192,122 @@ def test_progress_moves_within_the_harmonics_stage(
     assert all(top == len(stages) * PROGRESS_STEPS for _, top in seen if top)
     assert any(s.startswith("running: harmonics 50 %") for s in statuses), statuses
     assert widget.progress.value == widget.progress.max
+
+
+class Waiting:
+    """A toy method of three stages whose second waits for ``release`` (status and
+    progress checked while it runs)."""
+
+    name = "waiting"
+    title = "waits in its second stage"
+    reads = ("n_segments",)
+    inputs: tuple[str, ...] = ()
+
+    def __init__(self) -> None:
+        import threading
+
+        self.entered, self.release = threading.Event(), threading.Event()
+
+    def stages(self, params):
+        return ("first", "second", "third")
+
+    def segment(self, scene, params, inputs, run):
+        run.begin("first")
+        run.begin("second")
+        self.entered.set()
+        while not self.release.wait(0.02):
+            # half done, reported again and again; not checking for a stop request, as
+            # a report from a stage that has not seen Cancel yet
+            run.progress("second", run.index("second") + 0.5, run.total)
+        run.begin("third")  # raises Cancelled after a stop request
+        h, w = scene.shape
+        return MethodOutput(np.zeros((h, w), dtype=np.int32))
+
+
+@pytest.fixture
+def waiting_method():
+    method = register_method(Waiting())
+    yield method
+    method.release.set()
+    unregister_method(Waiting.name)
+
+
+def test_progress_counts_the_running_methods_own_stages(
+    viewer, open_sample, add_widget, qtbot, waiting_method
+):
+    from napari_polarseg.widgets._base import PROGRESS_STEPS
+
+    stack = open_sample("leaves")
+    widget = add_widget("Segment by material", preset=None)
+    widget.method.value = waiting_method.name
+    seen: list[tuple[int, int]] = []
+    widget.progress.changed.connect(lambda value: seen.append((value, widget.progress.max)))
+    widget.run_button.clicked.emit()
+    qtbot.waitUntil(waiting_method.entered.is_set, timeout=60_000)
+    # polarisation, normals and the method's three stages: the second one runs
+    total = len(("polarisation", "normals", "first", "second", "third"))
+    qtbot.waitUntil(lambda: "second" in widget.status.value, timeout=10_000)
+    assert widget.status.value.startswith(f"running: second 50 % (3/{total})")
+    waiting_method.release.set()
+    wait_idle(qtbot, widget)
+    assert error_messages() == []
+    scene = widget.store.scene(source_key(stack))
+    assert len(scene.stages(widget.params())) == total
+    assert all(top == total * PROGRESS_STEPS for value, top in seen if value), seen
+    values = [value for value, _ in seen]
+    assert values == sorted(values) and values[-1] == total * PROGRESS_STEPS  # no jump back
+    assert "1 segments" in widget.status.value
+
+
+def test_cancel_feedback_is_not_overwritten_by_a_late_report(
+    viewer, open_sample, add_widget, qtbot, waiting_method
+):
+    open_sample("leaves")
+    widget = add_widget("Segment by material", preset=None)
+    widget.method.value = waiting_method.name
+    statuses: list[str] = []  # every status the run's reports and Cancel set
+    on_status = widget._slot.on_status
+
+    def record(text: str) -> None:
+        statuses.append(text)
+        on_status(text)
+
+    widget._slot.on_status = record
+    widget.run_button.clicked.emit()
+    qtbot.waitUntil(waiting_method.entered.is_set, timeout=60_000)
+    qtbot.waitUntil(lambda: widget.status.value.startswith("running: second"), timeout=10_000)
+    widget.cancel_button.clicked.emit()
+    assert widget.status.value == "cancelling…"
+    qtbot.wait(3 * int(REPORT_INTERVAL * 1000))  # the stage keeps reporting meanwhile
+    waiting_method.release.set()
+    wait_idle(qtbot, widget)
+    assert widget.status.value == "cancelled"
+    after = statuses[statuses.index("cancelling…") :]
+    assert after == ["cancelling…", "cancelled"], after
+    assert widget.output("segments") is None
+
+
+def test_a_run_that_ends_after_cancel_stays_cancelled(qtbot):
+    import threading
+
+    entered, release = threading.Event(), threading.Event()
+    results, statuses = [], []
+
+    def late(report=None, cancel=None):
+        yield "first", 0, 2
+        entered.set()
+        release.wait(10)
+        report("first", 0.5, 2)  # a report from inside the stage, after Cancel
+        return "value"
+
+    slot = WorkerSlot("test", on_status=statuses.append, report_interval=0)
+    on_result = lambda run_id, value: results.append(value)  # noqa: E731
+    slot.submit(late, (), 2, on_result, cancellable=True, reports=True)
+    qtbot.waitUntil(entered.is_set, timeout=5_000)
+    qtbot.waitUntil(lambda: statuses[-1].startswith("running: first"), timeout=5_000)
+    slot.cancel()
+    assert statuses[-1] == "cancelling…"
+    release.set()
+    slot.wait(30)
+    assert results == [] and statuses[-1] == "cancelled"
+    assert not any(s.startswith("running") for s in statuses[statuses.index("cancelling…") :])

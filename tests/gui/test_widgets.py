@@ -414,7 +414,7 @@ def test_segments_visible_in_a_canvas_screenshot(make_napari_viewer, qtbot):
     run_and_wait(qtbot, widget)
     segments = widget.output("segments")
     assert viewer.layers[-1] is segments  # on top, over the grey stack
-    assert not widget.output("error").visible  # the error map starts hidden
+    assert widget.output("error") is None  # the default method computes no error map
     viewer.reset_view()
     shot = viewer.screenshot(canvas_only=True, flash=False)
     assert shot.ndim == 3 and shot.shape[2] == 4

@@ -40,6 +40,7 @@ from .jobs import (
     read_classifier_job,
     segment_job,
     segment_request,
+    wants_maps,
     write_classifier_job,
 )
 from .results import NO_INPUTS, Delivery, ExportRecord, ShownResult, shown_result
@@ -92,6 +93,7 @@ __all__ = [
     "shown_result",
     "stack_pipeline",
     "stage_text",
+    "wants_maps",
     "write_classifier_job",
     "write_params_json",
 ]

@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ...engine import Pipeline, PolarsegError, SegmentationResult, SegmentParams
-from .runs import Partial, Stage
+from .runs import Partial
 
 if TYPE_CHECKING:
     from ...engine.analysis.pixel_classifier import PixelClassifier, PixelPrediction
@@ -96,9 +96,10 @@ def classifier_stages(
     """Run the stages the scribble mode needs (yielding after each), then classify.
 
     Trains the pixel classifier on ``scribbles``, or applies ``classifier`` (exactly one
-    of them). ``len(CLASSIFIER_STAGES)`` stage yields (one fewer without the
-    reconstruction). The pipeline's cached stages and ``segmenter``'s feature stack are
-    reused: once they are computed, a new stroke reruns only training and prediction.
+    of them). Yields ``(stage, stages done, total)`` as each stage starts (at most
+    ``len(CLASSIFIER_STAGES)``, one fewer without the reconstruction). The pipeline's
+    cached stages and ``segmenter``'s feature stack are reused:
+    once they are computed, a new stroke reruns only training and prediction.
     When the reconstruction still has to be computed, the output without it is yielded
     as a :class:`Partial` first (the segments are shown while the error map is
     computed). ``cancel`` is handed to the prediction, which raises
@@ -111,25 +112,27 @@ def classifier_stages(
     recomputed: list[str] = []
     partial = reconstruction and not pipe.is_fresh("reconstruction", params)
 
-    def run_stage(i: int, name: str) -> Stage:
+    def run_stage(name: str) -> None:
         before = pipe.calls[name]
         t0 = time.perf_counter()
         pipe.get(name, params)
         if pipe.calls[name] != before:
             timings[name] = time.perf_counter() - t0
             recomputed.append(name)
-        return name, i + 1, total
 
+    # each stage is reported as it starts (index = stages done): the status names it
     for i, name in enumerate(PIPELINE_STAGES):
-        yield run_stage(i, name)
+        yield name, i, total
+        run_stage(name)
     fparams = None if classifier is None else classifier.feature_params
+    yield "pixel features", len(PIPELINE_STAGES), total
     before = segmenter.cached_features
     t0 = time.perf_counter()
     segmenter.features(fparams, segment_params=params)
     if segmenter.cached_features is not before:
         timings["pixel features"] = time.perf_counter() - t0
         recomputed.append("pixel features")
-    yield "pixel features", len(PIPELINE_STAGES) + 1, total
+    yield "pixel classifier", len(PIPELINE_STAGES) + 1, total
     try:
         seg = segmenter.segment(
             scribbles,
@@ -154,11 +157,11 @@ def classifier_stages(
         )
         return ClassifierOutput(replace(segmentation, result=result), classifier is None)
 
-    yield "pixel classifier", len(PIPELINE_STAGES) + 2, total
     if not partial:
         return output(seg, reconstruction)
     yield Partial(output(seg, False))
-    yield run_stage(total - 1, names[-1])
+    yield names[-1], total - 1, total
+    run_stage(names[-1])
     result = segmenter.result(seg.prediction.labels, True, seg.seconds, params)
     return output(replace(seg, result=result), True)
 

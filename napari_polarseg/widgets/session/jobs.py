@@ -18,11 +18,19 @@ import numpy as np
 
 from ...engine import PolarsegError, SegmentParams, get_method
 from .classify import CLASSIFIER_STAGES, ClassifierOutput, classifier_stages
+from .results import ExportRecord
 from .runs import Job, Partial, Result, Stage
 from .store import PipelineStore
 
 if TYPE_CHECKING:
     from ...engine.analysis.pixel_classifier import PixelClassifier
+
+
+def wants_maps(params: SegmentParams, thesis_maps: bool = False) -> bool:
+    """Whether a run computes the thesis maps (harmonic coefficients, PCA features) and
+    the reconstruction-error map: always for the thesis method (its window, degree and
+    refractive index are tuned with the error map), else when ``thesis_maps`` asks."""
+    return params.method == "thesis" or bool(thesis_maps)
 
 
 def segment_job(
@@ -34,53 +42,53 @@ def segment_job(
     region: np.ndarray | None = None,
     mask_key: str | None = None,
     prefetch: bool = False,
+    maps: bool = True,
     cancel: Callable[[], bool] | None = None,
     report: Callable[[str, float, int], None] | None = None,
 ) -> Generator[Any, None, Any]:
     """Worker job: the method ``params.method`` on the layer's kept
     :class:`~napari_polarseg.engine.Scene` (it reruns only when a parameter it reads
-    changes), with the thesis maps, then the error map.
+    changes); with ``maps`` also the thesis maps and then the error map.
 
     ``region`` (H, W bool, True = use) restricts the segmentation; saturated and black
-    samples are left out in any case (:meth:`PipelineStore.obtain`). Yields ``(stage,
-    index, total)`` after the labels and after the error map; stopping the worker between
-    two yields cancels the run and leaves the stages computed so far cached. When the
-    reconstruction (error map)
-    has to be recomputed, the result without it is yielded first as a
-    :class:`~napari_polarseg.widgets.session.Partial`: the segments are shown while the
-    last stage runs (after a change of n or w it is a third of the run).
+    samples are left out in any case (:meth:`PipelineStore.obtain`). The progress is the
+    run's own stage list (``Scene.stages``): ``report`` (the runner's,
+    ``WorkerSlot.submit(..., reports=True)``) receives ``(stage, index, total)`` when a
+    stage starts (``index`` = stages done, fractional within the chunked stages), so the
+    status line names the stage that runs and the total is what runs. When the
+    reconstruction (error map) has to be recomputed, the result without it is yielded
+    first as a :class:`~napari_polarseg.widgets.session.Partial`: the segments are shown
+    while the last stage runs. Without ``maps`` the result has no coefficients, features
+    or error map (``None``).
 
-    With ``prefetch``, the result is yielded as a
+    With ``prefetch`` (the thesis method), the result is yielded as a
     :class:`~napari_polarseg.widgets.session.Result` and the job goes on in idle time
     with :meth:`Pipeline.prefetch <napari_polarseg.engine.Pipeline.prefetch>` (the
     eigensolves one more segment needs), stopping at the next request.
 
-    ``cancel`` (the runner's stop request) is handed to the normalized cut, which checks
-    it before every product of its eigensolvers and raises
-    :class:`~napari_polarseg.engine.errors.Cancelled`: Cancel or a newer request stops a
-    long cut (or a prefetch) at once instead of at the end of the stage.
-
-    ``report`` (the runner's, ``WorkerSlot.submit(..., reports=True)``) receives the
-    progress within the stages that loop in chunks (harmonics, reconstruction) as
-    ``(stage, index, total)`` with a fractional ``index`` on the same scale as the
-    yields (:meth:`Pipeline.run_iter <napari_polarseg.engine.Pipeline.run_iter>`).
+    ``cancel`` (the runner's stop request) is checked by the scene before every stage and
+    inside the long ones (:class:`~napari_polarseg.engine.errors.Cancelled`).
     """
     pipe = store.obtain(key, data, angles_rad, params, region=region, mask_key=mask_key)
     scene = store.scene(key)
     assert scene is not None
-    total = len(scene.stages(params, maps=True, reconstruction=True))
+    names = scene.stages(params, maps=maps, reconstruction=maps)
+    total = len(names)
 
     def within(stage: str, index: float, _n: int) -> None:
+        # the first call of a run with maps lists every stage but the last: the same
+        # order, so its indexes count on the whole run's scale
         if report is not None and stage != "done":
             report(stage, index, total)
 
+    if not maps:
+        return scene.segment(
+            params, maps=False, reconstruction=False, cancel=cancel, progress=within
+        )
     result = scene.segment(params, maps=True, reconstruction=False, cancel=cancel, progress=within)
-    yield "labels", total - 1, total
     if not pipe.is_fresh("reconstruction", params):
-        # the segments are shown while the error map is computed
-        yield Partial(result)
+        yield Partial(result)  # the segments are shown while the error map is computed
     result = scene.segment(params, maps=True, reconstruction=True, cancel=cancel, progress=within)
-    yield "reconstruction", total, total
     if prefetch and params.method == "thesis":
         yield Result(result)
         for _ in pipe.prefetch(params, cancel):
@@ -136,14 +144,22 @@ def write_classifier_job(path: Path, classifier: PixelClassifier) -> Generator[S
     return path
 
 
-def export_job(folder: Path, kwargs: dict[str, Any]) -> Generator[Stage, None, list[str]]:
+def export_job(
+    folder: Path, record: ExportRecord, options: dict[str, Any]
+) -> Generator[Stage, None, list[str]]:
     """Worker job of *Export results…*: :func:`~napari_polarseg.outputs.write_result_folder`
-    (a file that cannot be written is reported as a :class:`PolarsegError`)."""
+    of ``record`` (``options``: ``overview``, ``plots``). A result without the thesis
+    maps or error map (a method other than the thesis one, the option off) gets them
+    first (:meth:`ExportRecord.complete`): the folder is the one ``polarseg segment --out``
+    writes. A file that cannot be written is reported as a :class:`PolarsegError`."""
     from ...outputs import OutputError, write_result_folder
 
-    yield "writing", 1, 1
+    if record.incomplete:
+        yield "thesis maps and error map", 0, 2
+        record = record.complete()
+    yield "writing", 1, 2
     try:
-        return write_result_folder(folder, **kwargs)
+        return write_result_folder(folder, **record.kwargs(), **options)
     except OutputError as exc:
         raise PolarsegError(str(exc)) from None
 
@@ -170,17 +186,30 @@ def segment_request(
     scribbles: np.ndarray | None = None,
     classifier: PixelClassifier | None = None,
     colour_stack: np.ndarray | None = None,
+    maps: bool = True,
 ) -> SegmentRequest:
-    """The job that segments ``data``: the normalized cut (:func:`segment_job`, then
-    prefetching in idle time, with progress within the harmonics and reconstruction)
-    without ``scribbles`` and ``classifier``, else the pixel classifier trained on the
-    strokes or the loaded one applied (:func:`classifier_job`)."""
+    """The job that segments ``data``: the method of ``params`` (:func:`segment_job`,
+    with the thesis maps and error map when ``maps``; prefetching in idle time for the
+    thesis method) without ``scribbles`` and ``classifier``, else the pixel classifier
+    trained on the strokes or the loaded one applied (:func:`classifier_job`).
+
+    ``total`` is the number of stages the run goes through (the layer's scene lists
+    them; before its first run, the method's stages after the shared ones). The job
+    reports the same total with every stage."""
     if scribbles is None and classifier is None:
-        args = (store, key, data, angles_rad, params, region, mask_key, True)
-        total = 2 + len(get_method(params.method).stages(params)) + 1
-        if params.method != "thesis":
-            total += 2  # the thesis maps (harmonics, PCA) beside its labels
-        return SegmentRequest(segment_job, args, total, reports=True)
+        args = (store, key, data, angles_rad, params, region, mask_key, True, maps)
+        return SegmentRequest(segment_job, args, planned_stages(store, key, params, maps), True)
     args = (store, key, data, angles_rad, params, scribbles, classifier)
     args += (region, mask_key, colour_stack)
     return SegmentRequest(classifier_job, args, len(CLASSIFIER_STAGES), reports=False)
+
+
+def planned_stages(store: PipelineStore, key: str, params: SegmentParams, maps: bool) -> int:
+    """How many stages a :func:`segment_job` of ``key`` with ``params`` goes through."""
+    scene = store.scene(key)
+    if scene is not None:
+        return len(scene.stages(params, maps=maps, reconstruction=maps))
+    names = ["polarisation", "normals", *get_method(params.method).stages(params)]
+    if maps:
+        names += [s for s in ("harmonics", "pca") if s not in names] + ["reconstruction"]
+    return len(names)

@@ -10,7 +10,7 @@ the ``segments`` layer, the metadata of every output layer and the status line;
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -31,7 +31,7 @@ class Delivery:
 
     layer: Any
     angles_deg: np.ndarray
-    snap: tuple[Any, ...]
+    snap: Any
     inputs: dict[str, Any]
     t0: float
 
@@ -49,7 +49,8 @@ class ShownResult:
     scribble value of the chosen class, so segments and strokes share their colours.
     ``confidence`` is the classifier's probability of the chosen class (None after the
     cut); ``meta`` the metadata of every output layer; ``inputs`` the mask, scribbles and
-    classifier file the run used.
+    classifier file the run used; ``partial`` is True for the segments a worker yields
+    before its last stage (the error map).
     """
 
     result: SegmentationResult
@@ -59,11 +60,7 @@ class ShownResult:
     labels: np.ndarray
     confidence: np.ndarray | None
     inputs: dict[str, Any]
-
-    @property
-    def partial(self) -> bool:
-        """True before the reconstruction (the worker yielded it before its last stage)."""
-        return self.result.reconstruction_error is None
+    partial: bool = False
 
     def masked(self) -> np.ndarray:
         """1 where a pixel was left out of the fit and the features (uint8, H x W)."""
@@ -73,7 +70,8 @@ class ShownResult:
         return masked
 
     def status(self, seconds: float) -> str:
-        """The status line: labels, then (once complete) PCA, error, mask and time."""
+        """The status line: labels, then (once complete) PCA and error (when the run
+        computed the thesis maps), mask and time."""
         summary = self.summary
         if self.out is not None:
             assert self.confidence is not None
@@ -83,11 +81,13 @@ class ShownResult:
             parts += [t for t in (close_up_text(summary), degenerate_text(summary)) if t]
         if self.partial:
             return " · ".join([*parts, f"{seconds:.2f} s", "computing the error map…"])
-        parts += [
-            f"{summary['n_components']} PCA components "
-            f"({summary['explained_variance']:.0%} variance)",
-            f"mean reconstruction error {summary['mean_reconstruction_error']:.3g}",
-        ]
+        if summary.get("n_components") is not None:
+            parts.append(
+                f"{summary['n_components']} PCA components "
+                f"({summary['explained_variance']:.0%} variance)"
+            )
+        if summary.get("mean_reconstruction_error") is not None:
+            parts.append(f"mean reconstruction error {summary['mean_reconstruction_error']:.3g}")
         masked_text = mask_text(self.result.mask_counts)
         if masked_text:
             parts.append(masked_text)
@@ -99,8 +99,10 @@ def shown_result(
     value: SegmentationResult | ClassifierOutput,
     angles_deg: np.ndarray,
     inputs: dict[str, Any] | None = None,
+    partial: bool = False,
 ) -> ShownResult:
-    """The labels, metadata and summary the Segment widget shows of ``value``."""
+    """The labels, metadata and summary the Segment widget shows of ``value``
+    (``partial``: the segments before the error map)."""
     inputs = inputs or dict(NO_INPUTS)
     out = value if isinstance(value, ClassifierOutput) else None
     result = out.result if out is not None else value
@@ -125,7 +127,7 @@ def shown_result(
         labels = np.asarray(out.prediction.classes, dtype=np.int32)[result.labels]
     else:
         labels = np.asarray(result.labels, dtype=np.int32) + 1  # a copy: painting is safe
-    return ShownResult(result, out, summary, meta, labels, confidence, inputs)
+    return ShownResult(result, out, summary, meta, labels, confidence, inputs, partial)
 
 
 @dataclass
@@ -133,7 +135,11 @@ class ExportRecord:
     """What *Export results…* writes for a stack layer: its last result and inputs.
 
     The keyword arguments of :func:`napari_polarseg.outputs.write_result_folder` but the
-    folder (and ``overview``/``plots``), captured when the result was shown.
+    folder (and ``overview``/``plots``), captured when the result was shown. ``scene``
+    (the :class:`~napari_polarseg.engine.Scene` that made an unsupervised result) and
+    ``params`` (the parameters the folder records; default the result's) let
+    :meth:`complete` add what the folder's contract has and a run without the thesis
+    maps did not compute (harmonic coefficients, PCA features, the error map).
     """
 
     stack: Any
@@ -145,6 +151,25 @@ class ExportRecord:
     uncertainty: np.ndarray | None = None
     info: dict[str, Any] = field(default_factory=dict)
     summary: dict[str, Any] = field(default_factory=dict)
+    scene: Any = None
+    params: Any = None
+
+    @property
+    def incomplete(self) -> bool:
+        """True when the folder needs maps the result lacks (computed by :meth:`complete`)."""
+        result = self.result
+        stale = self.params is not None and self.params != result.params
+        lacking = result.features is None or result.reconstruction_error is None
+        return self.scene is not None and (lacking or stale)
+
+    def complete(self) -> ExportRecord:
+        """This record with a result that has every map of the folder (a worker's job:
+        the scene reruns no method, only the thesis maps and the error map)."""
+        if not self.incomplete:
+            return self
+        params = self.params if self.params is not None else self.result.params
+        result = self.scene.segment(params, maps=True, reconstruction=True)
+        return replace(self, result=result)
 
     def kwargs(self) -> dict[str, Any]:
         """The keyword arguments of :func:`~napari_polarseg.outputs.write_result_folder`."""
@@ -170,10 +195,12 @@ class ExportRecord:
         mask: Any,
         source: str | None,
         layer_name: str,
+        scene: Any = None,
     ) -> ExportRecord:
         """What *Export results…* needs of ``shown`` (a complete result) of the stack
         layer ``layer_name`` (``stack`` its data, ``mask`` the pipeline's pixel mask,
-        ``source`` the file it was read from)."""
+        ``source`` the file it was read from; ``scene`` the scene of an unsupervised
+        result, see :meth:`complete`)."""
         from ...outputs import classifier_summary
 
         out, inputs = shown.out, shown.inputs
@@ -198,4 +225,5 @@ class ExportRecord:
                 }
             },
             summary=summary,
+            scene=scene if out is None else None,
         )
