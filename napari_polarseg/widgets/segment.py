@@ -128,8 +128,8 @@ class SegmentWidget(ResultLayers, MaskAndScribbles, StackWidget, SegmentDock):
     class, 1/K … 1, low where it hesitates between materials) and ``uncertainty``
     (Image, hidden: 1 − (p1 − p2), one minus the margin between the two most probable
     classes, 0 sure … 1 a tie: where another stroke helps most); the probabilities of
-    every class are :attr:`probabilities` (K, H, W) with their labels in
-    :attr:`classes`, the uncertainty is :attr:`uncertainty`. With *HSV and Stokes layers*
+    every class are ``probabilities`` (K, H, W) with their labels in
+    ``classes``, the uncertainty is ``uncertainty``. With *HSV and Stokes layers*
     (advanced) also ``S0/S1/S2 Stokes`` (hidden) and ``AoLP/DoLP HSV`` in the chosen *HSV
     view* (with intensity, light, or dark: value from ρ, black where unpolarised), the
     layers the *Polarisation image* widget shares; changing the view redraws them only.

@@ -312,17 +312,20 @@ class ResultExport:
     ) -> bool:
         """Write the chosen stack's last result into ``folder``, in a worker thread.
 
-        The files of ``polarseg segment --out`` (:func:`napari_polarseg.outputs.
-        write_result_folder`): ``labels.tif`` (0 = first segment; after a scribble run the
+        The files of ``polarseg segment --out``
+        (:func:`napari_polarseg.outputs.write_result_folder`): ``labels.tif`` (0 = first segment;
+        after a scribble run the
         class index, 0 = smallest scribble value), the float maps, ``mask.tif``,
-        ``segments.csv``, ``params.json`` (reloads with :meth:`load_params` and ``polarseg
+        ``segments.csv``, ``params.json`` (reloads with
+        :meth:`~napari_polarseg.widgets.segment.SegmentWidget.load_params` and ``polarseg
         segment --params``), ``summary.json``, ``stokes.tif`` and ``aolp_dolp.png``,
         ``overview.png`` (unless ``overview`` is False), the analyst's plots in ``plots/``
         with ``plots``, and when the labels came from the pixel classifier
         ``probabilities.tif`` and ``uncertainty.tif``. The result is the one the stack's
         ``segments`` layer was made from, with the stack, angles, parameters and mask of
         that run. Returns whether the export started; the status line then says how many
-        files were written, or why they could not be (also as a notification). :meth:`wait`
+        files were written, or why they could not be (also as a notification).
+        :meth:`~napari_polarseg.widgets.segment.SegmentWidget.wait`
         waits for it.
         """
         layer = self._host.stack_layer.value

@@ -84,7 +84,7 @@ def test_export_and_plots_of_a_result_without_the_maps(
     widget.set_params(**FAST)
     run_and_wait(qtbot, widget)
     assert widget.shown_result(stack).features is None
-    # the folder is polarseg segment --out's: the maps are computed for the export
+    # the folder is polarseg segment --out's for the default: no thesis maps
     assert widget.export_results(tmp_path / "out")
     wait_idle(qtbot, widget)
     assert error_messages() == [] and widget.status.value.startswith("exported")
@@ -93,9 +93,16 @@ def test_export_and_plots_of_a_result_without_the_maps(
     labels = tifffile.imread(out / "labels.tif")
     np.testing.assert_array_equal(labels, widget.output("segments").data - 1)
     assert np.array_equal(np.unique(labels), np.unique(want.labels))
-    assert (out / "reconstruction_error.tif").exists()
+    assert not (out / "reconstruction_error.tif").exists()
     summary = json.loads((out / "summary.json").read_text())
-    assert summary["method"] == "superpixels" and summary["n_components"] is not None
+    assert summary["method"] == "superpixels" and summary["n_components"] is None
+    assert summary["thesis_maps"] is False
+    # with plots, the maps they are drawn from are computed for the export
+    assert widget.export_results(tmp_path / "plots", plots=True)
+    wait_idle(qtbot, widget)
+    assert (tmp_path / "plots" / "reconstruction_error.tif").exists()
+    summary = json.loads((tmp_path / "plots" / "summary.json").read_text())
+    assert summary["n_components"] is not None
     assert _scene(widget, stack).method_calls == {"superpixels": 1}
 
     plots = add_widget("Polarisation plots")
@@ -129,7 +136,7 @@ def test_a_parameter_the_method_does_not_read_only_reshows(
     assert "unchanged" in widget.status.value and "refractive_index" in widget.status.value
     meta = segments.metadata["polarseg_params"]
     assert meta["refractive_index"] == 1.6 and meta["window"] == 12
-    # the export records the parameters shown, its maps computed for them
+    # the export records the parameters shown, its maps (θ) computed for them
     assert widget.export_results(tmp_path / "out")
     wait_idle(qtbot, widget)
     params = json.loads((tmp_path / "out" / "params.json").read_text())["params"]

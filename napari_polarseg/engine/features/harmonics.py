@@ -22,10 +22,10 @@ The harmonics are evaluated by the standard three-term recurrences of the normal
 associated Legendre functions, run directly on the real harmonics in thesis order (see
 :func:`_fill_harmonics`), vectorised over points and over m, in chunks of a few thousand
 points (cache-sized, bounded memory) spread over the CPU cores. This is hand-written only
-because no library evaluates *all* degrees and orders fast enough (``scipy.special.
-sph_harm_y_all`` and ``sph_legendre_p_all`` are an order of magnitude slower; the
-figures are in ``docs/performance.md``). ``tests/test_harmonics.py`` checks it against ``scipy.special.sph_harm_y`` to
-1e-10 up to L = 30.
+because no library evaluates *all* degrees and orders fast enough
+(``scipy.special.sph_harm_y_all`` and ``sph_legendre_p_all`` are an order of magnitude
+slower; the figures are in ``docs/performance.md``). ``tests/test_harmonics.py`` checks
+it against ``scipy.special.sph_harm_y`` to 1e-10 up to L = 30.
 
 Estimators
 ----------

@@ -149,14 +149,16 @@ def export_job(
 ) -> Generator[Stage, None, list[str]]:
     """Worker job of *Export results…*: :func:`~napari_polarseg.outputs.write_result_folder`
     of ``record`` (``options``: ``overview``, ``plots``). A result without the thesis
-    maps or error map (a method other than the thesis one, the option off) gets them
-    first (:meth:`ExportRecord.complete`): the folder is the one ``polarseg segment --out``
-    writes. A file that cannot be written is reported as a :class:`PolarsegError`."""
+    maps gets them first when the folder has them (:meth:`ExportRecord.complete`: the
+    thesis method, or plots asked for), so the folder is the one ``polarseg segment --out``
+    writes for the same method and options. A file that cannot be written is reported as
+    a :class:`PolarsegError`."""
     from ...outputs import OutputError, write_result_folder
 
-    if record.incomplete:
+    plots = bool(options.get("plots"))
+    if record.needs(plots):
         yield "thesis maps and error map", 0, 2
-        record = record.complete()
+        record = record.complete(plots)
     yield "writing", 1, 2
     try:
         return write_result_folder(folder, **record.kwargs(), **options)

@@ -156,19 +156,29 @@ class ExportRecord:
 
     @property
     def incomplete(self) -> bool:
-        """True when the folder needs maps the result lacks (computed by :meth:`complete`)."""
+        """True when the folder needs what the result lacks (computed by
+        :meth:`complete`): the maps of parameters changed since (that the method does not
+        read), or the thesis maps of a thesis-method result — as ``polarseg segment``
+        writes them for the thesis method only (or with ``--thesis-maps``, ``--plots``)."""
+        return self.needs(plots=False)
+
+    def needs(self, plots: bool) -> bool:
+        """:attr:`incomplete`, and with ``plots`` also a result without the thesis maps
+        (the plots are drawn from them)."""
         result = self.result
         stale = self.params is not None and self.params != result.params
         lacking = result.features is None or result.reconstruction_error is None
-        return self.scene is not None and (lacking or stale)
+        wanted = plots or result.method == "thesis"
+        return self.scene is not None and (stale or (lacking and wanted))
 
-    def complete(self) -> ExportRecord:
+    def complete(self, plots: bool = False) -> ExportRecord:
         """This record with a result that has every map of the folder (a worker's job:
-        the scene reruns no method, only the thesis maps and the error map)."""
-        if not self.incomplete:
+        the scene reruns no method, only the maps that are missing)."""
+        if not self.needs(plots):
             return self
         params = self.params if self.params is not None else self.result.params
-        result = self.scene.segment(params, maps=True, reconstruction=True)
+        maps = plots or self.result.features is not None or params.method == "thesis"
+        result = self.scene.segment(params, maps=maps, reconstruction=maps)
         return replace(self, result=result)
 
     def kwargs(self) -> dict[str, Any]:

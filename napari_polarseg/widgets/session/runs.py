@@ -24,7 +24,8 @@ Job = Callable[..., Generator[Any, None, Any]]
 class Result:
     """The result of a job that goes on with idle-time work (e.g. precomputing).
 
-    :class:`WorkerSlot` hands ``value`` to ``on_result`` at once, as if the job had
+    :class:`~napari_polarseg.widgets._runner.WorkerSlot` hands ``value`` to ``on_result`` at once,
+    as if the job had
     returned it; the rest of the job reports nothing and the next request stops it at its
     next yield.
     """
@@ -36,7 +37,8 @@ class Result:
 class Partial:
     """A result a job yields before it ends (e.g. the segments before the error map).
 
-    :class:`WorkerSlot` hands ``value`` to the ``on_partial`` callback of the run in the
+    :class:`~napari_polarseg.widgets._runner.WorkerSlot` hands ``value`` to the ``on_partial``
+    callback of the run in the
     GUI thread, unless a newer run has been requested since.
     """
 
