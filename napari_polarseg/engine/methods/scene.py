@@ -271,7 +271,7 @@ class Scene:
             timings={
                 s: self._seconds.get(s, 0.0) for s in [*names, method.name] if s in self._seconds
             },
-            recomputed=[s for s in [*names, method.name] if s in timings],
+            recomputed=list(dict.fromkeys(s for s in [*names, method.name] if s in timings)),
             reconstruction=None if rec is None else rec.intensity,
             reconstruction_error=None if rec is None else rec.error,
             valid=~pol.invalid,

@@ -12,6 +12,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any
 
 from ..params import SegmentParams
+from ..timing import timed
 from ..unsupervised.params import UnsupervisedParams
 from ..unsupervised.segmenter import cluster_regions, prepare_regions
 from .base import MethodOutput, MethodRun
@@ -41,14 +42,17 @@ class SuperpixelClustering:
         run.begin("superpixels")
         pol = scene.polarisation(params)
         region = scene.region
+        seconds: dict[str, float] = {}
 
         def prepare() -> Any:
-            return prepare_regions(
-                pol.intensity, pol.dop, pol.phase, self.params, region, run.within
-            )
+            with timed(seconds, "superpixels"):
+                return prepare_regions(
+                    pol.intensity, pol.dop, pol.phase, self.params, region, run.within
+                )
 
         model = scene.cached("superpixels", (id(pol), self.params), prepare)
         run.begin("clustering")
-        seg = cluster_regions(model, params.n_segments)
+        with timed(seconds, "clustering"):
+            seg = cluster_regions(model, params.n_segments)
         record = {"surface_share": round(seg.surface_share, 6), "close_up": seg.close_up}
-        return MethodOutput(seg.labels, record=record, extra={"unsupervised": seg})
+        return MethodOutput(seg.labels, seconds, record=record, extra={"unsupervised": seg})
