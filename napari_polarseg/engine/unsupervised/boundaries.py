@@ -32,10 +32,10 @@ def refine_boundaries(
     not given). One pass (each moves a border by at most a pixel), vectorised over the
     border pixels only.
     """
-    return _refine_pass(labels, _refine_maps(intensity, dop), n_labels, spread)
+    return _refine_pass(labels, refine_maps(intensity, dop), n_labels, spread)
 
 
-def _refine_maps(intensity: np.ndarray, dop: np.ndarray) -> np.ndarray:
+def refine_maps(intensity: np.ndarray, dop: np.ndarray) -> np.ndarray:
     """(2, H, W) float64: log Î and ρ, what the refinement compares."""
     log_i = np.log(np.maximum(intensity, EPS_INTENSITY)).astype(np.float64)
     return np.stack([log_i, dop.astype(np.float64)])
@@ -55,11 +55,8 @@ def _refine_pass(
         spread = np.sqrt((resid.reshape(2, -1) ** 2).mean(axis=1)) + 1e-12
     # the 3 × 3 neighbourhood of every pixel (edge-padded): row and column offsets
     pad = np.pad(labels, 1, mode="edge")
-    h, w = labels.shape
     offsets = [(r, c) for r in range(3) for c in range(3)]
-    border = np.zeros(labels.shape, dtype=bool)
-    for r, c in offsets:
-        border |= pad[r : r + h, c : c + w] != labels
+    border = _border(labels)
     if not border.any():
         return labels
     rows, cols = np.nonzero(border)
@@ -72,24 +69,48 @@ def _refine_pass(
     return out
 
 
+def _border(labels: np.ndarray) -> np.ndarray:
+    """Pixels with a different label among their 8 neighbours inside the image: each
+    of the four neighbour directions compared once, both pixels of a differing pair
+    marked."""
+    border = np.zeros(labels.shape, dtype=bool)
+    for a, b in (
+        ((slice(None), slice(1, None)), (slice(None), slice(None, -1))),  # left-right
+        ((slice(1, None), slice(None)), (slice(None, -1), slice(None))),  # up-down
+        ((slice(1, None), slice(1, None)), (slice(None, -1), slice(None, -1))),  # diagonal
+        ((slice(1, None), slice(None, -1)), (slice(None, -1), slice(1, None))),  # anti-diag.
+    ):
+        differ = labels[a] != labels[b]
+        border[a] |= differ
+        border[b] |= differ
+    return border
+
+
 def within_spread(labels: np.ndarray, intensity: np.ndarray, dop: np.ndarray) -> np.ndarray:
     """Pooled within-segment standard deviation of log Î and of ρ, (2,): the units of
     :func:`refine_boundaries`."""
-    log_i = np.log(np.maximum(intensity, EPS_INTENSITY)).astype(np.float64)
+    return _spread(labels, refine_maps(intensity, dop))
+
+
+def _spread(labels: np.ndarray, maps: np.ndarray) -> np.ndarray:
+    """:func:`within_spread` of the (2, H, W) ``maps`` of :func:`_refine_maps`."""
     flat = labels.ravel()
     n = int(flat.max()) + 1
     count = np.maximum(np.bincount(flat, minlength=n), 1)
     out = []
-    for m in (log_i.ravel(), dop.astype(np.float64).ravel()):
+    for m in (maps[0].ravel(), maps[1].ravel()):
         mean = np.bincount(flat, m, n) / count
         out.append(np.sqrt(np.mean((m - mean[flat]) ** 2)) + 1e-12)
     return np.array(out)
 
 
-def refined_labels(labels: np.ndarray, i: np.ndarray, d: np.ndarray, k: int) -> np.ndarray:
-    """Labels after up to :data:`REFINE_PASSES` passes of :func:`refine_boundaries`."""
-    spread = within_spread(labels, i, d)
-    maps = _refine_maps(i, d)
+def refined_labels(
+    labels: np.ndarray, i: np.ndarray, d: np.ndarray, k: int, maps: np.ndarray | None = None
+) -> np.ndarray:
+    """Labels after up to :data:`REFINE_PASSES` passes of :func:`refine_boundaries`;
+    ``maps``: :func:`refine_maps` of ``i`` and ``d`` when already made."""
+    maps = refine_maps(i, d) if maps is None else maps
+    spread = _spread(labels, maps)
     for _ in range(REFINE_PASSES):
         moved = _refine_pass(labels, maps, k, spread)
         if np.array_equal(moved, labels):

@@ -88,7 +88,7 @@ from ..errors import PolarsegError
 from ..features.pca import pca_features, whiten
 from ..features.pixel_features import EPS_DOP, EPS_INTENSITY, check_maps
 from ..physics.pixel_mask import fill_from_nearest
-from .boundaries import refined_labels
+from .boundaries import refine_maps, refined_labels
 from .kmeans import squared_distances, weighted_kmeans
 from .params import NODE_FEATURES, TREND, UnsupervisedParams, UnsupervisedResult
 from .region_diffusion import diffuse, diffusion_steps, edge_aware_adjacency
@@ -282,7 +282,10 @@ def _cluster_graph(
 def _first_appearance(labels: np.ndarray, node_labels: np.ndarray) -> tuple[np.ndarray, ...]:
     """Segments renumbered in order of first appearance in ``labels`` (row-major)."""
     flat = labels.ravel()
-    _, first = np.unique(flat, return_index=True)
+    # the first index of each of the few labels: one comparison pass per label is
+    # several times faster than sorting every pixel (np.unique)
+    present = np.flatnonzero(np.bincount(flat))
+    first = np.array([np.argmax(flat == v) for v in present], dtype=np.int64)
     values = flat[np.sort(first)]
     order = np.zeros(int(max(flat.max(), node_labels.max())) + 1, dtype=np.int32)
     order[values] = np.arange(values.size, dtype=np.int32)
@@ -398,6 +401,8 @@ class RegionModel:
     params : UnsupervisedParams
         The parameters asked for (``close_up_params()`` of them were used when
         ``close_up``).
+    refine_maps : ndarray (2, H, W) or None
+        log Î and ρ for the border refinement (:func:`.boundaries.refine_maps`), made once.
     """
 
     maps: tuple[np.ndarray, np.ndarray, np.ndarray]
@@ -411,6 +416,7 @@ class RegionModel:
     surface_share: float
     close_up: bool
     params: UnsupervisedParams
+    refine_maps: np.ndarray | None = None
 
     @property
     def used_params(self) -> UnsupervisedParams:
@@ -479,8 +485,20 @@ def prepare_regions(
         if diffusion_steps(q.diffusion_range, n, q.diffusion):
             graph = edge_aware_adjacency(regions, edges, q.diffusion_tau)[keep][:, keep].tocsr()
         z = _project(x[keep], weight, graph, adjacency, q)
+    maps = refine_maps(i, d) if q.refine_boundaries else None
     return RegionModel(
-        (i, d, ph), valid, regions, n, weight, adjacency, z, tuple(names), share, close_up, p
+        (i, d, ph),
+        valid,
+        regions,
+        n,
+        weight,
+        adjacency,
+        z,
+        tuple(names),
+        share,
+        close_up,
+        p,
+        maps,
     )
 
 
@@ -493,9 +511,7 @@ def cluster_regions(model: RegionModel, n_segments: int) -> UnsupervisedResult:
     k = _checked_k(i.shape, n_segments)
     n, q = model.n, model.used_params
     if n < k:
-        raise PolarsegError(
-            f"only {n} superpixels for {k} segments: ask for at most {n} segments"
-        )
+        raise PolarsegError(f"only {n} superpixels for {k} segments: ask for at most {n} segments")
     if k == 1:
         node_labels = np.zeros(n, dtype=np.int32)
     else:
@@ -507,7 +523,7 @@ def cluster_regions(model: RegionModel, n_segments: int) -> UnsupervisedResult:
     if model.valid is not None:
         (labels,) = fill_from_nearest(model.valid, labels)
     if q.refine_boundaries and k > 1:
-        labels = refined_labels(labels, i, d, int(node_labels.max()) + 1)
+        labels = refined_labels(labels, i, d, int(node_labels.max()) + 1, model.refine_maps)
         if model.valid is not None:
             (labels,) = fill_from_nearest(model.valid, labels)
     labels, node_labels = _first_appearance(labels, node_labels)
