@@ -9,6 +9,7 @@ import re
 import zipfile
 
 import numpy as np
+import PIL.Image
 import pytest
 import tifffile
 from scipy import ndimage
@@ -464,7 +465,7 @@ def test_atomic_writers_leave_the_old_file_intact(tmp_path, monkeypatch):
         pio.write_tiff(tif, np.zeros((8, 8), np.uint16))
     with pytest.raises(OSError, match="No space"):
         pio.write_stack_tiff(tif, np.zeros((3, 8, 8)), [0, 60, 120])
-    monkeypatch.setattr(skio, "imsave", _failing_writer)
+    monkeypatch.setattr(PIL.Image.Image, "save", lambda self, fp, **kw: _failing_writer(fp))
     with pytest.raises(OSError, match="No space"):
         pio.write_png(png, np.zeros((8, 8), np.uint8))
     with pytest.raises(TypeError):

@@ -483,7 +483,7 @@ def write_result_folder(
     Returns
     -------
     list of str
-        The files written, relative to ``out``, in the order written.
+        The files written, relative to ``out``, in order.
 
     Raises
     ------
@@ -492,9 +492,8 @@ def write_result_folder(
     OutputError
         A file could not be written (the files written before it stay).
     """
-    stack, probabilities = _checked_arrays(
-        result, stack, angles_deg, probabilities, uncertainty, truth
-    )
+    arrays = (probabilities, uncertainty, truth)
+    stack, probabilities = _checked_arrays(result, stack, angles_deg, *arrays)
     params_json = _params_json(result, stack, angles_deg, command, source, mask, shifts, info)
     summary_json = _summary_json(result, summary, evaluation)
     files = {"segments": segment_rows(result), "evaluation": evaluation}

@@ -93,7 +93,7 @@ def within_spread(labels: np.ndarray, intensity: np.ndarray, dop: np.ndarray) ->
 
 
 def _spread(labels: np.ndarray, maps: np.ndarray) -> np.ndarray:
-    """:func:`within_spread` of the (2, H, W) ``maps`` of :func:`_refine_maps`."""
+    """:func:`within_spread` of the (2, H, W) ``maps`` of :func:`refine_maps`."""
     flat = labels.ravel()
     n = int(flat.max()) + 1
     count = np.maximum(np.bincount(flat, minlength=n), 1)
