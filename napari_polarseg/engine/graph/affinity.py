@@ -202,7 +202,8 @@ def knn_affinity(
     search = NearestNeighbors(n_neighbors=k + 1, algorithm="brute").fit(z)
     if progress is None:
         dist, ind = search.kneighbors(z)
-    else:  # the same queries in row chunks, with a checkpoint between them
+    else:  # the same queries in row chunks, with a checkpoint before each
+        progress(0.0)
         parts = []
         for top in range(0, n, KNN_QUERY_ROWS):
             parts.append(search.kneighbors(z[top : top + KNN_QUERY_ROWS]))
