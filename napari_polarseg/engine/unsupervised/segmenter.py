@@ -359,12 +359,18 @@ def _checked_k(shape: tuple[int, ...], n_segments: int) -> int:
 
 
 def _superpixels(
-    i: np.ndarray, d: np.ndarray, ph: np.ndarray, p: UnsupervisedParams
+    i: np.ndarray,
+    d: np.ndarray,
+    ph: np.ndarray,
+    p: UnsupervisedParams,
+    step: Callable[[float], None] = lambda share: None,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """(superpixels, their edge map) of ``p.boundary`` (module docstring, step 1)."""
+    """(superpixels, their edge map) of ``p.boundary`` (module docstring, step 1);
+    ``step`` is called between the edge map and the watershed."""
     area = p.area_of(i.shape)
     edge_weight = p.polarisation_edge_weight if p.boundary == "polarisation" else 0.0
     edges = superpixel_edges(i, d, ph, edge_weight)
+    step(0.25)
     if p.boundary == "polarisation":
         return polarisation_superpixels(i, d, ph, area, edges=edges), edges
     from ..features.superpixels import superpixels
@@ -466,7 +472,7 @@ def prepare_regions(
     if min(i.shape) < 2:
         raise PolarsegError(f"image too small to segment: {i.shape}")
     step(0.05)
-    regions, edges = _superpixels(i, d, ph, p)
+    regions, edges = _superpixels(i, d, ph, p, step)
     step(0.5)
     regions, n = _masked_regions(regions, valid)
     keep = slice(0, n)
