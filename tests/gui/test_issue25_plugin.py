@@ -1,0 +1,90 @@
+"""Issue 25, plugin items: what a user met in the docks."""
+
+from __future__ import annotations
+
+import numpy as np
+from _gui_helpers import run_and_wait
+from napari.layers import Labels
+
+from napari_polarseg.widgets._layers import layer_tag
+from napari_polarseg.widgets.polarisation import polarisation_status
+
+
+def test_derived_maps_sit_below_segments_and_scribbles(viewer, open_sample, add_widget, qtbot):
+    stack = open_sample("leaves")
+    segment = add_widget("Segment by material")
+    run_and_wait(qtbot, segment)
+    scribbles = viewer.add_labels(np.zeros(stack.data.shape[1:], dtype=np.int32), name="strokes")
+    polarisation = add_widget("Polarisation image")
+    run_and_wait(qtbot, polarisation)
+    names = [layer.name for layer in viewer.layers]
+    segments = names.index(f"segments ({stack.name})")
+    lowest_labels = min(segments, names.index(scribbles.name))
+    derived = [
+        i
+        for i, layer in enumerate(viewer.layers)
+        if layer_tag(layer) is not None and not isinstance(layer, Labels)
+    ]
+    assert len(derived) >= 8  # Î, ρ, φ, θ, S0-S2, the HSV view (and the error map)
+    assert max(derived) < lowest_labels, names
+    assert names.index(stack.name) < min(derived)  # still above the stack
+    assert "90°" in polarisation.status.value or "ρ is above" not in polarisation.status.value
+
+
+def test_polarisation_status_speaks_to_a_user():
+    text = polarisation_status("leaves", 115409, "diffuse")
+    assert "115,409 pixels" in text and "zenith is set to 90°" in text
+    assert "ceiling" not in text
+    assert "ρ is above" not in polarisation_status("leaves", 0, "diffuse")
+    assert "ρ is above" not in polarisation_status("leaves", 12, "specular")
+
+
+#: Every dock widget of the plugin's manifest, the Segment dock first.
+DOCKS = (
+    "Segment by material",
+    "Polarisation image",
+    "Polarisation plots",
+    "Parameter sweep",
+    "Batch over a folder",
+    "Time series change map",
+)
+
+
+def _in_view(widget, dock) -> bool:
+    """True when ``widget`` shows on screen, wholly inside ``dock``."""
+    if not widget.isVisible() or widget.visibleRegion().isEmpty():
+        return False
+    top_left = widget.mapTo(dock, widget.rect().topLeft())
+    bottom_right = widget.mapTo(dock, widget.rect().bottomRight())
+    return dock.rect().contains(top_left) and dock.rect().contains(bottom_right)
+
+
+def test_run_and_status_stay_in_view_with_every_dock_open(
+    viewer, open_sample, add_widget, qtbot
+):
+    from napari_polarseg.widgets._base import _dock_of
+
+    open_sample("leaves")
+    widgets = []
+    for name in DOCKS:  # one by one, as from the Plugins menu: each opens as a tab
+        widgets.append(add_widget(name))
+        qtbot.wait(10)
+    window = viewer.window._qt_window
+    window.resize(1600, 1000)
+    window.show()
+    qtbot.wait(50)
+    for name, widget in zip(DOCKS, widgets, strict=True):
+        widget.status.value = "a status a user reads"
+        dock = _dock_of(widget.native)
+        dock.raise_()
+        qtbot.wait(20)
+        for control in (widget.run_button, widget.status):
+            assert _in_view(control.native, dock), f"{name}: {control!r} out of view"
+    # however short a dock gets, the footer does not scroll away
+    segment = widgets[0]
+    _dock_of(segment.native).raise_()
+    segment.show_advanced.value = True
+    window.resize(1600, 600)
+    qtbot.wait(50)
+    assert segment.scroll_area.verticalScrollBar().maximum() > 0
+    assert _in_view(segment.run_button.native, _dock_of(segment.native))
