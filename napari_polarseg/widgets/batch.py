@@ -43,7 +43,7 @@ from ..engine.analysis.timeseries import METHODS, segment_timeseries
 from ..engine.analysis.timeseries_result import TimeSeriesResult
 from ..io import parse_angles
 from ._base import ScrollingContainer, is_angle_stack
-from ._layers import ANGLES_KEY, label_colormap
+from ._layers import ANGLES_KEY, TAG, label_colormap, source_key
 from ._runner import WorkerSlot
 from .param_sources import PARAM_SOURCES, params_from
 from .session import relay
@@ -154,13 +154,11 @@ class BatchWidget(ScrollingContainer):
                 self.scheduler,
                 self.workers,
                 self.resume,
-                self.run_button,
-                self.cancel_button,
                 self.load_button,
-                self.status,
                 self.table,
             ]
         )
+        self.footer = self.add_footer([self.run_button, self.cancel_button, self.status])
         self._stop = threading.Event()
         self.result: batch_engine.BatchResult | None = None
         self._slot = WorkerSlot("Batch", on_status=self._set_status, on_idle=self._on_idle)
@@ -321,7 +319,11 @@ def add_timeseries_layers(
     changed segment from one day to the next, slider position t = day t + 1 → t + 2),
     ``<name> change score`` (Image, hidden; the graded change test, significant above
     ~3.1 at the default false-alarm rate) and ``<name> feature distance`` (Image,
-    hidden). A folder without score maps (an older run) gets no score layer.
+    hidden); with a ``source`` each name ends in its name, e.g.
+    ``time series change score (day 1)``. A folder without score maps (an older run)
+    gets no score layer. Each layer is tagged as the plugin's output
+    (:data:`~napari_polarseg.widgets._layers.TAG`, role ``time series …``), so no widget
+    offers it as an angle stack (a day of another series).
 
     Parameters
     ----------
@@ -343,38 +345,42 @@ def add_timeseries_layers(
         if changes is None:
             changes = labels[1:] != labels[:-1]
     place: dict[str, Any] = {}
+    suffix, key = "", ""
     if source is not None:
         place = {"scale": tuple(source.scale[-2:]), "translate": tuple(source.translate[-2:])}
+        suffix, key = f" ({source.name})", source_key(source)
+
+    def own(kind: str) -> dict[str, Any]:
+        meta = {TAG: {"role": f"time series {kind}", "source": key}}
+        return {"name": f"{name} {kind}{suffix}", "metadata": meta, **place}
+
     layers = [
         viewer.add_labels(
             np.asarray(labels, np.int32) + 1,
-            name=f"{name} segments",
+            **own("segments"),
             opacity=0.6,
             colormap=label_colormap(),
-            **place,
         ),
-        viewer.add_labels(np.asarray(changes, np.uint8), name=f"{name} change", **place),
+        viewer.add_labels(np.asarray(changes, np.uint8), **own("change")),
     ]
     if score is not None:
         score = np.asarray(score, np.float32)
         layers.append(
             viewer.add_image(
                 score,
-                name=f"{name} change score",
+                **own("change score"),
                 colormap="inferno",
                 contrast_limits=(0.0, max(float(score.max(initial=0.0)), 4.0)),
                 visible=False,
-                **place,
             )
         )
     if distance is not None:
         layers.append(
             viewer.add_image(
                 np.asarray(distance, np.float32),
-                name=f"{name} feature distance",
+                **own("feature distance"),
                 colormap="magma",
                 visible=False,
-                **place,
             )
         )
     return layers
@@ -430,9 +436,8 @@ class TimeSeriesWidget(ScrollingContainer):
         self.status = Label(value="")
         self.status.native.setWordWrap(True)
         self.result: TimeSeriesResult | None = None
-        self.extend(
-            [self.days, self.method, self.false_alarm, self.source, self.run_button, self.status]
-        )
+        self.extend([self.days, self.method, self.false_alarm, self.source])
+        self.footer = self.add_footer([self.run_button, self.status])
         self._slot = WorkerSlot("Time series", on_status=self._set_status)
         self.run_button.changed.connect(self.run)
         events = viewer.layers.events
