@@ -59,9 +59,7 @@ def _in_view(widget, dock) -> bool:
     return dock.rect().contains(top_left) and dock.rect().contains(bottom_right)
 
 
-def test_run_and_status_stay_in_view_with_every_dock_open(
-    viewer, open_sample, add_widget, qtbot
-):
+def test_run_and_status_stay_in_view_with_every_dock_open(viewer, open_sample, add_widget, qtbot):
     from napari_polarseg.widgets._base import _dock_of
 
     open_sample("leaves")
@@ -88,3 +86,24 @@ def test_run_and_status_stay_in_view_with_every_dock_open(
     qtbot.wait(50)
     assert segment.scroll_area.verticalScrollBar().maximum() > 0
     assert _in_view(segment.run_button.native, _dock_of(segment.native))
+
+
+def test_use_best_shows_the_swept_preset_and_values(viewer, open_sample, add_widget, qtbot):
+    from _gui_helpers import wait_idle
+
+    open_sample("leaves")
+    segment = add_widget("Segment by material", preset=None)
+    assert segment.preset.value == "auto" and segment.method.value == "superpixels"
+    sweep = add_widget("Parameter sweep")
+    assert sweep.source.value == "recommended"
+    assert "auto" in sweep.source.native.toolTip()  # says why it is not the default
+    sweep.windows.value = "8"
+    sweep.degrees.value = "4, 6"
+    run_and_wait(qtbot, sweep)
+    best = sweep.result.best()
+    assert sweep.use_best() is segment
+    wait_idle(qtbot, segment)
+    assert segment.preset.value == "recommended"
+    assert segment.method.value == best.method == "thesis"
+    assert (segment.window.value, segment.degree.value) == (8, best.degree)
+    assert segment.params() == best
