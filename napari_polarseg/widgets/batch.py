@@ -115,21 +115,19 @@ class BatchWidget(ScrollingContainer):
     def __init__(self, viewer: napari.viewer.Viewer) -> None:
         super().__init__(labels=True)
         self._viewer = viewer
-        self.folder = FileEdit(label="input folder", mode="d")
-        self.pattern = LineEdit(
-            label="pattern",
-            tooltip="Glob inside the folder, e.g. *.npz; empty: every stack file and sub-folder",
-        )
-        self.out = FileEdit(label="output folder", mode="d")
-        self.source = ComboBox(label="parameters", choices=list(PARAM_SOURCES))
-        self.params_file = FileEdit(label="JSON file", mode="r", filter="*.json", visible=False)
+        self._build_inputs()
         self.scheduler = LineEdit(
             label="scheduler",
             tooltip="Empty: a local Dask cluster; 'inline': no Dask (one scene after the "
             "other); or the address of a running dask.distributed scheduler",
         )
         self.workers = SpinBox(label="workers", value=0, min=0, max=256, tooltip="0: auto")
-        self.resume = CheckBox(text="skip complete scenes (resume)", value=True)
+        self.resume = CheckBox(
+            text="skip complete scenes (resume)",
+            value=True,
+            tooltip="Leave out the scenes whose result folder is already complete (to "
+            "resume a batch that stopped); off: segment every scene again",
+        )
         self.run_button = PushButton(
             text="Run batch",
             tooltip="Segment every input of the folder or pattern into its own result "
@@ -173,6 +171,39 @@ class BatchWidget(ScrollingContainer):
             slot.cancel()
 
         self.native.destroyed.connect(_closed)
+
+    def _build_inputs(self) -> None:
+        """The input and output folders, the pattern and the parameters' source."""
+        self.folder = FileEdit(
+            label="input folder",
+            mode="d",
+            tooltip="The folder of scenes: each stack file (.tif, .npz, …) or sub-folder of "
+            "frames in it is one scene",
+        )
+        self.pattern = LineEdit(
+            label="pattern",
+            tooltip="Glob inside the folder, e.g. *.npz; empty: every stack file and sub-folder",
+        )
+        self.out = FileEdit(
+            label="output folder",
+            mode="d",
+            tooltip="Where each scene's results go (OUT/<scene>/, as polarseg segment "
+            "writes them) with batch_summary.csv and .json",
+        )
+        self.source = ComboBox(
+            label="parameters",
+            choices=list(PARAM_SOURCES),
+            tooltip="The parameters of every scene: the docked Segment by material "
+            "widget's values, a preset, or a parameters JSON file",
+        )
+        self.params_file = FileEdit(
+            label="JSON file",
+            mode="r",
+            filter="*.json",
+            visible=False,
+            tooltip="A parameters JSON (from 'Save parameters…', 'Save best…' or a "
+            "params.json of polarseg segment); missing fields take the thesis defaults",
+        )
 
     # -- inputs -----------------------------------------------------------------------
     def _on_source(self, value: str) -> None:
@@ -418,17 +449,34 @@ class TimeSeriesWidget(ScrollingContainer):
     def __init__(self, viewer: napari.viewer.Viewer) -> None:
         super().__init__(labels=True)
         self._viewer = viewer
-        self.days = Select(label="days (in order)", choices=self._stack_choices)
-        self.method = ComboBox(label="method", choices=list(METHODS), value=METHODS[0])
+        self.days = Select(
+            label="days (in order)",
+            choices=self._stack_choices,
+            tooltip="The angle-stack layers of the same view on successive days, in time "
+            "order (the list's order); at least two",
+        )
+        self.method = ComboBox(
+            label="method",
+            choices=list(METHODS),
+            value=METHODS[0],
+            tooltip="tracked: cut day 1 and move only the blocks whose polarisation "
+            "changed significantly to the segment of what they changed into; reference: "
+            "give every day's blocks the nearest day-1 segment; joint: one cut over all "
+            "days' blocks",
+        )
         self.false_alarm = ComboBox(
             label="false-alarm rate",
             choices=[(f"{p:g} per block", p) for p in FALSE_ALARM_CHOICES],
             value=DEFAULT_FALSE_ALARM,
+            tooltip="Share of unchanged blocks the change test may flag by chance: lower "
+            "flags fewer blocks, only the surer changes",
         )
         # the time series cuts one block graph of all days: no superpixel preset
         self.source = ComboBox(
             label="parameters",
             choices=[s for s in PARAM_SOURCES if s not in ("auto", "JSON file")],
+            tooltip="The parameters of every day: the docked Segment by material widget's "
+            "values or a preset (no auto: the series cuts one block graph of all days)",
         )
         self.run_button = PushButton(
             text="Run", tooltip="Segment the time series and test every block for change"
