@@ -107,3 +107,57 @@ def test_use_best_shows_the_swept_preset_and_values(viewer, open_sample, add_wid
     assert segment.method.value == best.method == "thesis"
     assert (segment.window.value, segment.degree.value) == (8, best.degree)
     assert segment.params() == best
+
+
+#: Opens every dock, segments (live update on), leaves a live rerun pending and two runs
+#: going, closes the viewer, then waits for the worker threads.
+EXIT_SCRIPT = """
+import time
+
+import napari
+from qtpy.QtWidgets import QApplication
+from superqt.utils._qthreading import WorkerBase
+
+viewer = napari.Viewer(show=False)
+viewer.open_sample("napari-polarseg", "leaves")
+widgets = {}
+for name in DOCKS:
+    _, widgets[name] = viewer.window.add_plugin_dock_widget("napari-polarseg", name)
+    QApplication.processEvents()
+segment = widgets["Segment by material"]
+segment.live.value = True
+segment.run()
+assert segment.wait(120), "the segmentation did not end"
+assert segment.output("segments") is not None
+segment.n_segments.value = segment.n_segments.value + 1  # a live rerun on the timer
+widgets["Polarisation image"].run()
+segment.window.value = 8
+segment.run()  # still running when the viewer closes
+viewer.close()
+deadline = time.monotonic() + 60
+while any(getattr(w, "busy", False) for w in widgets.values()):
+    assert time.monotonic() < deadline, "a run outlived the viewer"
+    QApplication.processEvents()
+    time.sleep(0.05)
+WorkerBase.await_workers(msecs=30_000)  # raises if a thread still runs
+print("closed cleanly")
+"""
+
+
+def test_every_dock_open_then_close_exits_cleanly():
+    import os
+    import subprocess
+    import sys
+
+    script = f"DOCKS = {DOCKS!r}\n{EXIT_SCRIPT}"
+    done = subprocess.run(
+        [sys.executable, "-c", script],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        env={**os.environ, "MPLBACKEND": "Agg"},
+    )
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert "closed cleanly" in done.stdout
+    for bad in ("Traceback", "QThread: Destroyed", "RuntimeError", "Segmentation fault"):
+        assert bad not in done.stderr, done.stderr[-3000:]
