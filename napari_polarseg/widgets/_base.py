@@ -11,8 +11,8 @@ import numpy as np
 from magicgui.widgets import ComboBox, Container, Label, LineEdit, ProgressBar, PushButton
 from napari.layers import Image, Labels
 from napari.utils.notifications import show_error
-from qtpy.QtCore import QEvent, QObject
-from qtpy.QtWidgets import QScrollArea, QWidget
+from qtpy.QtCore import QEvent, QObject, QTimer
+from qtpy.QtWidgets import QDockWidget, QMainWindow, QScrollArea, QVBoxLayout, QWidget
 
 from ..engine import PolarsegError
 from ..io import parse_angles
@@ -96,14 +96,76 @@ class WidthFollower(QObject):
         self._area.setMinimumWidth(self._area.widget().minimumSizeHint().width() + bar + frame)
 
 
+#: Object name of every plugin dock's frame (:class:`ScrollingContainer`), and of the
+#: Segment dock's (the one the others open tabbed with, when it is open).
+DOCK_NAME, SEGMENT_DOCK_NAME = "napari_polarseg_dock", "napari_polarseg_segment_dock"
+
+
+def _dock_of(widget: QWidget) -> QDockWidget | None:
+    """The QDockWidget holding ``widget``, if any."""
+    parent = widget.parent()
+    while parent is not None and not isinstance(parent, QDockWidget):
+        parent = parent.parent()
+    return parent
+
+
+class DockTabber(QObject):
+    """Opens a plugin dock as a tab of the plugin's docks already open (the Segment dock
+    first), in place of a slice of their height.
+
+    napari stacks each dock the Plugins menu opens below the others: with every dock of
+    the plugin open, each got a sixth of the window's height. Once the frame is put in a
+    dock, the next event-loop turn (the dock is then in its window) tabifies it.
+    """
+
+    def __init__(self, frame: QWidget) -> None:
+        super().__init__(frame)
+        self._frame = frame
+        frame.installEventFilter(self)
+
+    def eventFilter(self, watched: QObject, event: QEvent) -> bool:  # noqa: N802 (Qt)
+        if event.type() == QEvent.Type.ParentChange:
+            QTimer.singleShot(0, self.tabify)
+        return False
+
+    def tabify(self) -> None:
+        """Tabify the frame's dock with the first plugin dock in the same window area."""
+        try:
+            dock = _dock_of(self._frame)
+            window = None if dock is None else dock.parentWidget()
+        except RuntimeError:  # deleted meanwhile
+            return
+        if not isinstance(window, QMainWindow) or dock.isFloating():
+            return
+        area = window.dockWidgetArea(dock)
+        others = [
+            d
+            for d in window.findChildren(QDockWidget)
+            if d is not dock
+            and not d.isHidden()  # closed (a hidden window's docks count)
+            and not d.isFloating()
+            and window.dockWidgetArea(d) == area
+            and (d.findChild(QWidget, DOCK_NAME) or d.findChild(QWidget, SEGMENT_DOCK_NAME))
+        ]
+        if not others or dock in window.tabifiedDockWidgets(others[0]):
+            return
+        others.sort(key=lambda d: d.findChild(QWidget, SEGMENT_DOCK_NAME) is None)
+        window.tabifyDockWidget(others[0], dock)
+        dock.show()
+        dock.raise_()
+
+
 class ScrollingContainer(Container):
-    """A labelled vertical Container whose controls scroll when its dock is too short.
+    """A labelled vertical Container whose controls scroll when its dock is too short,
+    with a footer that never scrolls.
 
     napari docks a magicgui widget's ``native`` (``add_dock_widget`` of napari 0.9 has no
     scroll option), and magicgui's ``scrollable=True`` puts the widget holding the
     controls' layout inside a ``QScrollArea``, its ``root_native_widget``. Here ``native``
-    is that scroll area, so napari docks the scroll area and the window's minimum height
-    no longer grows with the controls; :attr:`content` is the widget with the layout
+    is a frame holding that scroll area (:attr:`scroll_area`) and, below it, the footer
+    (:meth:`add_footer`: Run, Cancel, progress, status), so napari docks the frame: the
+    window's minimum height no longer grows with the controls, and however short the dock
+    the footer stays in view. :attr:`content` is the widget with the controls' layout
     (where a subclass adds plain Qt widgets such as a plot canvas).
     """
 
@@ -112,17 +174,38 @@ class ScrollingContainer(Container):
         # the scroll area stretches the controls' widget to its height: a stretch below
         # them keeps them packed at the top (napari adds one to a dock that does not scroll)
         self.content.layout().addStretch(1)
-        self._width = WidthFollower(self.native)
+        self._frame = QWidget()
+        frame_layout = QVBoxLayout(self._frame)
+        frame_layout.setContentsMargins(0, 0, 0, 0)
+        frame_layout.setSpacing(0)
+        frame_layout.addWidget(self.root_native_widget, 1)
+        self._frame.setObjectName(DOCK_NAME)
+        self._frame._magic_widget = self  # type: ignore[attr-defined] (as magicgui's native)
+        self._tabber = DockTabber(self._frame)
+        self._width = WidthFollower(self.scroll_area)
 
     @property
-    def native(self) -> QScrollArea:
-        """The scroll area around the controls: the widget napari docks."""
+    def native(self) -> QWidget:
+        """The frame of the scroll area and the footer: the widget napari docks (the
+        scroll area while magicgui's ``__init__`` runs)."""
+        frame = vars(self).get("_frame")
+        return self.root_native_widget if frame is None else frame
+
+    @property
+    def scroll_area(self) -> QScrollArea:
+        """The scroll area around the controls."""
         return self.root_native_widget
 
     @property
     def content(self) -> QWidget:
         """The widget inside the scroll area that holds the controls' layout."""
         return self.root_native_widget.widget()
+
+    def add_footer(self, widgets: list[Any]) -> Container:
+        """A labelled Container of ``widgets`` below the scroll area (always in view)."""
+        footer = Container(widgets=widgets, labels=True)
+        self._frame.layout().addWidget(footer.native)
+        return footer
 
     def add_native(self, widget: QWidget, expand: bool = False) -> None:
         """Add a plain Qt ``widget`` below the controls (add every magicgui widget first).
@@ -184,6 +267,10 @@ class StackWidget(ScrollingContainer):
         self.status = Label(value="")
         self.status.native.setWordWrap(True)
         self.extend([self.stack_layer, self.angles])
+        #: Run, Cancel, progress and status, below the scrolling controls
+        self.footer = self.add_footer(
+            [self.run_button, self.cancel_button, self.progress, self.status]
+        )
         self._slot = WorkerSlot(
             self.progress_desc,
             on_status=self._set_status,
@@ -210,8 +297,9 @@ class StackWidget(ScrollingContainer):
 
     # -- building ---------------------------------------------------------------------
     def _add_parameters(self, widgets: list[Any]) -> None:
-        """Append the parameter widgets, then the buttons and the status line."""
-        self.extend([*widgets, self.run_button, self.cancel_button, self.progress, self.status])
+        """Append the parameter widgets (the buttons and the status line are in
+        :attr:`footer`)."""
+        self.extend(widgets)
 
     # -- stack and angles -------------------------------------------------------------
     def _stack_choices(self, _widget: Any = None) -> list[tuple[str, Layer]]:

@@ -166,7 +166,8 @@ def show_output(
     overlays the stack; the layer selection stays as the user left it. On a rerun only
     the data, the contrast limits (for images) and the plugin's metadata change; the
     user's other settings (visibility, opacity, colormap, name, position in the layer
-    list) are kept.
+    list) are kept. A new image layer goes below the Labels layers above ``source``
+    (:func:`below_labels`), so it hides neither segments nor scribbles.
     """
     style = ROLES[role]
     tag = {"role": role, "source": source_key(source)}
@@ -200,11 +201,29 @@ def show_output(
         layer = viewer.add_image(
             data, name=name, metadata=meta, **placement, **_image_style(role, data)
         )
+    if style.layer_type == "image":
+        below_labels(viewer, layer, source)
     selection.clear()
     selection.update(selected)
     if active is not None:
         selection.active = active
     return layer
+
+
+def below_labels(viewer: napari.Viewer, layer: Layer, source: Layer) -> None:
+    """Move the new image ``layer`` below the lowest Labels layer above ``source``.
+
+    The plugin's derived maps (ρ, the HSV view, …) are opaque: added on top they would
+    hide the segments and the scribbles being painted. A Labels layer below the stack
+    (hidden by it anyway) does not count.
+    """
+    layers = viewer.layers
+    start = layers.index(source) + 1 if source in layers else 0
+    index = layers.index(layer)
+    for i in range(start, index):
+        if isinstance(layers[i], Labels):
+            layers.move(index, i)
+            return
 
 
 def remove_output(viewer: napari.Viewer, role: str, source: Layer) -> bool:

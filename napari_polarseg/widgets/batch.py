@@ -43,7 +43,7 @@ from ..engine.analysis.timeseries import METHODS, segment_timeseries
 from ..engine.analysis.timeseries_result import TimeSeriesResult
 from ..io import parse_angles
 from ._base import ScrollingContainer, is_angle_stack
-from ._layers import ANGLES_KEY, label_colormap
+from ._layers import ANGLES_KEY, TAG, label_colormap, source_key
 from ._runner import WorkerSlot
 from .param_sources import PARAM_SOURCES, params_from
 from .session import relay
@@ -115,21 +115,19 @@ class BatchWidget(ScrollingContainer):
     def __init__(self, viewer: napari.viewer.Viewer) -> None:
         super().__init__(labels=True)
         self._viewer = viewer
-        self.folder = FileEdit(label="input folder", mode="d")
-        self.pattern = LineEdit(
-            label="pattern",
-            tooltip="Glob inside the folder, e.g. *.npz; empty: every stack file and sub-folder",
-        )
-        self.out = FileEdit(label="output folder", mode="d")
-        self.source = ComboBox(label="parameters", choices=list(PARAM_SOURCES))
-        self.params_file = FileEdit(label="JSON file", mode="r", filter="*.json", visible=False)
+        self._build_inputs()
         self.scheduler = LineEdit(
             label="scheduler",
             tooltip="Empty: a local Dask cluster; 'inline': no Dask (one scene after the "
             "other); or the address of a running dask.distributed scheduler",
         )
         self.workers = SpinBox(label="workers", value=0, min=0, max=256, tooltip="0: auto")
-        self.resume = CheckBox(text="skip complete scenes (resume)", value=True)
+        self.resume = CheckBox(
+            text="skip complete scenes (resume)",
+            value=True,
+            tooltip="Leave out the scenes whose result folder is already complete (to "
+            "resume a batch that stopped); off: segment every scene again",
+        )
         self.run_button = PushButton(
             text="Run batch",
             tooltip="Segment every input of the folder or pattern into its own result "
@@ -154,13 +152,11 @@ class BatchWidget(ScrollingContainer):
                 self.scheduler,
                 self.workers,
                 self.resume,
-                self.run_button,
-                self.cancel_button,
                 self.load_button,
-                self.status,
                 self.table,
             ]
         )
+        self.footer = self.add_footer([self.run_button, self.cancel_button, self.status])
         self._stop = threading.Event()
         self.result: batch_engine.BatchResult | None = None
         self._slot = WorkerSlot("Batch", on_status=self._set_status, on_idle=self._on_idle)
@@ -175,6 +171,39 @@ class BatchWidget(ScrollingContainer):
             slot.cancel()
 
         self.native.destroyed.connect(_closed)
+
+    def _build_inputs(self) -> None:
+        """The input and output folders, the pattern and the parameters' source."""
+        self.folder = FileEdit(
+            label="input folder",
+            mode="d",
+            tooltip="The folder of scenes: each stack file (.tif, .npz, …) or sub-folder of "
+            "frames in it is one scene",
+        )
+        self.pattern = LineEdit(
+            label="pattern",
+            tooltip="Glob inside the folder, e.g. *.npz; empty: every stack file and sub-folder",
+        )
+        self.out = FileEdit(
+            label="output folder",
+            mode="d",
+            tooltip="Where each scene's results go (OUT/<scene>/, as polarseg segment "
+            "writes them) with batch_summary.csv and .json",
+        )
+        self.source = ComboBox(
+            label="parameters",
+            choices=list(PARAM_SOURCES),
+            tooltip="The parameters of every scene: the docked Segment by material "
+            "widget's values, a preset, or a parameters JSON file",
+        )
+        self.params_file = FileEdit(
+            label="JSON file",
+            mode="r",
+            filter="*.json",
+            visible=False,
+            tooltip="A parameters JSON (from 'Save parameters…', 'Save best…' or a "
+            "params.json of polarseg segment); missing fields take the thesis defaults",
+        )
 
     # -- inputs -----------------------------------------------------------------------
     def _on_source(self, value: str) -> None:
@@ -321,7 +350,11 @@ def add_timeseries_layers(
     changed segment from one day to the next, slider position t = day t + 1 → t + 2),
     ``<name> change score`` (Image, hidden; the graded change test, significant above
     ~3.1 at the default false-alarm rate) and ``<name> feature distance`` (Image,
-    hidden). A folder without score maps (an older run) gets no score layer.
+    hidden); with a ``source`` each name ends in its name, e.g.
+    ``time series change score (day 1)``. A folder without score maps (an older run)
+    gets no score layer. Each layer is tagged as the plugin's output
+    (:data:`~napari_polarseg.widgets._layers.TAG`, role ``time series …``), so no widget
+    offers it as an angle stack (a day of another series).
 
     Parameters
     ----------
@@ -343,38 +376,42 @@ def add_timeseries_layers(
         if changes is None:
             changes = labels[1:] != labels[:-1]
     place: dict[str, Any] = {}
+    suffix, key = "", ""
     if source is not None:
         place = {"scale": tuple(source.scale[-2:]), "translate": tuple(source.translate[-2:])}
+        suffix, key = f" ({source.name})", source_key(source)
+
+    def own(kind: str) -> dict[str, Any]:
+        meta = {TAG: {"role": f"time series {kind}", "source": key}}
+        return {"name": f"{name} {kind}{suffix}", "metadata": meta, **place}
+
     layers = [
         viewer.add_labels(
             np.asarray(labels, np.int32) + 1,
-            name=f"{name} segments",
+            **own("segments"),
             opacity=0.6,
             colormap=label_colormap(),
-            **place,
         ),
-        viewer.add_labels(np.asarray(changes, np.uint8), name=f"{name} change", **place),
+        viewer.add_labels(np.asarray(changes, np.uint8), **own("change")),
     ]
     if score is not None:
         score = np.asarray(score, np.float32)
         layers.append(
             viewer.add_image(
                 score,
-                name=f"{name} change score",
+                **own("change score"),
                 colormap="inferno",
                 contrast_limits=(0.0, max(float(score.max(initial=0.0)), 4.0)),
                 visible=False,
-                **place,
             )
         )
     if distance is not None:
         layers.append(
             viewer.add_image(
                 np.asarray(distance, np.float32),
-                name=f"{name} feature distance",
+                **own("feature distance"),
                 colormap="magma",
                 visible=False,
-                **place,
             )
         )
     return layers
@@ -412,17 +449,34 @@ class TimeSeriesWidget(ScrollingContainer):
     def __init__(self, viewer: napari.viewer.Viewer) -> None:
         super().__init__(labels=True)
         self._viewer = viewer
-        self.days = Select(label="days (in order)", choices=self._stack_choices)
-        self.method = ComboBox(label="method", choices=list(METHODS), value=METHODS[0])
+        self.days = Select(
+            label="days (in order)",
+            choices=self._stack_choices,
+            tooltip="The angle-stack layers of the same view on successive days, in time "
+            "order (the list's order); at least two",
+        )
+        self.method = ComboBox(
+            label="method",
+            choices=list(METHODS),
+            value=METHODS[0],
+            tooltip="tracked: cut day 1 and move only the blocks whose polarisation "
+            "changed significantly to the segment of what they changed into; reference: "
+            "give every day's blocks the nearest day-1 segment; joint: one cut over all "
+            "days' blocks",
+        )
         self.false_alarm = ComboBox(
             label="false-alarm rate",
             choices=[(f"{p:g} per block", p) for p in FALSE_ALARM_CHOICES],
             value=DEFAULT_FALSE_ALARM,
+            tooltip="Share of unchanged blocks the change test may flag by chance: lower "
+            "flags fewer blocks, only the surer changes",
         )
         # the time series cuts one block graph of all days: no superpixel preset
         self.source = ComboBox(
             label="parameters",
             choices=[s for s in PARAM_SOURCES if s not in ("auto", "JSON file")],
+            tooltip="The parameters of every day: the docked Segment by material widget's "
+            "values or a preset (no auto: the series cuts one block graph of all days)",
         )
         self.run_button = PushButton(
             text="Run", tooltip="Segment the time series and test every block for change"
@@ -430,9 +484,8 @@ class TimeSeriesWidget(ScrollingContainer):
         self.status = Label(value="")
         self.status.native.setWordWrap(True)
         self.result: TimeSeriesResult | None = None
-        self.extend(
-            [self.days, self.method, self.false_alarm, self.source, self.run_button, self.status]
-        )
+        self.extend([self.days, self.method, self.false_alarm, self.source])
+        self.footer = self.add_footer([self.run_button, self.status])
         self._slot = WorkerSlot("Time series", on_status=self._set_status)
         self.run_button.changed.connect(self.run)
         events = viewer.layers.events

@@ -151,7 +151,11 @@ class PlotsWidget(StackWidget):
         self.plot = ComboBox(
             label="plot", choices=list(PLOTS), value="scatter_dop", tooltip="What to plot"
         )
-        self.components_button = PushButton(text="Add component maps")
+        self.components_button = PushButton(
+            text="Add component maps",
+            tooltip="Add the first principal components of the block features (PCA) of "
+            "the chosen stack's last segmentation as image layers (needs its thesis maps)",
+        )
         self._add_parameters([self.plot, self.components_button])
         self.theme = napari_theme(viewer)
         self.figure, self.canvas = figure_canvas((4.0, 3.2), min_height=280)

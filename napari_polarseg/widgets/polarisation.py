@@ -25,6 +25,20 @@ if TYPE_CHECKING:
 
 #: Output roles of this widget, in the order their layers are added.
 OUTPUTS = ("intensity", "dop", "phase", "zenith")
+
+
+def polarisation_status(name: str, n_clamped: int, model: str) -> str:
+    """The status line after *Compute*: the stack, and in words the pixels whose ρ no
+    diffuse surface gives (their zenith was set to 90°)."""
+    text = f"polarisation image of {name!r}"
+    if n_clamped > 0 and model == "diffuse":
+        text += (
+            f"; ρ is above what a diffuse surface can give on {n_clamped:,} pixels "
+            "(glints or specular reflection): their zenith is set to 90°"
+        )
+    return text
+
+
 def polarisation_job(
     data: Any, angles_rad: np.ndarray, refractive_index: float, model: str, branch: str
 ) -> Generator[tuple[str, int, int], None, dict[str, Any]]:
@@ -165,9 +179,6 @@ class PolarisationWidget(StackWidget):
             self._views_input = {k: v for k, v in self._views_input.items() if k in present}
             self._views_input[source_key(layer)] = (out["intensity"], out["dop"], out["phase"])
             self.show_composite(layer)
-            extra = f", {out['n_clamped']} pixels above the diffuse ρ ceiling" * (
-                out["n_clamped"] > 0 and args[3] == "diffuse"
-            )
-            self._done(f"polarisation image of {layer.name!r}{extra}")
+            self._done(polarisation_status(layer.name, out["n_clamped"], args[3]))
 
         self._submit(polarisation_job, args, 2, on_result)

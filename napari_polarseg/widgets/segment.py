@@ -24,7 +24,7 @@ from qtpy.QtCore import QTimer
 
 from ..engine import Pipeline, PolarsegError, SegmentationResult, SegmentParams
 from ..engine.params import PARAM_SPECS, PRESETS, ParamSpec
-from ._base import StackWidget
+from ._base import SEGMENT_DOCK_NAME, StackWidget
 from ._layers import find_output, source_key
 from .docks import SegmentDock
 from .param_controls import controlled_names
@@ -177,6 +177,7 @@ class SegmentWidget(ResultLayers, MaskAndScribbles, StackWidget, SegmentDock):
         self._build_input_controls()
         self._build_view_controls()
         self._lay_out()
+        self.native.setObjectName(SEGMENT_DOCK_NAME)  # the others open as its tabs
         self._timer = QTimer(self.native)  # deleted with the widget: never fires after it
         self._timer.setSingleShot(True)
         self._timer.setInterval(LIVE_DELAY_MS)
@@ -238,7 +239,7 @@ class SegmentWidget(ResultLayers, MaskAndScribbles, StackWidget, SegmentDock):
                 self.advanced,
             ]
         )
-        self.insert(self.index(self.progress), self.export_button)  # after Run and Cancel
+        self.footer.insert(self.footer.index(self.progress), self.export_button)  # after Cancel
 
     def _connect(self) -> None:
         """Connect the controls to their handlers (the parts connect their own)."""

@@ -22,6 +22,7 @@ from magicgui.widgets import ComboBox, Container, LineEdit, PushButton, SpinBox,
 from ..engine import PolarsegError, SegmentParams, validity_mask
 from ..engine.analysis.sweep import check_grid, iter_sweep
 from ..engine.analysis.sweep_result import DEFAULT_SCORE, SCORES, SweepResult
+from ..engine.params import PRESETS
 from ..outputs import figures
 from ._base import StackWidget, ask_file
 from .canvas import figure_canvas, napari_theme, show_message
@@ -140,6 +141,23 @@ def cell_stage(item: tuple[int, int, Any]) -> tuple[str, int, int]:
     return f"w={cell.window} L={cell.degree} n={cell.refractive_index:g}", done, total
 
 
+def best_buttons() -> tuple[PushButton, PushButton]:
+    """*Use best* and *Save best…* (enabled once a sweep has a best cell)."""
+    use_button = PushButton(
+        text="Use best",
+        enabled=False,
+        tooltip="Set the Segment by material widget (docked if needed) to the preset "
+        "and the best cell's w, L and n, and segment the swept stack",
+    )
+    save_button = PushButton(
+        text="Save best…",
+        enabled=False,
+        tooltip="Write the best cell's parameters as JSON (what polarseg segment "
+        "--params and the batch widget read)",
+    )
+    return use_button, save_button
+
+
 class SweepWidget(StackWidget):
     """Sweep window size w, harmonic degree L and refractive index n on an angle stack.
 
@@ -171,7 +189,10 @@ class SweepWidget(StackWidget):
             label="parameters",
             choices=list(PARAM_SOURCES),
             value=PARAM_SOURCES[0],
-            tooltip="The parameters of every cell apart from w, L and n",
+            tooltip="The parameters of every cell apart from w, L and n. No preset auto "
+            "(the Segment widget's default): the sweep varies the block window w and the "
+            "degree L of the thesis block graph, which auto's superpixels do not use. "
+            "'Use best' sets the Segment widget to this preset and the best cell",
         )
         self.windows = LineEdit(
             label="windows w", value="8,10,12", tooltip="Window sizes in pixels, comma-separated"
@@ -204,8 +225,7 @@ class SweepWidget(StackWidget):
         self.metric = ComboBox(
             label="heatmap", choices=list(HEATMAPS), value="stability", tooltip="Metric shown"
         )
-        self.use_button = PushButton(text="Use best", enabled=False)
-        self.save_button = PushButton(text="Save best…", enabled=False)
+        self.use_button, self.save_button = best_buttons()
         self._add_parameters(
             [
                 self.source,
@@ -333,7 +353,10 @@ class SweepWidget(StackWidget):
         return widget
 
     def use_best(self, *_: Any) -> SegmentWidget | None:
-        """Set the Segment widget to the best cell's parameters on this stack and run it."""
+        """Set the Segment widget to the best cell's parameters on this stack and run it.
+
+        Its preset menu shows the preset the sweep started from (when one was chosen as
+        the *parameters*), its controls the best cell's method, w, L and n."""
         try:
             params = self.best_params()
             source = self._source
@@ -346,6 +369,8 @@ class SweepWidget(StackWidget):
         widget.stack_layer.value = source
         if not widget.angles.value:
             widget.angles.value = self.angles.value
+        if self.source.value in PRESETS:  # the preset the cells started from (not auto)
+            widget.preset.value = self.source.value
         widget.set_params(params)
         widget.run()
         self._done(

@@ -118,9 +118,14 @@ def test_timeseries_widget_adds_segments_change_and_score_layers(viewer, add_wid
     expected = segment_timeseries(
         [day1.stack, stack2], day1.angles, RECOMMENDED, method="tracked", false_alarm=1e-4
     )
-    seg = viewer.layers["time series segments"]
-    change = viewer.layers["time series change"]
-    score = viewer.layers["time series change score"]
+    # named after the first day; never offered as a day of another series (issue 25)
+    seg = viewer.layers["time series segments (day 1)"]
+    change = viewer.layers["time series change (day 1)"]
+    score = viewer.layers["time series change score (day 1)"]
+    distance = viewer.layers["time series feature distance (day 1)"]
+    widget.days.reset_choices()
+    assert list(widget.days.choices) == layers
+    assert score.ndim == distance.ndim == 3  # shaped like a stack, yet not a day
     assert seg.data.shape == (2, *SHAPE) and change.data.shape == (1, *SHAPE)
     np.testing.assert_array_equal(seg.data, expected.labels + 1)
     np.testing.assert_array_equal(change.data[0], expected.changes[0])

@@ -31,3 +31,32 @@ def test_time_series_offers_no_superpixel_preset(viewer, add_widget):
     widget = add_widget("Time series change map")
     assert "auto" not in widget.source.choices
     assert "recommended" in widget.source.choices
+
+
+def _controls(container):
+    """Every magicgui control inside ``container`` (nested containers, the footer)."""
+    from magicgui.widgets import Container, Label, ProgressBar, Table
+
+    # the footer (Run, Cancel, status) and the sweep's row of buttons below its heatmaps
+    parts = list(container) + [getattr(container, k, None) for k in ("footer", "_buttons")]
+    for widget in parts:
+        if widget is None or isinstance(widget, (Label, ProgressBar, Table)):
+            continue
+        if isinstance(widget, Container):
+            yield from _controls(widget)
+        else:
+            yield widget
+
+
+@pytest.mark.parametrize("name", WIDGETS)
+def test_every_control_has_a_tooltip(viewer, add_widget, name):
+    # issue 25: a user hovering any control of any dock learns what it does
+    widget = add_widget(name)
+    controls = list(_controls(widget))
+    assert len(controls) >= 3
+    missing = [
+        getattr(c, "label", "") or getattr(c, "text", "") or c.name
+        for c in controls
+        if not c.native.toolTip().strip()
+    ]
+    assert missing == [], f"{name}: no tooltip on {missing}"
