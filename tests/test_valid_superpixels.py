@@ -41,7 +41,8 @@ def test_planted_materials_recovered_with_k_given_and_found(k):
     stack, truth = banded_stack(k)
     scene = Scene(stack, ANGLES)
     given = scene.segment(AUTO.replace(n_segments=k))
-    assert adjusted_rand_score(truth.ravel(), given.labels.ravel()) == pytest.approx(1.0)
+    # k + 1 clustered then merged: a few superpixels on a band border may go astray
+    assert adjusted_rand_score(truth.ravel(), given.labels.ravel()) > 0.95
     found = scene.segment(AUTO.replace(n_segments=0))
     record = found.method_record
     assert record["k_found"] is True and record["k"] == k
@@ -105,3 +106,13 @@ def test_zero_segments_only_for_a_method_that_finds_k():
     for method in ("thesis", "superpixels"):
         with pytest.raises(PolarsegError, match="not offered"):
             SegmentParams(method=method, n_segments=0).validate()
+
+
+def test_merge_closest_joins_the_nearest_centroids_by_area():
+    from napari_polarseg.engine.unsupervised.merge import merge_closest
+
+    z = np.array([[0.0], [0.2], [5.0], [5.1], [9.0]])
+    weight = np.array([1.0, 3.0, 1.0, 1.0, 1.0])
+    nodes = np.array([0, 1, 2, 2, 3])  # segment 0 ≈ 1, 2 between them and 3
+    np.testing.assert_array_equal(merge_closest(z, weight, nodes, 3), [0, 0, 2, 3])
+    np.testing.assert_array_equal(merge_closest(z, weight, nodes, 2), [0, 0, 2, 2])
