@@ -39,6 +39,7 @@ criterion (picks unreliable).
 
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -73,8 +74,11 @@ def choose_k(model: RegionModel) -> dict[str, Any]:
     (exact / within ±1 on the rendered development half 4 / 7 of 12 against 2 / 5, on
     the real frames 2 / 4 of 4 against 1 / 3)."""
 
+    # only the superpixels' labels are scored: no pixel-level border refinement
+    nodes_only = replace(model, params=model.params.replace(refine_boundaries=False))
+
     def node_labels(k: int) -> np.ndarray:
-        return cluster_regions(model, k).node_labels
+        return cluster_regions(nodes_only, k).node_labels
 
     ks = [k for k in K_RANGE if k <= model.n]
     k, confidence, scores = estimate_k(model.z, model.weight, ks, node_labels)
