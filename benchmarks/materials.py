@@ -27,7 +27,8 @@ means are printed with and without them; nothing is dropped silently.
 
 Below each table, the number of materials found by itself (:func:`k_lines`): preset
 ``auto`` with ``method="valid_superpixels"`` and ``n_segments = 0`` against the true k,
-with the choice's confidence; counted exact and within ±1.
+with the choice's confidence and the ARI of the labels with that k; counted exact and
+within ±1.
 """
 
 from __future__ import annotations
@@ -109,8 +110,10 @@ def score_frame(name: str, stack, angles, truth: np.ndarray, k: int, bounds: str
         row[column] = value
         if not seen:
             row["marks"][column] = "†"
-    found = scene.segment(params.replace(method=FINDS_K, n_segments=0)).method_record
-    row["k found"] = (int(found["k"]), float(found.get("k_confidence", 0.0)))
+    found = scene.segment(params.replace(method=FINDS_K, n_segments=0))
+    record = found.method_record
+    value = float(adjusted_rand_score(truth[scored], found.labels[scored]))
+    row["k found"] = (int(record["k"]), float(record.get("k_confidence", 0.0)), value)
     return row
 
 
@@ -120,11 +123,16 @@ def k_lines(rows: list[dict]) -> str:
     lines = [f"number of materials found by itself ({FINDS_K}, n_segments = 0):"]
     exact = near = 0
     for r in rows:
-        k, confidence = r["k found"]
+        k, confidence, value = r["k found"]
         exact += k == r["k"]
         near += abs(k - r["k"]) <= 1
-        lines.append(f"- {r['frame']}: true {r['k']}, found {k} (confidence {confidence:.2f})")
+        lines.append(
+            f"- {r['frame']}: true {r['k']}, found {k} (confidence {confidence:.2f}), "
+            f"ARI with the k found {value:.3f}"
+        )
+    mean = np.mean([r["k found"][2] for r in rows])
     lines.append(f"- exact {exact} / {len(rows)}, within ±1 {near} / {len(rows)}")
+    lines.append(f"- mean ARI with the k found {mean:.3f}")
     return "\n".join(lines)
 
 
