@@ -12,7 +12,8 @@ hand-labelled real frames, one row per frame, the same columns for both.
 
 Columns (:data:`COLUMNS`): ``intensity k-means`` (``baselines.intensity_kmeans``),
 ``smoothed k-means`` (``baselines.smoothed_kmeans``: k-means on 20 smoothed
-polarisation features), ``auto (default)`` (what ``polarseg segment`` does: the
+polarisation features), ``superpixels`` (the superpixel method, preset ``auto`` before
+issue 24), ``auto (default)`` (what ``polarseg segment`` does: the
 pipeline with preset ``auto`` cut into k segments), then the truth-trained bounds
 (``baselines.truth_bound_halves``): a random forest trained on the truth of the frame's
 left half and scored on its right half, on the 20 plain features and on those plus the
@@ -23,6 +24,11 @@ Markers: ``‡`` = degenerate (one segment holds ≥ 90 % of the scored pixels, 
 more than the truth's largest class); ``†`` = a
 bound whose left half lacks a class of the right half. Marked cells are counted and the
 means are printed with and without them; nothing is dropped silently.
+
+Below each table, the number of materials found by itself (:func:`k_lines`): preset
+``auto`` with ``method="valid_superpixels"`` and ``n_segments = 0`` against the true k,
+with the choice's confidence and the ARI of the labels with that k; counted exact and
+within ±1.
 """
 
 from __future__ import annotations
@@ -44,7 +50,9 @@ HALVES = {"dev": tuple(range(12)), "test": tuple(range(12, 24))}
 HALF_NAMES = {"dev": "development half (seeds 0–11)", "test": "test half (seeds 12–23)"}
 #: A result is degenerate when one segment holds this share of the scored pixels.
 DEGENERATE_SHARE = 0.90
-UNSUPERVISED = ("intensity k-means", "smoothed k-means", "auto (default)")
+UNSUPERVISED = ("intensity k-means", "smoothed k-means", "superpixels", "auto (default)")
+#: The method that finds k by itself (``n_segments = 0``), scored by :func:`k_lines`.
+FINDS_K = "valid_superpixels"
 BOUNDS = {"bound L→R: 20 features": "plain", "bound L→R: rich": "rich"}
 COLUMNS = UNSUPERVISED + tuple(BOUNDS)
 
@@ -77,10 +85,12 @@ def score_frame(name: str, stack, angles, truth: np.ndarray, k: int, bounds: str
     pol = pipe.get("polarisation")
     valid = ~np.asarray(pol.invalid, bool)
     prep = time.perf_counter() - t0
+    scene, params = Scene(pipeline=pipe), pipe.params  # a segment() call resets pipe.params
     runs = {
         "intensity k-means": lambda: intensity_kmeans(pol.intensity, k),
         "smoothed k-means": lambda: smoothed_kmeans(pol.intensity, pol.dop, pol.phase, k, valid),
-        "auto (default)": lambda: Scene(pipeline=pipe).segment(pipe.params).labels,
+        "superpixels": lambda: scene.segment(params.replace(method="superpixels")).labels,
+        "auto (default)": lambda: scene.segment(params).labels,
     }
     for column, run in runs.items():
         t0 = time.perf_counter()
@@ -100,7 +110,30 @@ def score_frame(name: str, stack, angles, truth: np.ndarray, k: int, bounds: str
         row[column] = value
         if not seen:
             row["marks"][column] = "†"
+    found = scene.segment(params.replace(method=FINDS_K, n_segments=0))
+    record = found.method_record
+    value = float(adjusted_rand_score(truth[scored], found.labels[scored]))
+    row["k found"] = (int(record["k"]), float(record.get("k_confidence", 0.0)), value)
     return row
+
+
+def k_lines(rows: list[dict]) -> str:
+    """The k found by :data:`FINDS_K` with ``n_segments = 0`` against the true k, one
+    frame a line, then how many are exact and within ±1."""
+    lines = [f"number of materials found by itself ({FINDS_K}, n_segments = 0):"]
+    exact = near = 0
+    for r in rows:
+        k, confidence, value = r["k found"]
+        exact += k == r["k"]
+        near += abs(k - r["k"]) <= 1
+        lines.append(
+            f"- {r['frame']}: true {r['k']}, found {k} (confidence {confidence:.2f}), "
+            f"ARI with the k found {value:.3f}"
+        )
+    mean = np.mean([r["k found"][2] for r in rows])
+    lines.append(f"- exact {exact} / {len(rows)}, within ±1 {near} / {len(rows)}")
+    lines.append(f"- mean ARI with the k found {mean:.3f}")
+    return "\n".join(lines)
 
 
 def rendered_rows(seeds, bounds: str, folder: Path = RENDERED_DIR) -> list[dict]:
@@ -200,10 +233,12 @@ def run(args, real_dir: Path) -> None:
             for half in halves[args.rendered]:
                 rows = rendered_rows(HALVES[half], args.bounds, args.rendered_dir)
                 print(f"\n{table(rows, 'rendered scenes, ' + HALF_NAMES[half])}")
+                print(f"\n{k_lines(rows)}")
     if args.real or not args.rendered:
         rows = real_rows(real_dir, args.bounds) if Path(real_dir).is_dir() else []
         if rows:
             print(f"\n{table(rows, 'real frames (hand-labelled truth)')}")
+            print(f"\n{k_lines(rows)}")
         else:
             print(f"\nno real frames in {real_dir}: their material table is skipped")
     print(f"\nmaterial tables: {time.perf_counter() - t0:.1f} s wall")

@@ -498,8 +498,8 @@ BAD_INPUTS = {
         lambda t: [_stack_file(t), "--model", "glossy"],
         "argument --model: invalid choice: 'glossy'",
     ),
-    "zero segments": (
-        lambda t: [_stack_file(t), "--segments", "0"],
+    "zero segments": (  # 0 = find k: only a method that can (the default, not the thesis)
+        lambda t: [_stack_file(t), "--preset", "thesis", "--segments", "0"],
         "number of segments must be a positive integer, got 0",
     ),
     "params file with an unknown key": (

@@ -48,13 +48,13 @@ def _with_bright_patch(stack: np.ndarray, outside: np.ndarray) -> np.ndarray:
     return out
 
 
-@pytest.mark.parametrize("method", ["superpixels", "thesis", "classifier"])
+@pytest.mark.parametrize("method", ["superpixels", "valid_superpixels", "thesis", "classifier"])
 def test_labels_inside_the_mask_do_not_depend_on_the_outside(method):
     stack, truth = planted_stack(K)
     w = stack.shape[2]
     region = np.zeros(truth.shape, dtype=bool)
     region[:, : int(0.6 * w)] = True
-    params = AUTO.replace(n_segments=K, method="thesis" if method == "thesis" else AUTO.method)
+    params = AUTO.replace(n_segments=K, method=AUTO.method if method == "classifier" else method)
     inputs = None
     if method == "classifier":
         inputs = {"scribbles": _scribbles(truth, slice(0, int(0.6 * w)))}
@@ -74,10 +74,10 @@ def test_a_parameter_a_method_does_not_read_does_not_rerun_it():
     for change in ({"refractive_index": 1.7}, {"scale": 5.0}, {"window": 8}, {"degree": 4}):
         again = scene.segment(p.replace(**change))
         np.testing.assert_array_equal(again.labels, first.labels)
-    assert scene.method_calls == {"superpixels": 1}
+    assert scene.method_calls == {AUTO.method: 1}
     assert scene.pipeline.calls["harmonics"] == 0  # no thesis map was asked for
     scene.segment(p.replace(n_segments=K + 1))
-    assert scene.method_calls == {"superpixels": 2}  # n_segments is read
+    assert scene.method_calls == {AUTO.method: 2}  # n_segments is read
     # the classifier reads the image and its strokes, not the block parameters
     strokes = _scribbles(truth, slice(0, stack.shape[2]))
     scene.segment(p, {"scribbles": strokes})

@@ -15,7 +15,7 @@ def test_segment_widget_defaults_to_auto_and_matches_the_engine(
     widget = add_widget("Segment by material", preset=None)
     assert widget.preset.value == "auto" == DEFAULT_PRESET
     assert widget.params() == AUTO
-    assert widget.method.value == "superpixels"
+    assert widget.method.value == AUTO.method
     run_and_wait(qtbot, widget)
     assert error_messages() == []
     ref = engine_result(stack, AUTO)

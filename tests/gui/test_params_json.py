@@ -113,7 +113,7 @@ def test_a_partial_file_takes_the_thesis_defaults_like_the_cli(viewer, add_widge
         ('{"features": "wavelets"}', "features must be one of"),
         ("[1, 2, 3]", "must hold a JSON object"),
         ('{"window": 5000}', "window 5000 is outside the widget's range 2..4096"),
-        ('{"n_segments": 1000}', "n_segments 1000 is outside the widget's range 1..256"),
+        ('{"n_segments": 1000}', "n_segments 1000 is outside the widget's range 0..256"),
         (None, "cannot read the parameters file"),
     ],
 )

@@ -11,7 +11,7 @@ from __future__ import annotations
 import importlib
 
 from ..errors import PolarsegError
-from ..params import METHOD_CHOICES
+from ..params import FINDS_K_METHODS, METHOD_CHOICES
 from .base import Segmenter
 
 #: The methods that come with the package: module (in this package) and class.
@@ -19,6 +19,7 @@ BUILT_IN: tuple[tuple[str, str], ...] = (
     ("superpixel_clustering", "SuperpixelClustering"),
     ("thesis", "ThesisBlocks"),
     ("pixel_classification", "PixelClassification"),
+    ("valid_superpixels", "ValidSuperpixels"),
 )
 
 _METHODS: dict[str, Segmenter] = {}
@@ -34,6 +35,8 @@ def register_method(method: Segmenter) -> Segmenter:
     _METHODS[method.name] = method
     if not method.inputs:  # a method chosen by its inputs (scribbles) is no menu choice
         METHOD_CHOICES[method.name] = method.title
+    if getattr(method, "finds_k", False):  # n_segments = 0: the method finds k
+        FINDS_K_METHODS.add(method.name)
     return method
 
 
@@ -41,6 +44,7 @@ def unregister_method(name: str) -> None:
     """Forget the method registered as ``name`` (nothing if there is none)."""
     _METHODS.pop(name, None)
     METHOD_CHOICES.pop(name, None)
+    FINDS_K_METHODS.discard(name)
 
 
 def get_method(name: str) -> Segmenter:

@@ -278,7 +278,7 @@ class Scene:
             mask_counts=self.mask.counts(),
             duplicate_angle_frames=polarimage.duplicate_angle_frames(pipe.angles),
             cut_limits=dict(out.cut_limits),
-            superpixels=dict(out.record) if method.name == "superpixels" else {},
+            superpixels=dict(out.record) if "close_up" in out.record else {},
             method=method.name,
             method_record=dict(out.record),
         )

@@ -1,0 +1,118 @@
+"""The default method (preset auto): superpixels clustered on the valid pixels, and the
+number of materials found by itself (``n_segments = 0``, :func:`estimate_k`)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from sklearn.metrics import adjusted_rand_score
+
+from napari_polarseg.engine import PolarsegError, Scene, SegmentParams
+from napari_polarseg.engine.methods import valid_superpixels
+from napari_polarseg.engine.params import AUTO
+from napari_polarseg.engine.unsupervised.choose_k import estimate_k
+
+ANGLES = np.deg2rad([0.0, 45.0, 90.0, 135.0])
+LEVEL = (1.0, 0.55, 1.5, 0.8)
+RHO = (0.03, 0.12, 0.25, 0.4)
+
+
+def banded_stack(k: int, shape=(96, 128), seed: int = 0):
+    """(stack (4, H, W) uint16, truth): k vertical bands of materials that differ in
+    intensity level and ρ under one smooth shading, 1 % intensity and 5 % ρ noise."""
+    rng = np.random.default_rng(seed)
+    h, w = shape
+    rows, cols = np.mgrid[0:h, 0:w]
+    truth = np.minimum(cols * k // w, k - 1)
+    shading = 0.6 + 0.3 * np.sin(rows / h * np.pi)
+    intensity = shading * np.asarray(LEVEL)[truth] * (1 + 0.01 * rng.standard_normal(shape))
+    dop = np.asarray(RHO)[truth] * (1 + 0.05 * rng.standard_normal(shape))
+    phase = np.arctan2(rows - h / 2, cols - w / 2) % np.pi
+    stack = 0.5 * intensity * (1 + dop * np.cos(2 * ANGLES[:, None, None] - 2 * phase))
+    return np.round(stack * 2000).astype(np.uint16), truth
+
+
+def test_auto_preset_is_this_method():
+    assert AUTO.method == valid_superpixels.ValidSuperpixels.name
+
+
+@pytest.mark.parametrize("k", [2, 3, 4])
+def test_planted_materials_recovered_with_k_given_and_found(k):
+    stack, truth = banded_stack(k)
+    scene = Scene(stack, ANGLES)
+    given = scene.segment(AUTO.replace(n_segments=k))
+    # k + 1 clustered then merged: a few superpixels on a band border may go astray
+    assert adjusted_rand_score(truth.ravel(), given.labels.ravel()) > 0.95
+    found = scene.segment(AUTO.replace(n_segments=0))
+    record = found.method_record
+    assert record["k_found"] is True and record["k"] == k
+    assert 0.0 < record["k_confidence"] <= 1.0
+    assert set(record["k_scores"]) == {"2", "3", "4", "5", "6"}
+    np.testing.assert_array_equal(found.labels, given.labels)
+    assert given.method_record["k_found"] is False and given.method_record["k"] == k
+
+
+@pytest.mark.parametrize("k", [2, 3, 4])
+def test_estimate_k_finds_planted_clusters(k):
+    rng = np.random.default_rng(k)
+    centres = 8.0 * np.eye(k, 4)
+    x = np.concatenate([c + rng.normal(0, 1, (150, 4)) for c in centres])
+    weights = rng.uniform(50, 150, x.shape[0])
+    found, confidence, scores = estimate_k(x, weights, range(2, 7))
+    assert found == k and 0 < confidence <= 1
+    assert max(scores, key=scores.get) == k and set(scores) == {2, 3, 4, 5, 6}
+
+
+def test_estimate_k_with_too_few_nodes_says_one():
+    assert estimate_k(np.zeros((2, 3)), None, range(2, 7)) == (1, 0.0, {})
+
+
+def test_saturated_pixels_take_no_segment_of_their_own():
+    """A saturated patch inside one material: the superpixel method gives it a segment,
+    this one labels it from the nearest valid pixels and finds the two materials."""
+    stack, truth = banded_stack(2)
+    stack[:, 20:80, 5:55] = np.iinfo(np.uint16).max
+    params = AUTO.replace(n_segments=2)
+    labels = Scene(stack, ANGLES).segment(params).labels
+    assert adjusted_rand_score(truth.ravel(), labels.ravel()) > 0.95
+    old = Scene(stack, ANGLES).segment(params.replace(method="superpixels")).labels
+    assert adjusted_rand_score(truth.ravel(), old.ravel()) < 0.9
+
+
+def test_reruns_only_for_what_it_reads(monkeypatch):
+    calls = []
+    prepare = valid_superpixels.prepare_regions
+
+    def counted(*args, **kwargs):
+        calls.append(1)
+        return prepare(*args, **kwargs)
+
+    monkeypatch.setattr(valid_superpixels, "prepare_regions", counted)
+    stack, _ = banded_stack(3)
+    scene = Scene(stack, ANGLES)
+    first = scene.segment(AUTO.replace(n_segments=3))
+    for change in ({"scale": 5.0}, {"window": 8}, {"refractive_index": 1.7}):
+        again = scene.segment(AUTO.replace(n_segments=3, **change))
+        np.testing.assert_array_equal(again.labels, first.labels)
+    assert scene.method_calls == {"valid_superpixels": 1} and len(calls) == 1
+    scene.segment(AUTO.replace(n_segments=0))
+    scene.segment(AUTO.replace(n_segments=4))
+    assert scene.method_calls == {"valid_superpixels": 3}
+    assert len(calls) == 1  # another k reclusters the kept superpixels
+
+
+def test_zero_segments_only_for_a_method_that_finds_k():
+    AUTO.replace(n_segments=0).validate()
+    for method in ("thesis", "superpixels"):
+        with pytest.raises(PolarsegError, match="not offered"):
+            SegmentParams(method=method, n_segments=0).validate()
+
+
+def test_merge_closest_joins_the_nearest_centroids_by_area():
+    from napari_polarseg.engine.unsupervised.merge import merge_closest
+
+    z = np.array([[0.0], [0.2], [5.0], [5.1], [9.0]])
+    weight = np.array([1.0, 3.0, 1.0, 1.0, 1.0])
+    nodes = np.array([0, 1, 2, 2, 3])  # segment 0 ≈ 1, 2 between them and 3
+    np.testing.assert_array_equal(merge_closest(z, weight, nodes, 3), [0, 0, 2, 3])
+    np.testing.assert_array_equal(merge_closest(z, weight, nodes, 2), [0, 0, 2, 2])
