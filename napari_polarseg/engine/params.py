@@ -441,9 +441,11 @@ DEFAULT_PRESET = "auto"
 
 #: What each preset is: the CLI's ``--preset`` help and the plugin's preset tooltip.
 PRESET_HELP: dict[str, str] = {
-    "auto": "superpixels clustered by their polarisation, the best unsupervised method "
-    "measured on rendered and real frames (a close-up of one smooth surface: by where "
-    "its polarisation departs from the surface's trend)",
+    "auto": "superpixels of the valid pixels clustered by their polarisation into one "
+    "segment more than asked, the closest two merged: the best unsupervised method "
+    "measured on rendered and real frames (--segments 0: the number found by itself; a "
+    "close-up of one smooth surface: by where its polarisation departs from the "
+    "surface's trend)",
     "thesis": "the thesis pipeline as published",
     "recommended": "the thesis pipeline with the block parameters that score best on the "
     "synthetic scenes (docs/quality.md)",

@@ -26,15 +26,8 @@ of the clustering on the superpixels' node features (:func:`choose_k`,
 which k was used (``k``), whether it was found (``k_found``), how sure the choice is
 (``k_confidence``) and every k's score (``k_scores``).
 
-Measured with ``benchmarks/evaluate_unsupervised.py --rendered all --real --bounds
-none`` (mean ARI over the labelled pixels; superpixel method → this one): rendered
-development half 0.361 → 0.435, test half 0.266 → 0.336; real frames camera 0.992 →
-0.992, carps 0.364 → 0.902, fruits 0.663 → 0.660, polariser 0.563 → 1.000. Tried and
-not kept (development half and real frames): self-training a classifier on the
-confident superpixels (no gain), a Gaussian mixture or k-means on the pixel feature
-stack averaged per superpixel (carps up, the rest down), a consensus of several
-parameter variants (the default again), choosing among methods by an internal
-criterion (picks unreliable).
+The figures that chose it (and the variants not kept) are in ``docs/quality.md``
+(*A default chosen on the development half*).
 """
 
 from __future__ import annotations

@@ -181,12 +181,21 @@ def fill_from_nearest(valid: np.ndarray, *maps: np.ndarray) -> tuple[np.ndarray,
     PolarsegError
         No valid pixel at all.
     """
-    from scipy import ndimage
-
     valid = np.asarray(valid, dtype=bool)
     if valid.all():
         return maps
+    ri, ci = nearest_valid(valid)
+    return tuple(np.asarray(m)[ri, ci] for m in maps)
+
+
+def nearest_valid(valid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(rows, columns) (each H × W) of the nearest ``valid`` pixel of every pixel
+    (itself where valid): the indices :func:`fill_from_nearest` reads, to keep when the
+    same mask fills many maps."""
+    from scipy import ndimage
+
+    valid = np.asarray(valid, dtype=bool)
     if not valid.any():
         raise PolarsegError("the mask leaves no pixel to segment")
     _, (ri, ci) = ndimage.distance_transform_edt(~valid, return_indices=True)
-    return tuple(np.asarray(m)[ri, ci] for m in maps)
+    return ri, ci

@@ -87,7 +87,7 @@ from ..degenerate import degenerate_result
 from ..errors import PolarsegError
 from ..features.pca import pca_features, whiten
 from ..features.pixel_features import EPS_DOP, EPS_INTENSITY, check_maps
-from ..physics.pixel_mask import fill_from_nearest
+from ..physics.pixel_mask import nearest_valid
 from .boundaries import refine_maps, refined_labels
 from .kmeans import squared_distances, weighted_kmeans
 from .params import NODE_FEATURES, TREND, UnsupervisedParams, UnsupervisedResult
@@ -409,6 +409,9 @@ class RegionModel:
         ``close_up``).
     refine_maps : ndarray (2, H, W) or None
         log Î and ρ for the border refinement (:func:`.boundaries.refine_maps`), made once.
+    nearest : (rows, columns) or None
+        With a mask, the nearest valid pixel of every pixel
+        (:func:`~napari_polarseg.engine.physics.pixel_mask.nearest_valid`), made once.
     """
 
     maps: tuple[np.ndarray, np.ndarray, np.ndarray]
@@ -423,6 +426,7 @@ class RegionModel:
     close_up: bool
     params: UnsupervisedParams
     refine_maps: np.ndarray | None = None
+    nearest: tuple[np.ndarray, np.ndarray] | None = None
 
     @property
     def used_params(self) -> UnsupervisedParams:
@@ -461,6 +465,7 @@ def prepare_regions(
     step = progress or (lambda share: None)
     p = params or UnsupervisedParams()
     i, d, ph = check_maps(intensity, dop, phase)
+    nearest = None
     if valid is not None:
         valid = np.asarray(valid, dtype=bool)
         if valid.shape != i.shape:
@@ -468,7 +473,8 @@ def prepare_regions(
         if valid.all():
             valid = None
         else:
-            i, d, ph = fill_from_nearest(valid, i, d, ph)
+            nearest = nearest_valid(valid)
+            i, d, ph = i[nearest], d[nearest], ph[nearest]
     if min(i.shape) < 2:
         raise PolarsegError(f"image too small to segment: {i.shape}")
     step(0.05)
@@ -505,6 +511,7 @@ def prepare_regions(
         close_up,
         p,
         maps,
+        nearest,
     )
 
 
@@ -527,11 +534,11 @@ def cluster_regions(model: RegionModel, n_segments: int) -> UnsupervisedResult:
         node_labels = np.append(node_labels, 0).astype(np.int32)
     labels = node_labels[model.regions]
     if model.valid is not None:
-        (labels,) = fill_from_nearest(model.valid, labels)
+        labels = labels[model.nearest]
     if q.refine_boundaries and k > 1:
         labels = refined_labels(labels, i, d, int(node_labels.max()) + 1, model.refine_maps)
         if model.valid is not None:
-            (labels,) = fill_from_nearest(model.valid, labels)
+            labels = labels[model.nearest]
     labels, node_labels = _first_appearance(labels, node_labels)
     return UnsupervisedResult(
         labels=labels,
