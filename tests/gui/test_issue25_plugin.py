@@ -6,6 +6,7 @@ import numpy as np
 from _gui_helpers import run_and_wait
 from napari.layers import Labels
 
+from napari_polarseg.engine.params import AUTO
 from napari_polarseg.widgets._layers import layer_tag
 from napari_polarseg.widgets.polarisation import polarisation_status
 
@@ -93,7 +94,7 @@ def test_use_best_shows_the_swept_preset_and_values(viewer, open_sample, add_wid
 
     open_sample("leaves")
     segment = add_widget("Segment by material", preset=None)
-    assert segment.preset.value == "auto" and segment.method.value == "superpixels"
+    assert segment.preset.value == "auto" and segment.method.value == AUTO.method
     sweep = add_widget("Parameter sweep")
     assert sweep.source.value == "recommended"
     assert "auto" in sweep.source.native.toolTip()  # says why it is not the default

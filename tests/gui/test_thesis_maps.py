@@ -13,6 +13,7 @@ import tifffile
 from _gui_helpers import engine_result, error_messages, run_and_wait, wait_idle
 
 from napari_polarseg.engine.methods import MethodOutput, register_method, unregister_method
+from napari_polarseg.engine.params import AUTO
 from napari_polarseg.widgets._layers import source_key
 
 pytestmark = pytest.mark.gui
@@ -28,7 +29,7 @@ def test_default_method_computes_the_maps_only_when_asked(viewer, open_sample, a
     stack = open_sample("leaves")
     widget = add_widget("Segment by material", preset=None)  # auto: the superpixel method
     widget.set_params(**FAST)
-    assert widget.params().method == "superpixels"
+    assert widget.params().method == AUTO.method
     assert widget.thesis_maps.enabled and not widget.thesis_maps.value
     run_and_wait(qtbot, widget)
     assert error_messages() == []
@@ -50,13 +51,13 @@ def test_default_method_computes_the_maps_only_when_asked(viewer, open_sample, a
     assert error is not None and not error.visible
     np.testing.assert_allclose(error.data, result.reconstruction_error)
     assert "mean reconstruction error" in widget.status.value
-    assert _scene(widget, stack).method_calls == {"superpixels": 1}
+    assert _scene(widget, stack).method_calls == {AUTO.method: 1}
 
     widget.thesis_maps.value = False  # off again: the error layer would be stale
     run_and_wait(qtbot, widget)
     assert widget.output("error") is None
     assert widget.shown_result(stack).features is None
-    assert _scene(widget, stack).method_calls == {"superpixels": 1}
+    assert _scene(widget, stack).method_calls == {AUTO.method: 1}
 
 
 def test_the_thesis_method_always_computes_the_maps(viewer, open_sample, add_widget, qtbot):
@@ -95,7 +96,7 @@ def test_export_and_plots_of_a_result_without_the_maps(
     assert np.array_equal(np.unique(labels), np.unique(want.labels))
     assert not (out / "reconstruction_error.tif").exists()
     summary = json.loads((out / "summary.json").read_text())
-    assert summary["method"] == "superpixels" and summary["n_components"] is None
+    assert summary["method"] == AUTO.method and summary["n_components"] is None
     assert summary["thesis_maps"] is False
     # with plots, the maps they are drawn from are computed for the export
     assert widget.export_results(tmp_path / "plots", plots=True)
@@ -103,7 +104,7 @@ def test_export_and_plots_of_a_result_without_the_maps(
     assert (tmp_path / "plots" / "reconstruction_error.tif").exists()
     summary = json.loads((tmp_path / "plots" / "summary.json").read_text())
     assert summary["n_components"] is not None
-    assert _scene(widget, stack).method_calls == {"superpixels": 1}
+    assert _scene(widget, stack).method_calls == {AUTO.method: 1}
 
     plots = add_widget("Polarisation plots")
     plots.stack_layer.value = stack
