@@ -25,7 +25,7 @@ from ..physics.pixel_mask import PixelMask
 from ..pipeline import Pipeline
 from ..result import SegmentationResult
 from .base import MethodOutput, MethodRun, Progress, Segmenter
-from .registry import get_method
+from .registry import get_method, method_names
 
 #: The thesis stages that give the maps of the result-folder contract beyond Î, ρ, φ, θ.
 MAP_STAGES = ("harmonics", "pca")
@@ -116,8 +116,6 @@ class Scene:
         classifier), else ``params.method``."""
         given = {k for k, v in (inputs or {}).items() if v is not None and k != "colour_stack"}
         if given:
-            from .registry import method_names
-
             for name in method_names():
                 method = get_method(name)
                 if given & set(method.inputs):

@@ -40,9 +40,9 @@ import numpy as np
 from ..params import SegmentParams
 from ..unsupervised.choose_k import K_RANGE, estimate_k
 from ..unsupervised.merge import merged_clustering
-from ..unsupervised.params import UnsupervisedParams
 from ..unsupervised.segmenter import RegionModel, cluster_regions, prepare_regions
 from .base import MethodOutput, MethodRun
+from .superpixel_clustering import SuperpixelClustering
 
 if TYPE_CHECKING:
     from .scene import Scene
@@ -78,37 +78,31 @@ def choose_k(model: RegionModel) -> dict[str, Any]:
     return {"k": k, "confidence": confidence, "scores": scores}
 
 
-class ValidSuperpixels:
+class ValidSuperpixels(SuperpixelClustering):
     """Superpixels clustered on the valid pixels (module docstring) as a
-    :class:`~.base.Segmenter`; ``n_segments = 0`` finds k."""
+    :class:`~.base.Segmenter`; ``n_segments = 0`` finds k. Its parameters, the
+    SegmentParams fields it reads and its stages are the superpixel method's."""
 
     name = "valid_superpixels"
     title = "superpixels on valid pixels (unsupervised; 0 segments = find k)"
-    reads = ("fit", "n_segments")
-    inputs: tuple[str, ...] = ()
     #: ``n_segments = 0`` means "find the number of segments"
     finds_k = True
-
-    def __init__(self, params: UnsupervisedParams | None = None) -> None:
-        self.params = params or UnsupervisedParams()
-
-    def stages(self, params: SegmentParams) -> tuple[str, ...]:
-        return ("superpixels", "clustering")
 
     def segment(
         self, scene: Scene, params: SegmentParams, inputs: dict[str, Any], run: MethodRun
     ) -> MethodOutput:
         run.begin("superpixels")
         pol = scene.polarisation(params)
-        valid = clustered_pixels(scene.region, pol.invalid)
-        digest = None if valid is None else hash(np.packbits(valid).tobytes())
 
         def prepare() -> RegionModel:
+            valid = clustered_pixels(scene.region, pol.invalid)
             return prepare_regions(
                 pol.intensity, pol.dop, pol.phase, self.params, valid, run.within
             )
 
-        key = (id(pol), digest, self.params)
+        # the clustered pixels follow from the image (its invalid pixels) and the
+        # scene's region, fixed for the scene's life: the image's identity keys them
+        key = (id(pol), self.params)
         model = scene.cached("valid_superpixels", key, prepare)
         run.begin("clustering")
         record: dict[str, Any] = {

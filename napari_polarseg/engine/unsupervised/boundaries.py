@@ -86,14 +86,9 @@ def _border(labels: np.ndarray) -> np.ndarray:
     return border
 
 
-def within_spread(labels: np.ndarray, intensity: np.ndarray, dop: np.ndarray) -> np.ndarray:
-    """Pooled within-segment standard deviation of log Î and of ρ, (2,): the units of
-    :func:`refine_boundaries`."""
-    return _spread(labels, refine_maps(intensity, dop))
-
-
 def _spread(labels: np.ndarray, maps: np.ndarray) -> np.ndarray:
-    """:func:`within_spread` of the (2, H, W) ``maps`` of :func:`refine_maps`."""
+    """Pooled within-segment standard deviation of log Î and of ρ, (2,), from the
+    (2, H, W) ``maps`` of :func:`refine_maps`: the units of :func:`refine_boundaries`."""
     flat = labels.ravel()
     n = int(flat.max()) + 1
     count = np.maximum(np.bincount(flat, minlength=n), 1)
