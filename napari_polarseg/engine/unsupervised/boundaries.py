@@ -51,8 +51,7 @@ def _refine_pass(
     count = np.maximum(np.bincount(flat, minlength=n_labels), 1)
     means = np.stack([np.bincount(flat, m.ravel(), n_labels) / count for m in maps])
     if spread is None:
-        resid = maps - means[:, labels]
-        spread = np.sqrt((resid.reshape(2, -1) ** 2).mean(axis=1)) + 1e-12
+        spread = _spread(flat, maps.reshape(2, -1), means)
     # the 3 × 3 neighbourhood of every pixel (edge-padded): row and column offsets
     pad = np.pad(labels, 1, mode="edge")
     offsets = [(r, c) for r in range(3) for c in range(3)]
@@ -86,29 +85,76 @@ def _border(labels: np.ndarray) -> np.ndarray:
     return border
 
 
-def _spread(labels: np.ndarray, maps: np.ndarray) -> np.ndarray:
-    """Pooled within-segment standard deviation of log Î and of ρ, (2,), from the
-    (2, H, W) ``maps`` of :func:`refine_maps`: the units of :func:`refine_boundaries`."""
-    flat = labels.ravel()
-    n = int(flat.max()) + 1
-    count = np.maximum(np.bincount(flat, minlength=n), 1)
-    out = []
-    for m in (maps[0].ravel(), maps[1].ravel()):
-        mean = np.bincount(flat, m, n) / count
-        out.append(np.sqrt(np.mean((m - mean[flat]) ** 2)) + 1e-12)
-    return np.array(out)
+def _spread(flat: np.ndarray, values: np.ndarray, means: np.ndarray) -> np.ndarray:
+    """Pooled within-segment standard deviation of log Î and of ρ, (2,): the units of
+    :func:`refine_boundaries`, from the flat labels, the (2, P) ``values`` of
+    :func:`refine_maps` and the (2, k) segment means."""
+    pairs = zip(values, means, strict=True)
+    return np.array([np.sqrt(np.mean((v - m[flat]) ** 2)) + 1e-12 for v, m in pairs])
 
 
 def refined_labels(
     labels: np.ndarray, i: np.ndarray, d: np.ndarray, k: int, maps: np.ndarray | None = None
 ) -> np.ndarray:
     """Labels after up to :data:`REFINE_PASSES` passes of :func:`refine_boundaries`;
-    ``maps``: :func:`refine_maps` of ``i`` and ``d`` when already made."""
+    ``maps``: :func:`refine_maps` of ``i`` and ``d`` when already made.
+
+    The same labels as calling :func:`refine_boundaries` pass after pass (with the
+    spread of the first labels), but each pass looks only at the pixels that can be on
+    a border: a pixel joins the border only when it or a neighbour changed label, so
+    after the first pass the candidates are the last border and the 3 × 3
+    neighbourhoods of the pixels that moved. The segment sums are updated from the
+    moved pixels instead of recounted over the image (written by hand: no library
+    keeps per-label means under label changes).
+    """
     maps = refine_maps(i, d) if maps is None else maps
-    spread = _spread(labels, maps)
+    h, w = labels.shape
+    out = np.array(labels, dtype=np.int32, order="C")  # a copy; flat below is its view
+    flat = out.ravel()
+    values = maps.reshape(2, -1)
+    count = np.bincount(flat, minlength=k).astype(np.float64)
+    sums = np.stack([np.bincount(flat, v, k) for v in values])
+    spread = _spread(flat, values, sums / np.maximum(count, 1.0))
+    candidates = np.flatnonzero(_border(out))
+    mark = np.zeros(flat.size, dtype=bool)  # scratch for the next candidates
     for _ in range(REFINE_PASSES):
-        moved = _refine_pass(labels, maps, k, spread)
-        if np.array_equal(moved, labels):
+        neighbours = _neighbour_labels(flat, candidates, h, w)  # (9, b)
+        on_border = (neighbours != flat[candidates]).any(axis=0)
+        pixels, neighbours = candidates[on_border], neighbours[:, on_border]
+        if pixels.size == 0:
+            break
+        mu = sums / np.maximum(count, 1.0) / spread[:, None]  # (2, k)
+        x = values[:, pixels] / spread[:, None]
+        dist = ((x[:, None, :] - mu[:, neighbours]) ** 2).sum(axis=0)  # (9, b)
+        new = neighbours[np.argmin(dist, axis=0), np.arange(pixels.size)]
+        moved = new != flat[pixels]
+        if not moved.any():
             break  # converged: no border pixel moved
-        labels = moved
-    return labels.astype(np.int32)
+        where, old, new = pixels[moved], flat[pixels[moved]], new[moved]
+        count -= np.bincount(old, minlength=k)
+        count += np.bincount(new, minlength=k)
+        for c, v in enumerate(values):
+            sums[c] -= np.bincount(old, v[where], k)
+            sums[c] += np.bincount(new, v[where], k)
+        flat[where] = new
+        mark[pixels] = True
+        mark[_neighbour_indices(where, h, w).ravel()] = True
+        candidates = np.flatnonzero(mark)
+        mark[candidates] = False
+    return out
+
+
+def _neighbour_indices(pixels: np.ndarray, h: int, w: int) -> np.ndarray:
+    """(9, b) flat indices of the 3 × 3 neighbourhood of each flat pixel index, clipped
+    at the image edge (the edge pixel stands in for the missing neighbour, as with
+    ``np.pad(mode="edge")`` in :func:`refine_boundaries`)."""
+    rows, cols = np.divmod(pixels, w)
+    r = np.clip(rows[None, :] + np.array([-1, -1, -1, 0, 0, 0, 1, 1, 1])[:, None], 0, h - 1)
+    c = np.clip(cols[None, :] + np.array([-1, 0, 1, -1, 0, 1, -1, 0, 1])[:, None], 0, w - 1)
+    return r * w + c
+
+
+def _neighbour_labels(flat: np.ndarray, pixels: np.ndarray, h: int, w: int) -> np.ndarray:
+    """(9, b) labels of the 3 × 3 neighbourhood of each flat pixel index (row-major
+    offsets, the order of :func:`refine_boundaries`' candidates)."""
+    return flat[_neighbour_indices(pixels, h, w)]

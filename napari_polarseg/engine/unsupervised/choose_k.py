@@ -20,7 +20,6 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 
 import numpy as np
-from sklearn.metrics import silhouette_score
 
 from ..errors import PolarsegError
 from .kmeans import weighted_kmeans
@@ -76,6 +75,10 @@ def estimate_k(
     ks = sorted({int(k) for k in k_range if 2 <= int(k) < n})
     if n < 3 or not ks or x.shape[1] == 0:
         return 1, 0.0, {}
+    # Imported here: scikit-learn costs ~0.7 s of start-up, and a run with k given
+    # never needs it.
+    from sklearn.metrics import silhouette_score
+
     cluster = cluster or _kmeans_labels(x, w)
     rng = np.random.default_rng(seed)
     sample = rng.choice(n, min(n, SILHOUETTE_SAMPLE), replace=True, p=w / w.sum())

@@ -25,7 +25,7 @@ from dataclasses import replace
 import numpy as np
 
 from .params import UnsupervisedResult
-from .segmenter import RegionModel, cluster_regions
+from .segmenter import RegionModel, cluster_regions, first_appearance
 
 #: Segments beyond k clustered before merging down to k.
 EXTRA_SEGMENTS = 1
@@ -62,15 +62,6 @@ def merge_closest(z: np.ndarray, weight: np.ndarray, node_labels: np.ndarray, k:
     return target
 
 
-def _renumber(labels: np.ndarray, node_labels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Segments numbered 0 … in order of first appearance in ``labels`` (row-major)."""
-    flat = labels.ravel()
-    _, first = np.unique(flat, return_index=True)
-    order = np.zeros(int(max(flat.max(), node_labels.max())) + 1, dtype=np.int32)
-    order[flat[np.sort(first)]] = np.arange(first.size, dtype=np.int32)
-    return order[labels], order[node_labels]
-
-
 def merged_clustering(
     model: RegionModel, k: int, extra: int = EXTRA_SEGMENTS
 ) -> UnsupervisedResult:
@@ -81,5 +72,5 @@ def merged_clustering(
     if extra == 0 or k < 1:
         return seg
     target = merge_closest(model.z, model.weight, seg.node_labels, k)
-    labels, node_labels = _renumber(target[seg.labels], target[seg.node_labels])
+    labels, node_labels = first_appearance(target[seg.labels], target[seg.node_labels])
     return replace(seg, labels=labels, node_labels=node_labels)

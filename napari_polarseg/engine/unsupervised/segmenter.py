@@ -279,7 +279,7 @@ def _cluster_graph(
     return SpectralClustering(W).labels(k)
 
 
-def _first_appearance(labels: np.ndarray, node_labels: np.ndarray) -> tuple[np.ndarray, ...]:
+def first_appearance(labels: np.ndarray, node_labels: np.ndarray) -> tuple[np.ndarray, ...]:
     """Segments renumbered in order of first appearance in ``labels`` (row-major)."""
     flat = labels.ravel()
     # the first index of each of the few labels: one comparison pass per label is
@@ -409,8 +409,8 @@ class RegionModel:
         ``close_up``).
     refine_maps : ndarray (2, H, W) or None
         log Î and ρ for the border refinement (:func:`.boundaries.refine_maps`), made once.
-    nearest : (rows, columns) or None
-        With a mask, the nearest valid pixel of every pixel
+    nearest : ndarray (H, W) of int or None
+        With a mask, the flat index of the nearest valid pixel of every pixel
         (:func:`~napari_polarseg.engine.physics.pixel_mask.nearest_valid`), made once.
     """
 
@@ -426,7 +426,7 @@ class RegionModel:
     close_up: bool
     params: UnsupervisedParams
     refine_maps: np.ndarray | None = None
-    nearest: tuple[np.ndarray, np.ndarray] | None = None
+    nearest: np.ndarray | None = None
 
     @property
     def used_params(self) -> UnsupervisedParams:
@@ -473,8 +473,9 @@ def prepare_regions(
         if valid.all():
             valid = None
         else:
-            nearest = nearest_valid(valid)
-            i, d, ph = i[nearest], d[nearest], ph[nearest]
+            rows, cols = nearest_valid(valid)
+            i, d, ph = i[rows, cols], d[rows, cols], ph[rows, cols]
+            nearest = rows * i.shape[1] + cols  # flat: one gather per use, not two
     if min(i.shape) < 2:
         raise PolarsegError(f"image too small to segment: {i.shape}")
     step(0.05)
@@ -533,13 +534,13 @@ def cluster_regions(model: RegionModel, n_segments: int) -> UnsupervisedResult:
     if model.valid is not None:  # the outside region: relabelled from inside below
         node_labels = np.append(node_labels, 0).astype(np.int32)
     labels = node_labels[model.regions]
-    if model.valid is not None:
-        labels = labels[model.nearest]
+    if model.nearest is not None:
+        labels = labels.ravel()[model.nearest]
     if q.refine_boundaries and k > 1:
         labels = refined_labels(labels, i, d, int(node_labels.max()) + 1, model.refine_maps)
-        if model.valid is not None:
-            labels = labels[model.nearest]
-    labels, node_labels = _first_appearance(labels, node_labels)
+        if model.nearest is not None:
+            labels = labels.ravel()[model.nearest]
+    labels, node_labels = first_appearance(labels, node_labels)
     return UnsupervisedResult(
         labels=labels,
         node_labels=node_labels[:n],
