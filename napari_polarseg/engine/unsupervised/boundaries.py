@@ -104,57 +104,55 @@ def refined_labels(
     a border: a pixel joins the border only when it or a neighbour changed label, so
     after the first pass the candidates are the last border and the 3 × 3
     neighbourhoods of the pixels that moved. The segment sums are updated from the
-    moved pixels instead of recounted over the image (written by hand: no library
-    keeps per-label means under label changes).
+    moved pixels instead of recounted over the image, and each border pixel's distance
+    to every segment is computed once (k values) and then read for its neighbours.
+    Written by hand: no library keeps per-label means under label changes.
     """
     maps = refine_maps(i, d) if maps is None else maps
     h, w = labels.shape
-    out = np.array(labels, dtype=np.int32, order="C")  # a copy; flat below is its view
-    flat = out.ravel()
     values = maps.reshape(2, -1)
-    count = np.bincount(flat, minlength=k).astype(np.float64)
-    sums = np.stack([np.bincount(flat, v, k) for v in values])
-    spread = _spread(flat, values, sums / np.maximum(count, 1.0))
-    candidates = np.flatnonzero(_border(out))
-    mark = np.zeros(flat.size, dtype=bool)  # scratch for the next candidates
+    first = np.ascontiguousarray(labels, dtype=np.int32).ravel()
+    count = np.bincount(first, minlength=k).astype(np.float64)
+    sums = np.stack([np.bincount(first, v, k) for v in values])
+    spread = _spread(first, values, sums / np.maximum(count, 1.0))
+    # the labels inside a frame of the label k (no segment): a neighbour's flat index
+    # is the pixel's plus a fixed offset, and the frame is never a candidate
+    padded = np.full((h + 2, w + 2), k, dtype=np.int32)
+    padded[1:-1, 1:-1] = labels
+    flat = padded.ravel()
+    offsets = ((np.arange(3)[:, None] - 1) * (w + 2) + np.arange(3)[None, :] - 1).ravel()
+    rows, cols = np.nonzero(_border(padded[1:-1, 1:-1]))
+    candidates = (rows + 1) * (w + 2) + cols + 1
+    mark = np.zeros((h + 2, w + 2), dtype=bool)  # scratch for the next candidates
+    marked = mark.ravel()
     for _ in range(REFINE_PASSES):
-        neighbours = _neighbour_labels(flat, candidates, h, w)  # (9, b)
-        on_border = (neighbours != flat[candidates]).any(axis=0)
+        neighbours = flat[candidates[None, :] + offsets[:, None]]  # (9, b)
+        own = flat[candidates]
+        on_border = ((neighbours != own) & (neighbours != k)).any(axis=0)
         pixels, neighbours = candidates[on_border], neighbours[:, on_border]
         if pixels.size == 0:
             break
+        r, c = np.divmod(pixels, w + 2)
+        inside = (r - 1) * w + (c - 1)  # the pixels' indices in the maps
         mu = sums / np.maximum(count, 1.0) / spread[:, None]  # (2, k)
-        x = values[:, pixels] / spread[:, None]
-        dist = ((x[:, None, :] - mu[:, neighbours]) ** 2).sum(axis=0)  # (9, b)
+        x = values[:, inside] / spread[:, None]  # (2, b)
+        to_segment = np.full((k + 1, pixels.size), np.inf)  # row k: the frame
+        to_segment[:k] = ((x[:, None, :] - mu[:, :, None]) ** 2).sum(axis=0)
+        dist = to_segment[neighbours, np.arange(pixels.size)]  # (9, b)
         new = neighbours[np.argmin(dist, axis=0), np.arange(pixels.size)]
         moved = new != flat[pixels]
         if not moved.any():
             break  # converged: no border pixel moved
-        where, old, new = pixels[moved], flat[pixels[moved]], new[moved]
+        where, at, old, new = pixels[moved], inside[moved], flat[pixels[moved]], new[moved]
         count -= np.bincount(old, minlength=k)
         count += np.bincount(new, minlength=k)
-        for c, v in enumerate(values):
-            sums[c] -= np.bincount(old, v[where], k)
-            sums[c] += np.bincount(new, v[where], k)
+        for j, v in enumerate(values):
+            sums[j] -= np.bincount(old, v[at], k)
+            sums[j] += np.bincount(new, v[at], k)
         flat[where] = new
-        mark[pixels] = True
-        mark[_neighbour_indices(where, h, w).ravel()] = True
-        candidates = np.flatnonzero(mark)
-        mark[candidates] = False
-    return out
-
-
-def _neighbour_indices(pixels: np.ndarray, h: int, w: int) -> np.ndarray:
-    """(9, b) flat indices of the 3 × 3 neighbourhood of each flat pixel index, clipped
-    at the image edge (the edge pixel stands in for the missing neighbour, as with
-    ``np.pad(mode="edge")`` in :func:`refine_boundaries`)."""
-    rows, cols = np.divmod(pixels, w)
-    r = np.clip(rows[None, :] + np.array([-1, -1, -1, 0, 0, 0, 1, 1, 1])[:, None], 0, h - 1)
-    c = np.clip(cols[None, :] + np.array([-1, 0, 1, -1, 0, 1, -1, 0, 1])[:, None], 0, w - 1)
-    return r * w + c
-
-
-def _neighbour_labels(flat: np.ndarray, pixels: np.ndarray, h: int, w: int) -> np.ndarray:
-    """(9, b) labels of the 3 × 3 neighbourhood of each flat pixel index (row-major
-    offsets, the order of :func:`refine_boundaries`' candidates)."""
-    return flat[_neighbour_indices(pixels, h, w)]
+        marked[pixels] = True
+        marked[(where[None, :] + offsets[:, None]).ravel()] = True
+        mark[[0, -1], :] = mark[:, [0, -1]] = False  # the frame
+        candidates = np.flatnonzero(marked)
+        marked[candidates] = False
+    return np.ascontiguousarray(padded[1:-1, 1:-1])
