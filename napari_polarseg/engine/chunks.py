@@ -105,3 +105,37 @@ def scratch(name: str, shape: tuple[int, ...]) -> np.ndarray:
         buf = np.empty(size)
         setattr(_local, name, buf)
     return buf[:size].reshape(shape)
+
+
+#: Seconds between two looks at the stop flag while :func:`call_stoppable` waits.
+STOP_POLL_S = 0.02
+
+
+def call_stoppable(work: Callable[[], object], check: Callable[[], None]) -> object:
+    """``work()`` in a thread of its own, calling ``check()`` every :data:`STOP_POLL_S`
+    seconds while it runs; when ``check`` raises (a stop asked for), the exception goes
+    up at once and the work's result is dropped when it ends.
+
+    For one long library call with no stop hook of its own that releases the GIL
+    (scikit-image's watershed): the run stops within a poll instead of after the call.
+    The abandoned call still finishes in the background (bounded by its own length).
+    Written by hand: ``concurrent.futures`` has no way to leave a running call behind
+    without waiting for it on shutdown.
+    """
+    box: dict[str, object] = {}
+
+    def target() -> None:
+        try:
+            box["value"] = work()
+        except BaseException as exc:  # handed to the caller below
+            box["error"] = exc
+
+    thread = threading.Thread(target=target, name="polarseg-stoppable", daemon=True)
+    thread.start()
+    while thread.is_alive():
+        check()
+        thread.join(STOP_POLL_S)
+    check()
+    if "error" in box:
+        raise box["error"]  # type: ignore[misc]
+    return box["value"]

@@ -83,6 +83,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 import scipy.sparse as sps
 
+from ..chunks import call_stoppable
 from ..degenerate import degenerate_result
 from ..errors import PolarsegError
 from ..features.pca import pca_features, whiten
@@ -363,19 +364,32 @@ def _superpixels(
     d: np.ndarray,
     ph: np.ndarray,
     p: UnsupervisedParams,
-    step: Callable[[float], None] = lambda share: None,
+    progress: Callable[[float], None] | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """(superpixels, their edge map) of ``p.boundary`` (module docstring, step 1);
-    ``step`` is called between the edge map and the watershed."""
+    """(superpixels, their edge map) of ``p.boundary`` (module docstring, step 1).
+
+    ``progress`` is called with 0.25 after the edge map and then every
+    :data:`~napari_polarseg.engine.chunks.STOP_POLL_S` during the watershed (one
+    library call of ~0.6 s on a camera frame with no stop hook): when it raises, the
+    run stops at once (:func:`~napari_polarseg.engine.chunks.call_stoppable`).
+    """
     area = p.area_of(i.shape)
     edge_weight = p.polarisation_edge_weight if p.boundary == "polarisation" else 0.0
     edges = superpixel_edges(i, d, ph, edge_weight)
-    step(0.25)
     if p.boundary == "polarisation":
-        return polarisation_superpixels(i, d, ph, area, edges=edges), edges
-    from ..features.superpixels import superpixels
 
-    return relabel(superpixels(i, area)), edges
+        def work() -> np.ndarray:
+            return polarisation_superpixels(i, d, ph, area, edges=edges)
+    else:
+        from ..features.superpixels import superpixels
+
+        def work() -> np.ndarray:
+            return relabel(superpixels(i, area))
+
+    if progress is None:
+        return work(), edges
+    progress(0.25)
+    return call_stoppable(work, lambda: progress(0.25)), edges
 
 
 @dataclass(frozen=True)
@@ -479,11 +493,12 @@ def prepare_regions(
     if min(i.shape) < 2:
         raise PolarsegError(f"image too small to segment: {i.shape}")
     step(0.05)
-    regions, edges = _superpixels(i, d, ph, p, step)
+    regions, edges = _superpixels(i, d, ph, p, progress)
     step(0.5)
     regions, n = _masked_regions(regions, valid)
     keep = slice(0, n)
     z_region, count, centroid = region_polarisation(i, d, ph, regions)
+    step(0.6)
     share = surface_trend_share(z_region[keep], count[keep], centroid[keep], i.shape)
     close_up = share > p.close_up_share
     q = p.close_up_params() if close_up else p
