@@ -170,3 +170,17 @@ def test_params_round_trip():
     p = UnsupervisedParams()
     assert UnsupervisedParams(**p.to_dict()) == p
     assert p.replace(clustering="kmeans").clustering == "kmeans"
+
+
+def test_relabel_matches_unique_inverse():
+    from napari_polarseg.engine.unsupervised.region_graph import relabel
+
+    rng = np.random.default_rng(0)
+    for labels in (
+        rng.integers(0, 50, (30, 40)) * 3 + 7,  # gaps, non-negative: counted
+        rng.integers(-5, 5, (20, 20)),  # negative labels: sorted
+    ):
+        _, inverse = np.unique(labels, return_inverse=True)
+        out = relabel(labels)
+        assert out.dtype == np.int32
+        assert np.array_equal(out, inverse.reshape(labels.shape))
