@@ -189,12 +189,16 @@ def average_duplicate_angles(
     """
     data = np.asarray(stack, dtype=np.float64)
     angles = np.asarray(angles, dtype=float).ravel()
-    finite = np.isfinite(data)
-    w = finite.astype(np.float64) if weights is None else np.where(finite, weights, 0.0)
     groups = angle_groups(angles)
     n_groups = int(groups.max(initial=-1)) + 1
+    finite = np.isfinite(data)
+    all_finite = bool(finite.all())
+    if weights is None:
+        w = finite.astype(np.float64)
+    else:  # every sample finite (the usual case): no masked copy of the weights
+        w = np.asarray(weights, dtype=np.float64) if all_finite else np.where(finite, weights, 0.0)
     if n_groups == angles.size:
-        return np.where(finite, data, 0.0), angles, w
+        return (data if all_finite else np.where(finite, data, 0.0)), angles, w
     onehot = (groups[None, :] == np.arange(n_groups)[:, None]).astype(np.float64)  # (G, N)
     flat_w = w.reshape(angles.size, -1)
     flat_y = np.where(finite, data, 0.0).reshape(angles.size, -1)
@@ -387,21 +391,21 @@ def _weighted_polarisation(
     uniform = bool(full.all())
     sw = np.sqrt(np.where(ref > 0, ref, 1.0))[:, None]
     solve = np.linalg.pinv(design * sw) * sw.T  # (3, G): weighted least squares
-    if uniform:
-        coef = solve @ y  # (3, P): the exact least-squares solve
-        ok = np.ones(y.shape[1], dtype=bool)
-    else:
-        coef = np.zeros((3, y.shape[1]))
-        ok = full.copy()
-        coef[:, full] = solve @ y[:, full]
-        part = ~full
+    coef = solve @ y  # (3, P): the exact least-squares solve of the full pixels
+    ok = np.ones(y.shape[1], dtype=bool) if uniform else full.copy()
+    if not uniform:  # the others: one weighted solve each (a product of every pixel,
+        part = ~full  # then these overwritten, costs less than gathering the full ones)
         coef[:, part], ok[part] = weighted_fit(design, y[:, part], base[:, part])
     final_w = base
     if robust:
         coef, final_w = irls(design, y, base, coef, ok, loss, iterations)
     usable = base > 0
     n_used = np.maximum(usable.sum(axis=0), 1)
-    residual = np.sqrt(np.sum(np.where(usable, (y - design @ coef) ** 2, 0.0), axis=0) / n_used)
+    misfit = design @ coef
+    misfit -= y
+    misfit *= misfit
+    misfit[~usable] = 0.0
+    residual = np.sqrt(misfit.sum(axis=0) / n_used)
     report_w = None
     if not (uniform and final_w is base):
         report_w = final_w.reshape(g, h, w).astype(np.float32)
