@@ -9,11 +9,14 @@ and calls ``cancel()`` before each.
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 import numpy as np
-from scipy.sparse.linalg import LinearOperator
 
 from ..errors import Cancelled, PolarsegError
+
+if TYPE_CHECKING:
+    from scipy.sparse.linalg import LinearOperator
 
 #: Default cap on the products with the affinity one segment's eigensolve may make, all
 #: solvers together (module docstring: "Bounded work"); above the largest solves of
@@ -75,6 +78,8 @@ class Budget:
             if not self.take(1, stop):
                 raise OutOfProducts
             return product(np.ravel(x))
+
+        from scipy.sparse.linalg import LinearOperator  # start-up cost paid when used
 
         return LinearOperator((n, n), matvec=matvec, dtype=float)
 

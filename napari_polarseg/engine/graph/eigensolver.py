@@ -51,7 +51,6 @@ from collections.abc import Callable
 import numpy as np
 import scipy.linalg
 import scipy.sparse as sps
-from scipy.sparse.linalg import ArpackNoConvergence, eigsh
 
 from ..errors import PolarsegError
 from .budget import MAX_CUT_PRODUCTS, Budget, OutOfProducts, check_products
@@ -356,6 +355,8 @@ def segment_vectors(seg: Segment, starts: list[np.ndarray], budget: Budget) -> n
     the block's best vectors are returned (``budget.capped`` tells); a dense solve only
     when no solver gave any vector. Raises PolarsegError if that fails too.
     """
+    from scipy.sparse.linalg import ArpackNoConvergence, eigsh  # start-up cost when used
+
     m = seg.idx.size
     d = seg.d
     d_is = 1.0 / np.sqrt(d)
@@ -430,6 +431,8 @@ def _lanczos_fiedler(
 ) -> np.ndarray:
     """Second eigenvector z of D^−½ W D^−½ by Lanczos, its products charged to ``budget``
     (up to ``stop`` of them); raises ArpackNoConvergence or :class:`OutOfProducts`."""
+    from scipy.sparse.linalg import eigsh  # start-up cost when used
+
     n = Wop.shape[0]
     product = _scaled_product(Wop, 1.0 / np.sqrt(d))
     op = budget.operator(n, product, stop)
@@ -446,6 +449,8 @@ def _sparse_fiedler(W, d: np.ndarray, start: np.ndarray | None, budget: Budget) 
     The best vector of the block solver when the budget is spent; a dense solve when no
     solver gave any vector.
     """
+    from scipy.sparse.linalg import ArpackNoConvergence  # start-up cost when used
+
     Wop = operator_matrix(W)
     fallen = float(np.min(1.0 - diagonal(W) / d)) < FALLEN_APART
     best = None
