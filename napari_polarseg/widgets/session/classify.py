@@ -163,6 +163,7 @@ def classifier_stages(
     yield names[-1], total - 1, total
     run_stage(names[-1])
     result = segmenter.result(seg.prediction.labels, True, seg.seconds, params)
+    result = replace(result, materials=seg.result.materials)
     return output(replace(seg, result=result), True)
 
 
