@@ -234,6 +234,7 @@ class SegmentWidget(ResultLayers, MaskAndScribbles, StackWidget, SegmentDock):
                 *(getattr(self, name) for name in FIRST_CONTROLS),
                 self.scribbles_layer,
                 self.new_scribbles_button,
+                self.materials,
                 self.live,
                 self.show_advanced,
                 self.advanced,

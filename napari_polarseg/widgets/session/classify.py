@@ -21,6 +21,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ...engine import Pipeline, PolarsegError, SegmentationResult, SegmentParams
+from ...engine.materials import default_name
 from .runs import Partial
 
 if TYPE_CHECKING:
@@ -167,6 +168,18 @@ def classifier_stages(
     return output(replace(seg, result=result), True)
 
 
+def named_output(out: ClassifierOutput, names: dict[int, str]) -> ClassifierOutput:
+    """``out`` with its materials renamed by ``names`` (scribble value → name): the
+    classifier (what *Save classifier…* writes) and the result (what the plots and
+    *Export results…* show) both carry the names."""
+    if out.segmentation is None or not names:
+        return out
+    seg = out.segmentation
+    classifier = seg.classifier.named(names)
+    result = replace(seg.result, materials=classifier.materials())
+    return replace(out, segmentation=replace(seg, result=result, classifier=classifier))
+
+
 def classifier_text(classifier: PixelClassifier) -> str:
     """``"random_forest, 3 classes (1, 2, 3), 30 features, trained on 273 pixels"``."""
     classes = ", ".join(str(int(c)) for c in classifier.classes)
@@ -197,7 +210,12 @@ def classifier_parts(
 ) -> list[str]:
     """The status line's first parts for labels from the pixel classifier."""
     classes = out.prediction.classes
-    names = ", ".join(str(int(c)) for c in classes)
+    materials = out.result.materials
+    if materials is not None and len(materials.values) == classes.size:
+        pairs = zip(materials.values, materials.names, strict=True)
+        names = ", ".join(str(v) if n == default_name(v) else f"{v} {n}" for v, n in pairs)
+    else:
+        names = ", ".join(str(int(c)) for c in classes)
     source = "from scribbles" if out.trained else f"from the classifier {Path(path or '').name}"
     parts = [f"{classes.size} materials {source} (labels {names})"]
     if out.trained:
