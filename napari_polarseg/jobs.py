@@ -297,14 +297,6 @@ def _files_info(read: ReadOptions) -> dict[str, Any]:
     return info
 
 
-def written_labels(result: SegmentationResult) -> np.ndarray:
-    """The labels as ``labels.tif`` numbers them (a scribble classifier's segments: their
-    scribble values), so ``evaluation.json`` names each segment the same way."""
-    if result.materials is None:
-        return result.labels
-    return result.materials.label_values(result.labels)
-
-
 def data_to_folder(
     data: pio.StackData,
     out: pio.PathLike,
@@ -347,7 +339,7 @@ def data_to_folder(
     if truth is not None:
         evaluation = {
             "ground_truth": str(Path(truth_file).resolve()),
-            **evaluate(truth, written_labels(run.result), run.params.window),
+            **evaluate(truth, run.result.labels, run.params.window),
         }
     out = Path(out)
     status.show(f"writing the results to {out}")

@@ -164,8 +164,7 @@ def classifier_stages(
     yield names[-1], total - 1, total
     run_stage(names[-1])
     result = segmenter.result(seg.prediction.labels, True, seg.seconds, params)
-    result = replace(result, materials=seg.result.materials)
-    return output(replace(seg, result=result), True)
+    return output(replace(seg, result=replace(result, materials=seg.result.materials)), True)
 
 
 def named_output(out: ClassifierOutput, names: dict[int, str]) -> ClassifierOutput:
