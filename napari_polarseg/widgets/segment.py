@@ -28,6 +28,7 @@ from ._base import SEGMENT_DOCK_NAME, StackWidget
 from ._layers import find_output, source_key
 from .docks import SegmentDock
 from .param_controls import controlled_names
+from .segment_assist import ScribbleAssist
 from .segment_files import ClassifierFiles, ResultExport
 from .segment_inputs import CUT_ONLY, NO_MASK, NO_SCRIBBLES, MaskAndScribbles, Snapshot
 from .segment_layers import ResultLayers, ShownEntry
@@ -167,6 +168,7 @@ class SegmentWidget(ResultLayers, MaskAndScribbles, StackWidget, SegmentDock):
             self, viewer, self._set_status, self._fail, self._on_value_changed, self._on_inputs
         )
         self.export = ResultExport(self, self._set_status, self._fail)
+        self.assist = ScribbleAssist(self, viewer, self._set_status, self._fail)
         self._adopt_controls()
         self.live = CheckBox(
             text="live update",
@@ -235,6 +237,7 @@ class SegmentWidget(ResultLayers, MaskAndScribbles, StackWidget, SegmentDock):
                 self.scribbles_layer,
                 self.new_scribbles_button,
                 self.materials,
+                self.assist.buttons,
                 self.live,
                 self.show_advanced,
                 self.advanced,
