@@ -14,6 +14,7 @@ from napari.layers import Labels
 from ..engine import PolarsegError, SegmentParams
 from ._base import WidgetPart
 from ._layers import label_colormap, source_key
+from .classifier_controls import ClassifierControls
 from .materials import MaterialList
 from .session import LoadedClassifier, content_digest, region_digest
 
@@ -52,6 +53,8 @@ class Snapshot:
         Which *Load classifier…* is applied (None: none).
     maps : bool
         Whether the run computes the thesis maps and the error map.
+    classifier_settings : ClassifierSettings or None
+        The features and model a training uses (None: a value is bad).
     """
 
     stack_key: str | None
@@ -63,6 +66,7 @@ class Snapshot:
     scribbles_digest: str | None
     classifier_serial: int | None
     maps: bool
+    classifier_settings: Any = None
 
     def differs_only_in_params(self, other: Snapshot) -> tuple[str, ...] | None:
         """The SegmentParams fields that differ when nothing else does (None otherwise)."""
@@ -116,6 +120,8 @@ class MaskAndScribbles(WidgetPart):
         )
         #: The named materials of the chosen scribbles layer (brush class, swatch, name).
         self.materials = MaterialList(changed=self._on_materials_renamed)
+        #: The classifier's features and model (advanced section).
+        self.classifier_controls = ClassifierControls()
         self.new_scribbles_button = PushButton(
             text="New scribbles layer",
             tooltip="Add an empty Labels layer of the stack's size, choose it as the "
@@ -261,6 +267,7 @@ class MaskAndScribbles(WidgetPart):
             scribbles_digest=digest,
             classifier_serial=None if loaded is None else loaded.serial,
             maps=self.wants_maps(params),
+            classifier_settings=self.classifier_controls.settings_or_none(),
         )
 
     def _applied(self, scribble_key: str | None, digest: str | None) -> LoadedClassifier | None:
