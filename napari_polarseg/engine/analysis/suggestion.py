@@ -85,10 +85,10 @@ def _smoothed(u: np.ndarray, allowed: np.ndarray, sigma: float) -> np.ndarray:
     G * (u·a) / G * a), so left-out pixels do not leak into their neighbours."""
     if sigma <= 0:
         return u
-    weight = allowed.astype(np.float64)
+    weight = allowed.astype(np.float32)
     num = ndimage.gaussian_filter(u * weight, sigma)
     den = ndimage.gaussian_filter(weight, sigma)
-    return np.where(den > 1e-6, num / np.maximum(den, 1e-6), 0.0)
+    return np.where(den > 1e-6, num / np.maximum(den, 1e-6), np.float32(0.0))
 
 
 def paint_here_next(
@@ -116,11 +116,11 @@ def paint_here_next(
         None when no region of ``min_pixels`` pixels is uncertain enough.
     """
     params = params or SuggestionParams()
-    u = np.asarray(uncertainty, dtype=np.float64)
+    u = np.asarray(uncertainty, dtype=np.float32)
     if u.ndim != 2:
         raise PolarsegError(f"the uncertainty must be one 2-D map, got shape {u.shape}")
     finite = np.isfinite(u)
-    u = np.where(finite, u, 0.0)
+    u = np.where(finite, u, np.float32(0.0))
     allowed = finite.copy()
     if valid is not None:
         allowed &= np.asarray(valid, dtype=bool)
@@ -142,9 +142,12 @@ def paint_here_next(
     if totals[best] < 0:
         return None
     region = regions == best + 1
-    depth = ndimage.distance_transform_edt(np.pad(region, 1))[1:-1, 1:-1]
+    box = ndimage.find_objects(regions, max_label=best + 1)[best]
+    assert box is not None
+    # the deepest pixel, on the region's bounding box only (padded: its edge is outside)
+    depth = ndimage.distance_transform_edt(np.pad(region[box], 1))[1:-1, 1:-1]
     r, c = np.unravel_index(int(np.argmax(depth)), depth.shape)
-    rows, cols = np.nonzero(region)
-    bbox = (int(rows.min()), int(cols.min()), int(rows.max()) + 1, int(cols.max()) + 1)
+    centre = (int(r) + box[0].start, int(c) + box[1].start)
+    bbox = (box[0].start, box[1].start, box[0].stop, box[1].stop)
     mean = float(u[region].mean())
-    return Suggestion(region, (int(r), int(c)), int(sizes[best]), mean, bbox)
+    return Suggestion(region, centre, int(sizes[best]), mean, bbox)
