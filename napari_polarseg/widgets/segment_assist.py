@@ -88,7 +88,7 @@ class ScribbleAssist:
             layout="horizontal",
             widgets=[self.use_button, self.next_button],
             labels=False,
-            label="scribbles",
+            label="assist",
         )
         self.buttons.margins = (0, 0, 0, 0)
         self.use_button.changed.connect(self.use_as_scribbles)
@@ -173,7 +173,7 @@ class ScribbleAssist:
                 [outline],
                 shape_type="polygon",
                 name=name,
-                edge_color="yellow",
+                edge_color="white",  # not a palette colour: stands out on segments
                 face_color=[0, 0, 0, 0],
                 edge_width=2,
                 **placement,
