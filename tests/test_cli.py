@@ -590,22 +590,23 @@ def test_segment_with_scribbles_and_ground_truth(tmp_path, capsys, scene_tif):
         "evaluation.json",
     }
     labels = read_tif(out / "labels.tif")
-    assert labels.shape == (H, W) and set(np.unique(labels)) == {0, 1}
+    # the scribble values 1 and 2, as painted (issue 23: one numbering everywhere)
+    assert labels.shape == (H, W) and set(np.unique(labels)) == {1, 2}
     uncertainty = read_tif(out / "uncertainty.tif")
     assert uncertainty.shape == (H, W) and 0 <= uncertainty.min() <= uncertainty.max() <= 1
     assert adjusted_rand_score(truth.ravel(), labels.ravel()) > 0.9
-    # class 0 = value 1, left of the boundary at column 30 (pixel labels: a few pixels'
-    # band at the boundary may go either way)
-    assert np.all(labels[:, :26] == 0) and np.all(labels[:, 34:] == 1)
+    # value 1 left of the boundary at column 30 (pixel labels: a few pixels' band at the
+    # boundary may go either way)
+    assert np.all(labels[:, :26] == 1) and np.all(labels[:, 34:] == 2)
     proba = read_tif(out / "probabilities.tif")
     assert proba.shape == (2, H, W) and proba.dtype == np.float32
     np.testing.assert_allclose(proba.sum(axis=0), 1.0, atol=1e-5)
-    assert np.array_equal(np.argmax(proba, axis=0), labels)
+    assert np.array_equal(np.argmax(proba, axis=0) + 1, labels)  # plane k: k-th value
 
     evaluation = json.loads((out / "evaluation.json").read_text())
     ari = adjusted_rand_score(truth.ravel(), labels.ravel())
     assert evaluation["adjusted_rand_index"] == pytest.approx(ari)
-    assert set(evaluation["iou_per_segment"]) == {"0", "1"}
+    assert set(evaluation["iou_per_segment"]) == {"0", "1"}  # the true materials
     assert 0.9 < evaluation["mean_iou"] <= 1.0
     assert evaluation["block_accuracy_worst"] <= evaluation["block_accuracy_optimistic"]
     assert evaluation["window"] == 10
@@ -695,7 +696,7 @@ def test_segment_ground_truth_only_and_segments_csv(tmp_path, capsys, scene_tif)
 
     lines = (out / "segments.csv").read_text().splitlines()
     header = lines[0].split(",")
-    assert header[:3] == ["segment", "pixels", "area_fraction"]
+    assert header[:4] == ["segment", "name", "pixels", "area_fraction"]
     assert header[-3:] == ["mean_pca_1", "mean_pca_2", "mean_pca_3"]
     rows = [dict(zip(header, line.split(","), strict=True)) for line in lines[1:]]
     assert [int(r["segment"]) for r in rows] == [0, 1]

@@ -67,8 +67,13 @@ _GLOB_CHARS = re.compile(r"[*?\[]")
 
 
 def contract_files() -> tuple[str, ...]:
-    """Files every complete scene folder must hold (the ``segment`` contract)."""
-    return ("labels.tif", *FLOAT_OUTPUTS, "params.json", "summary.json")
+    """Files every complete scene folder must hold (the ``segment`` contract).
+
+    The reconstruction-error map is written with the thesis maps only (the thesis
+    method, ``--thesis-maps``): a scene of another method or of a classifier is complete
+    without it."""
+    always = (f for f in FLOAT_OUTPUTS if f != "reconstruction_error.tif")
+    return ("labels.tif", *always, "params.json", "summary.json")
 
 
 # -- planning -------------------------------------------------------------------------------

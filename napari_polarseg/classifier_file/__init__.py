@@ -48,7 +48,7 @@ whose one line names the file and the problem, anything that is not exactly such
    check types, and scikit-learn walks tree node arrays without bounds checks, so a
    crafted child or feature index could crash the process at the first prediction;
 7. metadata that is not a JSON object of plain JSON values, or that disagrees with the
-   model (number of features, class values).
+   model (number of features, class values, one material name per class).
 
 The package
 -----------
@@ -81,6 +81,7 @@ from .format import (
     ALLOWED_TYPES,
     FORMAT_NAME,
     FORMAT_VERSION,
+    KEY_CLASS_NAMES,
     KEY_CLASSES,
     KEY_FEATURE_NAMES,
     KEY_FEATURE_PARAMS,
@@ -105,6 +106,7 @@ __all__ = [
     "FOREST_TREES",
     "FORMAT_NAME",
     "FORMAT_VERSION",
+    "KEY_CLASS_NAMES",
     "KEY_CLASSES",
     "KEY_FEATURE_NAMES",
     "KEY_FEATURE_PARAMS",

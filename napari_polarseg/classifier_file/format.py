@@ -171,6 +171,10 @@ KEY_FEATURE_PARAMS = "feature_params"
 KEY_CLASSES = "classes"
 
 
+#: List of str, the material name of each class (in the order of :data:`KEY_CLASSES`).
+KEY_CLASS_NAMES = "class_names"
+
+
 #: str: napari-polarseg version that trained the model.
 KEY_PACKAGE_VERSION = "package_version"
 

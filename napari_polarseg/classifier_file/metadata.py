@@ -16,6 +16,7 @@ import numpy as np
 from .. import __version__
 from .format import (
     FORMAT_VERSION,
+    KEY_CLASS_NAMES,
     KEY_CLASSES,
     KEY_FEATURE_NAMES,
     KEY_FEATURE_PARAMS,
@@ -122,6 +123,14 @@ def check_metadata(path: Path, metadata: Any, model: Any) -> None:
     classes = metadata.get(KEY_CLASSES)
     if classes is not None and classes != model.classes_.tolist():
         raise file_error(path, f"metadata {KEY_CLASSES!r} differs from the model's class values")
+    names = metadata.get(KEY_CLASS_NAMES)
+    n_classes = len(model.classes_)
+    if names is not None and (
+        type(names) is not list or any(type(n) is not str for n in names) or len(names) != n_classes
+    ):
+        raise file_error(
+            path, f"metadata {KEY_CLASS_NAMES!r} must be {n_classes} names, one per class"
+        )
     version = metadata.get(KEY_FORMAT_VERSION)
     if version is not None and (not is_int(version) or version != FORMAT_VERSION):
         raise file_error(

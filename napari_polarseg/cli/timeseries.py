@@ -127,7 +127,8 @@ def _read_days(args: argparse.Namespace, params: SegmentParams) -> _Days:
 
 def _classify_days(result: Any, days: _Days, params: SegmentParams, path: str) -> Any:
     """The time series with every day labelled by the saved pixel classifier at ``path``
-    (the same classes every day, so a label means the same material on every day)."""
+    (the same classes every day, so a label means the same material on every day; each
+    labelled with its scribble value, as ``segment`` writes ``labels.tif``)."""
     from ..classifier_file import load_pixel_classifier
     from ..engine.analysis.pixel_segmentation import PixelSegmenter
 
@@ -142,6 +143,7 @@ def _classify_days(result: Any, days: _Days, params: SegmentParams, path: str) -
             for stack, day, mask in zip(days.stacks, days.data, days.masks, strict=True)
         ]
     )
+    labels = np.asarray(classifier.classes, dtype=np.int32)[labels]  # the scribble values
     return dataclasses.replace(result, labels=labels, changes=labels[1:] != labels[:-1])
 
 
@@ -215,7 +217,7 @@ def run(args: argparse.Namespace) -> int:
         result = _classify_days(result, days, params, args.classifier)
     summary = result.summary()
     if args.classifier:
-        summary["labels_from"] = "classifier"
+        summary["labels_from"] = "classifier"  # labels_DD.tif: the scribble values
     summary["io_seconds"] = {"read": round(days.read_seconds, 6)}
     aris = [
         None if d.ground_truth is None else adjusted_rand_index(d.ground_truth, labels)

@@ -14,6 +14,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from .degenerate import DegenerateCheck, degenerate_result
+from .materials import Materials
 from .params import SegmentParams
 
 
@@ -60,7 +61,9 @@ class SegmentationResult:
     otherwise. ``method`` names the segmentation method that made ``labels`` and
     ``method_record`` is what it reported. ``coefficients``, ``features`` and
     ``explained_variance_ratio`` (the thesis maps) and the reconstruction are None when
-    the run did not compute them (other methods, unless asked for).
+    the run did not compute them (other methods, unless asked for). ``materials``: the
+    scribble value and name of every label when a scribble classifier made them
+    (:class:`~napari_polarseg.engine.materials.Materials`; None for the other methods).
     """
 
     params: SegmentParams
@@ -88,6 +91,7 @@ class SegmentationResult:
     superpixels: dict[str, Any] = field(default_factory=dict)
     method: str = "thesis"
     method_record: dict[str, Any] = field(default_factory=dict)
+    materials: Materials | None = None
 
     @property
     def n_segments(self) -> int:

@@ -10,12 +10,15 @@ The file names and the TIFF metadata every result folder's images carry
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from ..engine.analysis.evaluation import STATISTICS_COLUMNS
+
 if TYPE_CHECKING:
     from ..engine import SegmentationResult
+    from ..engine.materials import Materials
 
 #: The polarisation views every result folder holds beside the contract files.
 STOKES_FILE = "stokes.tif"
@@ -53,6 +56,11 @@ PROBABILITY_META = {
     "dimensions": "class, row, column (class k = the k-th smallest scribble value)",
 }
 
+#: Columns of ``segments.csv``: the segment's ``labels.tif`` value, its material's name
+#: (a scribble classifier's; empty for the unsupervised methods), then its statistics
+#: (:data:`~napari_polarseg.engine.analysis.evaluation.STATISTICS_COLUMNS` but the first).
+SEGMENTS_CSV_COLUMNS = (STATISTICS_COLUMNS[0], "name", *STATISTICS_COLUMNS[1:])
+
 UNCERTAINTY_META = {
     "quantity": "uncertainty of the pixel classifier: 1 - (p1 - p2), one minus the margin "
     "between the two most probable classes",
@@ -74,10 +82,26 @@ class OutputError(Exception):
     """The outputs could not be written (``polarseg`` exit code 1)."""
 
 
-def labels_image(labels: np.ndarray) -> np.ndarray:
-    """Labels as the smallest unsigned type that holds them (uint16, else uint32)."""
+def labels_image(labels: np.ndarray, materials: Materials | None = None) -> np.ndarray:
+    """``labels.tif``: labels as the smallest unsigned type that holds them (uint16, else
+    uint32); with ``materials`` (a scribble classifier's) label k is written as the
+    scribble value ``materials.values[k]``, the value its strokes were painted with."""
+    if materials is not None:
+        labels = materials.label_values(labels)
     dtype = np.uint16 if labels.max(initial=0) < 2**16 else np.uint32
     return labels.astype(dtype)
+
+
+def labels_meta(materials: Materials | None) -> dict[str, Any]:
+    """The ImageDescription of ``labels.tif``: 0 = first segment, or with a scribble
+    classifier the scribble values and the materials' names."""
+    if materials is None:
+        return {"quantity": "segment labels", "first_label": 0}
+    return {
+        "quantity": "segment labels",
+        "values": "scribble value of each material",
+        "materials": materials.to_dict(),
+    }
 
 
 def used_pixels(result: SegmentationResult) -> np.ndarray:

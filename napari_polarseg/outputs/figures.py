@@ -28,6 +28,7 @@ if TYPE_CHECKING:
 
     from ..engine import SegmentationResult
     from ..engine.analysis.sweep_result import SweepCell, SweepResult
+    from ..engine.materials import Materials
 
 #: Colours of the light default theme: figure background, text/axes, accent.
 LIGHT = {"background": "#ffffff", "foreground": "#000000", "accent": "#1f77b4"}
@@ -89,13 +90,18 @@ def scatter_figure(
     fig: Figure | None = None,
     theme: dict[str, str] = LIGHT,
     first_label: int = 0,
+    materials: Materials | None = None,
 ) -> Figure:
     """Î against ρ (``against="dop"``), φ (``"phase"``, degrees) or both (``"both"``),
     coloured by segment (thesis figure 4.1). One point collection per axes.
 
-    The legend names segment label v as ``v + first_label``: 0 numbers them as
-    ``labels.tif`` does, 1 as the plugin's ``segments`` layer (where 0 is no label)."""
-    from matplotlib import colormaps
+    Each segment has the colour the viewer draws it in
+    (:func:`napari_polarseg.palette.label_rgba` of its shown value). The legend names
+    segment label v as ``v + first_label``: 0 numbers them as ``labels.tif`` does, 1 as
+    the plugin's ``segments`` layer (where 0 is no label); with ``materials`` (a scribble
+    classifier's) by its scribble value and material name, as both do."""
+    from ..engine.materials import display_values
+    from ..palette import label_rgba
 
     kinds = ["dop", "phase"] if against == "both" else [against]
     if any(k not in ("dop", "phase") for k in kinds):
@@ -103,15 +109,21 @@ def scatter_figure(
     fig = _figure(fig, (5.0 * len(kinds), 4.0), theme)
     labels = np.asarray(data.labels)
     values = np.unique(labels)
-    cmap = colormaps["tab10" if values.size <= 10 else "tab20"]
-    index = np.searchsorted(values, labels)
-    colours = cmap(index % cmap.N)
+    n = int(labels.max(initial=0)) + 1
+    if materials is not None and len(materials.values) < n:
+        materials = None  # labels the materials do not describe: numbered only
+    palette = label_rgba(display_values(n, materials))
+    colours = palette[labels]
+    if materials is None:
+        names = [f"segment {v + first_label}" for v in range(n)]
+    else:
+        names = [f"{v} {name}" for v, name in zip(materials.values, materials.names, strict=True)]
     for i, kind in enumerate(kinds):
         ax = fig.add_subplot(1, len(kinds), i + 1)
         x = data.dop if kind == "dop" else np.rad2deg(data.phase)
         ax.scatter(x, data.intensity, c=colours, s=2, linewidths=0, rasterized=True)
-        for j, v in enumerate(values):  # legend entries only (no points)
-            ax.scatter([], [], color=cmap(j % cmap.N), s=12, label=f"segment {v + first_label}")
+        for v in values:  # legend entries only (no points)
+            ax.scatter([], [], color=palette[v], s=12, label=names[v])
         ax.set_xlabel("ρ degree of polarisation" if kind == "dop" else "φ phase (degrees)")
         ax.set_ylabel("Î intensity")
         ax.set_title(f"Î against {'ρ' if kind == 'dop' else 'φ'} ({len(data)} pixels)")
@@ -275,7 +287,10 @@ def _plot_makers(
         pairs = [(l, m) for l, m in plots.DEFAULT_PAIRS if l <= degree]  # noqa: E741
     return {
         "scatter.png": lambda: scatter_figure(
-            plots.scatter_data(result, max_points, seed), "both", theme=theme
+            plots.scatter_data(result, max_points, seed),
+            "both",
+            theme=theme,
+            materials=result.materials,
         ),
         "explained_variance.png": lambda: explained_variance_figure(
             plots.explained_variance(result), theme=theme

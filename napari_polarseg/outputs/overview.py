@@ -1,10 +1,12 @@
 """The ``overview.png`` of a result folder: every map of a segmentation, on a grid.
 
 :func:`overview_figure` draws the input, Î, ρ, φ, the AoLP/DoLP HSV composite, the
-segments, the ground truth (when known, in the colours of the segments it is matched to,
-:func:`segment_colours_for`) and the reconstruction error; :func:`render_overview` turns
-it into pixels. matplotlib is imported lazily, with its object-oriented API on an Agg
-canvas only (no pyplot, no window, safe in a worker thread).
+segments (in the colours the viewer draws them in, :func:`napari_polarseg.palette.label_rgba`;
+their colour bar is the legend: each label's ``labels.tif`` value and, from a scribble
+classifier, its material's name), the ground truth (when known, in the colours of the
+segments it is matched to, :func:`segment_colours_for`) and the reconstruction error;
+:func:`render_overview` turns it into pixels. matplotlib is imported lazily, with its
+object-oriented API on an Agg canvas only (no pyplot, no window, safe in a worker thread).
 """
 
 from __future__ import annotations
@@ -16,7 +18,6 @@ import numpy as np
 from ..engine.analysis.views import CompositeParams, aolp_dolp_composite, auto_dolp_max
 
 if TYPE_CHECKING:
-    from matplotlib.colors import Colormap
     from matplotlib.figure import Figure
 
     from ..engine import SegmentationResult
@@ -24,8 +25,8 @@ if TYPE_CHECKING:
 #: One panel of the overview: (title, image, colour map or "rgb" or a label-panel key of
 #: the ticks, vmin, vmax).
 Panel = tuple[str, Any, str, Any, Any]
-#: The label panels by their key: (label values, tick labels, colour index of each value).
-Ticks = dict[str, tuple[Any, list[str], Any]]
+#: The label panels by their key: (label values, tick labels, RGBA of each value).
+Ticks = dict[str, tuple[Any, list[str], np.ndarray]]
 #: Columns of the overview's grid (2 rows of 4 for the 7 or 8 panels).
 COLUMNS = 4
 
@@ -55,38 +56,62 @@ def segment_colours_for(truth: np.ndarray, labels: np.ndarray) -> tuple[np.ndarr
     return true_index, colour
 
 
-def segment_colormap(k: int) -> Colormap:
-    """The colours of ``k`` label values: tab10 (tab20 above 10), repeated as needed."""
-    from matplotlib import colormaps
-    from matplotlib.colors import ListedColormap
+def _truth_rgba(segment_rgba: np.ndarray, colour: np.ndarray, n_true: int) -> np.ndarray:
+    """RGBA of the true materials 0..m−1: the colour of the segment matched to each, and
+    for an unmatched one a palette colour no segment has (grey when none is left)."""
+    from ..palette import segment_rgba as palette
 
-    base = "tab10" if k <= 10 else "tab20"
-    return ListedColormap(colormaps[base](np.arange(k) % colormaps[base].N))
+    rgba = np.tile([0.6, 0.6, 0.6, 1.0], (n_true, 1))
+    for j, i in enumerate(colour):
+        if i < n_true:
+            rgba[i] = segment_rgba[j]
+    used = {tuple(c) for c in np.round(segment_rgba, 6)}
+    spare = iter(c for c in palette() if tuple(np.round(c, 6)) not in used)
+    matched = set(int(i) for i in colour if i < n_true)
+    for i in range(n_true):
+        if i not in matched:
+            rgba[i] = next(spare, rgba[i])
+    return rgba
+
+
+def _segment_ticks(result: SegmentationResult, n: int) -> tuple[Any, list[str], np.ndarray]:
+    """The segments' colour-bar ticks (label 0..n−1 named by its ``labels.tif`` value,
+    and by its material with a scribble classifier: the legend) and their RGBA, the
+    colours the viewer draws them in (:func:`~napari_polarseg.palette.label_rgba`)."""
+    from ..engine.materials import display_values, file_values
+    from ..palette import label_rgba
+
+    materials = result.materials if result.materials is not None else None
+    if materials is not None and len(materials.values) < n:
+        materials = None  # labels the materials do not describe: numbered only
+    values = file_values(n, materials)
+    if materials is None:
+        names = [str(v) for v in values]
+    else:
+        names = [f"{v} {name}" for v, name in zip(values, materials.names, strict=False)]
+    return np.arange(n), names[:n], label_rgba(display_values(n, materials)[:n])
 
 
 def _label_panels(
     result: SegmentationResult, truth: np.ndarray | None
-) -> tuple[list[Panel], Ticks, int]:
+) -> tuple[list[Panel], Ticks]:
     """The segments' panel and, with ``truth``, the ground truth's, matched in colour;
-    their colour-bar ticks; the number of colours."""
+    their colour-bar ticks (and colours)."""
     from ..engine.analysis.evaluation import adjusted_rand_index
 
     labels = np.asarray(result.labels)
-    n = max(result.n_segments, 1)
-    k = n
+    n = max(result.n_segments, int(labels.max(initial=0)) + 1, 1)
     seg_title = f"segments ({result.n_segments})"
-    # each label panel shows its values 0, 1, ... in order; with the truth, a segment is
-    # drawn in the colour of the material it is matched to
-    ticks: Ticks = {"segments": (np.arange(n), [str(v) for v in range(n)], np.arange(n))}
+    # each label panel shows its values 0, 1, ... in order, in the viewer's colours;
+    # with the truth, a material is drawn in the colour of the segment matched to it
+    ticks: Ticks = {"segments": _segment_ticks(result, n)}
     if truth is None:
-        return [(seg_title, labels, "segments", -0.5, n - 0.5)], ticks, k
+        return [(seg_title, labels, "segments", -0.5, n - 0.5)], ticks
     true_index, colour = segment_colours_for(truth, labels)
     true_values = np.unique(np.asarray(truth))
-    n = colour.size
-    k = max(k, true_values.size, int(colour.max(initial=0)) + 1)
-    ticks["segments"] = (np.arange(n), [str(v) for v in range(n)], colour)
     m = true_values.size
-    ticks["truth"] = (np.arange(m), [str(v) for v in true_values], np.arange(m))
+    seg_rgba = ticks["segments"][2]
+    ticks["truth"] = (np.arange(m), [str(v) for v in true_values], _truth_rgba(seg_rgba, colour, m))
     seg_title += f", ARI {adjusted_rand_index(truth, result.labels):.3f}"
     return (
         [
@@ -94,7 +119,6 @@ def _label_panels(
             (f"ground truth ({m})", true_index, "truth", -0.5, m - 0.5),
         ],
         ticks,
-        k,
     )
 
 
@@ -104,8 +128,8 @@ def _panels(
     truth: np.ndarray | None,
     composite: np.ndarray | None,
     dolp_max: float | None,
-) -> tuple[list[Panel], Ticks, int]:
-    """Every panel of the overview in order, the label panels' ticks, their colours."""
+) -> tuple[list[Panel], Ticks]:
+    """Every panel of the overview in order, the label panels' ticks and colours."""
     if composite is None:
         if dolp_max is None:
             dolp_max = auto_dolp_max(result.dop)
@@ -115,7 +139,7 @@ def _panels(
     hsv_title = "AoLP hue, DoLP saturation"
     if dolp_max is not None:
         hsv_title += f"\n(full at ρ = {dolp_max:g})"
-    label_panels, ticks, k = _label_panels(result, truth)
+    label_panels, ticks = _label_panels(result, truth)
     error = result.reconstruction_error
     error_title = "reconstruction error"
     if error is None:
@@ -132,12 +156,10 @@ def _panels(
         *label_panels,
         (error_title, error, "magma", 0.0, err_max or None),
     ]
-    return panels, ticks, k
+    return panels, ticks
 
 
-def _draw_panel(
-    fig: Figure, ax: Any, panel: Panel, ticks: Ticks, seg_cmap: Colormap, k: int
-) -> None:
+def _draw_panel(fig: Figure, ax: Any, panel: Panel, ticks: Ticks) -> None:
     """One panel and its colour bar (hue degrees for the composite, label ticks)."""
     from matplotlib import colormaps
     from matplotlib.cm import ScalarMappable
@@ -156,7 +178,7 @@ def _draw_panel(
     is_labels = cmap in ticks
     if is_labels:
         values, names, colours = ticks[cmap]
-        panel_cmap: Any = ListedColormap(seg_cmap(np.asarray(colours, dtype=int)))
+        panel_cmap: Any = ListedColormap(np.asarray(colours, dtype=float))
     else:
         panel_cmap = cmap
     shown = ax.imshow(
@@ -215,8 +237,7 @@ def overview_figure(
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    panels, ticks, k = _panels(first_frame, result, truth, composite, dolp_max)
-    seg_cmap = segment_colormap(k)
+    panels, ticks = _panels(first_frame, result, truth, composite, dolp_max)
     h, w = result.labels.shape
     rows = -(-len(panels) // COLUMNS)
     panel_w = 3.4  # inches per panel, its colour bar included
@@ -225,7 +246,7 @@ def overview_figure(
     FigureCanvasAgg(fig)
     axes = fig.subplots(rows, COLUMNS, squeeze=False).ravel()
     for ax, panel in zip(axes, panels, strict=False):
-        _draw_panel(fig, ax, panel, ticks, seg_cmap, k)
+        _draw_panel(fig, ax, panel, ticks)
     for ax in axes[len(panels) :]:
         fig.delaxes(ax)
     return fig

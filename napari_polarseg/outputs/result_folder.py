@@ -33,7 +33,7 @@ import numpy as np
 from .. import __version__
 from .. import io as pio
 from ..engine import SegmentationResult, valid_blocks
-from ..engine.analysis.evaluation import STATISTICS_COLUMNS, segment_statistics
+from ..engine.analysis.evaluation import segment_statistics
 from ..engine.analysis.views import CompositeParams, aolp_dolp_composite, auto_dolp_max
 from ..engine.errors import PolarsegError
 from ..engine.physics.pixel_mask import PixelMask
@@ -45,10 +45,12 @@ from .contract import (
     FLOAT_OUTPUTS,
     MASK_META,
     PROBABILITY_META,
+    SEGMENTS_CSV_COLUMNS,
     STOKES_FILE,
     UNCERTAINTY_META,
     OutputError,
     labels_image,
+    labels_meta,
     used_pixels,
 )
 from .overview import render_overview
@@ -65,10 +67,13 @@ def segment_rows(result: SegmentationResult) -> list[dict[str, Any]]:
 
     Means over the used pixels (``result.valid``) and, for the PCA features, over the
     blocks that entered the graph (:func:`~napari_polarseg.engine.stages.valid_blocks`).
+    ``segment`` is the segment's value in ``labels.tif`` (a scribble classifier's: the
+    scribble value of its material) and ``name`` its material's name (empty without
+    ``result.materials``).
     """
     valid = result.valid
     block_valid = None if valid is None else valid_blocks(valid, result.params.window)
-    return segment_statistics(
+    rows = segment_statistics(
         result.labels,
         result.intensity,
         result.dop,
@@ -79,6 +84,14 @@ def segment_rows(result: SegmentationResult) -> list[dict[str, Any]]:
         features=result.features,
         block_valid=block_valid,
     )
+    materials = result.materials
+    for row in rows:
+        k = row["segment"]
+        if materials is not None and k < len(materials.values):
+            row["segment"], row["name"] = materials.values[k], materials.names[k]
+        else:
+            row["name"] = ""
+    return rows
 
 
 def _csv_value(value: Any) -> str:
@@ -88,12 +101,15 @@ def _csv_value(value: Any) -> str:
 
 
 def write_segments_csv(path: str | os.PathLike[str], rows: list[dict[str, Any]]) -> None:
-    """Write per-segment statistics (:data:`STATISTICS_COLUMNS`) as CSV, atomically.
+    """Write per-segment rows (:func:`segment_rows`) as CSV with the columns
+    :data:`~napari_polarseg.outputs.contract.SEGMENTS_CSV_COLUMNS`, atomically.
 
-    NaN (a segment with no used pixel or block, fewer than 3 PCA features) is empty.
+    NaN (a segment with no used pixel or block, fewer than 3 PCA features) is empty; a
+    row without a ``name`` has an empty one.
     """
-    lines = [",".join(STATISTICS_COLUMNS)]
-    lines += [",".join(_csv_value(row[c]) for c in STATISTICS_COLUMNS) for row in rows]
+    columns = SEGMENTS_CSV_COLUMNS
+    lines = [",".join(columns)]
+    lines += [",".join(_csv_value(row.get(c, "")) for c in columns) for row in rows]
     with pio.atomic_output(path) as tmp:
         tmp.write_text("\n".join(lines) + "\n", encoding="utf-8")
 
@@ -178,6 +194,9 @@ def classifier_summary(segmentation: Any, labels_from: str) -> dict[str, Any]:
     return {
         "labels_from": labels_from,
         "scribble_classes": [int(c) for c in clf.classes],
+        "materials": segmentation.result.materials.to_dict()
+        if segmentation.result.materials is not None
+        else clf.materials().to_dict(),
         "classifier": {
             "model": clf.params.model,
             "n_features": len(clf.feature_names),
@@ -225,8 +244,8 @@ def _write_maps(
     composite: np.ndarray | None,
 ) -> None:
     """``labels.tif``, the float maps, ``mask.tif`` and the polarisation views."""
-    labels_meta = {"quantity": "segment labels", "first_label": 0}
-    folder.tiff("labels.tif", labels_image(result.labels), labels_meta)
+    materials = result.materials
+    folder.tiff("labels.tif", labels_image(result.labels, materials), labels_meta(materials))
     for fname, (attr, meta) in FLOAT_OUTPUTS.items():
         value = getattr(result, attr)
         if value is not None:  # the reconstruction error: the thesis maps, when computed
@@ -245,13 +264,18 @@ def _write_extras(
     uncertainty: np.ndarray | None,
     evaluation: dict[str, Any] | None,
     overview: np.ndarray | None,
+    materials: Any = None,
 ) -> None:
-    """The files a run writes on request, in the contract's order."""
+    """The files a run writes on request, in the contract's order; ``materials`` (a
+    scribble classifier's) name the planes of ``probabilities.tif``."""
     if segments is not None:
         write_segments_csv(folder.path("segments.csv"), segments)
         folder.written.append("segments.csv")
     if probabilities is not None:
-        folder.tiff("probabilities.tif", probabilities.astype(np.float32), PROBABILITY_META)
+        meta = dict(PROBABILITY_META)
+        if materials is not None and len(materials.values) == probabilities.shape[0]:
+            meta["materials"] = materials.to_dict()  # plane k: the k-th of these
+        folder.tiff("probabilities.tif", probabilities.astype(np.float32), meta)
     if uncertainty is not None:
         folder.tiff("uncertainty.tif", uncertainty.astype(np.float32), UNCERTAINTY_META)
     if evaluation is not None:
@@ -302,7 +326,8 @@ def write_outputs(
     try:
         out.mkdir(parents=True, exist_ok=True)
         _write_maps(folder, result, stokes, composite)
-        _write_extras(folder, segments, probabilities, uncertainty, evaluation, overview)
+        extras = (segments, probabilities, uncertainty, evaluation, overview)
+        _write_extras(folder, *extras, result.materials)
         if plots is not None:
             _write_plots(folder, plots)
         folder.json("params.json", info)

@@ -73,6 +73,8 @@ def write_timeseries_folder(
         for t, labels in enumerate(result.labels):
             name = str(out / f"labels_{t + 1:02d}.tif")
             meta = {"quantity": "segment labels", "first_label": 0, "day": t + 1}
+            if summary.get("labels_from") == "classifier":  # numbered as the strokes
+                meta = {"quantity": "segment labels", "values": "scribble values", "day": t + 1}
             pio.write_tiff(name, labels_image(labels), meta)
             written.append(Path(name).name)
         pairs = zip(result.changes, result.change_score, result.feature_distance, strict=True)

@@ -42,6 +42,7 @@ from ..engine.analysis.change_test import DEFAULT_FALSE_ALARM
 from ..engine.analysis.timeseries import METHODS, segment_timeseries
 from ..engine.analysis.timeseries_result import TimeSeriesResult
 from ..io import parse_angles
+from ..io.read_options import ReadOptions
 from ._base import ScrollingContainer, is_angle_stack
 from ._layers import ANGLES_KEY, TAG, label_colormap, source_key
 from ._runner import WorkerSlot
@@ -87,7 +88,16 @@ def batch_job(
     options: dict[str, Any],
     stop: threading.Event,
 ) -> Generator[tuple[str, int, int], None, batch_engine.BatchResult]:
-    """Worker job: run the batch, yielding ``(scene: status, index, total)`` per scene."""
+    """Worker job: run the batch, yielding ``(scene: status, index, total)`` per scene.
+
+    With a classifier file in ``options["read"]`` (*Apply classifier*), it is read and
+    checked first, as ``polarseg batch --classifier`` does: a bad file stops the batch
+    before any scene, with one message."""
+    read = options.get("read")
+    if read is not None and read.classifier:
+        from ..classifier_file import load_pixel_classifier
+
+        load_pixel_classifier(read.classifier)
     rows = batch_engine.iter_batch(scenes, out, params, cancel=stop.is_set, **options)
     index = itertools.count(1)
 
@@ -98,7 +108,7 @@ def batch_job(
 
 
 class BatchWidget(ScrollingContainer):
-    """Apply the current parameters to every scene of a folder (the batch engine).
+    """Apply the current parameters (or a saved classifier) to every scene of a folder.
 
     Scenes are the stack files (``.tif``, ``.npz``, …) and sub-folders of the input
     folder, or the entries matching *pattern*. Each goes to ``OUT/<scene>/`` as with
@@ -149,6 +159,7 @@ class BatchWidget(ScrollingContainer):
                 self.out,
                 self.source,
                 self.params_file,
+                self.classifier,
                 self.scheduler,
                 self.workers,
                 self.resume,
@@ -205,6 +216,18 @@ class BatchWidget(ScrollingContainer):
             "params.json of polarseg segment); missing fields take the thesis defaults",
         )
 
+        from ..classifier_file.format import SUFFIX as CLASSIFIER_SUFFIX
+
+        self.classifier = FileEdit(
+            label="apply classifier",
+            mode="r",
+            filter=f"*{CLASSIFIER_SUFFIX}",
+            tooltip="Optional: a saved pixel classifier (.polarseg-clf, from 'Save "
+            "classifier…' or polarseg segment --save-classifier) labels every scene "
+            "instead of the unsupervised method, as polarseg batch --classifier; empty: "
+            "the parameters' method",
+        )
+
     # -- inputs -----------------------------------------------------------------------
     def _on_source(self, value: str) -> None:
         self.params_file.visible = value == "JSON file"
@@ -212,6 +235,17 @@ class BatchWidget(ScrollingContainer):
     def params(self) -> SegmentParams:
         """The parameters the batch will use (raises PolarsegError)."""
         return params_from(self._viewer, self.source.value, self.params_file.value)
+
+    def classifier_file(self) -> Path | None:
+        """The classifier file *Apply classifier* names (None: empty; raises
+        PolarsegError when it is not a file)."""
+        value = str(self.classifier.value or "").strip()
+        if value in ("", "."):
+            return None
+        path = Path(value).expanduser().resolve()
+        if not path.is_file():
+            raise PolarsegError(f"the classifier {path} is not a file")
+        return path
 
     def scenes(self) -> list[batch_engine.Scene]:
         """The scenes the batch would run (raises PolarsegError)."""
@@ -240,6 +274,7 @@ class BatchWidget(ScrollingContainer):
         try:
             params = self.params()
             scenes = self.scenes()
+            classifier = self.classifier_file()
         except PolarsegError as exc:
             self._set_status(f"error: {exc}")
             show_error(str(exc))
@@ -249,6 +284,8 @@ class BatchWidget(ScrollingContainer):
             "n_workers": int(self.workers.value) or None,
             "resume": bool(self.resume.value),
         }
+        if classifier is not None:  # every scene labelled by it (recorded in its marker)
+            options["read"] = ReadOptions(classifier=str(classifier))
         out = self._folder(self.out, "output")
         self._stop = threading.Event()
         self.cancel_button.enabled = True

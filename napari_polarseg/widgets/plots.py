@@ -335,7 +335,8 @@ class PlotsWidget(StackWidget):
         elif kind in ("scatter_dop", "scatter_phase"):
             data = plots.scatter_data(result, MAX_POINTS)
             # numbered as the segments layer shows them (label + 1)
-            figures.scatter_figure(data, kind.split("_")[1], fig=fig, theme=theme, first_label=1)
+            against, materials = kind.split("_")[1], result.materials
+            figures.scatter_figure(data, against, fig, theme, first_label=1, materials=materials)
         elif kind == "variance" and result.explained_variance_ratio is None:
             self._message(NO_MAPS)
         elif kind == "variance":

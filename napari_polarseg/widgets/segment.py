@@ -28,6 +28,7 @@ from ._base import SEGMENT_DOCK_NAME, StackWidget
 from ._layers import find_output, source_key
 from .docks import SegmentDock
 from .param_controls import controlled_names
+from .segment_assist import ScribbleAssist
 from .segment_files import ClassifierFiles, ResultExport
 from .segment_inputs import CUT_ONLY, NO_MASK, NO_SCRIBBLES, MaskAndScribbles, Snapshot
 from .segment_layers import ResultLayers, ShownEntry
@@ -167,6 +168,7 @@ class SegmentWidget(ResultLayers, MaskAndScribbles, StackWidget, SegmentDock):
             self, viewer, self._set_status, self._fail, self._on_value_changed, self._on_inputs
         )
         self.export = ResultExport(self, self._set_status, self._fail)
+        self.assist = ScribbleAssist(self, viewer, self._set_status, self._fail)
         self._adopt_controls()
         self.live = CheckBox(
             text="live update",
@@ -214,6 +216,7 @@ class SegmentWidget(ResultLayers, MaskAndScribbles, StackWidget, SegmentDock):
                 self.thesis_maps,
                 self.mask_layer,
                 self.classifier_file,
+                self.classifier_controls,
                 self.views,
                 self.view_mode,
             ],
@@ -234,6 +237,8 @@ class SegmentWidget(ResultLayers, MaskAndScribbles, StackWidget, SegmentDock):
                 *(getattr(self, name) for name in FIRST_CONTROLS),
                 self.scribbles_layer,
                 self.new_scribbles_button,
+                self.materials,
+                self.assist.buttons,
                 self.live,
                 self.show_advanced,
                 self.advanced,
@@ -250,6 +255,8 @@ class SegmentWidget(ResultLayers, MaskAndScribbles, StackWidget, SegmentDock):
         self.stack_layer.changed.connect(self.scribbles_layer.reset_choices)
         watched = [self.stack_layer, self.angles, self.mask_layer, self.scribbles_layer]
         for w in [*self.parameter_widgets, self.thesis_maps, *watched]:
+            w.changed.connect(self._on_value_changed)
+        for w in self.classifier_controls.controls:
             w.changed.connect(self._on_value_changed)
         self.live.changed.connect(self._on_value_changed)
         self.mask_layer.changed.connect(self._sync_watches)
@@ -404,6 +411,8 @@ class SegmentWidget(ResultLayers, MaskAndScribbles, StackWidget, SegmentDock):
             params = self.params()
             mask_key, region = self.current_mask()
             scribble_key, scribbles = self.current_scribbles()
+            if scribbles is not None:
+                self.classifier_controls.settings()  # a bad value: said before a run
         except PolarsegError as exc:
             self._requested = self.snapshot()
             self._fail(exc)
@@ -456,6 +465,7 @@ class SegmentWidget(ResultLayers, MaskAndScribbles, StackWidget, SegmentDock):
             None if loaded is None else loaded.classifier,
             colour_stack_of(layer),
             maps=snap.maps,
+            settings=snap.classifier_settings,
         )
         # a new stroke or request stops the prediction, or the method's stage, at once
         on_result = functools.partial(self._on_result, delivery)

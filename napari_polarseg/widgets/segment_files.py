@@ -50,6 +50,8 @@ class SegmentHost(Protocol):
 
     def current_scribbles(self) -> tuple[str | None, Any]: ...
 
+    def material_names(self) -> dict[int, str]: ...
+
     def shown_result(self, layer: Layer) -> SegmentationResult | None: ...
 
     def run(self, *_: Any) -> None: ...
@@ -170,6 +172,7 @@ class ClassifierFiles:
             self._status(f"saved the classifier to {written}")
 
         self._status(f"saving the classifier to {path}…")
+        classifier = classifier.named(self._host.material_names())
         self.slot.submit(write_classifier_job, (path, classifier), 1, on_result)
         return True
 
@@ -335,6 +338,7 @@ class ResultExport:
             return False
         folder = Path(folder)
         options = {"overview": overview, "plots": plots}
+        record = record.named(self._host.material_names())  # renamed since the run
 
         def on_result(run_id: int, written: list[str]) -> None:
             self._export_dir = folder

@@ -14,6 +14,8 @@ from napari.layers import Labels
 from ..engine import PolarsegError, SegmentParams
 from ._base import WidgetPart
 from ._layers import label_colormap, source_key
+from .classifier_controls import ClassifierControls
+from .materials import MaterialList
 from .session import LoadedClassifier, content_digest, region_digest
 
 #: Text of the "mask" menu entry that segments every pixel.
@@ -51,6 +53,8 @@ class Snapshot:
         Which *Load classifier…* is applied (None: none).
     maps : bool
         Whether the run computes the thesis maps and the error map.
+    classifier_settings : ClassifierSettings or None
+        The features and model a training uses (None: a value is bad).
     """
 
     stack_key: str | None
@@ -62,6 +66,7 @@ class Snapshot:
     scribbles_digest: str | None
     classifier_serial: int | None
     maps: bool
+    classifier_settings: Any = None
 
     def differs_only_in_params(self, other: Snapshot) -> tuple[str, ...] | None:
         """The SegmentParams fields that differ when nothing else does (None otherwise)."""
@@ -113,6 +118,10 @@ class MaskAndScribbles(WidgetPart):
             "scribbled pixels replaces the normalized cut; with live update every stroke "
             "retrains it",
         )
+        #: The named materials of the chosen scribbles layer (brush class, swatch, name).
+        self.materials = MaterialList(changed=self._on_materials_renamed)
+        #: The classifier's features and model (advanced section).
+        self.classifier_controls = ClassifierControls()
         self.new_scribbles_button = PushButton(
             text="New scribbles layer",
             tooltip="Add an empty Labels layer of the stack's size, choose it as the "
@@ -175,6 +184,7 @@ class MaskAndScribbles(WidgetPart):
         self.scribbles_layer.reset_choices()
         self.scribbles_layer.value = layer
         layer.selected_label = 1
+        self.materials.set_layer(layer)
         self._viewer.layers.selection.active = layer
         layer.mode = "paint"
         self._set_status(
@@ -183,7 +193,19 @@ class MaskAndScribbles(WidgetPart):
         )
         return layer
 
+    def material_names(self) -> dict[int, str]:
+        """Scribble value → name of the chosen scribbles layer's named materials."""
+        return self.materials.names()
+
+    def _on_materials_renamed(self) -> None:
+        """A material was renamed: the status line says so (the names reach the next
+        export, saved classifier and result)."""
+        self._set_status(
+            "renamed: " + ", ".join(f"{v} {n}" for v, n in self.material_names().items())
+        )
+
     def _on_scribbles_changed(self, *_: Any) -> None:
+        self.materials.set_layer(self.scribbles_layer.value)
         # the classifier replaces the cut: its controls do nothing
         unsupervised = self.scribbles_layer.value is None and self.loaded is None
         for name in CUT_ONLY:
@@ -245,6 +267,7 @@ class MaskAndScribbles(WidgetPart):
             scribbles_digest=digest,
             classifier_serial=None if loaded is None else loaded.serial,
             maps=self.wants_maps(params),
+            classifier_settings=self.classifier_controls.settings_or_none(),
         )
 
     def _applied(self, scribble_key: str | None, digest: str | None) -> LoadedClassifier | None:

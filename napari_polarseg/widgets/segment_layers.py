@@ -12,7 +12,7 @@ from magicgui.widgets import CheckBox
 from ..engine.physics.stokes import stokes_components
 from ._base import WidgetPart
 from ._layers import find_output, remove_output, show_output, source_key
-from .session import ClassifierOutput, ShownResult, shown_result
+from .session import ClassifierOutput, ShownResult, named_output, shown_result
 from .views import VIEW_OUTPUTS, composite_for, view_mode_box
 
 if TYPE_CHECKING:
@@ -43,6 +43,8 @@ class ResultLayers(WidgetPart):
     _shown: dict[str, ShownEntry]
     classifier_files: Any
     export: Any
+    materials: Any
+    material_names: Any
 
     def _build_view_controls(self) -> None:
         """*HSV and Stokes layers* and the *HSV view* menu; the last result's arrays."""
@@ -81,6 +83,11 @@ class ResultLayers(WidgetPart):
         to those already shown only update the segments' metadata. ``snap``: the
         snapshot of the controls the run was requested with.
         """
+        if isinstance(result, ClassifierOutput) and result.segmentation is not None:
+            # a loaded classifier's names name the strokes' materials that have none; the
+            # list's names name the result (its plots, export, saved classifier)
+            self.materials.adopt(dict(zip(*_values_names(result), strict=True)))
+            result = named_output(result, self.material_names())
         shown = shown_result(result, angles_deg, inputs, partial)
         meta, out = shown.meta, shown.out
         if not shown.partial:
@@ -189,3 +196,9 @@ class ResultLayers(WidgetPart):
         rgb, rho_max = composite_for(*arrays, 0.0, mode)
         composite = {"polarseg_composite": {"dolp_max": rho_max, "mode": mode}}
         self._show_below_segments("hsv", rgb, layer, {**meta, **composite})
+
+
+def _values_names(out: ClassifierOutput) -> tuple[tuple[int, ...], tuple[str, ...]]:
+    """The scribble values and names of a classifier output's materials."""
+    materials = out.classifier.materials()
+    return materials.values, materials.names

@@ -53,7 +53,8 @@ def test_export_button_writes_the_folder_and_params_load_back(
     assert info["angles_deg"] == pytest.approx(list(stack.metadata["angles_deg"]))
     assert SegmentParams.from_dict(info["params"]) == params
     lines = (out / "segments.csv").read_text(encoding="utf-8").splitlines()
-    pixels = [int(line.split(",")[1]) for line in lines[1:]]
+    assert lines[0].startswith("segment,name,pixels,")  # unsupervised: empty names
+    pixels = [int(line.split(",")[2]) for line in lines[1:]]
     assert sum(pixels) == labels.size and len(pixels) == result.n_segments
 
     # params.json loads back into the widget
@@ -87,7 +88,8 @@ def test_export_after_a_scribble_run_writes_probabilities_and_uncertainty(
     np.testing.assert_array_equal(uncertainty, widget.uncertainty)
     np.testing.assert_array_equal(uncertainty, widget.output("uncertainty").data)
     labels = tifffile.imread(out / "labels.tif")
-    np.testing.assert_array_equal(widget.classes[labels], widget.output("segments").data)
+    # one numbering: labels.tif holds the scribble values, as the segments layer shows
+    np.testing.assert_array_equal(labels, widget.output("segments").data)
     summary = json.loads((out / "summary.json").read_text(encoding="utf-8"))
     assert summary["labels_from"] == "scribbles"
     assert summary["scribble_classes"] == [int(c) for c in widget.classes]

@@ -198,7 +198,7 @@ def evaluate(truth: np.ndarray, labels: np.ndarray, window: int) -> dict[str, An
     }
 
 
-#: Columns of :func:`segment_statistics` (and of ``segments.csv``).
+#: Columns of :func:`segment_statistics` (``segments.csv`` adds the material's name).
 STATISTICS_COLUMNS = (
     "segment",
     "pixels",

@@ -17,7 +17,8 @@ from __future__ import annotations
 
 import math
 import warnings
-from dataclasses import asdict, dataclass, field
+from collections.abc import Mapping
+from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -25,6 +26,7 @@ from scipy import ndimage
 
 from ..errors import Cancelled, PolarsegError
 from ..features.pixel_features import FeatureStack, PixelFeatureParams
+from ..materials import Materials
 
 #: Classifier kinds of :class:`ClassifierParams`.
 MODELS = ("random_forest", "extra_trees", "hist_gradient_boosting")
@@ -113,6 +115,8 @@ class PixelClassifier:
     params : ClassifierParams
     n_training_pixels : int
         Scribbled pixels the model was fitted on (after sampling).
+    class_names : tuple of str
+        The material name of each class (empty: unnamed; see :meth:`materials`).
     """
 
     model: Any
@@ -121,6 +125,16 @@ class PixelClassifier:
     feature_params: PixelFeatureParams
     params: ClassifierParams
     n_training_pixels: int
+    class_names: tuple[str, ...] = ()
+
+    def materials(self) -> Materials:
+        """The value and name of every class (unnamed ones: ``"material <value>"``)."""
+        names = self.class_names if len(self.class_names) == self.classes.size else None
+        return Materials.of(self.classes, names)
+
+    def named(self, names: Mapping[int, str]) -> PixelClassifier:
+        """This classifier with the materials renamed by ``names`` (value → name)."""
+        return replace(self, class_names=self.materials().renamed(names).names)
 
     def importances(self) -> dict[str, float]:
         """Feature name → importance (impurity decrease, summing to 1), largest first.
@@ -137,6 +151,7 @@ class PixelClassifier:
         """JSON-ready description (what a classifier file stores beside the model)."""
         return {
             "classes": [int(c) for c in self.classes],
+            "class_names": list(self.materials().names),
             "feature_names": list(self.feature_names),
             "feature_params": self.feature_params.to_dict(),
             "training": {
@@ -155,6 +170,7 @@ class PixelClassifier:
             training = dict(meta["training"])
             cparams = ClassifierParams.from_dict(dict(training["classifier_params"]))
             n_train = int(training["n_pixels"])
+            class_names = tuple(str(n) for n in meta.get("class_names") or ())
         except (KeyError, TypeError, ValueError) as exc:
             raise PolarsegError(f"the classifier's description is incomplete ({exc})") from None
         model_classes = np.asarray(getattr(model, "classes_", []))
@@ -162,7 +178,9 @@ class PixelClassifier:
             raise PolarsegError("the classifier's classes do not match its description")
         if getattr(model, "n_features_in_", len(names)) != len(names):
             raise PolarsegError("the classifier's features do not match its description")
-        return cls(model, classes, names, fparams, cparams, n_train)
+        if class_names and len(class_names) != classes.size:
+            raise PolarsegError("the classifier's class names do not match its classes")
+        return cls(model, classes, names, fparams, cparams, n_train, class_names)
 
 
 @dataclass(frozen=True)

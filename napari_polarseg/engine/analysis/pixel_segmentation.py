@@ -20,7 +20,7 @@ can tell materials apart by the colour of their polarised reflection as well.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -56,7 +56,8 @@ class PixelSegmentation:
     ----------
     result : SegmentationResult
         Labels = class index 0..K−1 at pixel resolution (block labels: the label at each
-        block's top-left pixel); no Ncut values.
+        block's top-left pixel); no Ncut values; ``materials`` the classifier's (the
+        scribble value and name of each class).
     prediction : PixelPrediction
         Probabilities (K, H, W), uncertainty (H, W), classes.
     classifier : PixelClassifier
@@ -218,6 +219,7 @@ class PixelSegmenter:
             segment_params=segment_params,
         )
         result = self.result(prediction.labels, reconstruction, seconds, segment_params)
+        result = replace(result, materials=classifier.materials())
         return PixelSegmentation(result, prediction, classifier, seconds)
 
     def classify(

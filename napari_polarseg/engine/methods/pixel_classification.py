@@ -63,4 +63,5 @@ class PixelClassification:
         if scene.region is not None:
             (labels,) = fill_from_nearest(scene.region, labels)
         extra = {"prediction": prediction, "classifier": classifier, "seconds": seconds}
+        extra["materials"] = classifier.materials()
         return MethodOutput(labels, record={"seconds": seconds}, extra=extra)

@@ -279,6 +279,7 @@ class Scene:
             superpixels=dict(out.record) if "close_up" in out.record else {},
             method=method.name,
             method_record=dict(out.record),
+            materials=out.extra.get("materials"),  # a classifier's classes: value and name
         )
 
 

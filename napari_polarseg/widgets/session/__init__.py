@@ -29,6 +29,7 @@ from .classify import (
     classifier_parts,
     classifier_stages,
     classifier_text,
+    named_output,
     scribble_problem,
 )
 from .files import write_params_json
@@ -75,6 +76,7 @@ __all__ = [
     "classifier_parts",
     "classifier_stages",
     "classifier_text",
+    "named_output",
     "colour_stack_of",
     "content_digest",
     "degenerate_text",

@@ -21,11 +21,14 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ...engine import Pipeline, PolarsegError, SegmentationResult, SegmentParams
+from ...engine.analysis.classifier_settings import ClassifierSettings
+from ...engine.materials import default_name
 from .runs import Partial
 
 if TYPE_CHECKING:
     from ...engine.analysis.pixel_classifier import PixelClassifier, PixelPrediction
     from ...engine.analysis.pixel_segmentation import PixelSegmentation, PixelSegmenter
+    from ...engine.features.pixel_features import PixelFeatureParams
 
 #: Stages of the scribble mode: the pipeline's maps and block features (for the result's
 #: plots and error map), the pixel features, the classifier (training and prediction, or
@@ -84,6 +87,23 @@ class ClassifierOutput:
         return self.segmentation.classifier
 
 
+def feature_stage(
+    segmenter: PixelSegmenter,
+    fparams: PixelFeatureParams,
+    params: SegmentParams,
+    timings: dict[str, float],
+    recomputed: list[str],
+) -> None:
+    """The pixel features of ``fparams`` (kept by ``segmenter``); their seconds go into
+    ``timings`` and ``recomputed`` when they were computed now."""
+    before = segmenter.cached_features
+    t0 = time.perf_counter()
+    segmenter.features(fparams, segment_params=params)
+    if segmenter.cached_features is not before:
+        timings["pixel features"] = time.perf_counter() - t0
+        recomputed.append("pixel features")
+
+
 def classifier_stages(
     pipe: Pipeline,
     segmenter: PixelSegmenter,
@@ -92,12 +112,14 @@ def classifier_stages(
     classifier: PixelClassifier | None = None,
     reconstruction: bool = True,
     cancel: Callable[[], bool] | None = None,
+    settings: ClassifierSettings | None = None,
 ) -> Generator[Any, None, ClassifierOutput]:
     """Run the stages the scribble mode needs (yielding after each), then classify.
 
-    Trains the pixel classifier on ``scribbles``, or applies ``classifier`` (exactly one
-    of them). Yields ``(stage, stages done, total)`` as each stage starts (at most
-    ``len(CLASSIFIER_STAGES)``, one fewer without the reconstruction). The pipeline's
+    Trains the pixel classifier on ``scribbles`` with ``settings`` (default the
+    defaults), or applies ``classifier`` (exactly one of them). Yields ``(stage, stages
+    done, total)`` as each stage starts (at most ``len(CLASSIFIER_STAGES)``, one fewer
+    without the reconstruction). The pipeline's
     cached stages and ``segmenter``'s feature stack are reused:
     once they are computed, a new stroke reruns only training and prediction.
     When the reconstruction still has to be computed, the output without it is yielded
@@ -124,20 +146,17 @@ def classifier_stages(
     for i, name in enumerate(PIPELINE_STAGES):
         yield name, i, total
         run_stage(name)
-    fparams = None if classifier is None else classifier.feature_params
+    settings = settings or ClassifierSettings()
+    fparams = settings.features if classifier is None else classifier.feature_params
     yield "pixel features", len(PIPELINE_STAGES), total
-    before = segmenter.cached_features
-    t0 = time.perf_counter()
-    segmenter.features(fparams, segment_params=params)
-    if segmenter.cached_features is not before:
-        timings["pixel features"] = time.perf_counter() - t0
-        recomputed.append("pixel features")
+    feature_stage(segmenter, fparams, params, timings, recomputed)
     yield "pixel classifier", len(PIPELINE_STAGES) + 1, total
     try:
         seg = segmenter.segment(
             scribbles,
             classifier,
             feature_params=fparams,
+            params=settings.classifier,
             reconstruction=reconstruction and not partial,
             cancel=cancel,
             segment_params=params,
@@ -163,7 +182,19 @@ def classifier_stages(
     yield names[-1], total - 1, total
     run_stage(names[-1])
     result = segmenter.result(seg.prediction.labels, True, seg.seconds, params)
-    return output(replace(seg, result=result), True)
+    return output(replace(seg, result=replace(result, materials=seg.result.materials)), True)
+
+
+def named_output(out: ClassifierOutput, names: dict[int, str]) -> ClassifierOutput:
+    """``out`` with its materials renamed by ``names`` (scribble value → name): the
+    classifier (what *Save classifier…* writes) and the result (what the plots and
+    *Export results…* show) both carry the names."""
+    if out.segmentation is None or not names:
+        return out
+    seg = out.segmentation
+    classifier = seg.classifier.named(names)
+    result = replace(seg.result, materials=classifier.materials())
+    return replace(out, segmentation=replace(seg, result=result, classifier=classifier))
 
 
 def classifier_text(classifier: PixelClassifier) -> str:
@@ -196,7 +227,12 @@ def classifier_parts(
 ) -> list[str]:
     """The status line's first parts for labels from the pixel classifier."""
     classes = out.prediction.classes
-    names = ", ".join(str(int(c)) for c in classes)
+    materials = out.result.materials
+    if materials is not None and len(materials.values) == classes.size:
+        pairs = zip(materials.values, materials.names, strict=True)
+        names = ", ".join(str(v) if n == default_name(v) else f"{v} {n}" for v, n in pairs)
+    else:
+        names = ", ".join(str(int(c)) for c in classes)
     source = "from scribbles" if out.trained else f"from the classifier {Path(path or '').name}"
     parts = [f"{classes.size} materials {source} (labels {names})"]
     if out.trained:

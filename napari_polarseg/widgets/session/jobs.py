@@ -23,6 +23,7 @@ from .runs import Job, Partial, Result, Stage
 from .store import PipelineStore
 
 if TYPE_CHECKING:
+    from ...engine.analysis.classifier_settings import ClassifierSettings
     from ...engine.analysis.pixel_classifier import PixelClassifier
 
 
@@ -107,6 +108,7 @@ def classifier_job(
     region: np.ndarray | None = None,
     mask_key: str | None = None,
     colour_stack: np.ndarray | None = None,
+    settings: ClassifierSettings | None = None,
     cancel: Callable[[], bool] | None = None,
 ) -> Generator[Any, None, ClassifierOutput]:
     """Worker job of the scribble mode: the cached pipeline's stages up to the block
@@ -115,13 +117,14 @@ def classifier_job(
     (:func:`~napari_polarseg.widgets.session.classify.classifier_stages`). ``cancel`` stops the
     prediction between chunks. ``colour_stack`` (C, N, H, W): the colour stacks of a
     colour-polarisation frame whose luminance is ``data`` (the reader's
-    ``metadata["colour_stack"]``), whose polarisation images add features."""
+    ``metadata["colour_stack"]``), whose polarisation images add features. ``settings``:
+    the features and model a training uses (default the defaults)."""
     pipe = store.obtain(key, data, angles_rad, params, region=region, mask_key=mask_key)
     segmenter = store.segmenter(key, colour_stack)
     assert segmenter is not None
     return (
         yield from classifier_stages(
-            pipe, segmenter, params, scribbles, classifier, reconstruction=True, cancel=cancel
+            pipe, segmenter, params, scribbles, classifier, True, cancel, settings
         )
     )
 
@@ -189,11 +192,13 @@ def segment_request(
     classifier: PixelClassifier | None = None,
     colour_stack: np.ndarray | None = None,
     maps: bool = True,
+    settings: ClassifierSettings | None = None,
 ) -> SegmentRequest:
     """The job that segments ``data``: the method of ``params`` (:func:`segment_job`,
     with the thesis maps and error map when ``maps``; prefetching in idle time for the
     thesis method) without ``scribbles`` and ``classifier``, else the pixel classifier
-    trained on the strokes or the loaded one applied (:func:`classifier_job`).
+    trained on the strokes (with ``settings``) or the loaded one applied
+    (:func:`classifier_job`).
 
     ``total`` is the number of stages the run goes through (the layer's scene lists
     them; before its first run, the method's stages after the shared ones). The job
@@ -202,7 +207,7 @@ def segment_request(
         args = (store, key, data, angles_rad, params, region, mask_key, True, maps)
         return SegmentRequest(segment_job, args, planned_stages(store, key, params, maps), True)
     args = (store, key, data, angles_rad, params, scribbles, classifier)
-    args += (region, mask_key, colour_stack)
+    args += (region, mask_key, colour_stack, settings)
     return SegmentRequest(classifier_job, args, len(CLASSIFIER_STAGES), reports=False)
 
 

@@ -181,6 +181,18 @@ class ExportRecord:
         result = self.scene.segment(params, maps=maps, reconstruction=maps)
         return replace(self, result=result)
 
+    def named(self, names: dict[int, str]) -> ExportRecord:
+        """This record with the classifier's materials renamed by ``names`` (scribble
+        value → name): a rename after the run reaches the exported folder."""
+        materials = self.result.materials
+        if materials is None or not names:
+            return self
+        result = replace(self.result, materials=materials.renamed(names))
+        summary = dict(self.summary)
+        if "materials" in summary:
+            summary["materials"] = result.materials.to_dict()
+        return replace(self, result=result, summary=summary)
+
     def kwargs(self) -> dict[str, Any]:
         """The keyword arguments of :func:`~napari_polarseg.outputs.write_result_folder`."""
         return {
