@@ -54,7 +54,7 @@ HALF_NAMES = {"dev": "development half (seeds 0–11)", "test": "test half (seed
 DEGENERATE_SHARE = 0.90
 #: Registered methods shown as columns of their own beside the default (those that are
 #: not the default's method): the candidates and the previous defaults.
-METHOD_COLUMNS = ("superpixels", "valid_superpixels")
+METHOD_COLUMNS = ("superpixels", "valid_superpixels", "surface_superpixels")
 UNSUPERVISED = ("intensity k-means", "smoothed k-means", *METHOD_COLUMNS, "auto (default)")
 #: The method that finds k by itself (``n_segments = 0``), scored by :func:`k_lines`:
 #: the default's.
@@ -315,23 +315,27 @@ def run(args, real_dir: Path, command: str | None = None) -> None:
     halves["test"] = ("test",)
     blocks: list[str] = []
     sets: dict[str, list[dict]] = {}
+
+    def add(*texts: str) -> None:
+        for text in texts:
+            print(f"\n{text}", flush=True)
+            blocks.append(text)
+
     if args.rendered or not args.real:
         if not Path(args.rendered_dir).is_dir():
-            blocks.append(f"no rendered scenes in {args.rendered_dir}: their tables are skipped")
+            add(f"no rendered scenes in {args.rendered_dir}: their tables are skipped")
         else:
             for half in halves[args.rendered]:
                 rows = sets[half] = rendered_rows(HALVES[half], args.bounds, args.rendered_dir)
                 if rows:
-                    blocks += [table(rows, "rendered scenes, " + HALF_NAMES[half]), k_lines(rows)]
+                    add(table(rows, "rendered scenes, " + HALF_NAMES[half]), k_lines(rows))
     if args.real or not args.rendered:
         rows = sets["real"] = real_rows(real_dir, args.bounds) if Path(real_dir).is_dir() else []
         if rows:
-            blocks += [table(rows, "real frames (hand-labelled truth)"), k_lines(rows)]
+            add(table(rows, "real frames (hand-labelled truth)"), k_lines(rows))
         else:
-            blocks.append(f"no real frames in {real_dir}: their material table is skipped")
-    blocks.append(verdict_lines(sets))
-    for block in blocks:
-        print(f"\n{block}")
+            add(f"no real frames in {real_dir}: their material table is skipped")
+    add(verdict_lines(sets))
     if getattr(args, "markdown", None):
         replace_block(args.markdown, "\n\n".join(blocks), command or command_line())
         print(f"\nmaterial tables written into {args.markdown}")

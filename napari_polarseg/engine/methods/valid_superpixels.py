@@ -103,7 +103,7 @@ class ValidSuperpixels(SuperpixelClustering):
         # the clustered pixels follow from the image (its invalid pixels) and the
         # scene's region, fixed for the scene's life: the image's identity keys them
         key = (id(pol), self.params)
-        model = scene.cached("valid_superpixels", key, prepare)
+        model = scene.cached(self.name, key, prepare)
         run.begin("clustering")
         record: dict[str, Any] = {
             "invalid_share": round(float(np.mean(pol.invalid)), 6),
@@ -111,7 +111,7 @@ class ValidSuperpixels(SuperpixelClustering):
         }
         k = params.n_segments
         if k == 0:
-            choice = scene.cached("valid_superpixels:k", key, lambda: choose_k(model))
+            choice = scene.cached(f"{self.name}:k", key, lambda: choose_k(model))
             k = choice["k"]
             record["k_confidence"] = round(choice["confidence"], 4)
             record["k_scores"] = {str(j): round(s, 4) for j, s in choice["scores"].items()}

@@ -66,7 +66,8 @@ def estimate_k(
     confidence : float
         (best − runner-up) / best, in [0, 1] (1 when only one k was scored).
     scores : dict k -> float
-        The silhouette of every k tried (−1 for a partition with one cluster).
+        The silhouette of every k tried (−1 for a partition with one cluster or with
+        fewer than k).
     """
     x = np.asarray(features, dtype=float)
     if x.ndim != 2:
@@ -81,8 +82,11 @@ def estimate_k(
     sample = rng.choice(n, min(n, SILHOUETTE_SAMPLE), replace=True, p=w / w.sum())
     scores: dict[int, float] = {}
     for k in ks:
-        labels = np.asarray(cluster(k))[sample]
-        if np.unique(labels).size < 2:
+        full = np.asarray(cluster(k))
+        labels = full[sample]
+        # a clustering into k that fills fewer than k clusters (a cluster emptied by the
+        # smoothing of the posteriors) is a smaller k's partition again, not a k of its own
+        if np.unique(full).size < k or np.unique(labels).size < 2:
             scores[k] = -1.0
         else:
             scores[k] = float(silhouette_score(x[sample], labels))
