@@ -14,6 +14,7 @@ from napari_polarseg.engine.methods import surface_superpixels, valid_superpixel
 from napari_polarseg.engine.methods.registry import get_method
 from napari_polarseg.engine.methods.valid_superpixels import ValidSuperpixels
 from napari_polarseg.engine.params import AUTO
+from napari_polarseg.engine.unsupervised.choose_k import estimate_k
 from napari_polarseg.engine.unsupervised.params import UnsupervisedParams
 
 
@@ -62,3 +63,25 @@ def test_kept_apart_from_the_valid_superpixel_method(monkeypatch):
     assert scene.method_calls == {"surface_superpixels": 1, "valid_superpixels": 1}
     assert len(calls) == 2 and calls[0] != calls[1]
     np.testing.assert_array_equal(again.labels, wide.labels)
+
+
+def _two_close_and_one_far(gap: float) -> np.ndarray:
+    """Three blobs (σ 0.5) in the plane: one at the origin, two at (10, 0) and
+    (10, ``gap``)."""
+    rng = np.random.default_rng(0)
+    centres = np.array([[0.0, 0.0], [10.0, 0.0], [10.0, gap]])
+    return np.concatenate([c + rng.normal(0, 0.5, (200, 2)) for c in centres])
+
+
+def test_k_tolerance_prefers_fewer_clusters_that_score_nearly_as_well():
+    # the two close blobs: 3 clusters score a little better than 2 (0.83 against 0.80)
+    x = _two_close_and_one_far(4.0)
+    best, _, scores = estimate_k(x, None, range(2, 7))
+    assert best == 3 and scores[2] > 0.9 * scores[3]
+    k, confidence, _ = estimate_k(x, None, range(2, 7), tolerance=surface_superpixels.K_TOLERANCE)
+    assert k == 2 and confidence == 0.0  # another k scores better: no confidence
+    # well apart, 3 wins whatever the tolerance, with its margin as the confidence
+    x = _two_close_and_one_far(8.0)
+    k, confidence, scores = estimate_k(x, None, range(2, 7), tolerance=0.1)
+    runner_up = max(v for j, v in scores.items() if j != 3)
+    assert k == 3 and confidence == pytest.approx((scores[3] - runner_up) / scores[3])

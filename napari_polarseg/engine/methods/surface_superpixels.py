@@ -18,8 +18,15 @@ reaches further and crosses weaker borders:
 What it is for: on a large surface seen under a changing angle (a floor, a table, a
 wall) ρ and the shading drift across the frame, and a short diffusion leaves that drift
 in the features, so k-means cuts the surface in two along it and merges two materials
-elsewhere. The figures that chose the two values, and their neighbours, are in
-``docs/quality.md`` (*A default chosen on the development half*).
+elsewhere.
+
+With ``n_segments = 0`` the number of segments is the fewest among 2..6 whose
+silhouette comes within :data:`K_TOLERANCE` of the best one: the diffused features
+form smooth continua that more clusters always cut a little better, so the best
+silhouette alone overshoots (it chose 6 on half the development scenes).
+
+The figures that chose these values, and their neighbours, are in ``docs/quality.md``
+(*A default chosen on the development half*).
 """
 
 from __future__ import annotations
@@ -31,6 +38,9 @@ from .valid_superpixels import ValidSuperpixels
 REACH = 0.20
 #: τ of the diffusion's border weights, in units of the median border strength.
 BORDER_SCALE = 1.25
+#: With ``n_segments = 0``: the fewest k whose silhouette is within this share of the
+#: best (:func:`~napari_polarseg.engine.unsupervised.choose_k.estimate_k`).
+K_TOLERANCE = 0.10
 
 
 class SurfaceSuperpixels(ValidSuperpixels):
@@ -39,6 +49,7 @@ class SurfaceSuperpixels(ValidSuperpixels):
 
     name = "surface_superpixels"
     title = "superpixels on valid pixels, features spread over surfaces (unsupervised)"
+    k_tolerance = K_TOLERANCE
 
     def __init__(self, params: UnsupervisedParams | None = None) -> None:
         super().__init__(
