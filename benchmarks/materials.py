@@ -300,9 +300,8 @@ def replace_block(page: Path, body: str, command: str) -> None:
 
 
 def command_line() -> str:
-    """How this run was started, as a user would type it (``python benchmarks/…``)."""
-    script = Path(sys.argv[0]).name
-    return shlex.join(["python", f"benchmarks/{script}", *sys.argv[1:]])
+    """How this run was started, as typed (``python`` and the script's arguments)."""
+    return shlex.join(["python", *sys.argv])
 
 
 def run(args, real_dir: Path, command: str | None = None) -> None:

@@ -23,7 +23,7 @@ elsewhere.
 With ``n_segments = 0`` the number of segments is the fewest among 2..6 whose
 silhouette comes within :data:`K_TOLERANCE` of the best one: the diffused features
 form smooth continua that more clusters always cut a little better, so the best
-silhouette alone overshoots (it chose 6 on half the development scenes).
+silhouette alone overshoots.
 
 The figures that chose these values, and their neighbours, are in ``docs/quality.md``
 (*A default chosen on the development half*).
