@@ -12,8 +12,9 @@ hand-labelled real frames, one row per frame, the same columns for both.
 
 Columns (:data:`COLUMNS`): ``intensity k-means`` (``baselines.intensity_kmeans``),
 ``smoothed k-means`` (``baselines.smoothed_kmeans``: k-means on 20 smoothed
-polarisation features), ``superpixels`` (the superpixel method, preset ``auto`` before
-issue 24), ``auto (default)`` (what ``polarseg segment`` does: the
+polarisation features), the previous defaults (:data:`METHOD_COLUMNS` but the default's
+own method: ``superpixels``, preset ``auto`` before issue 24; ``valid_superpixels``, its
+first step), ``auto (default)`` (what ``polarseg segment`` does: the
 pipeline with preset ``auto`` cut into k segments), then the truth-trained bounds
 (``baselines.truth_bound_halves``): a random forest trained on the truth of the frame's
 left half and scored on its right half, on the 20 plain features and on those plus the
@@ -26,9 +27,11 @@ bound whose left half lacks a class of the right half. Marked cells are counted 
 means are printed with and without them; nothing is dropped silently.
 
 Below each table, the number of materials found by itself (:func:`k_lines`): preset
-``auto`` with ``method="valid_superpixels"`` and ``n_segments = 0`` against the true k,
-with the choice's confidence and the ARI of the labels with that k; counted exact and
-within ±1.
+``auto`` with ``n_segments = 0`` against the true k, with the choice's confidence and
+the ARI of the labels with that k; counted exact and within ±1. Last, the default
+against issue 24's targets and floors (:func:`verdict_lines`). ``--markdown PAGE``
+writes all of it into the block of PAGE between :data:`BEGIN` and :data:`END`
+(``docs/quality.md``; :func:`replace_block`).
 """
 
 from __future__ import annotations
