@@ -45,7 +45,9 @@ def _variants() -> dict[str, UnsupervisedParams]:
     out = {"valid_superpixels (reach 7 %, τ 0.75)": V}
     for reach in (0.10, 0.14, 0.17, 0.20):
         for tau in (0.75, 1.0, 1.25):
-            out[f"reach {reach:.0%}, τ {tau}"] = V.replace(diffusion_range=reach, diffusion_tau=tau)
+            out[f"reach {reach * 100:.0f} %, τ {tau}"] = V.replace(
+                diffusion_range=reach, diffusion_tau=tau
+            )
     out["reach 20 %, τ 1.5"] = W.replace(diffusion_tau=1.5)
     out["reach 20 %, τ 2"] = W.replace(diffusion_tau=2.0)
     out["reach 20 %, τ 1.25, λ 0.7"] = W.replace(diffusion=0.7)
