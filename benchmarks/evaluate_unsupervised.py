@@ -12,7 +12,9 @@ synthetic scenes, above intensity k-means on the real frames), by how much it mi
 and its time on a 720 × 660 rendering and on the real frames. Then the material tables
 (``materials.py``): the rendered scenes by half (development, seeds 0–11; test, seeds
 12–23) and the real frames, one row per frame — intensity k-means, smoothed k-means, the
-default (preset ``auto``), the truth-trained left→right bounds; degenerate results ‡.
+default (preset ``auto``), the truth-trained left→right bounds; degenerate results ‡;
+the k the default finds by itself; the default against issue 24's targets. With
+``--markdown PAGE`` the same text replaces the marked block of PAGE.
 
 Usage::
 
@@ -22,6 +24,9 @@ Usage::
                                                                         # on real frames
     .venv/bin/python benchmarks/evaluate_unsupervised.py --rendered test --bounds none
     .venv/bin/python benchmarks/evaluate_unsupervised.py --real         # real frames only
+    # the material tables of docs/quality.md, rewritten in place (~5 min with the bounds):
+    cd benchmarks && OMP_NUM_THREADS=1 PYTHONPATH=.. python evaluate_unsupervised.py \
+        --rendered all --real --markdown ../docs/quality.md
 """
 
 from __future__ import annotations

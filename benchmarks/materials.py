@@ -12,8 +12,9 @@ hand-labelled real frames, one row per frame, the same columns for both.
 
 Columns (:data:`COLUMNS`): ``intensity k-means`` (``baselines.intensity_kmeans``),
 ``smoothed k-means`` (``baselines.smoothed_kmeans``: k-means on 20 smoothed
-polarisation features), ``superpixels`` (the superpixel method, preset ``auto`` before
-issue 24), ``auto (default)`` (what ``polarseg segment`` does: the
+polarisation features), the previous defaults (:data:`METHOD_COLUMNS` but the default's
+own method: ``superpixels``, preset ``auto`` before issue 24; ``valid_superpixels``, its
+first step), ``auto (default)`` (what ``polarseg segment`` does: the
 pipeline with preset ``auto`` cut into k segments), then the truth-trained bounds
 (``baselines.truth_bound_halves``): a random forest trained on the truth of the frame's
 left half and scored on its right half, on the 20 plain features and on those plus the
@@ -26,13 +27,17 @@ bound whose left half lacks a class of the right half. Marked cells are counted 
 means are printed with and without them; nothing is dropped silently.
 
 Below each table, the number of materials found by itself (:func:`k_lines`): preset
-``auto`` with ``method="valid_superpixels"`` and ``n_segments = 0`` against the true k,
-with the choice's confidence and the ARI of the labels with that k; counted exact and
-within ±1.
+``auto`` with ``n_segments = 0`` against the true k, with the choice's confidence and
+the ARI of the labels with that k; counted exact and within ±1. Last, the default
+against issue 24's targets and floors (:func:`verdict_lines`). ``--markdown PAGE``
+writes all of it into the block of PAGE between :data:`BEGIN` and :data:`END`
+(``docs/quality.md``; :func:`replace_block`).
 """
 
 from __future__ import annotations
 
+import shlex
+import sys
 import time
 from pathlib import Path
 
@@ -50,9 +55,19 @@ HALVES = {"dev": tuple(range(12)), "test": tuple(range(12, 24))}
 HALF_NAMES = {"dev": "development half (seeds 0–11)", "test": "test half (seeds 12–23)"}
 #: A result is degenerate when one segment holds this share of the scored pixels.
 DEGENERATE_SHARE = 0.90
-UNSUPERVISED = ("intensity k-means", "smoothed k-means", "superpixels", "auto (default)")
-#: The method that finds k by itself (``n_segments = 0``), scored by :func:`k_lines`.
-FINDS_K = "valid_superpixels"
+#: Registered methods shown as columns of their own beside the default (those that are
+#: not the default's method): the candidates and the previous defaults.
+METHOD_COLUMNS = ("superpixels", "valid_superpixels", "surface_superpixels")
+UNSUPERVISED = ("intensity k-means", "smoothed k-means", *METHOD_COLUMNS, "auto (default)")
+#: The method that finds k by itself (``n_segments = 0``), scored by :func:`k_lines`:
+#: the default's.
+FINDS_K = PRESETS["auto"].method
+#: Issue 24's targets for the default: the rendered test half's mean, each real frame.
+TARGET_TEST_HALF = 0.5
+TARGET_REAL_FRAME = 0.7
+#: The block of ``docs/quality.md`` that ``--markdown`` rewrites.
+BEGIN = "<!-- material tables: begin -->"
+END = "<!-- material tables: end -->"
 BOUNDS = {"bound L→R: 20 features": "plain", "bound L→R: rich": "rich"}
 COLUMNS = UNSUPERVISED + tuple(BOUNDS)
 
@@ -89,9 +104,11 @@ def score_frame(name: str, stack, angles, truth: np.ndarray, k: int, bounds: str
     runs = {
         "intensity k-means": lambda: intensity_kmeans(pol.intensity, k),
         "smoothed k-means": lambda: smoothed_kmeans(pol.intensity, pol.dop, pol.phase, k, valid),
-        "superpixels": lambda: scene.segment(params.replace(method="superpixels")).labels,
-        "auto (default)": lambda: scene.segment(params).labels,
     }
+    for method in METHOD_COLUMNS:
+        if method != params.method:
+            runs[method] = lambda m=method: scene.segment(params.replace(method=m)).labels
+    runs["auto (default)"] = lambda: scene.segment(params).labels
     for column, run in runs.items():
         t0 = time.perf_counter()
         labels = run()
@@ -137,9 +154,12 @@ def k_lines(rows: list[dict]) -> str:
 
 
 def rendered_rows(seeds, bounds: str, folder: Path = RENDERED_DIR) -> list[dict]:
-    """:func:`score_frame` of every rendered seed."""
+    """:func:`score_frame` of every rendered seed whose file is in ``folder``."""
     rows = []
     for seed in seeds:
+        if not (Path(folder) / f"scene_{seed}.npz").is_file():
+            print(f"rendered scene {seed} not in {folder}: skipped")
+            continue
         stack, angles, truth = load_rendered(seed, folder)
         k = len(np.unique(truth[truth > 0]))
         rows.append(score_frame(f"scene_{seed}", stack, angles, truth, k, bounds))
@@ -214,6 +234,13 @@ def add_arguments(parser) -> None:
         help="truth-trained left→right bounds of the material tables [all]",
     )
     parser.add_argument("--rendered-dir", type=Path, default=RENDERED_DIR, help=f"[{RENDERED_DIR}]")
+    parser.add_argument(
+        "--markdown",
+        type=Path,
+        metavar="PAGE",
+        help=f"also write the material tables into PAGE (docs/quality.md) between {BEGIN} "
+        f"and {END}",
+    )
 
 
 def subset_only(args) -> bool:
@@ -221,24 +248,97 @@ def subset_only(args) -> bool:
     return bool(args.rendered or args.real)
 
 
-def run(args, real_dir: Path) -> None:
-    """Print the material tables the flags ask for (all of them when none is given)."""
+def verdict_lines(sets: dict[str, list[dict]]) -> str:
+    """The default against issue 24's targets and floors, one line per set: the mean of
+    each rendered half and every real frame against the plain unsupervised baseline
+    (smoothed k-means) and intensity k-means; the test half against
+    :data:`TARGET_TEST_HALF`, each real frame against :data:`TARGET_REAL_FRAME`."""
+    lines = ["the default (preset auto) against issue 24's targets and floors:"]
+    default, plain, km = "auto (default)", "smoothed k-means", "intensity k-means"
+
+    def verdict(value: float, target: float | None, floor: float, other: float) -> str:
+        parts = (
+            []
+            if target is None
+            else [
+                f"target {target} "
+                + ("met" if value >= target else f"MISSED by {target - value:.3f}")
+            ]
+        )
+        parts.append(
+            ("at least" if value >= floor else f"BELOW by {floor - value:.3f}")
+            + f" the plain baseline {floor:.3f}"
+        )
+        parts.append(
+            ("above" if value > other else "not above") + f" intensity k-means {other:.3f}"
+        )
+        return "; ".join(parts)
+
+    for key, rows in sets.items():
+        if not rows:
+            continue
+        if key in HALVES:
+            mean = {c: float(np.mean([r[c] for r in rows])) for c in (default, plain, km)}
+            target = TARGET_TEST_HALF if key == "test" else None
+            what = verdict(mean[default], target, mean[plain], mean[km])
+            lines.append(f"- {HALF_NAMES[key]}, mean {mean[default]:.3f}: {what}")
+            continue
+        for r in rows:
+            what = verdict(r[default], TARGET_REAL_FRAME, r[plain], r[km])
+            mark = "; DEGENERATE" if default in r["marks"] else ""
+            lines.append(f"- {r['frame']} {r[default]:.3f}: {what}{mark}")
+    return "\n".join(lines)
+
+
+def replace_block(page: Path, body: str, command: str) -> None:
+    """Replace the text between :data:`BEGIN` and :data:`END` of ``page`` with ``body``
+    (and a line naming ``command``); SystemExit when the page has no such block."""
+    text = Path(page).read_text(encoding="utf-8")
+    if text.count(BEGIN) != 1 or text.count(END) != 1 or text.index(BEGIN) > text.index(END):
+        raise SystemExit(f"{page} has no single {BEGIN} ... {END} block to replace")
+    head, rest = text.split(BEGIN, 1)
+    tail = rest.split(END, 1)[1]
+    note = f"<!-- generated by `{command}`; do not edit by hand -->"
+    Path(page).write_text(f"{head}{BEGIN}\n{note}\n\n{body}\n\n{END}{tail}", encoding="utf-8")
+
+
+def command_line() -> str:
+    """How this run was started, as typed (``python`` and the script's arguments)."""
+    return shlex.join(["python", *sys.argv])
+
+
+def run(args, real_dir: Path, command: str | None = None) -> None:
+    """Print the material tables the flags ask for (all of them when none is given),
+    then the default against issue 24's targets; with ``args.markdown``, write the same
+    text into that page's :data:`BEGIN` … :data:`END` block (``command`` names the run,
+    :func:`command_line` by default)."""
     t0 = time.perf_counter()
     halves = {"all": ("dev", "test"), None: ("dev", "test"), "dev": ("dev",)}
     halves["test"] = ("test",)
+    blocks: list[str] = []
+    sets: dict[str, list[dict]] = {}
+
+    def add(*texts: str) -> None:
+        for text in texts:
+            print(f"\n{text}", flush=True)
+            blocks.append(text)
+
     if args.rendered or not args.real:
         if not Path(args.rendered_dir).is_dir():
-            print(f"\nno rendered scenes in {args.rendered_dir}: their tables are skipped")
+            add(f"no rendered scenes in {args.rendered_dir}: their tables are skipped")
         else:
             for half in halves[args.rendered]:
-                rows = rendered_rows(HALVES[half], args.bounds, args.rendered_dir)
-                print(f"\n{table(rows, 'rendered scenes, ' + HALF_NAMES[half])}")
-                print(f"\n{k_lines(rows)}")
+                rows = sets[half] = rendered_rows(HALVES[half], args.bounds, args.rendered_dir)
+                if rows:
+                    add(table(rows, "rendered scenes, " + HALF_NAMES[half]), k_lines(rows))
     if args.real or not args.rendered:
-        rows = real_rows(real_dir, args.bounds) if Path(real_dir).is_dir() else []
+        rows = sets["real"] = real_rows(real_dir, args.bounds) if Path(real_dir).is_dir() else []
         if rows:
-            print(f"\n{table(rows, 'real frames (hand-labelled truth)')}")
-            print(f"\n{k_lines(rows)}")
+            add(table(rows, "real frames (hand-labelled truth)"), k_lines(rows))
         else:
-            print(f"\nno real frames in {real_dir}: their material table is skipped")
+            add(f"no real frames in {real_dir}: their material table is skipped")
+    add(verdict_lines(sets))
+    if getattr(args, "markdown", None):
+        replace_block(args.markdown, "\n\n".join(blocks), command or command_line())
+        print(f"\nmaterial tables written into {args.markdown}")
     print(f"\nmaterial tables: {time.perf_counter() - t0:.1f} s wall")

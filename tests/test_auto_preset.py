@@ -1,6 +1,6 @@
 """The default preset ``auto``: the superpixel method, a peer of the thesis pipeline.
 
-``auto`` is the recommended block parameters with ``method="valid_superpixels"``: the labels
+``auto`` is the recommended block parameters with ``method="surface_superpixels"``: the labels
 come from :func:`~napari_polarseg.engine.unsupervised.segmenter.segment_unsupervised`
 through :class:`~napari_polarseg.engine.Scene`, no block graph is built or cut, and the
 contract files are written as for every preset.
@@ -34,7 +34,7 @@ def planted_stack(k: int = 3, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
 
 
 def test_auto_is_the_recommended_blocks_with_superpixel_labels():
-    assert AUTO.method == "valid_superpixels"
+    assert AUTO.method == "surface_superpixels"
     assert AUTO.replace(method="thesis") == RECOMMENDED
     assert PRESETS["auto"] == AUTO
     # a params.json written before the methods were peers still reads
@@ -63,7 +63,7 @@ def test_pipeline_default_recovers_planted_materials_exactly(k):
         "pca",
         "reconstruction",
     ]
-    assert result.method == "valid_superpixels"
+    assert result.method == "surface_superpixels"
     summary = result.summary()
     assert summary["degenerate"] is False
     assert result.ncut_values == []
@@ -83,7 +83,7 @@ def test_changing_the_method_switches_between_cut_and_superpixels():
     assert pipe.calls["cut"] == 1 and pipe.calls["labels"] == 1
     again = scene.segment(AUTO).labels
     assert pipe.calls["harmonics"] == 1  # the block stages are shared
-    assert scene.method_calls == {"valid_superpixels": 1, "thesis": 1}  # kept, not rerun
+    assert scene.method_calls == {"surface_superpixels": 1, "thesis": 1}  # kept, not rerun
     np.testing.assert_array_equal(first, again)
     # a Pipeline alone cuts the block graph only
     with pytest.raises(PolarsegError, match="Scene"):
@@ -97,7 +97,7 @@ def test_segment_and_demo_default_to_auto(tmp_path, capsys):
     out = tmp_path / "out"
     assert cli.main(["segment", str(path), "--segments", "3", "--out", str(out)]) == 0
     params = json.loads((out / "params.json").read_text())["params"]
-    assert params["method"] == "valid_superpixels"
+    assert params["method"] == "surface_superpixels"
     labels = tifffile.imread(out / "labels.tif")
     assert adjusted_rand_score(truth.ravel(), labels.ravel()) == pytest.approx(1.0)
     # --preset thesis keeps the faithful pipeline

@@ -39,6 +39,6 @@ def test_segment_help_shows_preset_auto_not_the_thesis():
     text = " ".join(_subparser("segment").format_help().split())
     assert "[default: preset auto's 12]" in text  # --window (thesis: 10)
     assert "[default: preset auto's 8]" in text  # --degree (thesis: 12)
-    assert "[default: preset auto's valid_superpixels]" in text  # --method (thesis: thesis)
+    assert "[default: preset auto's surface_superpixels]" in text  # --method (thesis: thesis)
     assert "[10]" not in text and "[recursive]" not in text
-    assert PRESETS["auto"].window == 12 and PRESETS["auto"].method == "valid_superpixels"
+    assert PRESETS["auto"].window == 12 and PRESETS["auto"].method == "surface_superpixels"

@@ -1,5 +1,6 @@
-"""The default method (preset auto): superpixels clustered on the valid pixels, and the
-number of materials found by itself (``n_segments = 0``, :func:`estimate_k`)."""
+"""Superpixels clustered on the valid pixels (``valid_superpixels``, the base of the
+default ``surface_superpixels``), and the number of materials found by itself
+(``n_segments = 0``, :func:`estimate_k`)."""
 
 from __future__ import annotations
 
@@ -9,7 +10,7 @@ from sklearn.metrics import adjusted_rand_score
 
 from napari_polarseg.engine import PolarsegError, Scene, SegmentParams
 from napari_polarseg.engine.methods import valid_superpixels
-from napari_polarseg.engine.params import AUTO
+from napari_polarseg.engine.params import AUTO as DEFAULT
 from napari_polarseg.engine.unsupervised.choose_k import estimate_k
 
 ANGLES = np.deg2rad([0.0, 45.0, 90.0, 135.0])
@@ -32,8 +33,14 @@ def banded_stack(k: int, shape=(96, 128), seed: int = 0):
     return np.round(stack * 2000).astype(np.uint16), truth
 
 
-def test_auto_preset_is_this_method():
-    assert AUTO.method == valid_superpixels.ValidSuperpixels.name
+#: The default preset with this method.
+AUTO = DEFAULT.replace(method=valid_superpixels.ValidSuperpixels.name)
+
+
+def test_auto_preset_method_builds_on_this_one():
+    from napari_polarseg.engine.methods.registry import get_method
+
+    assert isinstance(get_method(DEFAULT.method), valid_superpixels.ValidSuperpixels)
 
 
 @pytest.mark.parametrize("k", [2, 3, 4])

@@ -419,12 +419,13 @@ RECOMMENDED = SegmentParams(
 
 
 #: The default of ``segment``, ``demo`` and the plugin (preset ``auto``): the superpixel
-#: method on the valid pixels, k + 1 clusters merged to k (``method="valid_superpixels"``),
-#: the best unsupervised method measured on the rendered development scenes and the
-#: hand-labelled real frames together (``benchmarks/evaluate_unsupervised.py``; it
-#: replaced ``"superpixels"``: renders 0.36 → 0.44, real carps 0.36 → 0.90, polariser
-#: 0.56 → 1.00); the recommended block parameters give the thesis maps when asked for.
-AUTO = RECOMMENDED.replace(method="valid_superpixels")
+#: method on the valid pixels, k + 1 clusters merged to k, the node features diffused
+#: over whole surfaces (``method="surface_superpixels"``), the best unsupervised method
+#: measured on the rendered development scenes and the hand-labelled real frames
+#: together (``benchmarks/evaluate_unsupervised.py``, figures in ``docs/quality.md``; it
+#: replaced ``"valid_superpixels"``, which replaced ``"superpixels"``); the recommended
+#: block parameters give the thesis maps when asked for.
+AUTO = RECOMMENDED.replace(method="surface_superpixels")
 
 #: The named starting points of the CLI's ``--preset`` and the plugin's preset menu.
 PRESETS: dict[str, SegmentParams] = {
@@ -441,8 +442,9 @@ DEFAULT_PRESET = "auto"
 
 #: What each preset is: the CLI's ``--preset`` help and the plugin's preset tooltip.
 PRESET_HELP: dict[str, str] = {
-    "auto": "superpixels of the valid pixels clustered by their polarisation into one "
-    "segment more than asked, the closest two merged: the best unsupervised method "
+    "auto": "superpixels of the valid pixels, their polarisation features spread over the "
+    "surface each lies on, clustered into one segment more than asked, the closest two "
+    "merged: the best unsupervised method "
     "measured on rendered and real frames (--segments 0: the number found by itself; a "
     "close-up of one smooth surface: by where its polarisation departs from the "
     "surface's trend)",

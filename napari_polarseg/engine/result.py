@@ -56,7 +56,8 @@ class SegmentationResult:
     work counts (:meth:`~napari_polarseg.engine.graph.ncut.CutTree.cut_limits`: eigensolves
     capped, segments with an isolated block not solved, products); empty when labels
     came from elsewhere (scribbles). ``superpixels`` is the record of the superpixel
-    methods (``"superpixels"``, ``"valid_superpixels"``): ``surface_share`` and ``close_up``
+    methods (``"superpixels"``, ``"valid_superpixels"``, ``"surface_superpixels"``):
+    ``surface_share`` and ``close_up``
     (:class:`~napari_polarseg.engine.unsupervised.params.UnsupervisedResult`); empty
     otherwise. ``method`` names the segmentation method that made ``labels`` and
     ``method_record`` is what it reported. ``coefficients``, ``features`` and

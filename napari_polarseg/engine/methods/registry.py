@@ -20,6 +20,7 @@ BUILT_IN: tuple[tuple[str, str], ...] = (
     ("thesis", "ThesisBlocks"),
     ("pixel_classification", "PixelClassification"),
     ("valid_superpixels", "ValidSuperpixels"),
+    ("surface_superpixels", "SurfaceSuperpixels"),
 )
 
 _METHODS: dict[str, Segmenter] = {}

@@ -59,9 +59,10 @@ def clustered_pixels(region: np.ndarray | None, invalid: np.ndarray) -> np.ndarr
     return None if valid is None or valid.all() else valid
 
 
-def choose_k(model: RegionModel) -> dict[str, Any]:
+def choose_k(model: RegionModel, tolerance: float = 0.0) -> dict[str, Any]:
     """k of the best silhouette over :data:`K_RANGE` (no more than the superpixels
-    allow), how sure, and every k's score. Each k is scored on the plain clustering
+    allow; with ``tolerance``, the fewest within it of the best: :func:`estimate_k`),
+    how sure, and every k's score. Each k is scored on the plain clustering
     into k (:func:`~napari_polarseg.engine.unsupervised.segmenter.cluster_regions`):
     measured, it found the true k more often than the merged one the labels come from
     (exact / within ±1 on the rendered development half 4 / 7 of 12 against 2 / 5, on
@@ -74,7 +75,7 @@ def choose_k(model: RegionModel) -> dict[str, Any]:
         return cluster_regions(nodes_only, k).node_labels
 
     ks = [k for k in K_RANGE if k <= model.n]
-    k, confidence, scores = estimate_k(model.z, model.weight, ks, node_labels)
+    k, confidence, scores = estimate_k(model.z, model.weight, ks, node_labels, tolerance=tolerance)
     return {"k": k, "confidence": confidence, "scores": scores}
 
 
@@ -87,6 +88,8 @@ class ValidSuperpixels(SuperpixelClustering):
     title = "superpixels on valid pixels (unsupervised; 0 segments = find k)"
     #: ``n_segments = 0`` means "find the number of segments"
     finds_k = True
+    #: ``tolerance`` of :func:`choose_k`
+    k_tolerance = 0.0
 
     def segment(
         self, scene: Scene, params: SegmentParams, inputs: dict[str, Any], run: MethodRun
@@ -103,7 +106,7 @@ class ValidSuperpixels(SuperpixelClustering):
         # the clustered pixels follow from the image (its invalid pixels) and the
         # scene's region, fixed for the scene's life: the image's identity keys them
         key = (id(pol), self.params)
-        model = scene.cached("valid_superpixels", key, prepare)
+        model = scene.cached(self.name, key, prepare)
         run.begin("clustering")
         record: dict[str, Any] = {
             "invalid_share": round(float(np.mean(pol.invalid)), 6),
@@ -111,7 +114,7 @@ class ValidSuperpixels(SuperpixelClustering):
         }
         k = params.n_segments
         if k == 0:
-            choice = scene.cached("valid_superpixels:k", key, lambda: choose_k(model))
+            choice = scene.cached(f"{self.name}:k", key, lambda: choose_k(model, self.k_tolerance))
             k = choice["k"]
             record["k_confidence"] = round(choice["confidence"], 4)
             record["k_scores"] = {str(j): round(s, 4) for j, s in choice["scores"].items()}

@@ -41,8 +41,10 @@ def estimate_k(
     k_range: Sequence[int] = K_RANGE,
     cluster: Callable[[int], np.ndarray] | None = None,
     seed: int = 0,
+    tolerance: float = 0.0,
 ) -> tuple[int, float, dict[int, float]]:
-    """(k, confidence, scores): the number of clusters with the best silhouette.
+    """(k, confidence, scores): the number of clusters with the best silhouette, or the
+    fewest whose silhouette comes within ``tolerance`` of it.
 
     Parameters
     ----------
@@ -57,15 +59,22 @@ def estimate_k(
         when None.
     seed : int
         Seed of the node sample.
+    tolerance : float
+        The smallest k whose score is at least best − ``tolerance`` × |best| wins
+        (parsimony: fewer materials when more explain the features hardly better);
+        0 = the best score's k.
 
     Returns
     -------
     k : int
-        The k of the best score (1 when fewer than 3 nodes or no k could be scored).
+        The k chosen (1 when fewer than 3 nodes or no k could be scored).
     confidence : float
-        (best − runner-up) / best, in [0, 1] (1 when only one k was scored).
+        (its score − the best other k's) / its score, in [0, 1] (1 when only one k
+        was scored or every other k scores ≤ 0; 0 when another k scores as well or
+        better).
     scores : dict k -> float
-        The silhouette of every k tried (−1 for a partition with one cluster).
+        The silhouette of every k tried (−1 for a partition with one cluster or with
+        fewer than k).
     """
     x = np.asarray(features, dtype=float)
     if x.ndim != 2:
@@ -84,15 +93,19 @@ def estimate_k(
     sample = rng.choice(n, min(n, SILHOUETTE_SAMPLE), replace=True, p=w / w.sum())
     scores: dict[int, float] = {}
     for k in ks:
-        labels = np.asarray(cluster(k))[sample]
-        if np.unique(labels).size < 2:
+        full = np.asarray(cluster(k))
+        labels = full[sample]
+        # a clustering into k that fills fewer than k clusters (a cluster emptied by the
+        # smoothing of the posteriors) is a smaller k's partition again, not a k of its own
+        if np.unique(full).size < k or np.unique(labels).size < 2:
             scores[k] = -1.0
         else:
             scores[k] = float(silhouette_score(x[sample], labels))
-    ranked = sorted(scores.values(), reverse=True)
-    best_k = max(scores, key=lambda k: (scores[k], -k))
-    if len(ranked) < 2:
-        return best_k, 1.0, scores
-    best, second = ranked[0], ranked[1]
-    confidence = 1.0 if second <= 0 else (best - second) / max(best, 1e-12)
-    return best_k, float(min(max(confidence, 0.0), 1.0)), scores
+    best = max(scores.values())
+    chosen = min(k for k, v in scores.items() if v >= best - float(tolerance) * abs(best))
+    if len(scores) < 2:
+        return chosen, 1.0, scores
+    own = scores[chosen]
+    other = max(v for k, v in scores.items() if k != chosen)
+    confidence = 1.0 if other <= 0 else (own - other) / max(own, 1e-12)
+    return chosen, float(min(max(confidence, 0.0), 1.0)), scores

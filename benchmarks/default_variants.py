@@ -1,0 +1,137 @@
+"""How the default (preset ``auto``, ``surface_superpixels``) was chosen: its neighbours
+and the variants tried beside it, on the rendered development half and the real frames.
+
+Every variant is the valid-superpixel method (``engine/methods/valid_superpixels.py``:
+invalid pixels left out, k + 1 clusters merged to k) with other
+``UnsupervisedParams``; the rows print the mean ARI over the development half (seeds
+0–11) and over the four labelled real frames, and each real frame's ARI, scored as in
+``materials.py`` (k = the truth's classes, ARI over the labelled pixels). Then the
+number of materials found by itself (``n_segments = 0``) by the silhouette rule with
+each tolerance (``estimate_k``: the fewest k within that share of the best score), for
+the 7 % diffusion of ``valid_superpixels`` and the 20 % one of the default: exact and
+within ±1 of the true k. The test half (seeds 12–23) is only read with ``--test``:
+choose on the development half, report on the test half.
+
+Usage::
+
+    cd benchmarks && OMP_NUM_THREADS=1 PYTHONPATH=.. python default_variants.py  # ~10 min
+    ... python default_variants.py --variants "reach 20 %, τ 1.25" --test
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+from baselines import real_frames
+from evaluate import REAL_DIR
+from materials import HALVES, RENDERED_DIR, load_rendered
+from sklearn.metrics import adjusted_rand_score
+
+from napari_polarseg.engine import Pipeline
+from napari_polarseg.engine.methods.surface_superpixels import BORDER_SCALE, REACH
+from napari_polarseg.engine.methods.valid_superpixels import choose_k, clustered_pixels
+from napari_polarseg.engine.params import PRESETS
+from napari_polarseg.engine.unsupervised.merge import merged_clustering
+from napari_polarseg.engine.unsupervised.params import UnsupervisedParams
+from napari_polarseg.engine.unsupervised.segmenter import prepare_regions
+
+V = UnsupervisedParams()  # valid_superpixels
+W = V.replace(diffusion_range=REACH, diffusion_tau=BORDER_SCALE)  # surface_superpixels
+
+
+def _variants() -> dict[str, UnsupervisedParams]:
+    out = {"valid_superpixels (reach 7 %, τ 0.75)": V}
+    for reach in (0.10, 0.14, 0.17, 0.20):
+        for tau in (0.75, 1.0, 1.25):
+            out[f"reach {reach * 100:.0f} %, τ {tau}"] = V.replace(
+                diffusion_range=reach, diffusion_tau=tau
+            )
+    out["reach 20 %, τ 1.5"] = W.replace(diffusion_tau=1.5)
+    out["reach 20 %, τ 2"] = W.replace(diffusion_tau=2.0)
+    out["reach 20 %, τ 1.25, λ 0.7"] = W.replace(diffusion=0.7)
+    out["reach 20 %, τ 1.25, no posterior smoothing"] = W.replace(smoothing=0.0)
+    for extra in ("intensity_spread", "dolp", "aolp_coherence", "log_dop_given_intensity"):
+        out[f"reach 20 %, τ 1.25, + {extra}"] = W.replace(features=W.features + (extra,))
+    out["reach 20 %, τ 1.25, − dop"] = W.replace(
+        features=tuple(f for f in W.features if f != "dop")
+    )
+    out["reach 7 %, log Î counted twice"] = V.replace(features=V.features + ("log_intensity",))
+    out["reach 14 %, log Î counted twice"] = V.replace(
+        features=V.features + ("log_intensity",), diffusion_range=0.14
+    )
+    return out
+
+
+def frames(test: bool) -> list[tuple[str, str, tuple, np.ndarray, int]]:
+    """(set, name, (Î, ρ, φ, invalid), truth, k) of the development half, the real
+    frames and, with ``test``, the test half; polarisation as preset ``auto`` fits it."""
+    out = []
+
+    def add(group: str, name: str, stack, angles, truth, k: int) -> None:
+        pol = Pipeline(stack, angles, PRESETS["auto"].replace(n_segments=k)).get("polarisation")
+        maps = (pol.intensity, pol.dop, pol.phase, np.asarray(pol.invalid, bool))
+        out.append((group, name, maps, truth, k))
+
+    for group in ("dev", "test") if test else ("dev",):
+        for seed in HALVES[group]:
+            stack, angles, truth = load_rendered(seed, RENDERED_DIR)
+            add(group, f"scene_{seed}", stack, angles, truth, len(np.unique(truth[truth > 0])))
+    for tf, data in real_frames(REAL_DIR):
+        add("real", tf.frame, data.stack, data.angles_rad, tf.truth, len(tf.classes))
+    return out
+
+
+def score(params: UnsupervisedParams, data: list, tolerances=(0.0,)) -> dict:
+    """ARI per frame of the k + 1 → k clustering, and the k found per tolerance."""
+    row: dict = {"ari": {}, "k": {t: {} for t in tolerances}}
+    for _group, name, (i, d, ph, invalid), truth, k in data:
+        model = prepare_regions(i, d, ph, params, clustered_pixels(None, invalid))
+        labels = merged_clustering(model, k).labels
+        scored = truth > 0
+        row["ari"][name] = float(adjusted_rand_score(truth[scored], labels[scored]))
+        for t in tolerances:
+            row["k"][t][name] = choose_k(model, t)["k"]
+    return row
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--variants", help="comma-separated names (default: all)")
+    parser.add_argument("--test", action="store_true", help="also score the test half")
+    args = parser.parse_args(argv)
+    t0 = time.perf_counter()
+    data = frames(args.test)
+    groups = [g for g in ("dev", "test", "real") if any(f[0] == g for f in data)]
+    real = [f[1] for f in data if f[0] == "real"]
+    variants = _variants()
+    names = args.variants.split(",") if args.variants else list(variants)
+    print(
+        "| variant | " + " | ".join(f"{g} mean" for g in groups) + " | " + " | ".join(real) + " |"
+    )
+    print("|---|" + "---:|" * (len(groups) + len(real)))
+    for name in names:
+        r = score(variants[name], data)["ari"]
+        means = [np.mean([r[f[1]] for f in data if f[0] == g]) for g in groups]
+        cells = [f"{m:.3f}" for m in means] + [f"{r[n]:.3f}" for n in real]
+        print(f"| {name} | " + " | ".join(cells) + " |", flush=True)
+    tolerances = (0.0, 0.05, 0.10, 0.15)
+    print("\nk found by itself (n_segments = 0), exact / within ±1 of the true k:\n")
+    print("| diffusion | tolerance | " + " | ".join(groups) + " |")
+    print("|---|---:|" + "---:|" * len(groups))
+    for label, params in (("reach 7 % (valid_superpixels)", V), ("reach 20 % (default)", W)):
+        found = score(params, data, tolerances)["k"]
+        for t in tolerances:
+            cells = []
+            for g in groups:
+                fs = [f for f in data if f[0] == g]
+                exact = sum(found[t][f[1]] == f[4] for f in fs)
+                near = sum(abs(found[t][f[1]] - f[4]) <= 1 for f in fs)
+                cells.append(f"{exact} / {near} of {len(fs)}")
+            print(f"| {label} | {t:.2f} | " + " | ".join(cells) + " |", flush=True)
+    print(f"\n{time.perf_counter() - t0:.1f} s wall")
+
+
+if __name__ == "__main__":
+    main()

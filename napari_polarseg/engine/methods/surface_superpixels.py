@@ -1,0 +1,57 @@
+"""Superpixels on the valid pixels whose features are spread over whole surfaces: the
+valid-superpixel method (:mod:`.valid_superpixels`) with a wider edge-aware diffusion.
+
+Everything is as in :class:`~.valid_superpixels.ValidSuperpixels` (invalid pixels left
+out, k + 1 clusters merged to k, ``n_segments = 0`` finds k) but the node features'
+diffusion over the region graph (:mod:`~napari_polarseg.engine.unsupervised.region_diffusion`)
+reaches further and crosses weaker borders:
+
+- **reach** (``diffusion_range``) :data:`REACH` of the image side instead of 7 %: a lazy
+  walk of t = ⌈reach² · n / λ⌉ steps (at most
+  :data:`~napari_polarseg.engine.unsupervised.region_diffusion.MAX_STEPS`) over the n
+  superpixels, so a superpixel carries the features of the whole surface it lies on;
+- **border scale** (``diffusion_tau``) :data:`BORDER_SCALE` × the median border strength
+  instead of 0.75: the border weights exp(−(e / τ)²) let the walk across the faint
+  borders inside one surface (a shading gradient, the rim of a soft shadow) and still
+  stop at the strong ones between objects.
+
+What it is for: on a large surface seen under a changing angle (a floor, a table, a
+wall) ρ and the shading drift across the frame, and a short diffusion leaves that drift
+in the features, so k-means cuts the surface in two along it and merges two materials
+elsewhere.
+
+With ``n_segments = 0`` the number of segments is the fewest among 2..6 whose
+silhouette comes within :data:`K_TOLERANCE` of the best one: the diffused features
+form smooth continua that more clusters always cut a little better, so the best
+silhouette alone overshoots.
+
+The figures that chose these values, and their neighbours, are in ``docs/quality.md``
+(*A default chosen on the development half*).
+"""
+
+from __future__ import annotations
+
+from ..unsupervised.params import UnsupervisedParams
+from .valid_superpixels import ValidSuperpixels
+
+#: Reach of the node features' diffusion, a share of the image side √(H·W).
+REACH = 0.20
+#: τ of the diffusion's border weights, in units of the median border strength.
+BORDER_SCALE = 1.25
+#: With ``n_segments = 0``: the fewest k whose silhouette is within this share of the
+#: best (:func:`~napari_polarseg.engine.unsupervised.choose_k.estimate_k`).
+K_TOLERANCE = 0.10
+
+
+class SurfaceSuperpixels(ValidSuperpixels):
+    """:class:`~.valid_superpixels.ValidSuperpixels` with the node features diffused over
+    whole surfaces (module docstring); ``n_segments = 0`` finds k."""
+
+    name = "surface_superpixels"
+    title = "superpixels on valid pixels, features spread over surfaces (unsupervised)"
+    k_tolerance = K_TOLERANCE
+
+    def __init__(self, params: UnsupervisedParams | None = None) -> None:
+        super().__init__(
+            params or UnsupervisedParams(diffusion_range=REACH, diffusion_tau=BORDER_SCALE)
+        )
