@@ -32,7 +32,7 @@ def test_the_error_map_of_a_method_without_it_is_a_note_without_colour_bar(scene
     fig = overview_figure(scene.stack[0], result)
     panel, bars = _error_panel(fig)
     assert len(panel.images) == 0  # no flat image
-    text = " ".join(t.get_text() for t in panel.texts)
+    text = " ".join(" ".join(t.get_text().split()) for t in panel.texts)
     assert f"not computed by the {result.method} method" in text
     # one colour bar per image panel (input, Î, ρ, φ, HSV, segments): none for the note
     assert len(bars) == sum(1 for ax in fig.axes if ax.images)
