@@ -18,6 +18,7 @@ from ..engine import PolarsegError
 from ..io import parse_angles
 from ._layers import ANGLES_KEY, find_output, layer_tag, source_key
 from ._runner import PROGRESS_STEPS, WorkerSlot
+from .canvas import warm_plotting
 from .session import format_angles
 
 if TYPE_CHECKING:
@@ -294,6 +295,7 @@ class StackWidget(ScrollingContainer):
 
         self.native.destroyed.connect(_closed)
         self._on_layers_changed()
+        warm_plotting()  # the plot docks opened later open without importing matplotlib
 
     # -- building ---------------------------------------------------------------------
     def _add_parameters(self, widgets: list[Any]) -> None:
