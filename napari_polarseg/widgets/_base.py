@@ -18,8 +18,10 @@ from ..engine import PolarsegError
 from ..io import parse_angles
 from ._layers import ANGLES_KEY, find_output, layer_tag, source_key
 from ._runner import PROGRESS_STEPS, WorkerSlot
+from .angle_axis import AngleLabel
 from .canvas import warm_plotting
 from .session import format_angles
+from .view_fit import FitKeeper
 
 if TYPE_CHECKING:
     import napari
@@ -286,9 +288,15 @@ class StackWidget(ScrollingContainer):
         events.inserted.connect(self._on_layers_changed)
         events.removed.connect(self._on_layers_changed)
         slot, on_layers = self._slot, self._on_layers_changed
+        #: Fits the view again when the dock narrows the canvas under a fitted view.
+        self._fit = fit = FitKeeper(viewer)
+        #: Shows the polariser angle of the frame shown beside the angle slider.
+        self._angle_label = angle_label = AngleLabel(viewer)
 
         def _closed(*_: Any) -> None:
             slot.cancel()
+            fit.close()
+            angle_label.close()
             for emitter in (events.inserted, events.removed):
                 with contextlib.suppress(Exception):
                     emitter.disconnect(on_layers)

@@ -36,9 +36,7 @@ def test_status_follows_the_plot_and_progress_reads_done(viewer, open_sample, ad
     assert not plots.busy and "histograms of Î" in plots.status.value
 
 
-def test_component_maps_go_below_the_segments_and_scribbles(
-    viewer, open_sample, add_widget, qtbot
-):
+def test_component_maps_go_below_the_segments_and_scribbles(viewer, open_sample, add_widget, qtbot):
     stack = open_sample("leaves")
     segment = add_widget("Segment by material")
     segment.set_params(**FAST)
