@@ -3,8 +3,6 @@ themed like napari."""
 
 from __future__ import annotations
 
-import sys
-import threading
 from typing import TYPE_CHECKING, Any
 
 from ..outputs import figures
@@ -27,30 +25,6 @@ def napari_theme(viewer: napari.viewer.Viewer) -> dict[str, str]:
         }
     except Exception:  # noqa: BLE001 - any theme problem: fall back to dark grey
         return dict(figures.DARK)
-
-
-#: The thread importing matplotlib ahead of the first plot (:func:`warm_plotting`).
-_warming: list[threading.Thread] = []
-
-
-def warm_plotting() -> None:
-    """Import matplotlib's figure and Agg backend in a background thread, once.
-
-    That import is most of the time the first *Polarisation plots* or *Parameter sweep*
-    dock took to open (the GUI froze meanwhile); a plugin dock calls this when it opens,
-    so the plot docks opened after it find matplotlib imported. The thread only imports
-    modules (no figure, no Qt object) and ends by itself.
-    """
-    if _warming or "matplotlib.backends.backend_agg" in sys.modules:
-        return
-
-    def _import() -> None:
-        import matplotlib.backends.backend_agg  # noqa: F401
-        import matplotlib.figure  # noqa: F401
-
-    thread = threading.Thread(target=_import, name="napari-polarseg matplotlib import")
-    _warming.append(thread)
-    thread.start()
 
 
 def figure_canvas(size: tuple[float, float], min_height: int) -> tuple[Figure, Any]:

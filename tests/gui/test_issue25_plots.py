@@ -65,10 +65,10 @@ viewer = napari.Viewer(show=False)
 assert "matplotlib.figure" not in sys.modules, "imported before any plugin dock"
 viewer.window.add_plugin_dock_widget("napari-polarseg", "Segment by material")
 QApplication.processEvents()
-from napari_polarseg.widgets import canvas
+from napari_polarseg.widgets.warm import WARM_MODULES, warmed
 
-canvas._warming[0].join(60)
-assert "matplotlib.figure" in sys.modules and "matplotlib.backends.backend_agg" in sys.modules
+assert warmed(60)
+assert all(name in sys.modules for name in WARM_MODULES)
 assert "matplotlib.pyplot" not in sys.modules
 viewer.close()
 print("warmed")
