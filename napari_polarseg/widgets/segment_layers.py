@@ -44,7 +44,10 @@ class WithContrast:
 
 def result_contrast(value: Any) -> WithContrast:
     """``value`` (a SegmentationResult or a ClassifierOutput) with the contrast of its
-    error map and fit residual (:func:`~._layers.contrast_of`)."""
+    error map and fit residual (:func:`~._layers.contrast_of`); none for a classifier
+    output that reports a problem (it has no result)."""
+    if getattr(value, "problem", None) is not None:
+        return WithContrast(value)
     result = getattr(value, "result", value)
     arrays = {
         "error": getattr(result, "reconstruction_error", None),
