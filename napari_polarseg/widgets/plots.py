@@ -359,8 +359,7 @@ class PlotsWidget(StackWidget):
             def on_result(run_id: int, value: Any) -> None:
                 if self.result is res:
                     self.histograms = value
-                    if self.plot.value == "histograms":
-                        self.draw()
+                    self.draw()  # the histograms, or the plot chosen meanwhile and its status
 
             self._submit(histogram_job, (result, HISTOGRAM_DEGREES), 1, on_result)
             status = None  # the worker's stages

@@ -34,6 +34,15 @@ def test_status_follows_the_plot_and_progress_reads_done(viewer, open_sample, ad
     assert plots.status.value == summary
     plots.plot.value = "histograms"  # kept: drawn at once, no worker
     assert not plots.busy and "histograms of Î" in plots.status.value
+    # another plot chosen while the histograms compute: its status stays when they end
+    plots.histograms = None
+    plots.plot.value = "scatter_phase"
+    plots.plot.value = "histograms"
+    assert plots.busy
+    plots.plot.value = "importances"
+    wait_idle(qtbot, plots)
+    assert plots.histograms is not None
+    assert plots.status.value == "no pixel classifier behind the segments"
 
 
 def test_component_maps_go_below_the_segments_and_scribbles(viewer, open_sample, add_widget, qtbot):
