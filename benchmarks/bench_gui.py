@@ -19,6 +19,11 @@ With ``--frame PATH`` (a camera frame, e.g. a 1224 × 1024 polarisation mosaic r
 viewer instead: segments k → k + 1 and a change of parameters the method does not read
 (refractive index, window), each from the change to the labels on screen, split into the
 engine's stages and the widget's own time (its overhead).
+
+With ``--first PATH`` (a raw camera frame) it times the GUI thread while the first
+results appear (issue 25, :func:`first_result_main`): the longest stall of the event
+loop, the widget's handlers, contrast limits on the GUI thread and napari's layer
+additions; then opening the *Polarisation plots* dock and its histograms.
 """
 
 from __future__ import annotations

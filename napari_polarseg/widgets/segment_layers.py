@@ -125,9 +125,10 @@ class ResultLayers(WidgetPart):
     ) -> None:
         """Show a run's layers and summary.
 
-        The segments (and class probability, uncertainty) are shown at once; the other
-        layers of a complete result are added one per event-loop turn (``_later``), with
-        the contrast the worker computed (``contrast``, :func:`with_contrast`).
+        The segments are shown at once; the other layers (class probability and
+        uncertainty, and those of a complete result) are added one per event-loop turn
+        (``_later``), with the contrast the worker computed (``contrast``,
+        :func:`with_contrast`).
 
         A ``partial`` result (no reconstruction yet: the worker yielded it before its last
         stage) updates the segments (and class probability, uncertainty) layers and the
@@ -141,13 +142,21 @@ class ResultLayers(WidgetPart):
             self._show_complete(layer, shown, contrast or {})
         if out is not None:
             prediction = out.prediction
-            self._show_below_segments("probability", shown.confidence, layer, meta)
-            self._show_below_segments("uncertainty", prediction.uncertainty, layer, meta)
+            # hidden maps with fixed limits: added in later turns, after the segments
+            for role, data in (
+                ("probability", shown.confidence),
+                ("uncertainty", prediction.uncertainty),
+            ):
+                self._queue(
+                    role,
+                    layer,
+                    lambda role=role, data=data: self._show_below_segments(role, data, layer, meta),
+                )
             self.probabilities, self.classes = prediction.probabilities, prediction.classes
             self.uncertainty = prediction.uncertainty
         else:
             for role in ("probability", "uncertainty"):  # they would be stale
-                remove_output(self._viewer, role, layer)
+                self._queue(role, layer, lambda role=role: remove_output(self._viewer, role, layer))
             self.probabilities, self.classes, self.uncertainty = None, None, None
         segments = find_output(self._viewer, "segments", layer)
         if segments is not None and np.array_equal(segments.data, shown.labels):
