@@ -194,7 +194,8 @@ def show_output(
     """Add the ``role`` layer for ``source``, or replace the data of the existing one.
 
     ``contrast``: the image's contrast limits and slider range computed in the worker
-    (:func:`contrast_of`); without it they are computed here.
+    (:func:`contrast_of`); without it they are computed here. Given the very array the
+    layer shows already, only the metadata change (nothing is drawn again).
 
     A new layer is named after its role and its source (:func:`output_name`).
     The layer takes the scale and translation of the last two axes of ``source`` so it
@@ -209,6 +210,10 @@ def show_output(
     meta = {TAG: tag, **(metadata or {})}
     layer = find_output(viewer, role, source)
     wanted = Labels if style.layer_type == "labels" else Image
+    if layer is not None and isinstance(layer, wanted) and layer.data is data:
+        # the very array shown (a rerun that kept this map): no redraw, no new limits
+        layer.metadata = {**layer.metadata, **meta}
+        return layer
     if layer is not None and isinstance(layer, wanted):
         layer.data = data
         if style.layer_type == "image":

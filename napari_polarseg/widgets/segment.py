@@ -464,7 +464,8 @@ class SegmentWidget(ResultLayers, MaskAndScribbles, StackWidget, SegmentDock):
         on_result = functools.partial(self._on_result, delivery)
         on_partial = functools.partial(self._on_partial, delivery)
         # the contrast of the maps it adds is computed in the worker too
-        job, args, total = with_contrast(request.job), request.args, request.total
+        job = with_contrast(request.job, self._contrast_memo)
+        args, total = request.args, request.total
         self._submit(job, args, total, on_result, on_partial, self._live_run, True, request.reports)
 
     def _reshow(self, layer: Layer, snap: Snapshot) -> bool:

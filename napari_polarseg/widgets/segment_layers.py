@@ -42,10 +42,16 @@ class WithContrast:
     contrast: dict[str, Contrast] = field(default_factory=dict)
 
 
-def result_contrast(value: Any) -> WithContrast:
+#: Per role, the last map :func:`result_contrast` measured and its contrast: a rerun that
+#: keeps the map (e.g. only the number of segments changed) reuses it.
+ContrastMemo = dict[str, tuple[np.ndarray, Contrast]]
+
+
+def result_contrast(value: Any, memo: ContrastMemo | None = None) -> WithContrast:
     """``value`` (a SegmentationResult or a ClassifierOutput) with the contrast of its
-    error map and fit residual (:func:`~._layers.contrast_of`); none for a classifier
-    output that reports a problem (it has no result)."""
+    error map and fit residual (:func:`~._layers.contrast_of`; from ``memo`` for the
+    very array measured last time); none for a classifier output that reports a problem
+    (it has no result)."""
     if getattr(value, "problem", None) is not None:
         return WithContrast(value)
     result = getattr(value, "result", value)
@@ -53,13 +59,25 @@ def result_contrast(value: Any) -> WithContrast:
         "error": getattr(result, "reconstruction_error", None),
         "residual": getattr(result, "residual", None),
     }
-    return WithContrast(value, contrasts_of(arrays))
+    memo = {} if memo is None else memo
+    contrast = {}
+    for role, data in arrays.items():
+        if data is None:
+            continue
+        kept = memo.get(role)
+        if kept is None or kept[0] is not data:
+            kept = memo[role] = (data, contrasts_of({role: data})[role])
+        contrast[role] = kept[1]
+    return WithContrast(value, contrast)
 
 
-def with_contrast(job: Callable[..., Generator[Any, Any, Any]]) -> Callable[..., Any]:
+def with_contrast(
+    job: Callable[..., Generator[Any, Any, Any]], memo: ContrastMemo | None = None
+) -> Callable[..., Any]:
     """The worker ``job`` whose result (returned, or yielded as a
-    :class:`~.session.Result` before idle-time work) comes as a :class:`WithContrast`;
-    its stages and partial results pass as they are."""
+    :class:`~.session.Result` before idle-time work) comes as a :class:`WithContrast`
+    (``memo``: see :func:`result_contrast`); its stages and partial results pass as they
+    are."""
 
     def wrapped(*args: Any, **kwargs: Any) -> Generator[Any, Any, Any]:
         gen = job(*args, **kwargs)
@@ -69,9 +87,9 @@ def with_contrast(job: Callable[..., Generator[Any, Any, Any]]) -> Callable[...,
                 try:
                     item = gen.send(sent)
                 except StopIteration as stop:
-                    return result_contrast(stop.value)
+                    return result_contrast(stop.value, memo)
                 if isinstance(item, Result):
-                    item = Result(result_contrast(item.value))
+                    item = Result(result_contrast(item.value, memo))
                 sent = yield item
         finally:
             gen.close()
@@ -104,6 +122,9 @@ class ResultLayers(WidgetPart):
         #: Per stack key: the fit residual the diagnostics layers show (the cached
         #: polarisation image's array: the same object while the image is unchanged).
         self._diagnostics: dict[str, Any] = {}
+        #: The contrast of the maps the last worker measured (only workers touch it; one
+        #: runs at a time), reused while a map is the same array.
+        self._contrast_memo: ContrastMemo = {}
         self.views = CheckBox(
             text="HSV and Stokes layers",
             value=False,
