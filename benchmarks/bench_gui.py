@@ -19,6 +19,11 @@ With ``--frame PATH`` (a camera frame, e.g. a 1224 × 1024 polarisation mosaic r
 viewer instead: segments k → k + 1 and a change of parameters the method does not read
 (refractive index, window), each from the change to the labels on screen, split into the
 engine's stages and the widget's own time (its overhead).
+
+With ``--first PATH`` (a raw camera frame) it times the GUI thread while the first
+results appear (issue 25, :func:`first_result_main`): the longest stall of the event
+loop, the widget's handlers, contrast limits on the GUI thread and napari's layer
+additions; then opening the *Polarisation plots* dock and its histograms.
 """
 
 from __future__ import annotations
@@ -75,7 +80,16 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--stages", action="store_true", help="print the seconds per stage")
     parser.add_argument("--frame", type=Path, help="time the default preset on this frame")
     parser.add_argument("--mosaic", default="90,45,135,0", help="the frame's mosaic angles")
+    parser.add_argument(
+        "--first",
+        type=Path,
+        help="time the GUI thread while the first result of this frame is shown (and the "
+        "Polarisation image of it), then the Polarisation plots dock",
+    )
     args = parser.parse_args(argv)
+    if args.first is not None:
+        first_result_main(args.first, tuple(int(a) for a in args.mosaic.split(",")))
+        return
     if args.frame is not None:
         frame_main(args.frame, tuple(int(a) for a in args.mosaic.split(",")))
         return
@@ -97,11 +111,11 @@ def main(argv: list[str] | None = None) -> None:
     shown: dict[str, float] = {}
     show = widget._show
 
-    def timed_show(layer, angles_deg, result, seconds, inputs=None, partial=False, snap=None):  # noqa: ANN001, ANN202
+    def timed_show(layer, angles_deg, result, seconds, inputs=None, partial=False, *rest):  # noqa: ANN001, ANN002, ANN202
         res = getattr(result, "result", None) or result
         t = time.perf_counter()
         try:
-            return show(layer, angles_deg, result, seconds, inputs, partial, snap)
+            return show(layer, angles_deg, result, seconds, inputs, partial, *rest)
         finally:
             now = time.perf_counter()
             shown.setdefault("segments", now)
@@ -115,6 +129,17 @@ def main(argv: list[str] | None = None) -> None:
             split["show"] = split.get("show", 0.0) + now - t
 
     widget._show = timed_show
+    later = widget._later._next
+
+    def timed_later() -> None:  # the layers added in later event-loop turns
+        t = time.perf_counter()
+        later()
+        now = time.perf_counter()
+        shown["all"] = max(shown.get("all", now), now)
+        split["show"] = split.get("show", 0.0) + now - t
+
+    widget._later._timer.timeout.disconnect()
+    widget._later._timer.timeout.connect(timed_later)
 
     ticks: list[float] = []  # times of a 5 ms timer: the longest gap is the GUI's stall
 
@@ -245,9 +270,9 @@ def frame_main(path: Path, mosaic: tuple[int, ...]) -> None:
     engine: dict[str, float] = {}
     show = widget._show
 
-    def timed_show(layer, angles_deg, result, seconds, inputs=None, partial=False, snap=None):  # noqa: ANN001, ANN202
+    def timed_show(layer, angles_deg, result, seconds, inputs=None, partial=False, *rest):  # noqa: ANN001, ANN002, ANN202
         t = time.perf_counter()
-        show(layer, angles_deg, result, seconds, inputs, partial, snap)
+        show(layer, angles_deg, result, seconds, inputs, partial, *rest)
         done["shown"], done["show"] = time.perf_counter(), time.perf_counter() - t
         res = getattr(result, "result", None) or result
         engine.update({s: res.timings.get(s, 0.0) for s in set(res.recomputed)})
@@ -320,6 +345,157 @@ def frame_main(path: Path, mosaic: tuple[int, ...]) -> None:
         if stages:
             print("    " + ", ".join(f"{k} {v:.3f}" for k, v in stages.items()))
     print(f"status: {widget.status.value}")
+    viewer.close()
+
+
+#: Issue 25: the longest the GUI thread may stay busy when a first result is shown.
+FREEZE_TARGET = 0.3
+
+
+def first_result_main(path: Path, mosaic: tuple[int, ...]) -> None:
+    """Issue 25's figures: how long the window freezes while the first result of a camera
+    frame appears (presets auto and thesis, then *Polarisation image ▸ Compute*), and the
+    *Polarisation plots* dock (opening it, its histograms), in a fresh viewer.
+
+    "freeze" is the longest the Qt event loop went without running (a 2 ms timer) from
+    the result's arrival on the GUI thread to 2 s after: the widget's own work (adding
+    the layers) and napari drawing them. "show" is the widget's handlers (each queued
+    layer too), "limits" its time in contrast limits on the GUI thread (0 when the worker computed
+    them), "add" napari's add_image/add_labels.
+    """
+    import threading
+
+    import napari
+    from qtpy.QtCore import QEventLoop, QTimer
+
+    import napari_polarseg.widgets._layers as layers_module
+    from napari_polarseg.io import read_stack
+
+    data = read_stack(path, mosaic=mosaic)
+    viewer = napari.Viewer(show=True)
+    viewer.window._qt_window.resize(1600, 1000)
+    meta = {"angles_deg": [float(a) for a in data.angles_deg]}
+    ticks: list[float] = []
+    spent: dict[str, float] = {"limits": 0.0, "add": 0.0, "show": 0.0}
+    marks: dict[str, float] = {}
+
+    def timed(name: str, func):  # noqa: ANN001, ANN202
+        """``func`` timed into ``spent[name]`` when it runs on the GUI thread."""
+
+        def wrapper(*a, **k):  # noqa: ANN002, ANN003, ANN202
+            t = time.perf_counter()
+            try:
+                return func(*a, **k)
+            finally:
+                if threading.current_thread() is threading.main_thread():
+                    spent[name] += time.perf_counter() - t
+
+        return wrapper
+
+    layers_module.contrast_for = timed("limits", layers_module.contrast_for)
+    viewer_class = type(viewer)  # a pydantic model: its instances take no new attributes
+    viewer_class.add_image = timed("add", viewer_class.add_image)
+    viewer_class.add_labels = timed("add", viewer_class.add_labels)
+
+    def run_events(until, timeout: float = 600.0) -> None:  # noqa: ANN001
+        loop, timer = QEventLoop(), QTimer()
+        deadline = time.perf_counter() + timeout
+
+        def tick() -> None:
+            ticks.append(time.perf_counter())
+            if until() or ticks[-1] > deadline:
+                loop.quit()
+
+        timer.setInterval(2)
+        timer.timeout.connect(tick)
+        timer.start()
+        loop.exec()
+        timer.stop()
+
+    def freeze() -> float:
+        """The longest gap between ticks from the first shown result on."""
+        start = marks.get("shown", ticks[-1])
+        times = [start] + [t for t in ticks if t > start]
+        return float(np.diff(times).max()) if len(times) > 1 else 0.0
+
+    def watch(widget, handler: str, count: bool = True) -> None:  # noqa: ANN001
+        """Mark the first call of ``handler`` as the result's arrival (and time it with
+        ``count``), and time every layer the widget adds in later event-loop turns."""
+        original = getattr(widget, handler)
+
+        def wrapper(*a, **k):  # noqa: ANN002, ANN003, ANN202
+            marks.setdefault("shown", time.perf_counter())
+            t = time.perf_counter()
+            try:
+                return original(*a, **k)
+            finally:
+                spent["show"] += (time.perf_counter() - t) if count else 0.0
+
+        setattr(widget, handler, wrapper)
+        queue = widget._later  # the layers it adds one per event-loop turn
+
+        def queued() -> None:
+            t = time.perf_counter()
+            try:
+                queue._next()
+            finally:
+                spent["show"] += time.perf_counter() - t
+
+        queue._timer.timeout.disconnect()
+        queue._timer.timeout.connect(queued)
+
+    rows = []
+
+    def measure(label: str, widget, start) -> None:  # noqa: ANN001
+        run_events(lambda: False, timeout=SETTLE)
+        for key in spent:
+            spent[key] = 0.0
+        marks.clear()
+        t0 = time.perf_counter()
+        start()
+        run_events(lambda: not (widget.busy or widget._waiting()) and "shown" in marks)
+        run_events(lambda: False, timeout=2.0)  # napari draws the new layers
+        rows.append((label, time.perf_counter() - t0 - 2.0, freeze(), dict(spent)))
+
+    viewer.add_image(data.stack, name=path.stem, metadata=meta)
+    _, seg = viewer.window.add_plugin_dock_widget("napari-polarseg", "Segment by material")
+    watch(seg, "_show")
+    measure("Segment, preset auto (first result)", seg, seg.run)
+    seg.preset.value = "thesis"
+    measure("Segment, preset thesis (error map)", seg, seg.run)
+    _, pol = viewer.window.add_plugin_dock_widget("napari-polarseg", "Polarisation image")
+    watch(pol, "_show_role", count=False)  # a queued layer: timed as such
+    measure("Polarisation image, Compute", pol, pol.run)
+
+    # the plots dock: opening it (matplotlib imported in the background meanwhile),
+    # loading the segmentation (cached), the histograms (a worker) and drawing them
+    run_events(lambda: False, timeout=SETTLE)
+    t0 = time.perf_counter()
+    _, plots = viewer.window.add_plugin_dock_widget("napari-polarseg", "Polarisation plots")
+    opened = time.perf_counter() - t0
+    plots.run()
+    run_events(lambda: not plots.busy)
+    ticks.clear()
+    t0 = time.perf_counter()
+    plots.plot.value = "histograms"
+    run_events(lambda: not plots.busy)
+    histograms = time.perf_counter() - t0
+    stall = float(np.diff(ticks).max()) if len(ticks) > 1 else 0.0
+    h, w = data.stack.shape[1:]
+    print(f"napari plugin, {w} x {h} x {data.stack.shape[0]} frame {path.name}")
+    print("seconds: total from the click to the result shown (the run included); freeze:")
+    print("the longest the event loop stalled from the result's arrival on (2 ms timer);")
+    print("show: the widget's handler; limits: contrast limits on the GUI thread; add:")
+    print("napari's add_image/add_labels")
+    print(f"{'run':<38}| total  | freeze | show  | limits | add   | target {FREEZE_TARGET}")
+    for label, total, stall_s, parts in rows:
+        verdict = "met" if stall_s <= FREEZE_TARGET else "MISSED"
+        print(
+            f"{label:<38}| {total:6.2f} | {stall_s:6.3f} | {parts['show']:5.3f} | "
+            f"{parts['limits']:6.3f} | {parts['add']:5.3f} | {verdict}"
+        )
+    print(f"Polarisation plots: dock opened in {opened:.3f} s; histograms {histograms:.2f} s")
+    print(f"  (a worker; the event loop's longest stall meanwhile {stall:.3f} s)")
     viewer.close()
 
 

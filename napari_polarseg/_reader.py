@@ -43,6 +43,11 @@ from .io.stack_formats import enough_angles
 MOSAIC_SENSOR_NAMES = SENSOR_NAMES
 
 LayerData = tuple[Any, dict[str, Any], str]
+
+#: Axis labels of a stack layer: napari's slider of the first axis reads "angle" (the
+#: plugin's docks add the polariser angle of the frame shown, ``widgets.angle_axis``);
+#: rows and columns keep napari's own labels.
+STACK_AXIS_LABELS = ("angle", "-2", "-1")
 ReaderFunction = Callable[[str | list[str]], list[LayerData]]
 
 
@@ -124,7 +129,12 @@ def stack_layer_data(data: Any, name: str | None = None) -> LayerData:
     if data.colour_stack is not None:
         metadata["colour_stack"] = data.colour_stack
     layer_name = name or Path(source).stem or Path(source).name
-    kwargs: dict[str, Any] = {"name": layer_name, "metadata": metadata, "colormap": "gray"}
+    kwargs: dict[str, Any] = {
+        "name": layer_name,
+        "metadata": metadata,
+        "colormap": "gray",
+        "axis_labels": STACK_AXIS_LABELS,
+    }
     placement = mosaic_placement(info)
     if placement:
         kwargs["scale"] = (1.0, *placement["scale"])

@@ -160,12 +160,17 @@ def importances_figure(
     ax.barh(y, data.values, color=theme["accent"])
     ax.set_yticks(y, data.names, fontsize="small")
     ax.invert_yaxis()
-    ax.set_xlabel("importance (mean impurity decrease)")
-    ax.set_title(
-        f"top {len(data.names)} of {data.n_features} features "
+    ax.tick_params(axis="x", labelsize="small")
+    # the title and the x label centred on the figure, not on the axes the long feature
+    # names push right: in a narrow dock they ran off the canvas
+    fg = theme["foreground"]
+    fig.suptitle(
+        f"top {len(data.names)} of {data.n_features} features\n"
         f"({data.shown_share:.0%} of the importance)",
         fontsize="medium",
+        color=fg,
     )
+    fig.supxlabel("importance (mean impurity decrease)", fontsize="small", color=fg)
     _style(ax, theme)
     return fig
 

@@ -23,8 +23,11 @@ if TYPE_CHECKING:
     from ..engine import SegmentationResult
 
 #: One panel of the overview: (title, image, colour map or "rgb" or a label-panel key of
-#: the ticks, vmin, vmax).
+#: the ticks or :data:`NOT_COMPUTED`, vmin, vmax).
 Panel = tuple[str, Any, str, Any, Any]
+#: The colour-map slot of a panel whose map the method did not compute: its "image" is
+#: the text shown in the panel (no image, no colour bar).
+NOT_COMPUTED = "not computed"
 #: The label panels by their key: (label values, tick labels, RGBA of each value).
 Ticks = dict[str, tuple[Any, list[str], np.ndarray]]
 #: Columns of the overview's grid (2 rows of 4 for the 7 or 8 panels).
@@ -141,12 +144,13 @@ def _panels(
         hsv_title += f"\n(full at ρ = {dolp_max:g})"
     label_panels, ticks = _label_panels(result, truth)
     error = result.reconstruction_error
-    error_title = "reconstruction error"
     if error is None:
-        error_title += "\n(not computed: --thesis-maps)"
-        error = np.zeros_like(result.intensity)
-    finite_err = error[np.isfinite(error)]
-    err_max = float(np.percentile(finite_err, 99)) if finite_err.size else 1.0
+        note = f"not computed by\nthe {result.method}\nmethod\n\n(--thesis-maps\ncomputes it)"
+        error_panel: Panel = ("reconstruction error", note, NOT_COMPUTED, None, None)
+    else:
+        finite_err = error[np.isfinite(error)]
+        err_max = float(np.percentile(finite_err, 99)) if finite_err.size else 1.0
+        error_panel = ("reconstruction error", error, "magma", 0.0, err_max or None)
     panels: list[Panel] = [
         ("input (first frame)", first_frame, "gray", None, None),
         ("Î mean intensity", result.intensity, "gray", None, None),
@@ -154,20 +158,28 @@ def _panels(
         ("φ phase (rad)", result.phase, "twilight", 0.0, np.pi),
         (hsv_title, composite, "rgb", None, None),
         *label_panels,
-        (error_title, error, "magma", 0.0, err_max or None),
+        error_panel,
     ]
     return panels, ticks
 
 
 def _draw_panel(fig: Figure, ax: Any, panel: Panel, ticks: Ticks) -> None:
-    """One panel and its colour bar (hue degrees for the composite, label ticks)."""
+    """One panel and its colour bar (hue degrees for the composite, label ticks); a map
+    the method did not compute is a framed note, with no colour bar."""
     from matplotlib import colormaps
     from matplotlib.cm import ScalarMappable
     from matplotlib.colors import ListedColormap, Normalize
+    from matplotlib.patches import Rectangle
 
     title, image, cmap, vmin, vmax = panel
     ax.set_title(title, fontsize=10)
     ax.set_axis_off()
+    if cmap == NOT_COMPUTED:
+        ax.text(0.5, 0.5, image, ha="center", va="center", fontsize=9, transform=ax.transAxes)
+        ax.add_patch(
+            Rectangle((0, 0), 1, 1, transform=ax.transAxes, fill=False, ls="--", clip_on=False)
+        )
+        return
     if cmap == "rgb":
         ax.imshow(image, interpolation="nearest")
         hue = ScalarMappable(Normalize(0.0, 180.0), colormaps["hsv"])
@@ -249,6 +261,9 @@ def overview_figure(
         _draw_panel(fig, ax, panel, ticks)
     for ax in axes[len(panels) :]:
         fig.delaxes(ax)
+    for ax, panel in zip(axes, panels, strict=False):
+        if panel[2] == NOT_COMPUTED:
+            ax.set_box_aspect(h / w)  # a note the shape of the image panels
     return fig
 
 

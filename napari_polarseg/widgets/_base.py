@@ -18,7 +18,11 @@ from ..engine import PolarsegError
 from ..io import parse_angles
 from ._layers import ANGLES_KEY, find_output, layer_tag, source_key
 from ._runner import PROGRESS_STEPS, WorkerSlot
+from .angle_axis import AngleLabel
+from .layer_queue import LayerQueue
 from .session import format_angles
+from .view_fit import FitKeeper
+from .warm import warm_imports
 
 if TYPE_CHECKING:
     import napari
@@ -285,15 +289,25 @@ class StackWidget(ScrollingContainer):
         events.inserted.connect(self._on_layers_changed)
         events.removed.connect(self._on_layers_changed)
         slot, on_layers = self._slot, self._on_layers_changed
+        #: A result's secondary layers, added one per event-loop turn (the window
+        #: freezes for one layer at most).
+        self._later = LayerQueue(self.native)
+        #: Fits the view again when the dock narrows the canvas under a fitted view.
+        self._fit = fit = FitKeeper(viewer)
+        #: Shows the polariser angle of the frame shown beside the angle slider.
+        self._angle_label = angle_label = AngleLabel(viewer)
 
         def _closed(*_: Any) -> None:
             slot.cancel()
+            fit.close()
+            angle_label.close()
             for emitter in (events.inserted, events.removed):
                 with contextlib.suppress(Exception):
                     emitter.disconnect(on_layers)
 
         self.native.destroyed.connect(_closed)
         self._on_layers_changed()
+        warm_imports()  # the plot docks and the first segments find them imported
 
     # -- building ---------------------------------------------------------------------
     def _add_parameters(self, widgets: list[Any]) -> None:
@@ -404,8 +418,9 @@ class StackWidget(ScrollingContainer):
         return self._slot.wait(timeout, extra=self._waiting)
 
     def _waiting(self) -> bool:
-        """Subclasses: True while a run is scheduled but not yet submitted."""
-        return False
+        """True while layers of a result wait to be added (subclasses: or a run is
+        scheduled but not yet submitted)."""
+        return self._later.pending
 
     def _submit(
         self,

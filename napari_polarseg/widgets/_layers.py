@@ -146,10 +146,41 @@ def contrast_for(role: str, data: np.ndarray) -> tuple[float, float]:
     return style.limits if style.limits is not None else fitted_limits(data, style.percentiles)
 
 
-def _image_style(role: str, data: np.ndarray) -> dict[str, Any]:
+@dataclass(frozen=True)
+class Contrast:
+    """The contrast limits of an image layer and the range its slider offers (the
+    limits and the finite data's minimum and maximum): what :func:`contrast_of`
+    computes in a worker so that showing a result runs no percentile, nor a scan of the
+    data, on the GUI thread."""
+
+    limits: tuple[float, float]
+    range: tuple[float, float]
+
+
+def contrast_of(role: str, data: np.ndarray) -> Contrast:
+    """The :class:`Contrast` of the ``role`` layer for ``data`` (any thread: numpy only)."""
+    lo, hi = contrast_for(role, data)
+    values = np.asarray(data, dtype=float)
+    finite = values[np.isfinite(values)]
+    dmin, dmax = (float(finite.min()), float(finite.max())) if finite.size else (lo, hi)
+    return Contrast((lo, hi), (min(lo, dmin), max(hi, dmax)))
+
+
+def contrasts_of(arrays: dict[str, np.ndarray | None]) -> dict[str, Contrast]:
+    """:func:`contrast_of` of every image role of ``arrays`` (role → data; None and
+    Labels roles skipped): a worker's part of showing its result."""
+    return {
+        role: contrast_of(role, data)
+        for role, data in arrays.items()
+        if data is not None and ROLES[role].layer_type == "image"
+    }
+
+
+def _image_style(role: str, data: np.ndarray, contrast: Contrast | None) -> dict[str, Any]:
     style = ROLES[role]
     colormap = {} if style.colormap is None else {"colormap": style.colormap}
-    return {**colormap, "contrast_limits": contrast_for(role, data), **style.extra}
+    limits = contrast_for(role, data) if contrast is None else contrast.limits
+    return {**colormap, "contrast_limits": limits, **style.extra}
 
 
 def show_output(
@@ -158,8 +189,13 @@ def show_output(
     data: np.ndarray,
     source: Layer,
     metadata: dict[str, Any] | None = None,
+    contrast: Contrast | None = None,
 ) -> Layer:
     """Add the ``role`` layer for ``source``, or replace the data of the existing one.
+
+    ``contrast``: the image's contrast limits and slider range computed in the worker
+    (:func:`contrast_of`); without it they are computed here. Given the very array the
+    layer shows already, only the metadata change (nothing is drawn again).
 
     A new layer is named after its role and its source (:func:`output_name`).
     The layer takes the scale and translation of the last two axes of ``source`` so it
@@ -174,14 +210,16 @@ def show_output(
     meta = {TAG: tag, **(metadata or {})}
     layer = find_output(viewer, role, source)
     wanted = Labels if style.layer_type == "labels" else Image
+    if layer is not None and isinstance(layer, wanted) and layer.data is data:
+        # the very array shown (a rerun that kept this map): no redraw, no new limits
+        layer.metadata = {**layer.metadata, **meta}
+        return layer
     if layer is not None and isinstance(layer, wanted):
         layer.data = data
         if style.layer_type == "image":
-            lo, hi = contrast_for(role, data)
-            finite = np.asarray(data, dtype=float)[np.isfinite(data)]
-            dmin, dmax = (finite.min(), finite.max()) if finite.size else (lo, hi)
-            layer.contrast_limits_range = (min(lo, float(dmin)), max(hi, float(dmax)))
-            layer.contrast_limits = (lo, hi)
+            contrast = contrast or contrast_of(role, data)
+            layer.contrast_limits_range = contrast.range
+            layer.contrast_limits = contrast.limits
         layer.metadata = {**layer.metadata, **meta}
         return layer
     if layer is not None:  # same tag but another type (should not happen): replace it
@@ -199,7 +237,7 @@ def show_output(
         )
     else:
         layer = viewer.add_image(
-            data, name=name, metadata=meta, **placement, **_image_style(role, data)
+            data, name=name, metadata=meta, **placement, **_image_style(role, data, contrast)
         )
     if style.layer_type == "image":
         below_labels(viewer, layer, source)

@@ -6,6 +6,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any
 
 from ..outputs import figures
+from .warm import warmed
 
 if TYPE_CHECKING:
     import napari
@@ -30,6 +31,9 @@ def napari_theme(viewer: napari.viewer.Viewer) -> dict[str, str]:
 def figure_canvas(size: tuple[float, float], min_height: int) -> tuple[Figure, Any]:
     """A constrained-layout figure of ``size`` inches on a Qt canvas at least
     ``min_height`` pixels high (``FigureCanvasQTAgg``)."""
+    # matplotlib imported by the background thread of warm.py, if that still runs: wait
+    # for it rather than import the same modules from two threads at once
+    warmed()
     from matplotlib.backends.backend_qtagg import FigureCanvasQTAgg
     from matplotlib.figure import Figure
 

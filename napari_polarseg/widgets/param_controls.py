@@ -4,8 +4,8 @@
 Every :class:`~napari_polarseg.engine.params.ParamSpec` with a ``label`` becomes one
 control: a menu (its ``choices``, or the registered methods, shown with
 :meth:`ParamSpec.menu` names), a float box (the spec has ``decimals``) or an integer
-box, with the spec's range and step; the tooltip is the spec's help and the thesis
-default.
+box, with the spec's range and step; the tooltip says what the control does to the
+result (:data:`EFFECTS`), then the spec's help and the thesis default.
 """
 
 from __future__ import annotations
@@ -39,6 +39,42 @@ CONTROL_ORDER = (
     "n_segments",
 )
 
+#: What each parameter control does to the result, in plain words: the first line of its
+#: tooltip (the spec's technical help follows it). One entry per labelled spec.
+EFFECTS: dict[str, str] = {
+    "method": "Which algorithm splits the image into materials: the superpixel methods "
+    "follow object edges and are fastest; thesis works on a grid of square blocks",
+    "window": "Size of the square blocks the image is cut into: larger gives smoother, "
+    "blockier segments and a faster run; smaller follows finer detail but is noisier",
+    "degree": "How much detail of each block's shading is compared: higher tells similar "
+    "materials apart better, but runs slower and can pick up noise",
+    "refractive_index": "The material's assumed refractive index (glass and most plastics "
+    "about 1.5), used to turn polarisation into surface angle; moves the segments little",
+    "fit": "How each pixel's polarisation is measured from the frames: robust ignores a "
+    "frame that is off at a pixel (a glint, a moving edge) and takes longer",
+    "model": "Whether surfaces are taken as matte (diffuse) or shiny (specular) when "
+    "polarisation is turned into surface angle",
+    "specular_branch": "Shiny surfaces only: which of the two surface angles that give the "
+    "same polarisation to take",
+    "coefficients": "How each block's shading is summarised: the thesis estimate, or a "
+    "fit that is steadier on small or partly masked blocks",
+    "features": "What is compared between blocks: the whole shading description, the part "
+    "that does not change when the object turns, or polarisation statistics; changes "
+    "which materials look alike",
+    "variance": "How much of the block description is kept: lower runs faster and merges "
+    "materials that differ only slightly",
+    "scale": "How different two blocks must be to end up apart: smaller splits more "
+    "readily, larger groups more",
+    "scale_mode": "absolute: the scale as given; median: the scale adapts to the image, "
+    "steadier from one image to the next",
+    "clustering": "How the segments are cut apart: one split at a time (thesis) or all at "
+    "once (k-way, often more even segments)",
+    "min_segment_blocks": "The smallest segment allowed, in blocks: raise it to stop tiny "
+    "specks becoming segments of their own",
+    "n_segments": "How many segments (materials) the result has; 0 lets a method that can "
+    "choose the number itself",
+}
+
 #: The thesis default of every SegmentParams field (the dataclass defaults).
 THESIS_DEFAULTS: dict[str, Any] = {
     f.name: f.default for f in fields(SegmentParams) if f.default is not MISSING
@@ -57,12 +93,15 @@ def float_box(decimals: int, **kwargs: Any) -> FloatSpinBox:
 
 
 def control_tooltip(name: str, spec: ParamSpec) -> str:
-    """The spec's help and, for a SegmentParams field, its thesis default."""
-    if name not in THESIS_DEFAULTS:
-        return spec.help
-    default = THESIS_DEFAULTS[name]
-    shown = f"{default:g}" if isinstance(default, float) else str(default)
-    return f"{spec.help} (thesis: {shown})"
+    """What the control does to the result (:data:`EFFECTS`), then the spec's help and,
+    for a SegmentParams field, its thesis default."""
+    details = spec.help
+    if name in THESIS_DEFAULTS:
+        default = THESIS_DEFAULTS[name]
+        shown = f"{default:g}" if isinstance(default, float) else str(default)
+        details = f"{details} (thesis: {shown})"
+    effect = EFFECTS.get(name)
+    return details if effect is None else f"{effect}.\n\nDetails: {details}"
 
 
 def param_control(name: str, spec: ParamSpec, value: Any, **kwargs: Any) -> ValueWidget:

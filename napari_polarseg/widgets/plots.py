@@ -17,7 +17,7 @@ from ..engine import STAGES, PolarsegError, Scene, SegmentParams
 from ..engine.analysis import plots
 from ..outputs import figures
 from ._base import StackWidget
-from ._layers import TAG, find_output, fitted_limits, source_key
+from ._layers import TAG, below_labels, find_output, fitted_limits, source_key
 from .canvas import figure_canvas, napari_theme, show_message
 from .docks import SegmentDock, docked
 from .session import (
@@ -47,9 +47,11 @@ PLOTS = (
 TOP_FEATURES = 15
 #: Degrees of the reconstruction histograms (thesis figure 5.17).
 HISTOGRAM_DEGREES = (4, 12, 20)
-#: Random blocks the histograms reconstruct at most: their time stops growing with the
-#: image (1,000 blocks of 12 x 12 are 144,000 pixels, smooth histograms).
-HISTOGRAM_BLOCKS = 1000
+#: Random blocks the histograms reconstruct at most (a fixed seed: the same blocks every
+#: time): their time stops growing with the image, and the degree-20 fit of a block is
+#: the cost (300 blocks of 12 x 12 are 43,200 pixels, some 700 a bin of the 64: smooth
+#: curves; seconds in benchmarks/bench_gui.py --plots).
+HISTOGRAM_BLOCKS = 300
 #: Pixels drawn at most in a scatter plot.
 MAX_POINTS = 20000
 #: What the variance plot and the component maps say of a result without PCA features.
@@ -114,6 +116,7 @@ def histogram_job(
 ) -> Generator[tuple[str, int, int], None, Any]:
     """Worker job: the reconstruction histograms of ``result`` (of at most
     :data:`HISTOGRAM_BLOCKS` random blocks)."""
+    yield "reconstructions", 0, 1
     hist = plots.result_histograms(result, degrees, max_blocks=HISTOGRAM_BLOCKS)
     yield "histograms", 1, 1
     return hist
@@ -148,6 +151,8 @@ class PlotsWidget(StackWidget):
         #: The pixel classifier of the chosen stack's segments (None: not from one).
         self.classifier: PixelClassifier | None = None
         self._source: Layer | None = None
+        #: The status line of the loaded segmentation (segments, components, notes).
+        self._summary = ""
         self.plot = ComboBox(
             label="plot", choices=list(PLOTS), value="scatter_dop", tooltip="What to plot"
         )
@@ -295,7 +300,8 @@ class PlotsWidget(StackWidget):
             parts.append(f"{result.features.shape[1]} components")
         else:
             parts.append(f"no PCA features ({result.method} without the thesis maps)")
-        self._done(" · ".join([*parts, *(notes or [])]))
+        self._summary = " · ".join([*parts, *(notes or [])])
+        self._set_progress(1, 1)  # loaded (a cached result ran no worker to say so)
         self.draw()
 
     def set_classifier(self, layer: Layer, classifier: PixelClassifier | None) -> None:
@@ -324,12 +330,14 @@ class PlotsWidget(StackWidget):
 
     # -- drawing -----------------------------------------------------------------------
     def draw(self, *_: Any) -> None:
-        """Draw the chosen plot into the canvas (a hint when there is nothing to plot)."""
+        """Draw the chosen plot into the canvas (a hint when there is nothing to plot);
+        the status line says what the canvas shows."""
         kind = self.plot.value
         result = self.result
         fig, theme = self.figure, self.theme
+        status = self._summary
         if kind == "importances":
-            self._draw_importances()
+            status = self._draw_importances()
         elif result is None:
             self._message("press 'Load segmentation' to plot the stack's last segmentation")
         elif kind in ("scatter_dop", "scatter_phase"):
@@ -343,6 +351,8 @@ class PlotsWidget(StackWidget):
             figures.explained_variance_figure(plots.explained_variance(result), fig, theme)
         elif self.histograms is not None:
             figures.histograms_figure(self.histograms, fig, theme)
+            degrees = ", ".join(map(str, self.histograms.reconstructed))
+            status = f"{self._summary} · histograms of Î and L = {degrees}"
         else:
             self._message("computing the reconstructions…")
             res = result
@@ -350,15 +360,16 @@ class PlotsWidget(StackWidget):
             def on_result(run_id: int, value: Any) -> None:
                 if self.result is res:
                     self.histograms = value
-                    self._done(
-                        f"histograms of Î and L = {', '.join(map(str, value.reconstructed))}"
-                    )
-                    self.draw()
+                    self.draw()  # the histograms, or the plot chosen meanwhile and its status
 
             self._submit(histogram_job, (result, HISTOGRAM_DEGREES), 1, on_result)
+            status = None  # the worker's stages
+        if status is not None:
+            self._set_status(status)
         self.canvas.draw_idle()
 
-    def _draw_importances(self) -> None:
+    def _draw_importances(self) -> str:
+        """Draw the feature importances (or say why there are none); the status line."""
         clf = self.classifier
         if clf is None:
             clf = self.classifier = self._segment_widget_classifier()
@@ -367,19 +378,24 @@ class PlotsWidget(StackWidget):
                 "no pixel classifier: paint scribbles (or load a classifier) in 'Segment "
                 "by material', or press 'Load segmentation'"
             )
-            return
+            return "no pixel classifier behind the segments"
         data = plots.feature_importances(clf.importances(), TOP_FEATURES)
         if not data.names:
             self._message(f"the {clf.params.model} classifier has no feature importances")
-            return
+            return f"the {clf.params.model} classifier has no feature importances"
         figures.importances_figure(data, self.figure, self.theme)
+        return (
+            f"feature importances of the {clf.params.model} classifier: the top "
+            f"{len(data.names)} of {data.n_features} features"
+        )
 
     def _message(self, text: str) -> None:
         show_message(self.figure, self.theme, text)
 
     # -- component layers --------------------------------------------------------------
     def add_component_maps(self, *_: Any) -> list[Layer]:
-        """Add (or replace in place) the first principal components as image layers."""
+        """Add (or replace in place) the first principal components as image layers; new
+        ones go below the segments and scribbles (:func:`~._layers.below_labels`)."""
         if self.result is None or self._source is None or self._source not in self._viewer.layers:
             self._fail(PolarsegError("load a segmentation first"))
             return []
@@ -413,6 +429,7 @@ class PlotsWidget(StackWidget):
                     translate=tuple(source.translate[-2:]),
                     visible=i == 0,
                 )
+                below_labels(self._viewer, layer, source)  # not over segments, scribbles
             out.append(layer)
         self._done(f"added {len(out)} component maps")
         return out

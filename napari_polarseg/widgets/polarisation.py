@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Generator
 from typing import TYPE_CHECKING, Any
 
@@ -16,9 +17,9 @@ from ..engine import (
 from ..engine.params import SegmentParams
 from ..engine.physics.stokes import stokes_components
 from ._base import StackWidget
-from ._layers import find_output, show_output, source_key
+from ._layers import contrasts_of, find_output, show_output, source_key
 from .param_controls import param_controls
-from .views import VIEW_OUTPUTS, show_views, view_mode_box
+from .views import VIEW_OUTPUTS, composite_for, show_views, view_mode_box
 
 if TYPE_CHECKING:
     import napari
@@ -40,15 +41,25 @@ def polarisation_status(name: str, n_clamped: int, model: str) -> str:
 
 
 def polarisation_job(
-    data: Any, angles_rad: np.ndarray, refractive_index: float, model: str, branch: str
+    data: Any,
+    angles_rad: np.ndarray,
+    refractive_index: float,
+    model: str,
+    branch: str,
+    dolp_max: float = 0.0,
+    mode: str = "intensity",
 ) -> Generator[tuple[str, int, int], None, dict[str, Any]]:
-    """Worker job: the engine's polarisation image, then zenith from ρ (radians)."""
+    """Worker job: the engine's polarisation image, then zenith from ρ (radians), the
+    Stokes components, the HSV composite (ρ_max ``dolp_max``, 0 = automatic, in view
+    ``mode``) and the contrast of every image (``"contrast"``: role →
+    :class:`~._layers.Contrast`), so that showing them computes nothing on the GUI
+    thread."""
     pol = polarisation_image(np.asarray(data), angles_rad)
-    yield "polarisation", 1, 2
+    yield "polarisation", 1, 3
     est = zenith_from_dop(pol.dop, refractive_index, model, branch)
     s0, s1, s2 = stokes_components(pol.intensity, pol.dop, pol.phase)
-    yield "zenith", 2, 2
-    return {
+    yield "zenith", 2, 3
+    out = {
         "intensity": pol.intensity,
         "dop": pol.dop,
         "phase": pol.phase,
@@ -59,6 +70,12 @@ def polarisation_job(
         "n_clamped": est.n_clamped,
         "n_invalid": int(np.count_nonzero(pol.invalid)),
     }
+    rgb, rho_max = composite_for(pol.intensity, pol.dop, pol.phase, dolp_max, mode)
+    out["hsv"] = rgb
+    out["composite"] = {"dolp_max": dolp_max, "mode": mode, "rho_max": rho_max}
+    out["contrast"] = contrasts_of({role: out[role] for role in OUTPUTS + VIEW_OUTPUTS})
+    yield "contrast", 3, 3
+    return out
 
 
 class PolarisationWidget(StackWidget):
@@ -161,6 +178,8 @@ class PolarisationWidget(StackWidget):
             float(self.refractive_index.value),
             self.model.value,
             self.specular_branch.value,
+            float(self.dolp_max.value),
+            str(self.view_mode.value),
         )
 
         def on_result(run_id: int, out: dict[str, Any]) -> None:
@@ -173,12 +192,41 @@ class PolarisationWidget(StackWidget):
                 "model": args[3],
                 "specular_branch": args[4],
             }
-            for role in OUTPUTS + VIEW_OUTPUTS[:-1]:
-                show_output(self._viewer, role, out[role], layer, {"polarseg_params": meta})
             present = {source_key(x) for x in self._viewer.layers}
             self._views_input = {k: v for k, v in self._views_input.items() if k in present}
             self._views_input[source_key(layer)] = (out["intensity"], out["dop"], out["phase"])
-            self.show_composite(layer)
+            # one layer per event-loop turn, with the worker's contrast limits
+            for role in OUTPUTS + VIEW_OUTPUTS[:-1]:
+                self._later.put(
+                    (role, source_key(layer)),
+                    functools.partial(self._show_role, layer, role, out, meta),
+                )
+            self._later.put(
+                ("hsv", source_key(layer)), functools.partial(self._show_hsv, layer, out, meta)
+            )
             self._done(polarisation_status(layer.name, out["n_clamped"], args[3]))
 
-        self._submit(polarisation_job, args, 2, on_result)
+        self._submit(polarisation_job, args, 3, on_result)
+
+    def _show_role(self, layer: Any, role: str, out: dict[str, Any], meta: dict) -> None:
+        """Add/update the ``role`` layer of a result (if its stack is still there)."""
+        if layer in self._viewer.layers:
+            metadata = {"polarseg_params": meta}
+            contrast = out["contrast"].get(role)
+            show_output(self._viewer, role, out[role], layer, metadata, contrast)
+
+    def _show_hsv(self, layer: Any, out: dict[str, Any], meta: dict) -> None:
+        """The HSV layer of a result: the worker's composite while the *DoLP maximum* and
+        the *HSV view* are as the run had them, else drawn again."""
+        if layer not in self._viewer.layers:
+            return
+        made = out["composite"]
+        if (made["dolp_max"], made["mode"]) != (
+            float(self.dolp_max.value),
+            str(self.view_mode.value),
+        ):
+            self.show_composite(layer)
+            return
+        how = {"polarseg_composite": {"dolp_max": made["rho_max"], "mode": made["mode"]}}
+        metadata = {"polarseg_params": meta, **how}
+        show_output(self._viewer, "hsv", out["hsv"], layer, metadata, out["contrast"]["hsv"])

@@ -31,7 +31,7 @@ from .param_controls import controlled_names
 from .segment_assist import ScribbleAssist
 from .segment_files import ClassifierFiles, ResultExport
 from .segment_inputs import CUT_ONLY, NO_MASK, NO_SCRIBBLES, MaskAndScribbles, Snapshot
-from .segment_layers import ResultLayers, ShownEntry
+from .segment_layers import ResultLayers, ShownEntry, WithContrast, with_contrast
 from .segment_params import ParameterControls
 from .session import (
     ClassifierOutput,
@@ -389,7 +389,10 @@ class SegmentWidget(ResultLayers, MaskAndScribbles, StackWidget, SegmentDock):
 
     def _waiting(self) -> bool:
         return (
-            self._timer.isActive() or self.export.slot.busy or self.classifier_files.slot.busy
+            super()._waiting()
+            or self._timer.isActive()
+            or self.export.slot.busy
+            or self.classifier_files.slot.busy
         )
 
     # -- running ----------------------------------------------------------------------
@@ -470,7 +473,9 @@ class SegmentWidget(ResultLayers, MaskAndScribbles, StackWidget, SegmentDock):
         # a new stroke or request stops the prediction, or the method's stage, at once
         on_result = functools.partial(self._on_result, delivery)
         on_partial = functools.partial(self._on_partial, delivery)
-        job, args, total = request.job, request.args, request.total
+        # the contrast of the maps it adds is computed in the worker too
+        job = with_contrast(request.job, self._contrast_memo)
+        args, total = request.args, request.total
         self._submit(job, args, total, on_result, on_partial, self._live_run, True, request.reports)
 
     def _reshow(self, layer: Layer, snap: Snapshot) -> bool:
@@ -508,6 +513,9 @@ class SegmentWidget(ResultLayers, MaskAndScribbles, StackWidget, SegmentDock):
 
     def _on_result(self, run: Delivery, run_id: int, result: Any) -> None:
         """A run's result (GUI thread): shown unless the inputs changed meanwhile."""
+        contrast: dict[str, Any] = {}
+        if isinstance(result, WithContrast):
+            result, contrast = result.value, result.contrast
         if run.snap != self.snapshot() or run.layer not in self._viewer.layers:
             self._set_status("result dropped: the parameters changed while it was computed")
             return
@@ -515,7 +523,9 @@ class SegmentWidget(ResultLayers, MaskAndScribbles, StackWidget, SegmentDock):
             where = "scribbles" if result.trained else "classifier"
             self._set_status(f"{where}: {result.problem}")
             return
-        self._show(run.layer, run.angles_deg, result, run.seconds(), run.inputs, False, run.snap)
+        self._show(
+            run.layer, run.angles_deg, result, run.seconds(), run.inputs, False, run.snap, contrast
+        )
 
     def _on_partial(self, run: Delivery, run_id: int, result: Any) -> None:
         """The segments (or classes) before the error map; dropped like a result."""

@@ -112,11 +112,12 @@ class MaskAndScribbles(WidgetPart):
         self.scribbles_layer = self._labels_box(
             "scribbles",
             NO_SCRIBBLES,
-            "Strokes per material in a Labels layer of the stack's height x width "
-            "(0 = unlabelled, 1, 2, … = materials, at least two): a pixel classifier "
-            "(random forest on multi-scale polarisation features) trained on the "
-            "scribbled pixels replaces the normalized cut; with live update every stroke "
-            "retrains it",
+            "Paint a few strokes on each material and every pixel gets the material it "
+            "resembles most: the segments follow your strokes.\n\nDetails: a Labels "
+            "layer of the stack's height x width (0 = unlabelled, 1, 2, … = materials, at "
+            "least two); a pixel classifier (random forest on multi-scale polarisation "
+            "features) trained on the scribbled pixels replaces the unsupervised method; "
+            "with live update every stroke retrains it",
         )
         #: The named materials of the chosen scribbles layer (brush class, swatch, name).
         self.materials = MaterialList(changed=self._on_materials_renamed)

@@ -3,7 +3,8 @@ error map, diagnostics, class probability and uncertainty, the HSV and Stokes vi
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Callable, Generator
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -11,8 +12,9 @@ from magicgui.widgets import CheckBox
 
 from ..engine.physics.stokes import stokes_components
 from ._base import WidgetPart
-from ._layers import find_output, remove_output, show_output, source_key
-from .session import ClassifierOutput, ShownResult, named_output, shown_result
+from ._layers import Contrast, contrasts_of, find_output, remove_output, show_output, source_key
+from .layer_queue import LayerQueue
+from .session import ClassifierOutput, Result, ShownResult, named_output, shown_result
 from .views import VIEW_OUTPUTS, composite_for, view_mode_box
 
 if TYPE_CHECKING:
@@ -31,6 +33,70 @@ class ShownEntry:
     snap: Any = None
 
 
+@dataclass(frozen=True)
+class WithContrast:
+    """A job's result and the contrast of its image maps, computed in the worker
+    (:func:`with_contrast`): showing it runs no percentile on the GUI thread."""
+
+    value: Any
+    contrast: dict[str, Contrast] = field(default_factory=dict)
+
+
+#: Per role, the last map :func:`result_contrast` measured and its contrast: a rerun that
+#: keeps the map (e.g. only the number of segments changed) reuses it.
+ContrastMemo = dict[str, tuple[np.ndarray, Contrast]]
+
+
+def result_contrast(value: Any, memo: ContrastMemo | None = None) -> WithContrast:
+    """``value`` (a SegmentationResult or a ClassifierOutput) with the contrast of its
+    error map and fit residual (:func:`~._layers.contrast_of`; from ``memo`` for the
+    very array measured last time); none for a classifier output that reports a problem
+    (it has no result)."""
+    if getattr(value, "problem", None) is not None:
+        return WithContrast(value)
+    result = getattr(value, "result", value)
+    arrays = {
+        "error": getattr(result, "reconstruction_error", None),
+        "residual": getattr(result, "residual", None),
+    }
+    memo = {} if memo is None else memo
+    contrast = {}
+    for role, data in arrays.items():
+        if data is None:
+            continue
+        kept = memo.get(role)
+        if kept is None or kept[0] is not data:
+            kept = memo[role] = (data, contrasts_of({role: data})[role])
+        contrast[role] = kept[1]
+    return WithContrast(value, contrast)
+
+
+def with_contrast(
+    job: Callable[..., Generator[Any, Any, Any]], memo: ContrastMemo | None = None
+) -> Callable[..., Any]:
+    """The worker ``job`` whose result (returned, or yielded as a
+    :class:`~.session.Result` before idle-time work) comes as a :class:`WithContrast`
+    (``memo``: see :func:`result_contrast`); its stages and partial results pass as they
+    are."""
+
+    def wrapped(*args: Any, **kwargs: Any) -> Generator[Any, Any, Any]:
+        gen = job(*args, **kwargs)
+        sent: Any = None
+        try:
+            while True:
+                try:
+                    item = gen.send(sent)
+                except StopIteration as stop:
+                    return result_contrast(stop.value, memo)
+                if isinstance(item, Result):
+                    item = Result(result_contrast(item.value, memo))
+                sent = yield item
+        finally:
+            gen.close()
+
+    return wrapped
+
+
 class ResultLayers(WidgetPart):
     """Mixin of :class:`~napari_polarseg.widgets.segment.SegmentWidget`: the layers of
     its results and the *HSV and Stokes layers* option.
@@ -41,6 +107,7 @@ class ResultLayers(WidgetPart):
     """
 
     _shown: dict[str, ShownEntry]
+    _later: LayerQueue
     classifier_files: Any
     export: Any
     materials: Any
@@ -57,6 +124,9 @@ class ResultLayers(WidgetPart):
         #: Per stack key: the fit residual the diagnostics layers show (the cached
         #: polarisation image's array: the same object while the image is unchanged).
         self._diagnostics: dict[str, Any] = {}
+        #: The contrast of the maps the last worker measured (only workers touch it; one
+        #: runs at a time), reused while a map is the same array.
+        self._contrast_memo: ContrastMemo = {}
         self.views = CheckBox(
             text="HSV and Stokes layers",
             value=False,
@@ -74,8 +144,14 @@ class ResultLayers(WidgetPart):
         inputs: dict[str, Any] | None = None,
         partial: bool = False,
         snap: Any = None,
+        contrast: dict[str, Contrast] | None = None,
     ) -> None:
         """Show a run's layers and summary.
+
+        The segments are shown at once; the other layers (class probability and
+        uncertainty, and those of a complete result) are added one per event-loop turn
+        (``_later``), with the contrast the worker computed (``contrast``,
+        :func:`with_contrast`).
 
         A ``partial`` result (no reconstruction yet: the worker yielded it before its last
         stage) updates the segments (and class probability, uncertainty) layers and the
@@ -91,16 +167,24 @@ class ResultLayers(WidgetPart):
         shown = shown_result(result, angles_deg, inputs, partial)
         meta, out = shown.meta, shown.out
         if not shown.partial:
-            self._show_complete(layer, shown)
+            self._show_complete(layer, shown, contrast or {})
         if out is not None:
             prediction = out.prediction
-            self._show_below_segments("probability", shown.confidence, layer, meta)
-            self._show_below_segments("uncertainty", prediction.uncertainty, layer, meta)
+            # hidden maps with fixed limits: added in later turns, after the segments
+            for role, data in (
+                ("probability", shown.confidence),
+                ("uncertainty", prediction.uncertainty),
+            ):
+                self._queue(
+                    role,
+                    layer,
+                    lambda role=role, data=data: self._show_below_segments(role, data, layer, meta),
+                )
             self.probabilities, self.classes = prediction.probabilities, prediction.classes
             self.uncertainty = prediction.uncertainty
         else:
             for role in ("probability", "uncertainty"):  # they would be stale
-                remove_output(self._viewer, role, layer)
+                self._queue(role, layer, lambda role=role: remove_output(self._viewer, role, layer))
             self.probabilities, self.classes, self.uncertainty = None, None, None
         segments = find_output(self._viewer, "segments", layer)
         if segments is not None and np.array_equal(segments.data, shown.labels):
@@ -116,29 +200,57 @@ class ResultLayers(WidgetPart):
         self.export.record(layer, angles_deg, shown)
         self._done(shown.status(seconds))
 
-    def _show_complete(self, layer: Layer, shown: ShownResult) -> None:
-        """The layers of a complete result below the segments: the error map, the
-        diagnostics (masked pixels, fit residual) and the HSV and Stokes views."""
+    def _queue(self, role: str, layer: Layer, action: Callable[[], Any]) -> None:
+        """Run ``action`` (which adds or updates ``layer``'s ``role`` layer) in a later
+        event-loop turn, if ``layer`` is still in the viewer then; it replaces an action
+        of the same role and stack still pending (an older result's)."""
+        viewer = self._viewer
+
+        def when_present() -> None:
+            if layer in viewer.layers:
+                action()
+
+        self._later.put((role, source_key(layer)), when_present)
+
+    def _show_complete(
+        self, layer: Layer, shown: ShownResult, contrast: dict[str, Contrast]
+    ) -> None:
+        """The layers of a complete result below the segments, one per event-loop turn:
+        the error map, the diagnostics (masked pixels, fit residual) and the HSV and
+        Stokes views."""
         result, meta = shown.result, shown.meta
         if result.reconstruction_error is None:
             # a run without the thesis maps: an error map of earlier parameters would
             # pass for this result's
-            remove_output(self._viewer, "error", layer)
+            self._queue("error", layer, lambda: remove_output(self._viewer, "error", layer))
         else:
             # the error map (added hidden) goes below the segments, which overlay the stack
-            error = np.array(result.reconstruction_error)
-            self._show_below_segments("error", error, layer, meta)
+            error = np.asarray(result.reconstruction_error)
+            self._queue(
+                "error",
+                layer,
+                lambda: self._show_below_segments(
+                    "error", error, layer, meta, contrast.get("error")
+                ),
+            )
         masked = shown.masked()
         if self._shows_diagnostics(layer, result, masked):
-            self._show_diagnostics(layer, result, masked, meta)
+            self._show_diagnostics(layer, result, masked, meta, contrast.get("residual"))
         if self.views.value:
             self._show_views(layer, result, meta)
 
-    def _show_below_segments(self, role: str, data: np.ndarray, layer: Layer, meta: dict) -> None:
+    def _show_below_segments(
+        self,
+        role: str,
+        data: np.ndarray,
+        layer: Layer,
+        meta: dict,
+        contrast: Contrast | None = None,
+    ) -> None:
         """Add/update the ``role`` layer; a new one goes just below the segments (which a
         partial result may have shown first), an existing one keeps its place."""
         new = find_output(self._viewer, role, layer) is None
-        shown = show_output(self._viewer, role, data, layer, meta)
+        shown = show_output(self._viewer, role, data, layer, meta, contrast)
         segments = find_output(self._viewer, "segments", layer)
         if new and segments is not None:
             layers = self._viewer.layers
@@ -147,19 +259,31 @@ class ResultLayers(WidgetPart):
                 layers.move(layers.index(shown), below)
 
     def _show_diagnostics(
-        self, layer: Layer, result: Any, masked: np.ndarray, meta: dict[str, Any]
+        self,
+        layer: Layer,
+        result: Any,
+        masked: np.ndarray,
+        meta: dict[str, Any],
+        contrast: Contrast | None = None,
     ) -> None:
-        """Add/update ``fit residual`` and ``masked pixels``; when both show the same
-        polarisation image already (a rerun that changed e.g. only the number of
-        segments), only their metadata follow."""
+        """Add/update ``fit residual`` and ``masked pixels`` (queued, one per turn);
+        when both show the same polarisation image already (a rerun that changed e.g.
+        only the number of segments), only their metadata follow."""
         key, roles = source_key(layer), ("residual", "masked")
         found = [find_output(self._viewer, role, layer) for role in roles]
         if self._diagnostics.get(key) is result.residual and all(found):
             for shown in found:
                 shown.metadata = {**shown.metadata, **meta}
             return
-        self._show_below_segments("residual", np.array(result.residual), layer, meta)
-        self._show_below_segments("masked", masked, layer, meta)
+        residual = np.asarray(result.residual)
+        self._queue(
+            "residual",
+            layer,
+            lambda: self._show_below_segments("residual", residual, layer, meta, contrast),
+        )
+        self._queue(
+            "masked", layer, lambda: self._show_below_segments("masked", masked, layer, meta)
+        )
         self._diagnostics[key] = result.residual
 
     def _shows_diagnostics(self, layer: Layer, result: Any, masked: np.ndarray) -> bool:
@@ -191,11 +315,19 @@ class ResultLayers(WidgetPart):
         below the segments; the Polarisation image widget shares these layers."""
         arrays = (np.asarray(result.intensity), np.asarray(result.dop), np.asarray(result.phase))
         for role, data in zip(VIEW_OUTPUTS[:-1], stokes_components(*arrays), strict=True):
-            self._show_below_segments(role, data, layer, meta)
+            self._queue(
+                role,
+                layer,
+                lambda role=role, data=data: self._show_below_segments(role, data, layer, meta),
+            )
         mode = str(self.view_mode.value)
-        rgb, rho_max = composite_for(*arrays, 0.0, mode)
-        composite = {"polarseg_composite": {"dolp_max": rho_max, "mode": mode}}
-        self._show_below_segments("hsv", rgb, layer, {**meta, **composite})
+
+        def composite() -> None:
+            rgb, rho_max = composite_for(*arrays, 0.0, mode)
+            how = {"polarseg_composite": {"dolp_max": rho_max, "mode": mode}}
+            self._show_below_segments("hsv", rgb, layer, {**meta, **how})
+
+        self._queue("hsv", layer, composite)
 
 
 def _values_names(out: ClassifierOutput) -> tuple[tuple[int, ...], tuple[str, ...]]:

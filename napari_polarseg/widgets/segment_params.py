@@ -22,6 +22,12 @@ if TYPE_CHECKING:
     from magicgui.widgets.bases import ValueWidget
     from qtpy.QtWidgets import QWidget
 
+#: Tooltip of the preset menu: what a preset does to the controls, then each preset.
+PRESET_TOOLTIP = (
+    "Sets every parameter to a tested starting point; change any control afterwards.\n\n"
+    + "\n".join(f"{name}: {text}" for name, text in PRESET_HELP.items())
+)
+
 #: Text of the option that adds the thesis maps and the error map to other methods' runs.
 THESIS_MAPS_TEXT = "thesis maps and error map"
 
@@ -60,7 +66,7 @@ class ParameterControls:
             label="preset",
             choices=list(PRESETS),
             value=DEFAULT_PRESET,
-            tooltip="; ".join(f"{name}: {text}" for name, text in PRESET_HELP.items()),
+            tooltip=PRESET_TOOLTIP,
         )
         self.load_button = PushButton(
             text="Load parameters…",
@@ -89,11 +95,11 @@ class ParameterControls:
         self.thesis_maps = CheckBox(
             text=THESIS_MAPS_TEXT,
             value=False,
-            tooltip="Also compute the thesis maps (harmonic coefficients, PCA features: the "
-            "plots' explained variance and component maps) and the reconstruction-error "
-            "layer with another method than the thesis one. Off: those runs compute none "
-            "of them (faster), and the error layer is removed. The thesis method always "
-            "computes them",
+            tooltip="Also add the reconstruction-error layer and the maps the Polarisation "
+            "plots draw when another method than thesis runs (slower).\n\nDetails: the "
+            "thesis maps are the harmonic coefficients and PCA features (the plots' "
+            "explained variance and component maps). Off: those runs compute none of them, "
+            "and the error layer is removed. The thesis method always computes them",
         )
         self._maps_choice = False  # the option's value for the other methods
         self.parameter_widgets: list[Widget] = [getattr(self, n) for n in self.controlled]

@@ -4,7 +4,7 @@ offer the light and dark variants of the HSV view (issue 14, item 6)."""
 from __future__ import annotations
 
 import numpy as np
-from _gui_helpers import error_messages, run_and_wait
+from _gui_helpers import error_messages, run_and_wait, wait_idle
 
 from napari_polarseg.engine import polarisation_image
 from napari_polarseg.engine.analysis.views import (
@@ -33,6 +33,7 @@ def test_segment_widget_adds_views_in_the_chosen_hsv_variant(
     assert widget.output("hsv") is None  # off by default: the layer list stays short
     widget.views.value = True  # draws the shown result's views at once, no rerun
     widget.view_mode.value = "dark"
+    wait_idle(qtbot, widget)  # the layers come one per event-loop turn
     result = widget.shown_result(stack)
     hsv = widget.output("hsv")
     assert hsv is not None and hsv.rgb and hsv.metadata[TAG]["role"] == "hsv"
@@ -53,6 +54,7 @@ def test_segment_widget_adds_views_in_the_chosen_hsv_variant(
     # another variant redraws the same layer in place, without a rerun
     calls = dict(widget.pipeline.calls)
     widget.view_mode.value = "light"
+    wait_idle(qtbot, widget)
     assert widget.output("hsv") is hsv and dict(widget.pipeline.calls) == calls
     np.testing.assert_array_equal(hsv.data, _composite(result, "light"))
     # a rerun updates the views with the new result

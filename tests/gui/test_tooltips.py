@@ -60,3 +60,40 @@ def test_every_control_has_a_tooltip(viewer, add_widget, name):
         if not c.native.toolTip().strip()
     ]
     assert missing == [], f"{name}: no tooltip on {missing}"
+
+
+#: Words of the thesis that a control's first line (what it does to the result) avoids.
+JARGON = (
+    "eq.",
+    "thesis section",
+    "Gram",
+    "Mahalanobis",
+    "IRLS",
+    "Ncut",
+    "normalized cut",
+    "eigen",
+    "harmonic",
+    "PCA",
+    "spherical",
+    "Fresnel",
+    "Tukey",
+    "(L+1)",
+)
+
+
+def test_segment_tooltips_lead_with_what_a_control_does(viewer, add_widget):
+    # issue 25: the Segment widget's tooltips were long and full of thesis words
+    from napari_polarseg.widgets.param_controls import EFFECTS
+
+    widget = add_widget("Segment by material")
+    assert set(widget.controlled) <= set(EFFECTS)
+    for name in widget.controlled:
+        tip = getattr(widget, name).native.toolTip()
+        assert tip.startswith(EFFECTS[name]), name
+        assert "Details:" in tip  # the technical help follows
+    for control in _controls(widget):
+        lead = control.native.toolTip().split("\n\n")[0]
+        label = getattr(control, "label", "") or getattr(control, "text", "") or control.name
+        assert len(lead.split()) <= 45, f"{label}: {lead!r}"
+        found = [word for word in JARGON if word.lower() in lead.lower()]
+        assert found == [], f"{label}: {found} in {lead!r}"
