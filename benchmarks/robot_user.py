@@ -16,9 +16,9 @@ update (training plus predicting the whole image) and the one-off feature second
 
 Rows (methods):
 
-- ``product``: the project's pixel classifier (``PixelSegmenter`` features of the
-  pipeline's polarisation image, computed once per scene; ``train_pixel_classifier``
-  and ``predict_pixels`` with the default parameters and smoothing);
+- ``product``: the project's scribble loop (``ScribbleSession`` on the pipeline's
+  polarisation image: features computed once per scene, each update retrains and
+  predicts coarse to fine, default parameters and smoothing);
 - ``plain RF``: the plain baseline's 20 smoothed polarisation features
   (``baselines.plain_features``) and a random forest of 100 trees;
 - ``ilastik RF``: ilastik's default filter bank on the raw angle frames
@@ -213,18 +213,15 @@ def forest_update(features: np.ndarray) -> Update:
 
 
 def product_update(pipe) -> Update:
-    """The project's pixel classifier: features and guide computed once."""
-    from napari_polarseg.engine.analysis.pixel_classifier import predict_pixels
-    from napari_polarseg.engine.analysis.pixel_segmentation import PixelSegmenter
+    """The project's scribble loop (``ScribbleSession``: features computed once, each
+    update retrains and predicts coarse to fine with the default parameters)."""
+    from napari_polarseg.engine import ScribbleSession
 
-    segmenter = PixelSegmenter(pipe)
-    features = segmenter.features()
-    guide = segmenter.guide()
+    session = ScribbleSession.on_pipeline(pipe)
+    session.features()
 
     def update(scribbles: np.ndarray) -> np.ndarray:
-        classifier = segmenter.train(scribbles)
-        prediction = predict_pixels(classifier, features, guide=guide)
-        return classifier.classes[prediction.labels]
+        return session.update(scribbles)
 
     return update
 

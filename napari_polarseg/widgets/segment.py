@@ -381,9 +381,7 @@ class SegmentWidget(ResultLayers, MaskAndScribbles, StackWidget, SegmentDock):
             self._live_run = False
 
     def _waiting(self) -> bool:
-        return (
-            self._timer.isActive() or self.export.slot.busy or self.classifier_files.slot.busy
-        )
+        return self._timer.isActive() or self.export.slot.busy or self.classifier_files.slot.busy
 
     # -- running ----------------------------------------------------------------------
     def run(self, *_: Any) -> None:

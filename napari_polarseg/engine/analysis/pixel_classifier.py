@@ -113,6 +113,10 @@ class PixelClassifier:
     params : ClassifierParams
     n_training_pixels : int
         Scribbled pixels the model was fitted on (after sampling).
+    n_scribbled_pixels : int
+        Scribbled (valid) pixels there were before sampling; 0 when not known (a
+        loaded classifier). More than ``n_training_pixels`` when
+        ``params.max_pixels_per_class`` sampled them (:attr:`subsampled`).
     """
 
     model: Any
@@ -121,6 +125,22 @@ class PixelClassifier:
     feature_params: PixelFeatureParams
     params: ClassifierParams
     n_training_pixels: int
+    n_scribbled_pixels: int = 0
+
+    @property
+    def subsampled(self) -> bool:
+        """True when fewer pixels trained the model than were scribbled."""
+        return self.n_scribbled_pixels > self.n_training_pixels
+
+    def training_text(self) -> str:
+        """``"1200 training pixels"``, or when sampled ``"10000 of 23456 scribbled pixels
+        train (a sample: at most 5000 per material)"``."""
+        if not self.subsampled:
+            return f"{self.n_training_pixels} training pixels"
+        return (
+            f"{self.n_training_pixels} of {self.n_scribbled_pixels} scribbled pixels train "
+            f"(a sample: at most {self.params.max_pixels_per_class} per material)"
+        )
 
     def importances(self) -> dict[str, float]:
         """Feature name → importance (impurity decrease, summing to 1), largest first.
@@ -295,6 +315,9 @@ def train_pixel_classifier(
     params = params or ClassifierParams()
     s = check_scribbles(scribbles, features.shape)
     index, values = training_pixels(s, params, valid)
+    marked = s.ravel() > 0
+    if valid is not None:
+        marked &= np.asarray(valid, dtype=bool).ravel()
     x = features.take(index)
     model = make_model(params)
     with warnings.catch_warnings():
@@ -307,6 +330,7 @@ def train_pixel_classifier(
         feature_params=features.params,
         params=params,
         n_training_pixels=int(index.size),
+        n_scribbled_pixels=int(np.count_nonzero(marked)),
     )
 
 
