@@ -23,13 +23,15 @@ from typing import Any
 import numpy as np
 from scipy import ndimage
 
-from ..errors import Cancelled, PolarsegError
+from ..errors import PolarsegError
 from ..features.pixel_features import FeatureStack, PixelFeatureParams
+from .refined_prediction import refined_probabilities
 
 #: Classifier kinds of :class:`ClassifierParams`.
 MODELS = ("random_forest", "extra_trees", "hist_gradient_boosting")
-#: Image rows predicted per chunk are chosen so a chunk holds about this many pixels.
-PREDICT_CHUNK_PIXELS = 131_072
+#: Grid step (pixels) of the coarse-to-fine prediction the segmenters use
+#: (:mod:`.refined_prediction`; 1 = every pixel on its own features).
+PREDICTION_STRIDE = 4
 
 
 @dataclass(frozen=True)
@@ -199,12 +201,15 @@ class PixelPrediction:
         1 − (p_(1) − p_(2)) in [0, 1] (module docstring).
     classes : ndarray (K,) of int
         Scribble value of each label.
+    n_predicted : int
+        Pixels whose own features were predicted (all of them unless coarse to fine).
     """
 
     labels: np.ndarray
     probabilities: np.ndarray
     uncertainty: np.ndarray
     classes: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    n_predicted: int = 0
 
 
 def check_scribbles(scribbles: Any, shape: tuple[int, int] | None = None) -> np.ndarray:
@@ -390,6 +395,8 @@ def predict_pixels(
     features: FeatureStack,
     guide: np.ndarray | None = None,
     cancel: Any = None,
+    stride: int = 1,
+    coarse: np.ndarray | None = None,
 ) -> PixelPrediction:
     """Class probabilities, labels and uncertainty of every pixel.
 
@@ -403,25 +410,25 @@ def predict_pixels(
         ``smoothing`` > 0.
     cancel : callable, optional
         Called between chunks; returning True raises :class:`Cancelled`.
+    stride : int
+        1: every pixel predicted on its own features; s > 1: coarse to fine, the
+        samples of a grid of step s then every pixel of the grid cells on a border
+        between classes (:mod:`.refined_prediction`).
+    coarse : array (K, ⌈H/s⌉, ⌈W/s⌉), optional
+        The grid's probabilities when already predicted (by this classifier).
     """
     if tuple(features.names) != tuple(classifier.feature_names):
         missing = [n for n in classifier.feature_names if n not in features.names]
         detail = f"missing {', '.join(missing[:3])}" if missing else "in another order"
         raise PolarsegError(f"the image's features do not match the classifier's ({detail})")
-    h, w = features.shape
-    k = classifier.classes.size
-    proba = np.empty((k, h, w), dtype=np.float32)
-    step = max(1, PREDICT_CHUNK_PIXELS // max(w, 1))
-    for start in range(0, h, step):
-        if cancel is not None and cancel():
-            raise Cancelled("prediction cancelled")
-        stop = min(h, start + step)
-        p = classifier.model.predict_proba(features.rows(start, stop))
-        proba[:, start:stop] = p.T.reshape(k, stop - start, w)
+    out = refined_probabilities(classifier.model, features, stride, cancel, coarse)
+    proba = out.probabilities
     radius = classifier.params.smoothing
     if radius > 0:
         if guide is None:
             raise PolarsegError("edge-aware smoothing needs a guide image")
         proba = smooth_probabilities(proba, guide, radius)
     labels = np.argmax(proba, axis=0).astype(np.int32)
-    return PixelPrediction(labels, proba, margin_uncertainty(proba), classifier.classes)
+    return PixelPrediction(
+        labels, proba, margin_uncertainty(proba), classifier.classes, out.n_predicted
+    )

@@ -68,6 +68,15 @@ def border_cells(labels: np.ndarray) -> np.ndarray:
     return high != low
 
 
+def upsampled(coarse: np.ndarray, stride: int, shape: tuple[int, int]) -> np.ndarray:
+    """(K, H, W) C-contiguous float32: every plane of ``coarse`` (K, h', w') linearly
+    interpolated from the grid of ``stride`` to ``shape``."""
+    out = np.empty((coarse.shape[0], *shape), dtype=np.float32)
+    for k, plane in enumerate(coarse):
+        out[k] = upsample(plane, stride, shape)
+    return out
+
+
 def grid_index(shape: tuple[int, int], stride: int) -> tuple[np.ndarray, np.ndarray]:
     """Rows and columns of the grid samples of ``stride`` in an image of ``shape``
     (:meth:`~..features.pixel_features.FeatureStack.grid_rows`'s pixels)."""
@@ -123,7 +132,7 @@ def refined_probabilities(
         return RefinedProbabilities(proba, h * w)
     if coarse is None:
         coarse = grid_probabilities(model, features, s, cancel)
-    proba = np.stack([upsample(p, s, (h, w)) for p in coarse])
+    proba = upsampled(coarse, s, (h, w))
     cells = border_cells(np.argmax(coarse, axis=0))
     rows, cols = np.nonzero(cells)
     # every pixel of every border cell, flat row-major indices inside the image

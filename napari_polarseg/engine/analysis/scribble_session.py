@@ -28,19 +28,21 @@ from typing import Any
 import numpy as np
 
 from ..errors import PolarsegError
-from ..features.pixel_features import FeatureStack, PixelFeatureParams, upsample
+from ..features.pixel_features import FeatureStack, PixelFeatureParams
 from ..params import SegmentParams
 from ..pipeline import Pipeline
 from ..timing import timed
 from .pixel_classifier import (
+    PREDICTION_STRIDE,
     ClassifierParams,
     PixelClassifier,
     PixelPrediction,
     margin_uncertainty,
+    predict_pixels,
     smooth_probabilities,
 )
 from .pixel_segmentation import PixelSegmentation, PixelSegmenter
-from .refined_prediction import grid_index, grid_probabilities, refined_probabilities
+from .refined_prediction import grid_index, grid_probabilities, upsampled
 
 
 @dataclass(frozen=True)
@@ -54,7 +56,7 @@ class PredictionParams:
         1 = predict every pixel on its own features.
     """
 
-    stride: int = 4
+    stride: int = PREDICTION_STRIDE
 
     def __post_init__(self) -> None:
         if int(self.stride) < 1:
@@ -121,7 +123,8 @@ class ScribbleSession:
             angles = np.deg2rad(np.asarray(self.angles_deg, dtype=float))
             self.pipeline = Pipeline(np.asarray(self.stack), angles, self.segment_params)
         self.segment_params = self.segment_params or self.pipeline.params
-        self.segmenter = PixelSegmenter(self.pipeline, colour_stack=self.colour_stack)
+        stride = int(self.prediction_params.stride)
+        self.segmenter = PixelSegmenter(self.pipeline, self.colour_stack, stride=stride)
 
     @classmethod
     def on_pipeline(
@@ -194,7 +197,7 @@ class ScribbleSession:
                 guide = self.segmenter.guide(self.segment_params)[rows[:, None], cols[None, :]]
                 radius = max(1.0, clf.params.smoothing / s)
                 coarse = smooth_probabilities(coarse, guide, radius)
-            proba = np.stack([upsample(p, s, feats.shape) for p in coarse])
+            proba = upsampled(coarse, s, feats.shape)
         self.n_predicted = int(coarse[0].size)
         self.prediction = _prediction(proba, clf.classes)
         return self.prediction
@@ -205,14 +208,10 @@ class ScribbleSession:
         clf, feats = self._ready()
         coarse = self._coarse[1] if self._coarse and self._coarse[0] == id(clf) else None
         with timed(self.seconds, "predict"):
+            guide = self.segmenter.guide(self.segment_params) if clf.params.smoothing else None
             s = int(self.prediction_params.stride)
-            out = refined_probabilities(clf.model, feats, s, cancel, coarse)
-            proba = out.probabilities
-            if clf.params.smoothing > 0:
-                guide = self.segmenter.guide(self.segment_params)
-                proba = smooth_probabilities(proba, guide, clf.params.smoothing)
-        self.n_predicted = out.n_predicted
-        self.prediction = _prediction(proba, clf.classes)
+            self.prediction = predict_pixels(clf, feats, guide, cancel, s, coarse)
+        self.n_predicted = self.prediction.n_predicted
         return self.prediction
 
     def update(self, scribbles: Any, cancel: Any = None) -> np.ndarray:

@@ -117,11 +117,11 @@ def classifier_job(
     colour-polarisation frame whose luminance is ``data`` (the reader's
     ``metadata["colour_stack"]``), whose polarisation images add features."""
     pipe = store.obtain(key, data, angles_rad, params, region=region, mask_key=mask_key)
-    segmenter = store.segmenter(key, colour_stack)
-    assert segmenter is not None
+    session = store.session(key, colour_stack)
+    assert session is not None
     return (
         yield from classifier_stages(
-            pipe, segmenter, params, scribbles, classifier, reconstruction=True, cancel=cancel
+            pipe, session, params, scribbles, classifier, reconstruction=True, cancel=cancel
         )
     )
 
