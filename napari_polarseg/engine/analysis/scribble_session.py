@@ -54,13 +54,18 @@ class PredictionParams:
     stride : int
         Step s of the grid predicted first, pixels (:mod:`.refined_prediction`);
         1 = predict every pixel on its own features.
+    preview_stride : int
+        Step of the coarser grid :meth:`ScribbleSession.preview` predicts (its labels
+        are shown first, while the borders are refined).
     """
 
     stride: int = PREDICTION_STRIDE
+    preview_stride: int = 2 * PREDICTION_STRIDE
 
     def __post_init__(self) -> None:
-        if int(self.stride) < 1:
-            raise PolarsegError(f"the prediction stride must be >= 1, got {self.stride}")
+        for name in ("stride", "preview_stride"):
+            if int(getattr(self, name)) < 1:
+                raise PolarsegError(f"{name} must be >= 1, got {getattr(self, name)}")
 
 
 @dataclass
@@ -185,21 +190,25 @@ class ScribbleSession:
         self.classifier, self._coarse = classifier, None
 
     def preview(self, cancel: Any = None) -> PixelPrediction:
-        """The grid's prediction interpolated to every pixel (module docstring):
-        probabilities smoothed on the grid, no border predicted yet."""
+        """The prediction of the grid of ``preview_stride`` interpolated to every pixel
+        (module docstring): probabilities smoothed on the grid, the uncertainty taken
+        there and interpolated too; no border predicted yet."""
         clf, feats = self._ready()
-        s = int(self.prediction_params.stride)
+        s = int(self.prediction_params.preview_stride)
         with timed(self.seconds, "preview"):
             coarse = grid_probabilities(clf.model, feats, s, cancel)
-            self._coarse = (id(clf), coarse)
+            if s == self.prediction_params.stride:
+                self._coarse = (id(clf), coarse)
             if clf.params.smoothing > 0:
                 rows, cols = grid_index(feats.shape, s)
                 guide = self.segmenter.guide(self.segment_params)[rows[:, None], cols[None, :]]
                 radius = max(1.0, clf.params.smoothing / s)
                 coarse = smooth_probabilities(coarse, guide, radius)
             proba = upsampled(coarse, s, feats.shape)
+            labels = np.argmax(proba, axis=0).astype(np.int32)
+            uncertainty = upsampled(margin_uncertainty(coarse)[None], s, feats.shape)[0]
         self.n_predicted = int(coarse[0].size)
-        self.prediction = _prediction(proba, clf.classes)
+        self.prediction = PixelPrediction(labels, proba, uncertainty, clf.classes, self.n_predicted)
         return self.prediction
 
     def refine(self, cancel: Any = None) -> PixelPrediction:
@@ -276,8 +285,3 @@ class ScribbleSession:
         if self.prediction is None:
             raise PolarsegError("nothing predicted yet: update the session with scribbles")
         return self.prediction
-
-
-def _prediction(proba: np.ndarray, classes: np.ndarray) -> PixelPrediction:
-    labels = np.argmax(proba, axis=0).astype(np.int32)
-    return PixelPrediction(labels, proba, margin_uncertainty(proba), classes)
