@@ -65,8 +65,10 @@ def scribble_frame_main(path: Path, mosaic: tuple[int, ...], crop=None) -> None:
     show = widget._show
 
     def timed_show(layer, angles_deg, result, seconds, inputs=None, partial=False, snap=None):  # noqa: ANN001, ANN202
+        t = time.perf_counter()
         show(layer, angles_deg, result, seconds, inputs, partial, snap)
         now = time.perf_counter()
+        shown.setdefault("show", now - t)  # the widget's layers of the first result
         shown.setdefault("first", now)
         if not partial:
             shown["all"] = now
@@ -96,7 +98,8 @@ def scribble_frame_main(path: Path, mosaic: tuple[int, ...], crop=None) -> None:
         run_events(lambda: not idle() or time.perf_counter() - t0 > 5)
         run_events(idle)
         end = shown.get("all", time.perf_counter())
-        return shown.get("first", end) - t0 - delay, end - t0 - delay, shown.get("engine", {})
+        engine = {**shown.get("engine", {}), "show": shown.get("show", 0.0)}
+        return shown.get("first", end) - t0 - delay, end - t0 - delay, engine
 
     t0 = time.perf_counter()
     layer = widget.new_scribbles_layer()
@@ -121,9 +124,9 @@ def scribble_frame_main(path: Path, mosaic: tuple[int, ...], crop=None) -> None:
     print(f"pixel features in the background after 'New scribbles layer': {features:.2f} s")
     print("seconds from the action to the labels on screen: 'preview' = the grid's labels,")
     print(f"'all' = every pixel's; corrections minus the live debounce ({LIVE_DELAY_MS} ms)")
-    print(f"{'action':<28}| preview |  all   | engine (train, preview, predict)")
+    print(f"{'action':<28}| preview |  all   | engine train, preview, predict | show preview")
     for label, first_s, all_s, eng in rows:
-        parts = ", ".join(f"{eng.get(k, 0.0):.3f}" for k in ("train", "preview", "predict"))
+        parts = ", ".join(f"{eng.get(k, 0.0):.3f}" for k in ("train", "preview", "predict", "show"))
         print(f"{label:<28}| {first_s:7.3f} | {all_s:6.3f} | {parts}")
     strokes = [r for r in rows if r[0].startswith("correction")]
     if strokes:

@@ -85,7 +85,9 @@ class ResultLayers(WidgetPart):
         meta, out = shown.meta, shown.out
         if not shown.partial:
             self._show_complete(layer, shown)
-        if out is not None:
+        if out is not None and out.preview:
+            pass  # the grid's labels: the probability and uncertainty maps follow
+        elif out is not None:
             prediction = out.prediction
             self._show_below_segments("probability", shown.confidence, layer, meta)
             self._show_below_segments("uncertainty", prediction.uncertainty, layer, meta)
