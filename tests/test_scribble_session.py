@@ -136,3 +136,20 @@ def test_sampled_training_pixels_are_said(scene):
     assert clf.n_scribbled_pixels == np.count_nonzero(strokes)
     assert f"60 of {clf.n_scribbled_pixels} scribbled pixels train" in clf.training_text()
     assert "at most 20 per material" in clf.training_text()
+
+
+def test_plane_by_plane_reductions_match_numpy():
+    from napari_polarseg.engine.analysis.pixel_classifier import (
+        margin_uncertainty,
+        most_probable,
+    )
+
+    rng = np.random.default_rng(1)
+    for k in (2, 3, 5):
+        p = rng.random((k, 40, 50)).astype(np.float32)
+        p[:, :5] = 0.25  # ties: the first class wins, the margin is 0
+        p /= p.sum(axis=0)
+        np.testing.assert_array_equal(most_probable(p), np.argmax(p, axis=0))
+        top = np.sort(p, axis=0)
+        np.testing.assert_allclose(margin_uncertainty(p), 1 - (top[-1] - top[-2]), atol=1e-6)
+        assert np.all(margin_uncertainty(p)[:5] == 1)

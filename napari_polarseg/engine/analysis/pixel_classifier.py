@@ -382,12 +382,30 @@ def smooth_probabilities(probabilities: np.ndarray, guide: np.ndarray, radius: f
     return out
 
 
+def most_probable(probabilities: np.ndarray) -> np.ndarray:
+    """Index k of the largest p_k per pixel (the first on a tie), int32 — what
+    ``np.argmax(probabilities, axis=0)`` gives, one plane at a time (several times
+    faster than the strided reduction over a (K, H, W) stack)."""
+    best = probabilities[0].copy()
+    index = np.zeros(best.shape, dtype=np.int32)
+    for k in range(1, probabilities.shape[0]):
+        index[probabilities[k] > best] = k
+        np.maximum(best, probabilities[k], out=best)
+    return index
+
+
 def margin_uncertainty(probabilities: np.ndarray) -> np.ndarray:
-    """1 − (p_(1) − p_(2)) per pixel: one minus the margin of the two best classes."""
+    """1 − (p_(1) − p_(2)) per pixel: one minus the margin of the two best classes
+    (float32; the two largest kept while walking the planes)."""
     if probabilities.shape[0] < 2:
         return np.zeros(probabilities.shape[1:], dtype=np.float32)
-    top = np.partition(probabilities, -2, axis=0)[-2:]
-    return (1.0 - (top[1] - top[0])).astype(np.float32)
+    p = probabilities.astype(np.float32, copy=False)
+    first, second = np.maximum(p[0], p[1]), np.minimum(p[0], p[1])
+    for plane in p[2:]:
+        np.maximum(second, np.minimum(first, plane), out=second)
+        np.maximum(first, plane, out=first)
+    first -= second
+    return np.subtract(1.0, first, dtype=np.float32)
 
 
 def predict_pixels(
@@ -428,7 +446,7 @@ def predict_pixels(
         if guide is None:
             raise PolarsegError("edge-aware smoothing needs a guide image")
         proba = smooth_probabilities(proba, guide, radius)
-    labels = np.argmax(proba, axis=0).astype(np.int32)
+    labels = most_probable(proba)
     return PixelPrediction(
         labels, proba, margin_uncertainty(proba), classifier.classes, out.n_predicted
     )

@@ -4,7 +4,7 @@ Predicting every pixel of a camera frame costs seconds, most of it where the ans
 plain: inside a material, where every pixel gets the same class. So the classifier
 first predicts the pixels of a grid of stride s (one pixel per s × s cell, the cell's
 centre pixel ⌊s/2⌋ rows and columns in), and the class probabilities p_k of every other
-pixel are interpolated from it (linear, :func:`~..features.pixel_features.upsample`).
+pixel are interpolated from it (linear, :func:`upsampled`).
 A cell whose 3 × 3 neighbourhood of grid samples does not agree on the most probable
 class lies on a border between materials (or holds a speck of another one): each of
 its pixels is predicted on its own features, exactly as a full prediction would. So
@@ -26,7 +26,7 @@ import numpy as np
 from scipy import ndimage
 
 from ..errors import Cancelled
-from ..features.pixel_features import FeatureStack, upsample
+from ..features.pixel_features import FeatureStack
 
 #: Pixels whose features are predicted in one call (bounds the (n, F) copy).
 CHUNK_PIXELS = 131_072
@@ -68,12 +68,30 @@ def border_cells(labels: np.ndarray) -> np.ndarray:
     return high != low
 
 
+def axis_weights(n_fine: int, f: int, n_coarse: int) -> tuple[np.ndarray, ...]:
+    """Linear interpolation along one axis from a grid of step f to ``n_fine`` pixels:
+    (lower sample, upper sample, weight of the upper) per fine pixel. Sample k stands
+    for fine pixels k·f … k·f + f − 1, at u = (i + ½)/f − ½ samples for fine pixel i (the
+    grid of :func:`~..features.pixel_features.upsample`); beyond the first and last
+    sample the value is held."""
+    u = (np.arange(n_fine) + 0.5) / f - 0.5
+    low = np.floor(u).astype(np.intp)
+    weight = (u - low).astype(np.float32)
+    high = np.clip(low + 1, 0, n_coarse - 1)
+    return np.clip(low, 0, n_coarse - 1), high, weight
+
+
 def upsampled(coarse: np.ndarray, stride: int, shape: tuple[int, int]) -> np.ndarray:
-    """(K, H, W) C-contiguous float32: every plane of ``coarse`` (K, h', w') linearly
-    interpolated from the grid of ``stride`` to ``shape``."""
-    out = np.empty((coarse.shape[0], *shape), dtype=np.float32)
-    for k, plane in enumerate(coarse):
-        out[k] = upsample(plane, stride, shape)
+    """(K, H, W) C-contiguous float32: every plane of ``coarse`` (K, h', w') linearly interpolated
+    from the grid of ``stride`` to ``shape`` (rows, then columns; all planes at once)."""
+    r0, r1, wr = axis_weights(shape[0], stride, coarse.shape[1])
+    c0, c1, wc = axis_weights(shape[1], stride, coarse.shape[2])
+    c = coarse.astype(np.float32, copy=False)
+    rows = c[:, r0] * (1 - wr)[:, None] + c[:, r1] * wr[:, None]
+    out = np.empty((c.shape[0], *shape), dtype=np.float32)  # C-contiguous
+    np.take(rows, c0, axis=2, out=out)
+    out *= 1 - wc
+    out += np.take(rows, c1, axis=2) * wc
     return out
 
 
@@ -132,7 +150,7 @@ def refined_probabilities(
         return RefinedProbabilities(proba, h * w)
     if coarse is None:
         coarse = grid_probabilities(model, features, s, cancel)
-    proba = upsampled(coarse, s, (h, w))
+    proba = upsampled(coarse, s, (h, w))  # C-contiguous: written through the view below
     cells = border_cells(np.argmax(coarse, axis=0))
     rows, cols = np.nonzero(cells)
     # every pixel of every border cell, flat row-major indices inside the image

@@ -38,6 +38,7 @@ from .pixel_classifier import (
     PixelClassifier,
     PixelPrediction,
     margin_uncertainty,
+    most_probable,
     predict_pixels,
     smooth_probabilities,
 )
@@ -205,7 +206,7 @@ class ScribbleSession:
                 radius = max(1.0, clf.params.smoothing / s)
                 coarse = smooth_probabilities(coarse, guide, radius)
             proba = upsampled(coarse, s, feats.shape)
-            labels = np.argmax(proba, axis=0).astype(np.int32)
+            labels = most_probable(proba)
             uncertainty = upsampled(margin_uncertainty(coarse)[None], s, feats.shape)[0]
         self.n_predicted = int(coarse[0].size)
         self.prediction = PixelPrediction(labels, proba, uncertainty, clf.classes, self.n_predicted)
