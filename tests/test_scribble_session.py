@@ -13,8 +13,8 @@ from napari_polarseg.engine import (
     ScribbleSession,
 )
 from napari_polarseg.engine.analysis.refined_prediction import (
+    border_cells,
     grid_probabilities,
-    refine_mask,
     refined_probabilities,
 )
 from napari_polarseg.engine.synthetic.scenes import make_scene, scribble_strokes
@@ -115,22 +115,14 @@ def test_coarse_to_fine_equals_every_pixel_off_the_borders(scene, session):
     full = refined_probabilities(model, feats, 1).probabilities
     fine = refined_probabilities(model, feats, 4)
     coarse = grid_probabilities(model, feats, 4)
-    border = refine_mask(np.argmax(coarse, axis=0), 4, feats.shape)
-    # pixels between grid samples of different classes: predicted on their own features
-    np.testing.assert_allclose(fine.probabilities[:, border], full[:, border], atol=1e-6)
-    assert fine.n_predicted == coarse[0].size + int(border.sum())
-    # elsewhere the four samples around agree, and so does the interpolation
-    inner = np.argmax(fine.probabilities, 0)[~border]
-    assert np.mean(inner == np.argmax(full, 0)[~border]) > 0.99
-
-
-def test_refine_mask_marks_the_pixels_between_disagreeing_samples():
-    labels = np.zeros((3, 4), int)
-    labels[:, 2:] = 1  # samples at columns 2, 6 | 10, 14 of a stride-4 grid
-    mask = refine_mask(labels, 4, (12, 16))
-    # columns between the samples of columns 6 and 10 (pixels 6..9, u in [1, 2)) only
-    np.testing.assert_array_equal(np.flatnonzero(mask.any(axis=0)), [6, 7, 8, 9])
-    assert mask[:, 6:10].all()
+    cells = np.kron(border_cells(np.argmax(coarse, axis=0)), np.ones((4, 4), bool))
+    cells = cells[: full.shape[1], : full.shape[2]]
+    # border cells: every pixel predicted on its own features, as by stride 1
+    np.testing.assert_allclose(fine.probabilities[:, cells], full[:, cells], atol=1e-6)
+    # elsewhere the nine grid samples around agree, and so does the interpolation
+    inner = ~cells
+    assert np.mean(np.argmax(fine.probabilities, 0)[inner] == np.argmax(full, 0)[inner]) > 0.99
+    assert fine.n_predicted == coarse[0].size + int(cells.sum())
 
 
 def test_sampled_training_pixels_are_said(scene):

@@ -4,14 +4,13 @@ Predicting every pixel of a camera frame costs seconds, most of it where the ans
 plain: inside a material, where every pixel gets the same class. So the classifier
 first predicts the pixels of a grid of stride s (one pixel per s × s cell, the cell's
 centre pixel ⌊s/2⌋ rows and columns in), and the class probabilities p_k of every other
-pixel are interpolated from it (linear, :func:`upsampled`: each pixel from the 2 × 2
-grid samples around it). Where those four samples agree on the most probable class,
-so does the interpolation (a weighted mean of vectors whose largest entry is the same
-class keeps it there). Where they do not, the pixel lies on a border between materials
-(or by a speck of another one) and is predicted on its own features, exactly as a full
-prediction would (:func:`refine_mask`). So the labels differ from predicting every
-pixel only where the four samples around a pixel agree but the pixel itself would not
-— a region of another class that no grid sample hits (smaller than about a cell).
+pixel are interpolated from it (linear, :func:`upsampled`).
+A cell whose 3 × 3 neighbourhood of grid samples does not agree on the most probable
+class lies on a border between materials (or holds a speck of another one): each of
+its pixels is predicted on its own features, exactly as a full prediction would. So
+the labels differ from predicting every pixel only inside cells whose nine surrounding
+samples all agree — a region of another class smaller than about a cell that no grid
+sample hits.
 
 s = 1 predicts every pixel. The grid's features are kept pixel-major (one C-contiguous
 (n, F) float32 block, :meth:`~..features.pixel_features.FeatureStack.grid_rows`), so a
@@ -24,6 +23,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from scipy import ndimage
 
 from ..errors import Cancelled
 from ..features.pixel_features import FeatureStack
@@ -61,16 +61,11 @@ def predict_rows(model: Any, rows: np.ndarray, cancel: Any = None) -> np.ndarray
     return out
 
 
-def refine_mask(labels: np.ndarray, stride: int, shape: tuple[int, int]) -> np.ndarray:
-    """(H, W) bool: the pixels whose 2 × 2 interpolating grid samples (:func:`upsampled`)
-    do not all have the same ``labels`` (h', w') — the pixels to predict on their own."""
-    padded = np.pad(labels, 1, mode="edge")
-    corners = (padded[:-1, :-1], padded[1:, :-1], padded[:-1, 1:], padded[1:, 1:])
-    # window (a, b) holds samples a − 1, a by b − 1, b (the edge samples repeated)
-    differ = np.maximum.reduce(corners) != np.minimum.reduce(corners)
-    # fine pixel i lies between samples ⌊u⌋ and ⌊u⌋ + 1, u = (i + ½)/s − ½: window ⌊u⌋ + 1
-    rows, cols = (np.floor((np.arange(n) + 0.5) / stride - 0.5).astype(np.intp) + 1 for n in shape)
-    return differ[rows[:, None], cols[None, :]]
+def border_cells(labels: np.ndarray) -> np.ndarray:
+    """Grid cells (h', w') whose 3 × 3 neighbourhood of labels is not all one class."""
+    high = ndimage.maximum_filter(labels, size=3, mode="nearest")
+    low = ndimage.minimum_filter(labels, size=3, mode="nearest")
+    return high != low
 
 
 def axis_weights(n_fine: int, f: int, n_coarse: int) -> tuple[np.ndarray, ...]:
@@ -156,7 +151,14 @@ def refined_probabilities(
     if coarse is None:
         coarse = grid_probabilities(model, features, s, cancel)
     proba = upsampled(coarse, s, (h, w))  # C-contiguous: written through the view below
-    flat = np.flatnonzero(refine_mask(np.argmax(coarse, axis=0), s, (h, w)))
+    cells = border_cells(np.argmax(coarse, axis=0))
+    rows, cols = np.nonzero(cells)
+    # every pixel of every border cell, flat row-major indices inside the image
+    dr, dc = np.divmod(np.arange(s * s), s)
+    pr = (rows[:, None] * s + dr[None, :]).ravel()
+    pc = (cols[:, None] * s + dc[None, :]).ravel()
+    inside = (pr < h) & (pc < w)
+    flat = np.sort(pr[inside] * w + pc[inside])
     out = proba.reshape(k, -1)
     for start in range(0, flat.size, CHUNK_PIXELS):
         part = flat[start : start + CHUNK_PIXELS]
