@@ -105,18 +105,18 @@ class ScribbleSession:
     ((96, 96), True, 1)
     """
 
-    stack: Any
+    stack: Any = field(repr=False)
     angles_deg: Any
     features_params: PixelFeatureParams | None = None
     classifier_params: ClassifierParams | None = None
     prediction_params: PredictionParams = field(default_factory=PredictionParams)
     segment_params: SegmentParams | None = None
-    pipeline: Pipeline | None = None
-    colour_stack: np.ndarray | None = None
+    pipeline: Pipeline | None = field(default=None, repr=False)
+    colour_stack: np.ndarray | None = field(default=None, repr=False)
     #: Feature stacks computed so far (1 after the first update, while the image stays).
     feature_runs: int = field(default=0, init=False)
-    classifier: PixelClassifier | None = field(default=None, init=False)
-    prediction: PixelPrediction | None = field(default=None, init=False)
+    classifier: PixelClassifier | None = field(default=None, init=False, repr=False)
+    prediction: PixelPrediction | None = field(default=None, init=False, repr=False)
     #: Seconds of the last update: ``features``, ``train``, ``predict``.
     seconds: dict[str, float] = field(default_factory=dict, init=False)
     #: Pixels whose own features the last prediction read (grid samples + borders).
