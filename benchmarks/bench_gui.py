@@ -18,7 +18,11 @@ With ``--frame PATH`` (a camera frame, e.g. a 1224 × 1024 polarisation mosaic r
 ``--mosaic 90,45,135,0``) it times the default preset (the superpixel method) in a fresh
 viewer instead: segments k → k + 1 and a change of parameters the method does not read
 (refractive index, window), each from the change to the labels on screen, split into the
-engine's stages and the widget's own time (its overhead).
+engine's stages and the widget's own time (its overhead). With ``--frame PATH
+--scribbles`` (a hand-labelled real frame, e.g. ``fruits_IMX250MZR.png``) it times the
+scribble loop there instead (``bench_gui_scribbles.py``, issue 23): the pixel features
+computed in the background once a scribbles layer is made, the first strokes → labels
+on screen (target 2 s) and painted corrections → labels on screen (target median 0.3 s).
 
 With ``--first PATH`` (a raw camera frame) it times the GUI thread while the first
 results appear (issue 25, :func:`first_result_main`): the longest stall of the event
@@ -86,12 +90,27 @@ def main(argv: list[str] | None = None) -> None:
         help="time the GUI thread while the first result of this frame is shown (and the "
         "Polarisation image of it), then the Polarisation plots dock",
     )
+    parser.add_argument(
+        "--scribbles",
+        action="store_true",
+        help="with --frame: time the scribble loop (first strokes, then corrections)",
+    )
+    parser.add_argument(
+        "--crop", help="with --frame: use the top-left HxW of the frame, e.g. 768x1024"
+    )
     args = parser.parse_args(argv)
     if args.first is not None:
         first_result_main(args.first, tuple(int(a) for a in args.mosaic.split(",")))
         return
     if args.frame is not None:
-        frame_main(args.frame, tuple(int(a) for a in args.mosaic.split(",")))
+        mosaic = tuple(int(a) for a in args.mosaic.split(","))
+        if args.scribbles:
+            from bench_gui_scribbles import scribble_frame_main
+
+            crop = None if not args.crop else tuple(int(v) for v in args.crop.split("x"))
+            scribble_frame_main(args.frame, mosaic, crop)
+        else:
+            frame_main(args.frame, mosaic)
         return
 
     import napari

@@ -16,9 +16,9 @@ update (training plus predicting the whole image) and the one-off feature second
 
 Rows (methods):
 
-- ``product``: the project's pixel classifier (``PixelSegmenter`` features of the
-  pipeline's polarisation image, computed once per scene; ``train_pixel_classifier``
-  and ``predict_pixels`` with the default parameters and smoothing);
+- ``product``: the project's scribble loop (``ScribbleSession`` on the pipeline's
+  polarisation image: features computed once per scene, each update retrains and
+  predicts coarse to fine, default parameters and smoothing);
 - ``plain RF``: the plain baseline's 20 smoothed polarisation features
   (``baselines.plain_features``) and a random forest of 100 trees;
 - ``ilastik RF``: ilastik's default filter bank on the raw angle frames
@@ -213,18 +213,15 @@ def forest_update(features: np.ndarray) -> Update:
 
 
 def product_update(pipe) -> Update:
-    """The project's pixel classifier: features and guide computed once."""
-    from napari_polarseg.engine.analysis.pixel_classifier import predict_pixels
-    from napari_polarseg.engine.analysis.pixel_segmentation import PixelSegmenter
+    """The project's scribble loop (``ScribbleSession``: features computed once, each
+    update retrains and predicts coarse to fine with the default parameters)."""
+    from napari_polarseg.engine import ScribbleSession
 
-    segmenter = PixelSegmenter(pipe)
-    features = segmenter.features()
-    guide = segmenter.guide()
+    session = ScribbleSession.on_pipeline(pipe)
+    session.features()
 
     def update(scribbles: np.ndarray) -> np.ndarray:
-        classifier = segmenter.train(scribbles)
-        prediction = predict_pixels(classifier, features, guide=guide)
-        return classifier.classes[prediction.labels]
+        return session.update(scribbles)
 
     return update
 
@@ -292,11 +289,15 @@ def rendered_scene(seed: int, folder: Path = RENDERED_DIR) -> Scene:
     return Scene(f"scene_{seed}", stack, angles, labels.astype(np.int32), half)
 
 
-def evaluate_scene(scene: Scene, rounds: int, bound: bool) -> list[dict]:
-    """One row per method for ``scene``."""
+def evaluate_scene(
+    scene: Scene, rounds: int, bound: bool, methods: tuple[str, ...] | None = None
+) -> list[dict]:
+    """One row per method for ``scene`` (only ``methods`` when given)."""
     rows = []
     b = truth_bound(scene) if bound else None
     for name, (factory, _) in method_updates(scene).items():
+        if methods is not None and name not in methods:
+            continue
         t0 = time.perf_counter()
         update = factory()
         feature_seconds = time.perf_counter() - t0
@@ -368,22 +369,26 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--rendered", choices=("dev", "test", "all"), help="rendered scenes")
     parser.add_argument("--rounds", type=int, default=15, help="corrections [15]")
     parser.add_argument("--seeds", help="only these rendered seeds (comma-separated)")
+    parser.add_argument(
+        "--methods", help="only these rows (comma-separated: product, plain RF, ilastik RF)"
+    )
     args = parser.parse_args(argv)
     if not args.real and not args.rendered:
         parser.error("choose --real and/or --rendered dev|test|all")
+    methods = None if not args.methods else tuple(m.strip() for m in args.methods.split(","))
     t0 = time.perf_counter()
     print(header(args.rounds), flush=True)
     rows = []
     if args.real:
         for scene in real_scenes():
-            rows += evaluate_scene(scene, args.rounds, bound=False)
+            rows += evaluate_scene(scene, args.rounds, bound=False, methods=methods)
     if args.rendered:
         halves = ("dev", "test") if args.rendered == "all" else (args.rendered,)
         seeds = [s for h in halves for s in HALVES[h]]
         if args.seeds:
             seeds = [s for s in seeds if str(s) in args.seeds.split(",")]
         for seed in seeds:
-            rows += evaluate_scene(rendered_scene(seed), args.rounds, bound=True)
+            rows += evaluate_scene(rendered_scene(seed), args.rounds, bound=True, methods=methods)
     print()
     print("\n".join(half_means(rows, args.rounds)))
     print(f"\ntotal {time.perf_counter() - t0:.1f} s")

@@ -13,7 +13,8 @@ Angles are radians throughout the engine.
 
 Beside the cut: :func:`pixel_features` (multi-scale per-pixel features) →
 :func:`train_pixel_classifier` on scribbles → :func:`predict_pixels`, chained on a
-pipeline's polarisation image by :class:`PixelSegmenter`.
+pipeline's polarisation image by :class:`PixelSegmenter`; :class:`ScribbleSession` is
+the interactive loop (features kept, each update retrains and predicts coarse to fine).
 """
 
 from __future__ import annotations
@@ -36,6 +37,9 @@ PUBLIC: dict[str, str] = {
     "PixelPrediction": ".analysis.pixel_classifier",
     "predict_pixels": ".analysis.pixel_classifier",
     "train_pixel_classifier": ".analysis.pixel_classifier",
+    # analysis.scribble_session
+    "PredictionParams": ".analysis.scribble_session",
+    "ScribbleSession": ".analysis.scribble_session",
     # analysis.pixel_segmentation
     "PixelSegmentation": ".analysis.pixel_segmentation",
     "PixelSegmenter": ".analysis.pixel_segmentation",
@@ -144,6 +148,7 @@ __all__ = [
     "UnsupervisedParams",
     "Pipeline",
     "PixelSegmenter",
+    "ScribbleSession",
     "ClassifierParams",
     "PixelClassifier",
     "train_pixel_classifier",

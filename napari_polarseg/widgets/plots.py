@@ -87,7 +87,7 @@ def segment_job(
     error map; ``report`` receives its stages as they start), or for the classifier the
     :class:`~napari_polarseg.widgets.session.ClassifierOutput` (result and classifier).
     """
-    from ..engine.analysis.pixel_segmentation import PixelSegmenter
+    from ..engine.analysis.scribble_session import ScribbleSession
 
     pipe = stack_pipeline(data, angles_rad, params, region)
     if scribbles is not None or classifier_file is not None:
@@ -96,8 +96,8 @@ def segment_job(
             from ..classifier_file import load_pixel_classifier
 
             classifier, scribbles = load_pixel_classifier(classifier_file), None
-        segmenter = PixelSegmenter(pipe)
-        out = yield from classifier_stages(pipe, segmenter, params, scribbles, classifier)
+        session = ScribbleSession.on_pipeline(pipe)
+        out = yield from classifier_stages(pipe, session, params, scribbles, classifier)
         if out.problem is not None:
             where = "scribbles" if out.trained else "classifier"
             raise PolarsegError(f"{where}: {out.problem}")

@@ -34,11 +34,13 @@ from .segment_inputs import CUT_ONLY, NO_MASK, NO_SCRIBBLES, MaskAndScribbles, S
 from .segment_layers import ResultLayers, ShownEntry, WithContrast, with_contrast
 from .segment_params import ParameterControls
 from .session import (
+    PIPELINE_STAGES,
     ClassifierOutput,
     Delivery,
     LoadedClassifier,
     PipelineStore,
     colour_stack_of,
+    features_job,
     input_info,
     scribble_problem,
     segment_request,
@@ -262,6 +264,7 @@ class SegmentWidget(ResultLayers, MaskAndScribbles, StackWidget, SegmentDock):
         self.mask_layer.changed.connect(self._sync_watches)
         self.scribbles_layer.changed.connect(self._sync_watches)
         self.scribbles_layer.changed.connect(self._on_scribbles_changed)
+        self.scribbles_layer.changed.connect(self._prefetch_features)
         self.new_scribbles_button.changed.connect(self.new_scribbles_layer)
 
     # -- the parts' public members ----------------------------------------------------
@@ -477,6 +480,31 @@ class SegmentWidget(ResultLayers, MaskAndScribbles, StackWidget, SegmentDock):
         job = with_contrast(request.job, self._contrast_memo)
         args, total = request.args, request.total
         self._submit(job, args, total, on_result, on_partial, self._live_run, True, request.reports)
+
+    def _prefetch_features(self, *_: Any) -> None:
+        """Compute the stack's pixel features in the worker as soon as a scribbles layer
+        without strokes of two materials is chosen (while the first ones are painted),
+        unless a run is going or waiting."""
+        if self.scribbles_layer.value is None or self.busy or self._waiting():
+            return
+        try:
+            layer, angles_deg = self.current_stack()
+            mask_key, region = self.current_mask()
+            scribbles = self.current_scribbles()[1]
+        except PolarsegError:
+            return
+        if scribbles is not None and scribble_problem(scribbles) is None:
+            return  # strokes to train on: their run computes the features
+        key, params = source_key(layer), self.params()
+        args = (self.store, key, layer.data, np.deg2rad(angles_deg), params, region, mask_key)
+        args += (colour_stack_of(layer),)
+
+        def ready(run_id: int, n_features: int) -> None:
+            strokes = self.current_scribbles()[1]
+            problem = scribble_problem(np.zeros(1) if strokes is None else strokes)
+            self._set_status(f"pixel features ready ({n_features} features); {problem or ''}")
+
+        self._submit(features_job, args, len(PIPELINE_STAGES) + 1, ready, live=True)
 
     def _reshow(self, layer: Layer, snap: Snapshot) -> bool:
         """Show the stack's result again when only parameters its method does not read

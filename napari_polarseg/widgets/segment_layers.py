@@ -168,7 +168,9 @@ class ResultLayers(WidgetPart):
         meta, out = shown.meta, shown.out
         if not shown.partial:
             self._show_complete(layer, shown, contrast or {})
-        if out is not None:
+        if out is not None and out.preview:
+            pass  # the grid's labels: the probability and uncertainty maps follow
+        elif out is not None:
             prediction = out.prediction
             # hidden maps with fixed limits: added in later turns, after the segments
             for role, data in (

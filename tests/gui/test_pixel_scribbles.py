@@ -12,7 +12,7 @@ from _gui_helpers import Gate, click, error_messages, run_and_wait, wait_idle
 from napari.layers import Image
 from napari.utils.notifications import notification_manager
 
-import napari_polarseg.engine.analysis.pixel_segmentation as pixel_segmentation_module
+import napari_polarseg.engine.analysis.scribble_session as scribble_session_module
 from napari_polarseg.classifier_file import SUFFIX, load_pixel_classifier
 from napari_polarseg.engine import Pipeline, validity_mask
 from napari_polarseg.engine.analysis.pixel_segmentation import PixelSegmenter
@@ -141,7 +141,8 @@ def test_a_new_stroke_cancels_the_running_prediction(
     widget.set_params(**FAST)
     _, scribbles, strokes = painted(viewer, widget)
     ends: list[str] = []
-    original = pixel_segmentation_module.predict_pixels
+    # the grid's prediction, the first of a stroke's (the preview)
+    original = scribble_session_module.grid_probabilities
 
     def recording(*args, **kwargs):
         try:
@@ -152,8 +153,8 @@ def test_a_new_stroke_cancels_the_running_prediction(
         ends.append("done")
         return out
 
-    monkeypatch.setattr(pixel_segmentation_module, "predict_pixels", recording)
-    gate = Gate(monkeypatch, pixel_segmentation_module, "predict_pixels")
+    monkeypatch.setattr(scribble_session_module, "grid_probabilities", recording)
+    gate = Gate(monkeypatch, scribble_session_module, "grid_probabilities")
     widget.live.value = True
     gate.arm()
     scribbles.data = np.where(strokes <= 2, strokes, 0).astype(np.int32)

@@ -13,7 +13,7 @@ from napari_polarseg.engine.analysis.evaluation import adjusted_rand_index
 from napari_polarseg.engine.analysis.pixel_segmentation import PixelSegmenter
 from napari_polarseg.engine.params import RECOMMENDED
 from napari_polarseg.engine.synthetic.scenes import scribble_strokes
-from napari_polarseg.widgets._layers import TAG
+from napari_polarseg.widgets._layers import TAG, source_key
 from napari_polarseg.widgets.segment import CUT_ONLY, NO_SCRIBBLES
 
 pytestmark = pytest.mark.gui
@@ -59,6 +59,13 @@ def test_new_scribbles_layer_and_fewer_than_two_materials(viewer, open_sample, a
     # the classifier replaces the cut: the cut's own controls are disabled
     assert not any(getattr(widget, name).enabled for name in CUT_ONLY)
     assert widget.window.enabled and widget.features.enabled
+    # meanwhile the stack's pixel features are computed in the background, once
+    wait_idle(qtbot, widget)
+    assert widget.status.value.startswith("pixel features ready")
+    assert "paint at least 2 materials" in widget.status.value
+    session = widget.store.session(source_key(stack))
+    features = session.cached_features
+    assert session.feature_runs == 1 and features is not None
 
     # nothing painted yet, then one material only: a status message, no run, no dialog
     click(qtbot, widget.run_button)

@@ -40,6 +40,7 @@ from ..pipeline import Pipeline
 from ..result import SegmentationResult
 from ..timing import timed
 from .pixel_classifier import (
+    PREDICTION_STRIDE,
     ClassifierParams,
     PixelClassifier,
     PixelPrediction,
@@ -87,11 +88,15 @@ class PixelSegmenter:
         (fitted like the pipeline's, with its sample weights) add features.
     colours : tuple of str
         Names of the colours of ``colour_stack`` (feature-name prefixes).
+    stride : int
+        Grid step of the coarse-to-fine prediction (:func:`predict_pixels`; 1 = every
+        pixel on its own features).
     """
 
     pipeline: Pipeline
     colour_stack: np.ndarray | None = None
     colours: tuple[str, ...] = COLOURS
+    stride: int = PREDICTION_STRIDE
     _features: tuple[Any, FeatureStack] | None = field(default=None, init=False, repr=False)
     _colour_images: tuple[int, list] | None = field(default=None, init=False, repr=False)
 
@@ -251,7 +256,7 @@ class PixelSegmenter:
                 classifier = self.train(scribbles, feats.params, params, segment_params)
         with timed(seconds, "predict"):
             guide = self.guide(segment_params) if classifier.params.smoothing > 0 else None
-            prediction = predict_pixels(classifier, feats, guide=guide, cancel=cancel)
+            prediction = predict_pixels(classifier, feats, guide, cancel, self.stride)
         return prediction, classifier, seconds
 
     def result(

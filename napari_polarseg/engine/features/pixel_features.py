@@ -167,6 +167,9 @@ class FeatureStack:
     planes: np.ndarray
     names: tuple[str, ...]
     params: PixelFeatureParams = field(default_factory=PixelFeatureParams)
+    _grids: dict[int, np.ndarray] = field(
+        default_factory=dict, init=False, repr=False, compare=False
+    )
 
     @property
     def data(self) -> np.ndarray:
@@ -189,6 +192,21 @@ class FeatureStack:
     def take(self, index: np.ndarray) -> np.ndarray:
         """(n, F) C-contiguous float32 rows of the pixels at flat (row-major) ``index``."""
         return np.ascontiguousarray(self.planes.reshape(self.n_features, -1)[:, index].T)
+
+    def grid_rows(self, stride: int) -> np.ndarray:
+        """(n, F) C-contiguous float32 rows of the pixels of a grid of step ``stride``:
+        pixel (i·s + ⌊s/2⌋, j·s + ⌊s/2⌋) of every s × s cell (the last row and column
+        of the image for a cut-off cell), row-major over the ⌈H/s⌉ × ⌈W/s⌉ cells. Kept:
+        the same array on every call for a stride (copied once, then read by every
+        prediction)."""
+        s = int(stride)
+        if s not in self._grids:
+            h, w = self.shape
+            r = np.minimum(np.arange(0, h, s) + s // 2, h - 1)
+            c = np.minimum(np.arange(0, w, s) + s // 2, w - 1)
+            block = self.planes[:, r[:, None], c[None, :]].reshape(self.n_features, -1)
+            self._grids[s] = np.ascontiguousarray(block.T)
+        return self._grids[s]
 
     def rows(self, start: int, stop: int) -> np.ndarray:
         """(n, F) C-contiguous float32 rows of image rows ``start:stop``, row-major."""

@@ -3,8 +3,8 @@ user's strokes (or a loaded one) in place of affinity and cut, and its texts.
 
 :func:`classifier_stages` is the scribble mode's job body: the pipeline's stages up to
 the block features, the pixel feature stack (kept by a
-:class:`~napari_polarseg.engine.analysis.pixel_segmentation.PixelSegmenter` per
-pipeline), then the pixel classifier, assembled into a
+:class:`~napari_polarseg.engine.ScribbleSession` per pipeline), then the pixel
+classifier (its grid preview first, then every pixel), assembled into a
 :class:`~napari_polarseg.engine.SegmentationResult` like the cut's. A ``cancel``
 callable that turns True when a newer request or Cancel stops the run makes the
 prediction stop between chunks instead of at the next stage boundary.
@@ -27,8 +27,8 @@ from .runs import Partial
 
 if TYPE_CHECKING:
     from ...engine.analysis.pixel_classifier import PixelClassifier, PixelPrediction
-    from ...engine.analysis.pixel_segmentation import PixelSegmentation, PixelSegmenter
-    from ...engine.features.pixel_features import PixelFeatureParams
+    from ...engine.analysis.pixel_segmentation import PixelSegmentation
+    from ...engine.analysis.scribble_session import ScribbleSession
 
 #: Stages of the scribble mode: the pipeline's maps and block features (for the result's
 #: plots and error map), the pixel features, the classifier (training and prediction, or
@@ -36,6 +36,8 @@ if TYPE_CHECKING:
 #: (affinity, cut, labels) are neither computed nor invalidated.
 PIPELINE_STAGES = ("polarisation", "normals", "harmonics", "pca")
 CLASSIFIER_STAGES = (*PIPELINE_STAGES, "pixel features", "pixel classifier", "reconstruction")
+#: The session's seconds that make up the "pixel classifier" stage.
+CLASSIFIER_SECONDS = ("train", "preview", "predict")
 
 
 def scribble_problem(scribbles: np.ndarray) -> str | None:
@@ -64,12 +66,15 @@ class ClassifierOutput:
     sums to 1 over K, ``prediction.uncertainty`` is (H, W) in [0, 1]. ``trained`` is
     False when a loaded classifier was applied. When the strokes cannot train the
     classifier (e.g. every pixel of a material is masked) or the classifier does not
-    fit the stack, ``problem`` says why and ``segmentation`` is None.
+    fit the stack, ``problem`` says why and ``segmentation`` is None. ``preview``: the
+    labels of the classifier's grid alone, before the borders are predicted
+    (:meth:`~napari_polarseg.engine.ScribbleSession.preview`).
     """
 
     segmentation: PixelSegmentation | None
     trained: bool = True
     problem: str | None = None
+    preview: bool = False
 
     @property
     def result(self) -> SegmentationResult:
@@ -87,26 +92,9 @@ class ClassifierOutput:
         return self.segmentation.classifier
 
 
-def feature_stage(
-    segmenter: PixelSegmenter,
-    fparams: PixelFeatureParams,
-    params: SegmentParams,
-    timings: dict[str, float],
-    recomputed: list[str],
-) -> None:
-    """The pixel features of ``fparams`` (kept by ``segmenter``); their seconds go into
-    ``timings`` and ``recomputed`` when they were computed now."""
-    before = segmenter.cached_features
-    t0 = time.perf_counter()
-    segmenter.features(fparams, segment_params=params)
-    if segmenter.cached_features is not before:
-        timings["pixel features"] = time.perf_counter() - t0
-        recomputed.append("pixel features")
-
-
 def classifier_stages(
     pipe: Pipeline,
-    segmenter: PixelSegmenter,
+    session: ScribbleSession,
     params: SegmentParams,
     scribbles: np.ndarray | None = None,
     classifier: PixelClassifier | None = None,
@@ -119,14 +107,15 @@ def classifier_stages(
     Trains the pixel classifier on ``scribbles`` with ``settings`` (default the
     defaults), or applies ``classifier`` (exactly one of them). Yields ``(stage, stages
     done, total)`` as each stage starts (at most ``len(CLASSIFIER_STAGES)``, one fewer
-    without the reconstruction). The pipeline's
-    cached stages and ``segmenter``'s feature stack are reused:
-    once they are computed, a new stroke reruns only training and prediction.
-    When the reconstruction still has to be computed, the output without it is yielded
-    as a :class:`Partial` first (the segments are shown while the error map is
-    computed). ``cancel`` is handed to the prediction, which raises
-    :class:`~napari_polarseg.engine.errors.Cancelled` between chunks when it returns
-    True.
+    without the reconstruction). The pipeline's cached stages and ``session``'s feature
+    stack are reused: once they are computed, a new stroke reruns only training and
+    prediction. The labels of the classifier's grid
+    (:meth:`~napari_polarseg.engine.ScribbleSession.preview`) are yielded as a
+    :class:`Partial` first, then every pixel's; when the reconstruction still has to be
+    computed, the output without it is yielded as a :class:`Partial` too (the segments
+    are shown while the error map is computed). ``cancel`` is handed to the prediction,
+    which raises :class:`~napari_polarseg.engine.errors.Cancelled` between chunks when
+    it returns True.
     """
     names = CLASSIFIER_STAGES if reconstruction else CLASSIFIER_STAGES[:-1]
     total = len(names)
@@ -147,42 +136,47 @@ def classifier_stages(
         yield name, i, total
         run_stage(name)
     settings = settings or ClassifierSettings()
-    fparams = settings.features if classifier is None else classifier.feature_params
+    if classifier is None:  # a loaded classifier brings its own
+        session.features_params = settings.features
+        session.classifier_params = settings.classifier
+    session.segment_params = params
     yield "pixel features", len(PIPELINE_STAGES), total
-    feature_stage(segmenter, fparams, params, timings, recomputed)
-    yield "pixel classifier", len(PIPELINE_STAGES) + 1, total
+    before = session.feature_runs
     try:
-        seg = segmenter.segment(
-            scribbles,
-            classifier,
-            feature_params=fparams,
-            params=settings.classifier,
-            reconstruction=reconstruction and not partial,
-            cancel=cancel,
-            segment_params=params,
-        )
+        if classifier is None:
+            session.train(scribbles)
+        else:
+            session.use(classifier)
     except PolarsegError as exc:
         return ClassifierOutput(None, classifier is None, problem=str(exc))
-    timings["pixel classifier"] = seg.seconds.get("train", 0.0) + seg.seconds.get("predict", 0.0)
+    if session.feature_runs != before:
+        timings["pixel features"] = session.seconds.get("features", 0.0)
+        recomputed.append("pixel features")
     recomputed.append("pixel classifier")
 
-    def output(segmentation: PixelSegmentation, with_reconstruction: bool) -> ClassifierOutput:
+    def output(with_reconstruction: bool, preview: bool = False) -> ClassifierOutput:
+        seg = session.segmentation(with_reconstruction)
+        seconds = session.seconds
+        timings["pixel classifier"] = sum(seconds.get(k, 0.0) for k in CLASSIFIER_SECONDS)
         stages = names if with_reconstruction else names[:-1]
         result = replace(
-            segmentation.result,
+            seg.result,
             params=params,
             timings={name: timings.get(name, 0.0) for name in stages},
             recomputed=[name for name in stages if name in recomputed],
         )
-        return ClassifierOutput(replace(segmentation, result=result), classifier is None)
+        return ClassifierOutput(replace(seg, result=result), classifier is None, None, preview)
 
+    yield "pixel classifier", len(PIPELINE_STAGES) + 1, total
+    session.preview(cancel)
+    yield Partial(output(False, preview=True))
+    session.refine(cancel)
     if not partial:
-        return output(seg, reconstruction)
-    yield Partial(output(seg, False))
+        return output(reconstruction)
+    yield Partial(output(False))
     yield names[-1], total - 1, total
     run_stage(names[-1])
-    result = segmenter.result(seg.prediction.labels, True, seg.seconds, params)
-    return output(replace(seg, result=replace(result, materials=seg.result.materials)), True)
+    return output(True)
 
 
 def named_output(out: ClassifierOutput, names: dict[int, str]) -> ClassifierOutput:
@@ -200,10 +194,11 @@ def named_output(out: ClassifierOutput, names: dict[int, str]) -> ClassifierOutp
 def classifier_text(classifier: PixelClassifier) -> str:
     """``"random_forest, 3 classes (1, 2, 3), 30 features, trained on 273 pixels"``."""
     classes = ", ".join(str(int(c)) for c in classifier.classes)
+    sample = f" of {classifier.n_scribbled_pixels} scribbled" if classifier.subsampled else ""
     return (
         f"{classifier.params.model}, {classifier.classes.size} classes ({classes}), "
         f"{len(classifier.feature_names)} features, "
-        f"trained on {classifier.n_training_pixels} pixels"
+        f"trained on {classifier.n_training_pixels}{sample} pixels"
     )
 
 
@@ -236,6 +231,6 @@ def classifier_parts(
     source = "from scribbles" if out.trained else f"from the classifier {Path(path or '').name}"
     parts = [f"{classes.size} materials {source} (labels {names})"]
     if out.trained:
-        parts.append(f"{out.classifier.n_training_pixels} training pixels")
+        parts.append(out.classifier.training_text())
     parts.append(f"mean class probability {float(confidence.mean()):.2f}")
     return parts

@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ...engine import PolarsegError, SegmentParams, get_method
-from .classify import CLASSIFIER_STAGES, ClassifierOutput, classifier_stages
+from .classify import CLASSIFIER_STAGES, PIPELINE_STAGES, ClassifierOutput, classifier_stages
 from .results import ExportRecord
 from .runs import Job, Partial, Result, Stage
 from .store import PipelineStore
@@ -120,13 +120,46 @@ def classifier_job(
     ``metadata["colour_stack"]``), whose polarisation images add features. ``settings``:
     the features and model a training uses (default the defaults)."""
     pipe = store.obtain(key, data, angles_rad, params, region=region, mask_key=mask_key)
-    segmenter = store.segmenter(key, colour_stack)
-    assert segmenter is not None
+    session = store.session(key, colour_stack)
+    assert session is not None
     return (
         yield from classifier_stages(
-            pipe, segmenter, params, scribbles, classifier, True, cancel, settings
+            pipe,
+            session,
+            params,
+            scribbles,
+            classifier,
+            reconstruction=True,
+            cancel=cancel,
+            settings=settings,
         )
     )
+
+
+def features_job(
+    store: PipelineStore,
+    key: str,
+    data: Any,
+    angles_rad: np.ndarray,
+    params: SegmentParams,
+    region: np.ndarray | None = None,
+    mask_key: str | None = None,
+    colour_stack: np.ndarray | None = None,
+) -> Generator[Any, None, int]:
+    """Worker job run when a scribbles layer is chosen before it holds strokes: the
+    stages the scribble mode shares with the pipeline and the stack's pixel features,
+    kept by its :class:`~napari_polarseg.engine.ScribbleSession`, so the first strokes
+    only train and predict. Returns the number of features."""
+    pipe = store.obtain(key, data, angles_rad, params, region=region, mask_key=mask_key)
+    total = len(PIPELINE_STAGES) + 1
+    for i, name in enumerate(PIPELINE_STAGES):
+        yield name, i, total
+        pipe.get(name, params)
+    session = store.session(key, colour_stack)
+    assert session is not None
+    session.segment_params = params
+    yield "pixel features", total - 1, total
+    return session.features().n_features
 
 
 def read_classifier_job(path: Path) -> Generator[Stage, None, PixelClassifier]:

@@ -80,7 +80,8 @@ class ShownResult:
             parts = [f"{summary['n_segments']} segments"]
             parts += [t for t in (close_up_text(summary), degenerate_text(summary)) if t]
         if self.partial:
-            return " · ".join([*parts, f"{seconds:.2f} s", "computing the error map…"])
+            busy = "refining the borders…" if self.out is not None and self.out.preview else None
+            return " · ".join([*parts, f"{seconds:.2f} s", busy or "computing the error map…"])
         if summary.get("n_components") is not None:
             parts.append(
                 f"{summary['n_components']} PCA components "

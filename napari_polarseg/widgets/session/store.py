@@ -15,6 +15,7 @@ import numpy as np
 
 from ...engine import Pipeline, Scene, SegmentParams, validity_mask
 from ...engine.analysis.pixel_segmentation import PixelSegmenter
+from ...engine.analysis.scribble_session import ScribbleSession
 
 
 def stack_pipeline(
@@ -34,14 +35,14 @@ def stack_pipeline(
 
 @dataclass
 class _Entry:
-    """A kept pipeline, what it was built from and the pixel segmenter beside it."""
+    """A kept pipeline, what it was built from and the scribble session beside it."""
 
     data: Any
     angles: tuple[float, ...]
     mask_key: str | None
     region: np.ndarray | None
     pipeline: Pipeline
-    segmenter: PixelSegmenter | None = None
+    session: ScribbleSession | None = None
     scene: Scene | None = None
 
     def matches(
@@ -61,7 +62,7 @@ class PipelineStore:
     ``mask_key`` or the content of its ``region``) change; otherwise the same object is
     reused so cached stages survive parameter changes. Beside each pipeline it keeps one
     :class:`~napari_polarseg.engine.analysis.pixel_segmentation.PixelSegmenter`
-    (:meth:`segmenter`), so the scribble mode computes the pixel features once per
+    (:meth:`session`), so the scribble mode computes the pixel features once per
     stack and a new stroke only retrains and predicts. Safe to call from a worker thread
     (the slot runs one worker at a time; a lock guards the dict).
     """
@@ -117,17 +118,23 @@ class PipelineStore:
                 entry.scene = Scene(pipeline=entry.pipeline)
             return entry.scene
 
-    def segmenter(self, key: str, colour_stack: np.ndarray | None = None) -> PixelSegmenter | None:
-        """The pixel segmenter beside ``key``'s pipeline (made at the first call; None
-        without a pipeline). A rebuilt pipeline, or another ``colour_stack`` (the colour
-        stacks of a colour-polarisation frame, :class:`PixelSegmenter`), gets a new one."""
+    def session(self, key: str, colour_stack: np.ndarray | None = None) -> ScribbleSession | None:
+        """The scribble session beside ``key``'s pipeline (made at the first call; None
+        without a pipeline): it keeps the pixel features between strokes. A rebuilt
+        pipeline, or another ``colour_stack`` (the colour stacks of a
+        colour-polarisation frame, :class:`PixelSegmenter`), gets a new one."""
         with self._lock:
             entry = self._entries.get(key)
             if entry is None:
                 return None
-            if entry.segmenter is None or entry.segmenter.colour_stack is not colour_stack:
-                entry.segmenter = PixelSegmenter(entry.pipeline, colour_stack=colour_stack)
-            return entry.segmenter
+            if entry.session is None or entry.session.colour_stack is not colour_stack:
+                entry.session = ScribbleSession.on_pipeline(entry.pipeline, colour_stack)
+            return entry.session
+
+    def segmenter(self, key: str, colour_stack: np.ndarray | None = None) -> PixelSegmenter | None:
+        """The pixel segmenter of :meth:`session` (its kept feature stack)."""
+        session = self.session(key, colour_stack)
+        return None if session is None else session.segmenter
 
     def discard(self, keep: set[str]) -> None:
         """Forget the pipelines of every key not in ``keep`` (layers that were removed)."""

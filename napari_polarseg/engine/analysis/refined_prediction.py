@@ -1,0 +1,166 @@
+"""Coarse-to-fine prediction of a pixel classifier: every s-th pixel, then the borders.
+
+Predicting every pixel of a camera frame costs seconds, most of it where the answer is
+plain: inside a material, where every pixel gets the same class. So the classifier
+first predicts the pixels of a grid of stride s (one pixel per s × s cell, the cell's
+centre pixel ⌊s/2⌋ rows and columns in), and the class probabilities p_k of every other
+pixel are interpolated from it (linear, :func:`upsampled`).
+A cell whose 3 × 3 neighbourhood of grid samples does not agree on the most probable
+class lies on a border between materials (or holds a speck of another one): each of
+its pixels is predicted on its own features, exactly as a full prediction would. So
+the labels differ from predicting every pixel only inside cells whose nine surrounding
+samples all agree — a region of another class smaller than about a cell that no grid
+sample hits.
+
+s = 1 predicts every pixel. The grid's features are kept pixel-major (one C-contiguous
+(n, F) float32 block, :meth:`~..features.pixel_features.FeatureStack.grid_rows`), so a
+new stroke reads them without copying the planes again.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from scipy import ndimage
+
+from ..errors import Cancelled
+from ..features.pixel_features import FeatureStack
+
+#: Pixels whose features are predicted in one call (bounds the (n, F) copy).
+CHUNK_PIXELS = 131_072
+
+
+@dataclass(frozen=True)
+class RefinedProbabilities:
+    """Output of :func:`refined_probabilities`.
+
+    Attributes
+    ----------
+    probabilities : ndarray (K, H, W) float32
+        p_k of every pixel (summing to 1 over k).
+    n_predicted : int
+        Pixels whose own features were predicted (grid samples plus border cells).
+    """
+
+    probabilities: np.ndarray
+    n_predicted: int
+
+
+def predict_rows(model: Any, rows: np.ndarray, cancel: Any = None) -> np.ndarray:
+    """``model.predict_proba`` of (n, F) rows in chunks → (n, K) float32; ``cancel()``
+    returning True between chunks raises :class:`Cancelled`."""
+    k = len(model.classes_)
+    out = np.empty((rows.shape[0], k), dtype=np.float32)
+    for start in range(0, rows.shape[0], CHUNK_PIXELS):
+        if cancel is not None and cancel():
+            raise Cancelled("prediction cancelled")
+        stop = min(rows.shape[0], start + CHUNK_PIXELS)
+        out[start:stop] = model.predict_proba(rows[start:stop])
+    return out
+
+
+def border_cells(labels: np.ndarray) -> np.ndarray:
+    """Grid cells (h', w') whose 3 × 3 neighbourhood of labels is not all one class."""
+    high = ndimage.maximum_filter(labels, size=3, mode="nearest")
+    low = ndimage.minimum_filter(labels, size=3, mode="nearest")
+    return high != low
+
+
+def axis_weights(n_fine: int, f: int, n_coarse: int) -> tuple[np.ndarray, ...]:
+    """Linear interpolation along one axis from a grid of step f to ``n_fine`` pixels:
+    (lower sample, upper sample, weight of the upper) per fine pixel. Sample k stands
+    for fine pixels k·f … k·f + f − 1, at u = (i + ½)/f − ½ samples for fine pixel i (the
+    grid of :func:`~..features.pixel_features.upsample`); beyond the first and last
+    sample the value is held."""
+    u = (np.arange(n_fine) + 0.5) / f - 0.5
+    low = np.floor(u).astype(np.intp)
+    weight = (u - low).astype(np.float32)
+    high = np.clip(low + 1, 0, n_coarse - 1)
+    return np.clip(low, 0, n_coarse - 1), high, weight
+
+
+def upsampled(coarse: np.ndarray, stride: int, shape: tuple[int, int]) -> np.ndarray:
+    """(K, H, W) C-contiguous float32: every plane of ``coarse`` (K, h', w') linearly interpolated
+    from the grid of ``stride`` to ``shape`` (rows, then columns; all planes at once)."""
+    r0, r1, wr = axis_weights(shape[0], stride, coarse.shape[1])
+    c0, c1, wc = axis_weights(shape[1], stride, coarse.shape[2])
+    c = coarse.astype(np.float32, copy=False)
+    rows = c[:, r0] * (1 - wr)[:, None] + c[:, r1] * wr[:, None]
+    out = np.empty((c.shape[0], *shape), dtype=np.float32)  # C-contiguous
+    np.take(rows, c0, axis=2, out=out)
+    out *= 1 - wc
+    out += np.take(rows, c1, axis=2) * wc
+    return out
+
+
+def grid_index(shape: tuple[int, int], stride: int) -> tuple[np.ndarray, np.ndarray]:
+    """Rows and columns of the grid samples of ``stride`` in an image of ``shape``
+    (:meth:`~..features.pixel_features.FeatureStack.grid_rows`'s pixels)."""
+    s = int(stride)
+    h, w = shape
+    rows = np.minimum(np.arange(0, h, s) + s // 2, h - 1)
+    cols = np.minimum(np.arange(0, w, s) + s // 2, w - 1)
+    return rows, cols
+
+
+def grid_probabilities(
+    model: Any, features: FeatureStack, stride: int, cancel: Any = None
+) -> np.ndarray:
+    """p_k (K, ⌈H/s⌉, ⌈W/s⌉) float32 of the grid samples of ``stride``."""
+    h, w = features.shape
+    s = int(stride)
+    k = len(model.classes_)
+    return predict_rows(model, features.grid_rows(s), cancel).T.reshape(k, -(-h // s), -(-w // s))
+
+
+def refined_probabilities(
+    model: Any,
+    features: FeatureStack,
+    stride: int,
+    cancel: Any = None,
+    coarse: np.ndarray | None = None,
+) -> RefinedProbabilities:
+    """p_k of every pixel by the grid of ``stride`` and the border cells (module
+    docstring); ``stride`` 1 predicts every pixel.
+
+    Parameters
+    ----------
+    model : fitted scikit-learn classifier (``predict_proba``)
+    features : FeatureStack
+        The features the model was trained on, by name and order.
+    stride : int
+        Grid step s, pixels (>= 1).
+    cancel : callable, optional
+        Returning True between chunks raises :class:`Cancelled`.
+    coarse : array (K, ⌈H/s⌉, ⌈W/s⌉), optional
+        :func:`grid_probabilities` of this model, when already predicted.
+    """
+    h, w = features.shape
+    k = len(model.classes_)
+    s = max(1, int(stride))
+    if s == 1:
+        proba = np.empty((k, h, w), dtype=np.float32)
+        step = max(1, CHUNK_PIXELS // max(w, 1))
+        for start in range(0, h, step):
+            stop = min(h, start + step)
+            p = predict_rows(model, features.rows(start, stop), cancel)
+            proba[:, start:stop] = p.T.reshape(k, stop - start, w)
+        return RefinedProbabilities(proba, h * w)
+    if coarse is None:
+        coarse = grid_probabilities(model, features, s, cancel)
+    proba = upsampled(coarse, s, (h, w))  # C-contiguous: written through the view below
+    cells = border_cells(np.argmax(coarse, axis=0))
+    rows, cols = np.nonzero(cells)
+    # every pixel of every border cell, flat row-major indices inside the image
+    dr, dc = np.divmod(np.arange(s * s), s)
+    pr = (rows[:, None] * s + dr[None, :]).ravel()
+    pc = (cols[:, None] * s + dc[None, :]).ravel()
+    inside = (pr < h) & (pc < w)
+    flat = np.sort(pr[inside] * w + pc[inside])
+    out = proba.reshape(k, -1)
+    for start in range(0, flat.size, CHUNK_PIXELS):
+        part = flat[start : start + CHUNK_PIXELS]
+        out[:, part] = predict_rows(model, features.take(part), cancel).T
+    return RefinedProbabilities(proba, int(coarse[0].size + flat.size))
