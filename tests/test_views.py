@@ -175,3 +175,19 @@ def test_stokes_sign_convention():
         np.testing.assert_allclose(s, [2.0, s1, s2], atol=1e-12)
     assert STOKES_CONVENTION["components"] == list(STOKES_COMPONENTS) == ["S0", "S1", "S2"]
     assert "column axis towards the row axis" in STOKES_CONVENTION["angle_direction"]
+
+
+def test_hsv_to_rgb_matches_matplotlib():
+    from matplotlib.colors import hsv_to_rgb as reference
+
+    from napari_polarseg.engine.analysis.views import hsv_to_rgb
+
+    rng = np.random.default_rng(0)
+    hsv = rng.random((50, 60, 3))
+    hsv[0, :6, 0] = np.arange(6) / 6  # the sector edges
+    hsv[1, :3] = [[0, 0, 1], [1, 1, 1], [0.5, 1, 0]]  # white, red, black
+    for dtype, tol in ((np.float64, 1e-12), (np.float32, 1e-6)):
+        x = hsv.astype(dtype)
+        out = hsv_to_rgb(x)
+        assert out.dtype == dtype
+        np.testing.assert_allclose(out, reference(x), atol=tol)

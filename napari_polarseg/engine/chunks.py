@@ -13,6 +13,7 @@ import threading
 from collections.abc import Callable, Iterator
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import contextmanager
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -24,6 +25,8 @@ N_THREADS = max(1, min(8, len(os.sched_getaffinity(0)) if hasattr(os, "sched_get
 MIN_PARALLEL_POINTS = 50_000
 
 _local = threading.local()
+
+T = TypeVar("T")
 
 _controller: list = []  # the threadpoolctl controller, found once (see below)
 
@@ -139,3 +142,31 @@ def call_stoppable(work: Callable[[], object], check: Callable[[], None]) -> obj
     if "error" in box:
         raise box["error"]  # type: ignore[misc]
     return box["value"]
+
+
+def in_background(work: Callable[[], T]) -> Callable[[], T]:
+    """Start ``work()`` in a thread of its own; the returned callable waits for it and
+    gives its result (or raises its exception).
+
+    For numpy work that releases the GIL and is needed later in the same run (the
+    second core works while the first draws the superpixels). Written by hand: a
+    one-off thread with a result, without an executor to shut down.
+    """
+    box: dict[str, Any] = {}
+
+    def target() -> None:
+        try:
+            box["value"] = work()
+        except BaseException as exc:  # handed to the caller of the result
+            box["error"] = exc
+
+    thread = threading.Thread(target=target, name="polarseg-background", daemon=True)
+    thread.start()
+
+    def result() -> T:
+        thread.join()
+        if "error" in box:
+            raise box["error"]
+        return box["value"]
+
+    return result

@@ -83,7 +83,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 import scipy.sparse as sps
 
-from ..chunks import call_stoppable
+from ..chunks import call_stoppable, in_background
 from ..degenerate import degenerate_result
 from ..errors import PolarsegError
 from ..features.pca import pca_features, whiten
@@ -111,6 +111,31 @@ def _region_sums(flat: np.ndarray, n: int, maps: dict[str, np.ndarray]) -> dict[
     return {k: np.bincount(flat, weights=v.ravel(), minlength=n) for k, v in maps.items()}
 
 
+def pixel_terms(intensity: np.ndarray, dop: np.ndarray, phase: np.ndarray) -> dict[str, np.ndarray]:
+    """The per-pixel maps whose region sums give :func:`node_features` (float64): Î, S1,
+    S2, log Î (centred on its median), (log Î)², ρ, ρ², ρ log Î, cos 2φ and sin 2φ.
+
+    They do not depend on the regions, so :func:`prepare_regions` computes them while
+    the superpixels are drawn.
+    """
+    log_i = np.log(np.maximum(intensity, EPS_INTENSITY)).astype(np.float64)
+    log_i -= np.median(log_i)
+    d = dop.astype(np.float64)
+    c, s = np.cos(2 * phase.astype(np.float64)), np.sin(2 * phase.astype(np.float64))
+    return {
+        "s0": intensity.astype(np.float64),
+        "s1": intensity * d * c,
+        "s2": intensity * d * s,
+        "l": log_i,
+        "ll": log_i * log_i,
+        "d": d,
+        "dd": d * d,
+        "ld": log_i * d,
+        "c": c,
+        "s": s,
+    }
+
+
 def node_features(
     intensity: np.ndarray,
     dop: np.ndarray,
@@ -118,38 +143,22 @@ def node_features(
     regions: np.ndarray,
     names: tuple[str, ...] = NODE_FEATURES,
     trend: tuple[int, float, int] = TREND,
+    terms: dict[str, np.ndarray] | None = None,
 ) -> np.ndarray:
     """Per-region features (n, len(names)) float64, each of :data:`NODE_FEATURES`;
     ``trend`` = (degree, reach, iterations) of ``dop_over_shape_trend``
     (:func:`.shape_trend.polarisation_over_trend`).
 
     Computed from region sums of Î, S1, S2, log Î, (log Î)², ρ, ρ², ρ log Î, cos 2φ and
-    sin 2φ (one ``np.bincount`` each); variances and covariances are differences of
-    means of log Î centred on its median.
+    sin 2φ (one ``np.bincount`` each; the maps: :func:`pixel_terms`, or ``terms`` when
+    already made); variances and covariances are differences of means of log Î centred
+    on its median.
     """
     flat = regions.ravel()
     n = int(flat.max()) + 1
     count = np.maximum(np.bincount(flat, minlength=n), 1).astype(float)
-    log_i = np.log(np.maximum(intensity, EPS_INTENSITY)).astype(np.float64)
-    log_i -= np.median(log_i)
-    d = dop.astype(np.float64)
-    c, s = np.cos(2 * phase.astype(np.float64)), np.sin(2 * phase.astype(np.float64))
-    sums = _region_sums(
-        flat,
-        n,
-        {
-            "s0": intensity.astype(np.float64),
-            "s1": intensity * d * c,
-            "s2": intensity * d * s,
-            "l": log_i,
-            "ll": log_i * log_i,
-            "d": d,
-            "dd": d * d,
-            "ld": log_i * d,
-            "c": c,
-            "s": s,
-        },
-    )
+    terms = pixel_terms(intensity, dop, phase) if terms is None else terms
+    sums = _region_sums(flat, n, terms)
     m = {k: v / count for k, v in sums.items()}
     var_l = np.maximum(m["ll"] - m["l"] ** 2, 0)
     var_d = np.maximum(m["dd"] - m["d"] ** 2, 0)
@@ -294,13 +303,19 @@ def first_appearance(labels: np.ndarray, node_labels: np.ndarray) -> tuple[np.nd
 
 
 def _region_features(
-    i: np.ndarray, d: np.ndarray, ph: np.ndarray, regions: np.ndarray, p: UnsupervisedParams
+    i: np.ndarray,
+    d: np.ndarray,
+    ph: np.ndarray,
+    regions: np.ndarray,
+    p: UnsupervisedParams,
+    terms: dict[str, np.ndarray] | None = None,
 ) -> tuple[np.ndarray, list[str]]:
     """Node features (n, c) of the superpixels, non-finite values 0, and their names: the
-    region features of :func:`node_features`, then the region means of pixel features."""
+    region features of :func:`node_features` (from ``terms``, :func:`pixel_terms`, when
+    made), then the region means of pixel features."""
     names = list(p.features)
     trend = (p.trend_degree, p.trend_reach, p.trend_iterations)
-    cols = [node_features(i, d, ph, regions, p.features, trend)] if p.features else []
+    cols = [node_features(i, d, ph, regions, p.features, trend, terms)] if p.features else []
     if p.pixel_scales:
         from ..features.pixel_features import PixelFeatureParams, pixel_features
         from ..features.superpixels import region_means
@@ -493,16 +508,21 @@ def prepare_regions(
     if min(i.shape) < 2:
         raise PolarsegError(f"image too small to segment: {i.shape}")
     step(0.05)
+    # the per-pixel maps of the node features do not depend on the superpixels: made in
+    # a second thread while they are drawn (numpy and the watershed release the GIL)
+    terms = in_background(lambda: pixel_terms(i, d, ph))
     regions, edges = _superpixels(i, d, ph, p, progress)
     step(0.5)
     regions, n = _masked_regions(regions, valid)
     keep = slice(0, n)
-    z_region, count, centroid = region_polarisation(i, d, ph, regions)
+    maps = terms()
+    stokes = (maps["s0"], maps["s1"], maps["s2"])
+    z_region, count, centroid = region_polarisation(i, d, ph, regions, stokes)
     step(0.6)
     share = surface_trend_share(z_region[keep], count[keep], centroid[keep], i.shape)
     close_up = share > p.close_up_share
     q = p.close_up_params() if close_up else p
-    x, names = _region_features(i, d, ph, regions, q)
+    x, names = _region_features(i, d, ph, regions, q, maps)
     step(0.8)
     weight = np.bincount(regions.ravel(), minlength=n).astype(float)[keep]
     adjacency = region_adjacency(regions)[keep][:, keep].tocsr()

@@ -44,10 +44,15 @@ OUTLIER_WEIGHT = 0.05
 
 
 def region_polarisation(
-    intensity: np.ndarray, dop: np.ndarray, phase: np.ndarray, regions: np.ndarray
+    intensity: np.ndarray,
+    dop: np.ndarray,
+    phase: np.ndarray,
+    regions: np.ndarray,
+    stokes: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Complex polarisation z = ΣS1 + iΣS2 over ΣS0 of every region (eq. 1), its pixel
-    count and its centroid (row, column), pixels.
+    count and its centroid (row, column), pixels. ``stokes``: the float64 maps S0 = Î,
+    S1 = Î ρ cos 2φ, S2 = Î ρ sin 2φ when already made (else computed here).
 
     Returns
     -------
@@ -58,11 +63,11 @@ def region_polarisation(
     flat = regions.ravel()
     n = int(flat.max()) + 1
     count = np.maximum(np.bincount(flat, minlength=n), 1).astype(np.float64)
-    i = intensity.astype(np.float64).ravel()
-    two_phi = 2.0 * phase.astype(np.float64).ravel()
-    s1 = i * dop.ravel() * np.cos(two_phi)
-    s2 = i * dop.ravel() * np.sin(two_phi)
-    sums = [np.bincount(flat, weights=v, minlength=n) for v in (i, s1, s2)]
+    if stokes is None:
+        i = intensity.astype(np.float64).ravel()
+        two_phi = 2.0 * phase.astype(np.float64).ravel()
+        stokes = (i, i * dop.ravel() * np.cos(two_phi), i * dop.ravel() * np.sin(two_phi))
+    sums = [np.bincount(flat, weights=v.ravel(), minlength=n) for v in stokes]
     z = (sums[1] + 1j * sums[2]) / np.maximum(sums[0], EPS_INTENSITY)
     return z, count, region_centroids(regions, count)
 
