@@ -12,9 +12,11 @@ from napari_polarseg.engine.unsupervised.params import (
     NODE_FEATURES,
     UnsupervisedParams,
 )
-from napari_polarseg.engine.unsupervised.segmenter import (
+from napari_polarseg.engine.unsupervised.region_features import (
     dop_given_intensity,
     node_features,
+)
+from napari_polarseg.engine.unsupervised.segmenter import (
     polarisation_superpixels,
     region_adjacency,
     segment_unsupervised,

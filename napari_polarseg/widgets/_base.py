@@ -4,7 +4,6 @@ Run/Cancel, status."""
 from __future__ import annotations
 
 import contextlib
-from collections.abc import Callable
 from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
 import numpy as np
@@ -49,20 +48,6 @@ def ask_file(
     ask = QFileDialog.getSaveFileName if save else QFileDialog.getOpenFileName
     path, _ = ask(parent, title, start, filters)
     return path or None
-
-
-class WidgetPart:
-    """Base of the mixins a widget is built from (the Segment widget's parts).
-
-    Annotations only: the :class:`StackWidget` attributes every part uses.
-    """
-
-    _viewer: napari.viewer.Viewer
-    native: Any
-    stack_layer: ComboBox
-    _set_status: Callable[[str], None]
-    _fail: Callable[[PolarsegError], None]
-    _done: Callable[[str], None]
 
 
 @runtime_checkable

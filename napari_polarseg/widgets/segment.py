@@ -1,14 +1,12 @@
 """The "Segment by material" widget: the cached engine pipeline, run in a worker thread.
 
 Thin: the jobs, pipelines and result texts are the session layer
-(:mod:`napari_polarseg.widgets.session`). The widget holds its parts as objects: the
-parameter controls (:class:`~napari_polarseg.widgets.segment_params.ParameterControls`,
-:attr:`SegmentWidget.controls`), the classifier files and *Export results…*
-(:mod:`~napari_polarseg.widgets.segment_files`, :attr:`SegmentWidget.classifier_files`,
-:attr:`SegmentWidget.export`); the mask and scribbles
-(:mod:`~napari_polarseg.widgets.segment_inputs`, with the :class:`Snapshot` of a
-request) and the output layers (:mod:`~napari_polarseg.widgets.segment_layers`) are
-still mixins. This module builds the widget and runs it.
+(:mod:`napari_polarseg.widgets.session`). The widget holds its parts as objects, each
+given the public members of the widget it reads: :attr:`SegmentWidget.controls` (the
+parameters), :attr:`SegmentWidget.inputs` (mask, scribbles, materials, the
+:class:`Snapshot` of a request), :attr:`SegmentWidget.layers` (the output layers),
+:attr:`SegmentWidget.classifier_files`, :attr:`SegmentWidget.export` and
+:attr:`SegmentWidget.assist`. This module builds the widget and runs it.
 """
 
 from __future__ import annotations
@@ -30,8 +28,8 @@ from .docks import SegmentDock
 from .param_controls import controlled_names
 from .segment_assist import ScribbleAssist
 from .segment_files import ClassifierFiles, ResultExport
-from .segment_inputs import CUT_ONLY, NO_MASK, NO_SCRIBBLES, MaskAndScribbles, Snapshot
-from .segment_layers import ResultLayers, ShownEntry, WithContrast, with_contrast
+from .segment_inputs import CUT_ONLY, NO_MASK, NO_SCRIBBLES, SegmentInputs, Snapshot
+from .segment_layers import SegmentLayers, ShownEntry, WithContrast, with_contrast
 from .segment_params import ParameterControls
 from .session import (
     PIPELINE_STAGES,
@@ -48,11 +46,11 @@ from .session import (
 
 if TYPE_CHECKING:
     import napari
-    from napari.layers import Layer
+    from napari.layers import Labels, Layer
 
     from ..engine.analysis.pixel_classifier import PixelClassifier
 
-# Names importers take from this module (tests, benchmarks): defined beside the mixins.
+# Names importers take from this module (tests, benchmarks): defined beside the parts.
 __all__ = [
     "CONTROLLED",
     "CUT_ONLY",
@@ -77,7 +75,7 @@ CONTROLLED = controlled_names(PARAM_SPECS)
 FIRST_CONTROLS = ("n_segments",)
 
 
-class SegmentWidget(ResultLayers, MaskAndScribbles, StackWidget, SegmentDock):
+class SegmentWidget(StackWidget, SegmentDock):
     """Segment an angle stack by material (thesis section 4.5) with live parameters.
 
     Controls: a preset (thesis values or the recommended ones), *Load parameters…* and
@@ -103,17 +101,11 @@ class SegmentWidget(ResultLayers, MaskAndScribbles, StackWidget, SegmentDock):
     are always left out of the fit and counted in the status line.
 
     One :class:`~napari_polarseg.engine.Pipeline` is kept per stack layer, so a rerun
-    computes only the stages a change made stale (changing the number of segments
-    recomputes only the labels). Beside it a
-    :class:`~napari_polarseg.engine.analysis.pixel_segmentation.PixelSegmenter` keeps the stack's
-    pixel features, so a painted stroke only retrains the pixel classifier and predicts
-    again; a new stroke (or any change) during a retraining stops its prediction between
-    chunks and starts the newest request. A loaded classifier is applied to the chosen
-    stack without retraining until the strokes change or it is cleared. The
-    mask is read at every run: choosing another one, or painting the chosen Labels
-    layer, builds a new pipeline at the next run. At most one worker runs at a time; a
-    change during a run stops it at the next stage boundary and starts the newest
-    request.
+    computes only what a change made stale; beside it a
+    :class:`~napari_polarseg.engine.ScribbleSession` keeps the stack's pixel features, so
+    a stroke only retrains the classifier and predicts again (a newer request stops it
+    between chunks). A loaded classifier applies until the strokes change or it is
+    cleared. The mask is read at every run. At most one worker runs at a time.
 
     Output layers (replaced in place on a rerun): ``segments`` (Labels, one label per
     segment over every pixel; segment k of the engine is label k + 1 because napari
@@ -158,8 +150,6 @@ class SegmentWidget(ResultLayers, MaskAndScribbles, StackWidget, SegmentDock):
     ) -> None:
         super().__init__(viewer)
         self.store = PipelineStore()
-        #: Per stack key: the result behind the stack's ``segments`` layer.
-        self._shown: dict[str, ShownEntry] = {}
         self._requested: Snapshot | None = None  # snapshot of the last request
         self._force = False  # a control changed: the next live run is not skipped
         self._live_run = False  # run() was called by the live update
@@ -178,8 +168,19 @@ class SegmentWidget(ResultLayers, MaskAndScribbles, StackWidget, SegmentDock):
             tooltip="Rerun (only the stale stages) whenever a value changes or a stroke is "
             "painted into the chosen mask or scribbles layer",
         )
-        self._build_input_controls()
-        self._build_view_controls()
+        #: The mask, the scribbles and their materials, the classifier settings (a part).
+        self.inputs = SegmentInputs(self, viewer, self._labels_box, self._set_status, self._fail)
+        for name in (
+            "mask_layer",
+            "scribbles_layer",
+            "materials",
+            "classifier_controls",
+            "new_scribbles_button",
+        ):
+            setattr(self, name, getattr(self.inputs, name))
+        #: The output layers and the results they show, the HSV and Stokes views (a part).
+        self.layers = SegmentLayers(self, viewer, self._later, self._set_status, self._done)
+        self.views, self.view_mode = self.layers.views, self.layers.view_mode
         self._lay_out()
         self.native.setObjectName(SEGMENT_DOCK_NAME)  # the others open as its tabs
         self._timer = QTimer(self.native)  # deleted with the widget: never fires after it
@@ -187,7 +188,7 @@ class SegmentWidget(ResultLayers, MaskAndScribbles, StackWidget, SegmentDock):
         self._timer.setInterval(LIVE_DELAY_MS)
         self._timer.timeout.connect(self._on_timer)
         self._connect()
-        self._unwatch_when_closed()
+        self.native.destroyed.connect(self.inputs.unwatch)
 
     def _adopt_controls(self) -> None:
         """The parts' controls as attributes of the widget (``widget.n_segments``, …)."""
@@ -251,8 +252,6 @@ class SegmentWidget(ResultLayers, MaskAndScribbles, StackWidget, SegmentDock):
     def _connect(self) -> None:
         """Connect the controls to their handlers (the parts connect their own)."""
         self.show_advanced.changed.connect(self._on_show_advanced)
-        self.views.changed.connect(self._on_views_changed)
-        self.view_mode.changed.connect(self._on_views_changed)
         self.stack_layer.changed.connect(self.mask_layer.reset_choices)
         self.stack_layer.changed.connect(self.scribbles_layer.reset_choices)
         watched = [self.stack_layer, self.angles, self.mask_layer, self.scribbles_layer]
@@ -261,11 +260,7 @@ class SegmentWidget(ResultLayers, MaskAndScribbles, StackWidget, SegmentDock):
         for w in self.classifier_controls.controls:
             w.changed.connect(self._on_value_changed)
         self.live.changed.connect(self._on_value_changed)
-        self.mask_layer.changed.connect(self._sync_watches)
-        self.scribbles_layer.changed.connect(self._sync_watches)
-        self.scribbles_layer.changed.connect(self._on_scribbles_changed)
         self.scribbles_layer.changed.connect(self._prefetch_features)
-        self.new_scribbles_button.changed.connect(self.new_scribbles_layer)
 
     # -- the parts' public members ----------------------------------------------------
     def params(self) -> SegmentParams:
@@ -331,18 +326,61 @@ class SegmentWidget(ResultLayers, MaskAndScribbles, StackWidget, SegmentDock):
 
     def _on_inputs(self) -> None:
         """The loaded classifier changed: the cut's controls follow."""
-        self._on_scribbles_changed()
+        self.inputs.on_scribbles_changed()
+
+    # -- the inputs part's public members ---------------------------------------------
+    def current_mask(self) -> tuple[str | None, np.ndarray | None]:
+        """Key and region of the chosen mask (``SegmentInputs.current_mask``)."""
+        return self.inputs.current_mask()
+
+    def current_scribbles(self) -> tuple[str | None, np.ndarray | None]:
+        """Key and strokes of the chosen scribbles (``SegmentInputs.current_scribbles``)."""
+        return self.inputs.current_scribbles()
+
+    def new_scribbles_layer(self, *_: Any) -> Labels | None:
+        """A new, chosen scribbles layer (``SegmentInputs.new_scribbles_layer``)."""
+        return self.inputs.new_scribbles_layer()
+
+    def material_names(self) -> dict[int, str]:
+        """Scribble value → material name (``SegmentInputs.material_names``)."""
+        return self.inputs.material_names()
+
+    def snapshot(self) -> Snapshot | None:
+        """Everything a result depends on (``SegmentInputs.snapshot``)."""
+        return self.inputs.snapshot()
+
+    @property
+    def probabilities(self) -> np.ndarray | None:
+        """Class probabilities (K, H, W) of the last scribble run shown, else None."""
+        return self.layers.probabilities
+
+    @property
+    def classes(self) -> np.ndarray | None:
+        """The scribble value of each class of :attr:`probabilities` (None: none)."""
+        return self.layers.classes
+
+    @property
+    def uncertainty(self) -> np.ndarray | None:
+        """Uncertainty (H, W) of the last scribble run shown, else None."""
+        return self.layers.uncertainty
+
+    def _show(self, *args: Any, **kwargs: Any) -> None:
+        """Show a run's layers and summary (``SegmentLayers.show``)."""
+        self.layers.show(*args, **kwargs)
+
+    def schedule_live_run(self) -> None:
+        """With live update on, rerun after the debounce (a stroke was painted)."""
+        if self.live.value:
+            self._timer.start()
 
     # -- stacks, pipelines and results ------------------------------------------------
     def _refresh_stacks(self) -> None:
         super()._refresh_stacks()
-        for name in ("mask_layer", "scribbles_layer"):
-            chooser = getattr(self, name, None)  # None while the base class initialises
-            if chooser is not None:
-                chooser.reset_choices()
-        if getattr(self, "scribbles_layer", None) is not None:
-            self._sync_watches()
-            self._on_scribbles_changed()
+        inputs = getattr(self, "inputs", None)  # None while the base class initialises
+        if inputs is not None:
+            inputs.reset_choices()
+            inputs.sync_watches()
+            inputs.on_scribbles_changed()
 
     @property
     def pipeline(self) -> Pipeline | None:
@@ -356,7 +394,7 @@ class SegmentWidget(ResultLayers, MaskAndScribbles, StackWidget, SegmentDock):
 
     def shown_result(self, layer: Layer) -> SegmentationResult | None:
         """The result behind ``layer``'s ``segments`` layer, if this widget made it."""
-        entry = self._shown.get(source_key(layer))
+        entry = self.layers.shown.get(source_key(layer))
         segments = find_output(self._viewer, "segments", layer)
         if entry is None or segments is None:
             return None
@@ -368,8 +406,9 @@ class SegmentWidget(ResultLayers, MaskAndScribbles, StackWidget, SegmentDock):
         store = getattr(self, "store", None)  # None while the base class initialises
         if store is not None:
             store.discard(keep)
-        for key in set(getattr(self, "_shown", None) or {}) - keep:
-            del self._shown[key]
+        layers = getattr(self, "layers", None)  # None while the base class initialises
+        for key in set(layers.shown if layers is not None else ()) - keep:
+            del layers.shown[key]
         for part in ("export", "classifier_files"):
             found = getattr(self, part, None)  # None while the widget is built
             if found is not None:
@@ -423,14 +462,14 @@ class SegmentWidget(ResultLayers, MaskAndScribbles, StackWidget, SegmentDock):
             self._requested = self.snapshot()
             self._fail(exc)
             return
-        snap = self._snapshot_of(params, mask_key, region, scribble_key, scribbles)
+        snap = self.inputs.snapshot_of(params, mask_key, region, scribble_key, scribbles)
         self._requested = snap
         files = self.classifier_files
-        loaded = self._applied(scribble_key, snap.scribbles_digest)
+        loaded = self.inputs.applied(scribble_key, snap.scribbles_digest)
         if files.loaded is not None and loaded is None:  # painted since: train again
             files.loaded = None
             files.update_buttons()
-            self._on_scribbles_changed()
+            self.inputs.on_scribbles_changed()
         if scribbles is not None and loaded is None:
             problem = scribble_problem(scribbles)
             if problem is not None:
@@ -477,7 +516,7 @@ class SegmentWidget(ResultLayers, MaskAndScribbles, StackWidget, SegmentDock):
         on_result = functools.partial(self._on_result, delivery)
         on_partial = functools.partial(self._on_partial, delivery)
         # the contrast of the maps it adds is computed in the worker too
-        job = with_contrast(request.job, self._contrast_memo)
+        job = with_contrast(request.job, self.layers.contrast_memo)
         args, total = request.args, request.total
         self._submit(job, args, total, on_result, on_partial, self._live_run, True, request.reports)
 
@@ -511,7 +550,7 @@ class SegmentWidget(ResultLayers, MaskAndScribbles, StackWidget, SegmentDock):
         changed (e.g. the refractive index under the superpixel method) and no thesis
         maps are asked for: nothing is recomputed. True if it did."""
         key = source_key(layer)
-        entry = self._shown.get(key)
+        entry = self.layers.shown.get(key)
         scene = self.store.scene(key)
         if entry is None or entry.snap is None or scene is None or snap.maps:
             return False
@@ -529,7 +568,7 @@ class SegmentWidget(ResultLayers, MaskAndScribbles, StackWidget, SegmentDock):
         angles = segments.metadata.get("polarseg_params", {}).get("angles_deg")
         params_meta = {**new.to_dict(), "angles_deg": angles}
         segments.metadata = {**segments.metadata, "polarseg_params": params_meta}
-        self._shown[key] = ShownEntry(entry.result, entry.inputs, snap)
+        self.layers.shown[key] = ShownEntry(entry.result, entry.inputs, snap)
         self.export.reshown(layer, new)
         self._slot.drop()  # a run of other values still going is outdated: no word of it
         fields = ", ".join(changed) if changed else "nothing"

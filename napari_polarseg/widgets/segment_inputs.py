@@ -4,6 +4,7 @@ edits painted into them), and the :class:`Snapshot` of everything a result depen
 from __future__ import annotations
 
 import contextlib
+from collections.abc import Callable
 from dataclasses import dataclass, fields
 from typing import Any
 
@@ -12,7 +13,6 @@ from magicgui.widgets import PushButton
 from napari.layers import Labels
 
 from ..engine import PolarsegError, SegmentParams
-from ._base import WidgetPart
 from ._layers import label_colormap, source_key
 from .classifier_controls import ClassifierControls
 from .materials import MaterialList
@@ -84,32 +84,45 @@ class Snapshot:
         )
 
 
-class MaskAndScribbles(WidgetPart):
-    """Mixin of :class:`~napari_polarseg.widgets.segment.SegmentWidget`: the mask and
-    scribbles choosers, the edits painted into the chosen layers, the snapshot.
+class SegmentInputs:
+    """The Segment widget's inputs beside the stack, a part the widget holds
+    (``widget.inputs``): the mask and scribbles choosers, the named materials, the
+    classifier settings, *New scribbles layer*, the edits painted into the chosen
+    layers, and the :class:`Snapshot` of everything a result depends on.
 
-    Uses the widget's viewer, stack chooser, angles, :meth:`params`, ``wants_maps``, the
-    loaded classifier (``loaded``), the live check box and timer, and its status line.
+    Parameters
+    ----------
+    owner : SegmentWidget
+        What the part reads of the widget, by its public members: the ``stack_layer``
+        and ``angles`` controls, ``params()``, ``wants_maps()``, the ``loaded``
+        classifier, the parameter ``controls`` part and
+        ``schedule_live_run()``.
+    viewer : napari.viewer.Viewer
+    labels_box : callable(label, none, tooltip) -> ComboBox
+        Makes a chooser of the Labels layers that fit the stack.
+    set_status, fail : callable
+        The widget's status line.
     """
 
-    angles: Any
-    live: Any
-    loaded: LoadedClassifier | None
-    _timer: Any
-    _labels_box: Any
-    params: Any
-    wants_maps: Any
-
-    def _build_input_controls(self) -> None:
-        """The mask and scribbles choosers and *New scribbles layer*."""
-        self._watched: dict[str, Any] = {"mask": None, "scribbles": None}
-        self.mask_layer = self._labels_box(
+    def __init__(
+        self,
+        owner: Any,
+        viewer: Any,
+        labels_box: Callable[[str, str, str], Any],
+        set_status: Callable[[str], None],
+        fail: Callable[[PolarsegError], None],
+    ) -> None:
+        self._owner, self._viewer = owner, viewer
+        self._set_status, self._fail = set_status, fail
+        #: The layers whose edits are listened to, by role (``mask``, ``scribbles``).
+        self.watched: dict[str, Any] = {"mask": None, "scribbles": None}
+        self.mask_layer = labels_box(
             "mask",
             NO_MASK,
             "Segment only where this Labels layer is non-zero (same height x width as the "
             "stack); saturated and black samples are left out in any case",
         )
-        self.scribbles_layer = self._labels_box(
+        self.scribbles_layer = labels_box(
             "scribbles",
             NO_SCRIBBLES,
             "Paint a few strokes on each material and every pixel gets the material it "
@@ -129,17 +142,16 @@ class MaskAndScribbles(WidgetPart):
             "scribbles and start the paint brush: paint label 1 on one material, 2 on "
             "another, …",
         )
+        self.mask_layer.changed.connect(self.sync_watches)
+        self.scribbles_layer.changed.connect(self.sync_watches)
+        self.scribbles_layer.changed.connect(self.on_scribbles_changed)
+        self.new_scribbles_button.changed.connect(self.new_scribbles_layer)
 
-    def _unwatch_when_closed(self) -> None:
-        """Stop listening to the edits of the watched layers when the widget is closed."""
-        watches, on_edit = self._watched, self._on_layer_edited
-
-        def _unwatch(*_: Any) -> None:
-            for layer in watches.values():
-                disconnect_edits(layer, on_edit)
-            watches.clear()
-
-        self.native.destroyed.connect(_unwatch)
+    def unwatch(self, *_: Any) -> None:
+        """Stop listening to the edits of the watched layers (the widget is closed)."""
+        for layer in self.watched.values():
+            disconnect_edits(layer, self._on_layer_edited)
+        self.watched.clear()
 
     # -- mask and scribbles -----------------------------------------------------------
     def current_mask(self) -> tuple[str | None, np.ndarray | None]:
@@ -164,13 +176,18 @@ class MaskAndScribbles(WidgetPart):
             raise PolarsegError(f"the {role} layer {layer.name!r} is no longer in the viewer")
         return layer
 
+    def reset_choices(self) -> None:
+        """The choosers list the Labels layers that fit the chosen stack now."""
+        self.mask_layer.reset_choices()
+        self.scribbles_layer.reset_choices()
+
     def new_scribbles_layer(self, *_: Any) -> Labels | None:
         """Add an empty Labels layer for strokes, choose it and start the paint brush.
 
         Named ``"<stack> scribbles"``, of the stack's height x width (and placement),
         selected in the layer list with the paint tool on label 1.
         """
-        stack = self.stack_layer.value
+        stack = self._owner.stack_layer.value
         if stack is None:
             self._fail(PolarsegError("choose an angle-stack image layer first"))
             return None
@@ -205,17 +222,20 @@ class MaskAndScribbles(WidgetPart):
             "renamed: " + ", ".join(f"{v} {n}" for v, n in self.material_names().items())
         )
 
-    def _on_scribbles_changed(self, *_: Any) -> None:
+    def on_scribbles_changed(self, *_: Any) -> None:
+        """Another scribbles layer (or classifier) is chosen: its materials are listed,
+        and the unsupervised method's controls are enabled only without either."""
         self.materials.set_layer(self.scribbles_layer.value)
-        # the classifier replaces the cut: its controls do nothing
-        unsupervised = self.scribbles_layer.value is None and self.loaded is None
+        # the classifier replaces the unsupervised method: its controls do nothing
+        unsupervised = self.scribbles_layer.value is None and self._owner.loaded is None
+        controls = self._owner.controls.controls
         for name in CUT_ONLY:
-            getattr(self, name).enabled = unsupervised
+            controls[name].enabled = unsupervised
 
-    def _sync_watches(self, *_: Any) -> None:
+    def sync_watches(self, *_: Any) -> None:
         """Listen to edits of the chosen mask and scribbles layers (and no others)."""
         for role, chooser in (("mask", self.mask_layer), ("scribbles", self.scribbles_layer)):
-            old, new = self._watched.get(role), chooser.value
+            old, new = self.watched.get(role), chooser.value
             if old is new:
                 continue
             if old is not None and old not in self._watched_except(role):
@@ -223,30 +243,30 @@ class MaskAndScribbles(WidgetPart):
             if new is not None and new not in self._watched_except(role):
                 for name in EDIT_EVENTS:
                     getattr(new.events, name).connect(self._on_layer_edited)
-            self._watched[role] = new
+            self.watched[role] = new
 
     def _watched_except(self, role: str) -> list[Any]:
-        return [layer for r, layer in self._watched.items() if r != role and layer is not None]
+        return [layer for r, layer in self.watched.items() if r != role and layer is not None]
 
     def _on_layer_edited(self, *_: Any) -> None:
         """A stroke (or undo, new data) in the chosen mask or scribbles layer."""
         try:
-            if self.live.value:
-                self._timer.start()  # the same debounce as a changed value
+            self._owner.schedule_live_run()
         except RuntimeError:  # the widget was deleted
             pass
 
+    # -- what a result depends on -----------------------------------------------------
     def snapshot(self) -> Snapshot | None:
         """Everything a result depends on, or None if the values are invalid."""
         try:
-            params = self.params()
+            params = self._owner.params()
             mask_key, region = self.current_mask()
             scribble_key, scribbles = self.current_scribbles()
         except PolarsegError:
             return None
-        return self._snapshot_of(params, mask_key, region, scribble_key, scribbles)
+        return self.snapshot_of(params, mask_key, region, scribble_key, scribbles)
 
-    def _snapshot_of(
+    def snapshot_of(
         self,
         params: SegmentParams,
         mask_key: str | None,
@@ -254,26 +274,29 @@ class MaskAndScribbles(WidgetPart):
         scribble_key: str | None,
         scribbles: np.ndarray | None,
     ) -> Snapshot:
-        layer = self.stack_layer.value
+        """The :class:`Snapshot` of these values (read once by the caller) and the
+        widget's stack, angles, applied classifier and settings."""
+        owner = self._owner
+        layer = owner.stack_layer.value
         key = None if layer is None else source_key(layer)
         digest = content_digest(scribbles)
-        loaded = self._applied(scribble_key, digest)
+        loaded = self.applied(scribble_key, digest)
         return Snapshot(
             stack_key=key,
-            angles=self.angles.value,
+            angles=owner.angles.value,
             params=params,
             mask_key=mask_key,
             mask_digest=region_digest(region),
             scribbles_key=scribble_key,
             scribbles_digest=digest,
             classifier_serial=None if loaded is None else loaded.serial,
-            maps=self.wants_maps(params),
+            maps=owner.wants_maps(params),
             classifier_settings=self.classifier_controls.settings_or_none(),
         )
 
-    def _applied(self, scribble_key: str | None, digest: str | None) -> LoadedClassifier | None:
+    def applied(self, scribble_key: str | None, digest: str | None) -> LoadedClassifier | None:
         """The loaded classifier if it still applies (the strokes are as when loaded)."""
-        loaded = self.loaded
+        loaded = self._owner.loaded
         if loaded is None or loaded.strokes != (scribble_key, digest):
             return None
         return loaded

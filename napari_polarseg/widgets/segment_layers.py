@@ -11,7 +11,6 @@ import numpy as np
 from magicgui.widgets import CheckBox
 
 from ..engine.physics.stokes import stokes_components
-from ._base import WidgetPart
 from ._layers import Contrast, contrasts_of, find_output, remove_output, show_output, source_key
 from .layer_queue import LayerQueue
 from .session import ClassifierOutput, Result, ShownResult, named_output, shown_result
@@ -97,24 +96,36 @@ def with_contrast(
     return wrapped
 
 
-class ResultLayers(WidgetPart):
-    """Mixin of :class:`~napari_polarseg.widgets.segment.SegmentWidget`: the layers of
-    its results and the *HSV and Stokes layers* option.
+class SegmentLayers:
+    """The Segment widget's output layers, a part the widget holds (``widget.layers``):
+    what a result adds to the viewer, the results shown per stack (:attr:`shown`), and
+    the *HSV and Stokes layers* option with its *HSV view* menu.
 
-    Uses the widget's viewer, stack chooser, the shown results (``_shown``), its
-    classifier and export parts (``classifier_files``, ``export``; their ``record``) and
-    its status line.
+    Parameters
+    ----------
+    owner : SegmentWidget
+        What the part reads of the widget, by its public members: the ``stack_layer``
+        chooser, the ``inputs`` part (the named materials), and the
+        ``classifier_files`` and ``export`` parts (told of every result shown).
+    viewer : napari.viewer.Viewer
+    later : LayerQueue
+        The widget's queue of layers added one per event-loop turn.
+    set_status, done : callable
+        The widget's status line (``done``: a run's last word).
     """
 
-    _shown: dict[str, ShownEntry]
-    _later: LayerQueue
-    classifier_files: Any
-    export: Any
-    materials: Any
-    material_names: Any
-
-    def _build_view_controls(self) -> None:
-        """*HSV and Stokes layers* and the *HSV view* menu; the last result's arrays."""
+    def __init__(
+        self,
+        owner: Any,
+        viewer: Any,
+        later: LayerQueue,
+        set_status: Callable[[str], None],
+        done: Callable[[str], None],
+    ) -> None:
+        self._owner, self._viewer, self._later = owner, viewer, later
+        self._set_status, self._done = set_status, done
+        #: Per stack key: the result behind the stack's ``segments`` layer.
+        self.shown: dict[str, ShownEntry] = {}
         #: Class probabilities (K, H, W) of the last scribble run shown, and the
         #: scribble label of each class (None after an unsupervised run).
         self.probabilities: np.ndarray | None = None
@@ -126,7 +137,7 @@ class ResultLayers(WidgetPart):
         self._diagnostics: dict[str, Any] = {}
         #: The contrast of the maps the last worker measured (only workers touch it; one
         #: runs at a time), reused while a map is the same array.
-        self._contrast_memo: ContrastMemo = {}
+        self.contrast_memo: ContrastMemo = {}
         self.views = CheckBox(
             text="HSV and Stokes layers",
             value=False,
@@ -134,8 +145,10 @@ class ResultLayers(WidgetPart):
             "(hidden) of each result, as the Polarisation image widget does",
         )
         self.view_mode = view_mode_box()
+        self.views.changed.connect(self.on_views_changed)
+        self.view_mode.changed.connect(self.on_views_changed)
 
-    def _show(
+    def show(
         self,
         layer: Layer,
         angles_deg: np.ndarray,
@@ -162,8 +175,9 @@ class ResultLayers(WidgetPart):
         if isinstance(result, ClassifierOutput) and result.segmentation is not None:
             # a loaded classifier's names name the strokes' materials that have none; the
             # list's names name the result (its plots, export, saved classifier)
-            self.materials.adopt(dict(zip(*_values_names(result), strict=True)))
-            result = named_output(result, self.material_names())
+            inputs_part = self._owner.inputs
+            inputs_part.materials.adopt(dict(zip(*_values_names(result), strict=True)))
+            result = named_output(result, inputs_part.material_names())
         shown = shown_result(result, angles_deg, inputs, partial)
         meta, out = shown.meta, shown.out
         if not shown.partial:
@@ -197,9 +211,9 @@ class ResultLayers(WidgetPart):
         if shown.partial:
             self._set_status(shown.status(seconds))
             return
-        self._shown[source_key(layer)] = ShownEntry(shown.result, shown.inputs, snap)
-        self.classifier_files.record(layer, None if out is None else out.classifier)
-        self.export.record(layer, angles_deg, shown)
+        self.shown[source_key(layer)] = ShownEntry(shown.result, shown.inputs, snap)
+        self._owner.classifier_files.record(layer, None if out is None else out.classifier)
+        self._owner.export.record(layer, angles_deg, shown)
         self._done(shown.status(seconds))
 
     def _queue(self, role: str, layer: Layer, action: Callable[[], Any]) -> None:
@@ -298,10 +312,10 @@ class ResultLayers(WidgetPart):
             return True
         return any(find_output(self._viewer, r, layer) is not None for r in ("masked", "residual"))
 
-    def _on_views_changed(self, *_: Any) -> None:
+    def on_views_changed(self, *_: Any) -> None:
         """Draw the views of the chosen stack's shown result at once (no rerun)."""
-        layer = self.stack_layer.value
-        shown = None if layer is None else self._shown.get(source_key(layer))
+        layer = self._owner.stack_layer.value
+        shown = None if layer is None else self.shown.get(source_key(layer))
         if self.views.value and shown is not None and layer in self._viewer.layers:
             segments = find_output(self._viewer, "segments", layer)
             meta = (

@@ -242,4 +242,4 @@ def test_removed_scribbles_layer_falls_back_to_unsupervised(viewer, open_sample,
     assert error_messages() == []
     assert widget.output("segments") is not None and "segments" in widget.status.value
     # the removed layer is no longer listened to
-    assert widget._watched["scribbles"] is None
+    assert widget.inputs.watched["scribbles"] is None

@@ -213,10 +213,9 @@ def scribble_segmentation(
     timings.update(scribble_seconds)
     done = pipe.recomputed_stages(p)
     recomputed = [s for s in names if s in done] + ["scribbles"]
-    result = pipe.assemble_result(
-        block, labels, [], reconstruction, timings, recomputed, params=p
-    )
+    result = pipe.assemble_result(block, labels, [], reconstruction, timings, recomputed, params=p)
     return ScribbleSegmentation(result, maps, classes, n_train)
+
 
 def scribble_result(
     pipe: Pipeline, scribbles: np.ndarray, params: SegmentParams | None = None
@@ -243,6 +242,7 @@ def scribble_result(
     """
     _, labels, maps, _, _ = _classify(pipe, scribbles, pipe.snapshot(params))
     return labels, maps
+
 
 def _classify(
     pipe: Pipeline, scribbles: np.ndarray, params: SegmentParams

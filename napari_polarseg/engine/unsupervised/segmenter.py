@@ -12,14 +12,14 @@ those few hundred to few thousand nodes:
    Stokes components s1 = S1/S0, s2 = S2/S0 (so a region border sits on an intensity
    *or* a polarisation edge).
 2. **Node features** (:func:`node_features`), from region sums (``np.bincount``) of
-   per-pixel products, each named once in :data:`NODE_FEATURES`: the region's mean
+   per-pixel products, each named once in :data:`~.params.NODE_FEATURES`: the region's mean
    log Î, its spread, mean ρ and its spread, the region's DoLP
    |(ΣS1, ΣS2)| / ΣS0, the AoLP coherence |mean e^{2iφ}|, DoLP / mean ρ and, as the
    physical material cue (thesis section 6.2), the slope and correlation of ρ against
    log Î inside the region: within one material the shading and ρ both follow the
    zenith, their relation depends on n and the depolarisation, not on the tilt; and
    the same cue taken image-wide, log ρ̄ less a cubic in log Î fitted over all regions
-   (:func:`dop_given_intensity`).
+   (:func:`~.region_features.dop_given_intensity`).
    Optionally the per-pixel feature stack of :mod:`.pixel_features` averaged per region.
    The features are standardised (weighted by region area), may be diffused over the
    region graph but not across its edges (``UnsupervisedParams.diffusion``) and are
@@ -68,10 +68,10 @@ over 5 iterations. Without the diffusion a real fruit falls apart by its shading
 as many segments as it has tones of ρ, and mean log Î merged the camouflage net with
 the foliage whose shading it follows; with it, both help. The correlation of ρ and
 log Î (the other half of the cue) and the AoLP coherence split the real camera's mat;
-the cue taken image-wide (:func:`dop_given_intensity`) helps some renders and hurts
-others; a Gaussian mixture sometimes fits one tiny component; the multi-scale pixel
-stack splits the camera's mat by shading; the graph cuts on neighbouring regions peel
-off single regions. The benchmark prints every variant.
+the cue taken image-wide (:func:`~.region_features.dop_given_intensity`) helps some
+renders and hurts others; a Gaussian mixture sometimes fits one tiny component; the
+multi-scale pixel stack splits the camera's mat by shading; the graph cuts on
+neighbouring regions peel off single regions. The benchmark prints every variant.
 """
 
 from __future__ import annotations
@@ -87,123 +87,21 @@ from ..chunks import call_stoppable, in_background
 from ..degenerate import degenerate_result
 from ..errors import PolarsegError
 from ..features.pca import pca_features, whiten
-from ..features.pixel_features import EPS_DOP, EPS_INTENSITY, check_maps
+from ..features.pixel_features import check_maps
 from ..physics.pixel_mask import nearest_valid
 from .boundaries import refine_maps, refined_labels
 from .kmeans import squared_distances, weighted_kmeans
-from .params import NODE_FEATURES, TREND, UnsupervisedParams, UnsupervisedResult
+from .params import UnsupervisedParams, UnsupervisedResult
 from .region_diffusion import diffuse, diffusion_steps, edge_aware_adjacency
+from .region_features import node_features, pixel_terms
 from .region_graph import polarisation_superpixels, region_adjacency, relabel, superpixel_edges
 from .shape_trend import (
-    polarisation_over_trend,
-    region_centroids,
     region_polarisation,
     surface_trend_share,
 )
 
 #: Seedings of the k-means (:func:`.kmeans.weighted_kmeans`; the lowest inertia wins).
 KMEANS_RESTARTS = 10
-#: Degree of the image-wide polynomial of :func:`dop_given_intensity`.
-RESIDUAL_DEGREE = 3
-
-
-def _region_sums(flat: np.ndarray, n: int, maps: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-    return {k: np.bincount(flat, weights=v.ravel(), minlength=n) for k, v in maps.items()}
-
-
-def pixel_terms(intensity: np.ndarray, dop: np.ndarray, phase: np.ndarray) -> dict[str, np.ndarray]:
-    """The per-pixel maps whose region sums give :func:`node_features` (float64): Î, S1,
-    S2, log Î (centred on its median), (log Î)², ρ, ρ², ρ log Î, cos 2φ and sin 2φ.
-
-    They do not depend on the regions, so :func:`prepare_regions` computes them while
-    the superpixels are drawn.
-    """
-    log_i = np.log(np.maximum(intensity, EPS_INTENSITY)).astype(np.float64)
-    log_i -= np.median(log_i)
-    d = dop.astype(np.float64)
-    c, s = np.cos(2 * phase.astype(np.float64)), np.sin(2 * phase.astype(np.float64))
-    return {
-        "s0": intensity.astype(np.float64),
-        "s1": intensity * d * c,
-        "s2": intensity * d * s,
-        "l": log_i,
-        "ll": log_i * log_i,
-        "d": d,
-        "dd": d * d,
-        "ld": log_i * d,
-        "c": c,
-        "s": s,
-    }
-
-
-def node_features(
-    intensity: np.ndarray,
-    dop: np.ndarray,
-    phase: np.ndarray,
-    regions: np.ndarray,
-    names: tuple[str, ...] = NODE_FEATURES,
-    trend: tuple[int, float, int] = TREND,
-    terms: dict[str, np.ndarray] | None = None,
-) -> np.ndarray:
-    """Per-region features (n, len(names)) float64, each of :data:`NODE_FEATURES`;
-    ``trend`` = (degree, reach, iterations) of ``dop_over_shape_trend``
-    (:func:`.shape_trend.polarisation_over_trend`).
-
-    Computed from region sums of Î, S1, S2, log Î, (log Î)², ρ, ρ², ρ log Î, cos 2φ and
-    sin 2φ (one ``np.bincount`` each; the maps: :func:`pixel_terms`, or ``terms`` when
-    already made); variances and covariances are differences of means of log Î centred
-    on its median.
-    """
-    flat = regions.ravel()
-    n = int(flat.max()) + 1
-    count = np.maximum(np.bincount(flat, minlength=n), 1).astype(float)
-    terms = pixel_terms(intensity, dop, phase) if terms is None else terms
-    sums = _region_sums(flat, n, terms)
-    m = {k: v / count for k, v in sums.items()}
-    var_l = np.maximum(m["ll"] - m["l"] ** 2, 0)
-    var_d = np.maximum(m["dd"] - m["d"] ** 2, 0)
-    cov = m["ld"] - m["l"] * m["d"]
-    dolp = np.hypot(sums["s1"], sums["s2"]) / np.maximum(sums["s0"], EPS_INTENSITY)
-    make = {
-        "log_intensity": lambda: m["l"],
-        "intensity_spread": lambda: np.sqrt(var_l),
-        "dop": lambda: m["d"],
-        "dop_spread": lambda: np.sqrt(var_d),
-        "dolp": lambda: dolp,
-        "aolp_coherence": lambda: np.hypot(m["c"], m["s"]),
-        "dolp_over_dop": lambda: dolp / (m["d"] + EPS_DOP),
-        "dop_vs_log_intensity_slope": lambda: cov / (var_l + 1e-6),
-        "dop_vs_log_intensity_corr": lambda: cov / np.sqrt(var_l * var_d + 1e-12),
-        "log_dop_given_intensity": lambda: dop_given_intensity(m["l"], m["d"], count),
-        "dop_over_shape_trend": lambda: _over_trend(regions, sums, count, trend),
-    }
-    return np.stack([make[k]() for k in names], axis=1)
-
-
-def _over_trend(
-    regions: np.ndarray, sums: dict[str, np.ndarray], count: np.ndarray, trend: tuple
-) -> np.ndarray:
-    """:func:`.shape_trend.polarisation_over_trend` from the region sums; ``trend`` =
-    (degree, reach, iterations)."""
-    z = (sums["s1"] + 1j * sums["s2"]) / np.maximum(sums["s0"], EPS_INTENSITY)
-    centroid = region_centroids(regions, count)
-    return polarisation_over_trend(z, count, centroid, regions.shape, *trend)
-
-
-def dop_given_intensity(
-    log_intensity: np.ndarray, dop: np.ndarray, weight: np.ndarray, degree: int = RESIDUAL_DEGREE
-) -> np.ndarray:
-    """log ρ̄ − f(log Î), f the polynomial of ``degree`` fitted over all regions
-    (least squares weighted by ``weight``, the regions' areas): the material cue taken
-    image-wide. Where one material covers most of the image, f is its ρ–shading
-    relation, and a region of another material (other n, other depolarisation) lies off
-    it at whatever tilt; ρ̄ and log Î are the regions' means.
-    """
-    y = np.log(dop + EPS_DOP)
-    x = log_intensity - np.average(log_intensity, weights=weight)
-    scale = max(float(np.sqrt(np.average(x * x, weights=weight))), 1e-12)
-    coef = np.polynomial.polynomial.polyfit(x / scale, y, degree, w=np.sqrt(weight))
-    return y - np.polynomial.polynomial.polyval(x / scale, coef)
 
 
 def _standardise(x: np.ndarray, weight: np.ndarray) -> np.ndarray:

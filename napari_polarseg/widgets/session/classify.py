@@ -92,6 +92,31 @@ class ClassifierOutput:
         return self.segmentation.classifier
 
 
+def fit_session(
+    session: ScribbleSession,
+    params: SegmentParams,
+    scribbles: np.ndarray | None,
+    classifier: PixelClassifier | None,
+    settings: ClassifierSettings | None,
+) -> str | None:
+    """Train ``session`` on ``scribbles`` with ``settings`` (default the defaults), or
+    give it the loaded ``classifier`` (which brings its own features); the problem's
+    text when that fails (e.g. strokes of one material), else None."""
+    settings = settings or ClassifierSettings()
+    if classifier is None:
+        session.features_params = settings.features
+        session.classifier_params = settings.classifier
+    session.segment_params = params
+    try:
+        if classifier is None:
+            session.train(scribbles)
+        else:
+            session.use(classifier)
+    except PolarsegError as exc:
+        return str(exc)
+    return None
+
+
 def classifier_stages(
     pipe: Pipeline,
     session: ScribbleSession,
@@ -135,20 +160,11 @@ def classifier_stages(
     for i, name in enumerate(PIPELINE_STAGES):
         yield name, i, total
         run_stage(name)
-    settings = settings or ClassifierSettings()
-    if classifier is None:  # a loaded classifier brings its own
-        session.features_params = settings.features
-        session.classifier_params = settings.classifier
-    session.segment_params = params
     yield "pixel features", len(PIPELINE_STAGES), total
     before = session.feature_runs
-    try:
-        if classifier is None:
-            session.train(scribbles)
-        else:
-            session.use(classifier)
-    except PolarsegError as exc:
-        return ClassifierOutput(None, classifier is None, problem=str(exc))
+    problem = fit_session(session, params, scribbles, classifier, settings)
+    if problem is not None:
+        return ClassifierOutput(None, classifier is None, problem=problem)
     if session.feature_runs != before:
         timings["pixel features"] = session.seconds.get("features", 0.0)
         recomputed.append("pixel features")
