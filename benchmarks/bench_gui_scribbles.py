@@ -64,9 +64,9 @@ def scribble_frame_main(path: Path, mosaic: tuple[int, ...], crop=None) -> None:
     shown: dict[str, float] = {}
     show = widget._show
 
-    def timed_show(layer, angles_deg, result, seconds, inputs=None, partial=False, snap=None):  # noqa: ANN001, ANN202
+    def timed_show(layer, angles_deg, result, seconds, inputs=None, partial=False, *rest):  # noqa: ANN001, ANN002, ANN202
         t = time.perf_counter()
-        show(layer, angles_deg, result, seconds, inputs, partial, snap)
+        show(layer, angles_deg, result, seconds, inputs, partial, *rest)
         now = time.perf_counter()
         shown.setdefault("show", now - t)  # the widget's layers of the first result
         shown.setdefault("first", now)
