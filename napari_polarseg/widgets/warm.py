@@ -1,9 +1,9 @@
 """Importing the libraries a plugin dock will need, in the background, ahead of time.
 
-matplotlib (the plot docks' canvas) and the parts of scikit-image napari imports with
-the first Labels layer took the GUI thread one to two seconds the first time they were
-needed: the *Polarisation plots* dock opened slowly, and the first segments froze the
-window longer than the next ones. A plugin dock calls :func:`warm_imports` when it opens;
+matplotlib (the plot docks' canvas), and the parts of scikit-image and pandas napari
+imports with the first Labels layer, took the GUI thread one to two seconds the first
+time they were needed: the *Polarisation plots* dock opened slowly, and the first
+segments froze the window longer than the next ones. A plugin dock calls :func:`warm_imports` when it opens;
 a thread imports them while the user sets up the run.
 """
 
@@ -13,8 +13,15 @@ import importlib
 import sys
 import threading
 
-#: Modules imported ahead (only modules: no figure, no Qt object is made).
-WARM_MODULES = ("matplotlib.figure", "matplotlib.backends.backend_agg", "skimage.color")
+#: Modules imported ahead (only modules: no figure, no Qt object is made). pandas:
+#: napari's Labels layer imports it for its features table when the first one is made
+#: (the first segments), about 0.2 s of the GUI thread.
+WARM_MODULES = (
+    "matplotlib.figure",
+    "matplotlib.backends.backend_agg",
+    "skimage.color.colorconv",
+    "pandas",
+)
 
 #: The thread importing :data:`WARM_MODULES` (started once).
 _warming: list[threading.Thread] = []
