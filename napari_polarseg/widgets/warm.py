@@ -3,8 +3,9 @@
 matplotlib (the plot docks' canvas), and the parts of scikit-image and pandas napari
 imports with the first Labels layer, took the GUI thread one to two seconds the first
 time they were needed: the *Polarisation plots* dock opened slowly, and the first
-segments froze the window longer than the next ones. A plugin dock calls :func:`warm_imports` when it opens;
-a thread imports them while the user sets up the run.
+segments froze the window longer than the next ones. A plugin dock calls
+:func:`warm_imports` when it opens; a thread imports them while the user sets up the
+run.
 """
 
 from __future__ import annotations
