@@ -47,3 +47,24 @@ def test_a_computed_error_map_keeps_its_image_and_colour_bar(scene):
     panel, bars = _error_panel(fig)
     assert len(panel.images) == 1 and len(panel.texts) == 0
     assert len(bars) == sum(1 for ax in fig.axes if ax.images)
+
+
+def test_the_aolp_bar_names_its_unit_above_itself_not_beside(scene):
+    """The AoLP colour bar's label sat in the gap before the next panel (issue 25): it is
+    the bar's title, and the bar's right edge stays left of the next panel."""
+    result = Scene(scene.stack, np.deg2rad(scene.angles_deg)).segment(AUTO.replace(n_segments=3))
+    fig = overview_figure(scene.stack[0], result)
+    fig.canvas.draw()
+    bars = [ax for ax in fig.axes if ax.get_label() == "<colorbar>"]
+    aolp = next(ax for ax in bars if ax.get_title() == "AoLP °")
+    assert aolp.get_ylabel() == ""
+    renderer = fig.canvas.get_renderer()
+    right = aolp.get_tightbbox(renderer).x1
+    later = [
+        ax.get_window_extent().x0
+        for ax in fig.axes
+        if ax.images
+        and ax.get_window_extent().x0 > aolp.get_window_extent().x0
+        and abs(ax.get_window_extent().y0 - aolp.get_window_extent().y0) < 50
+    ]
+    assert later and right < min(later)

@@ -185,7 +185,7 @@ def _draw_panel(fig: Figure, ax: Any, panel: Panel, ticks: Ticks) -> None:
         hue = ScalarMappable(Normalize(0.0, 180.0), colormaps["hsv"])
         bar = fig.colorbar(hue, ax=ax, fraction=0.046, pad=0.02)
         bar.set_ticks([0, 45, 90, 135, 180])
-        bar.set_label("AoLP (°)", fontsize=8)
+        bar.ax.set_title("AoLP °", fontsize=8)  # above the bar: a side label met the next panel
         return
     is_labels = cmap in ticks
     if is_labels:
