@@ -286,17 +286,25 @@ def segment_statistics(
     if index.size and index.min() < 0:
         raise PolarsegError("segment labels must be non-negative")
     k = int(index.max()) + 1 if index.size else 0
-    stack = np.stack([np.asarray(a, dtype=np.float64).ravel() for a in (intensity, dop, zenith)])
+    maps = [np.asarray(a, dtype=np.float64).ravel() for a in (intensity, dop, zenith)]
     phi = np.asarray(phase, dtype=np.float64).ravel()
-    ok = np.all(np.isfinite(stack), axis=0) & np.isfinite(phi)
+    ok = np.isfinite(phi)
+    for v in maps:
+        ok &= np.isfinite(v)
     if valid is not None:
         ok &= np.asarray(valid, dtype=bool).ravel()
-    weight = ok.astype(np.float64)
-    clean = np.where(ok, stack, 0.0)
-    means = [_masked_means(v, index, weight, k) for v in clean]
-    phi = np.where(ok, phi, 0.0)
-    s = _masked_means(np.sin(2 * phi), index, weight, k)
-    c = _masked_means(np.cos(2 * phi), index, weight, k)
+    # every pixel used (often): no masked copies; the sums and means are the same
+    every = bool(ok.all())
+    total = np.bincount(index, weights=None if every else ok.astype(np.float64), minlength=k)
+
+    def masked_mean(v: np.ndarray) -> np.ndarray:
+        sums = np.bincount(index, weights=v if every else np.where(ok, v, 0.0), minlength=k)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return np.where(total > 0, sums / np.where(total > 0, total, 1), np.nan)
+
+    means = [masked_mean(v) for v in maps]
+    with np.errstate(invalid="ignore"):  # φ not finite: left out by ``ok``
+        s, c = masked_mean(np.sin(2 * phi)), masked_mean(np.cos(2 * phi))
     phase_mean = np.mod(np.rad2deg(0.5 * np.arctan2(s, c)), 180.0)
     pixels = np.bincount(index, minlength=k)
     pca = _segment_pca_means(k, block_labels, features, block_valid)
