@@ -16,7 +16,7 @@ import threading
 
 #: Modules imported ahead (only modules: no figure, no Qt object is made). pandas:
 #: napari's Labels layer imports it for its features table when the first one is made
-#: (the first segments), about 0.2 s of the GUI thread.
+#: (the first segments), on the GUI thread (docs/performance.md).
 WARM_MODULES = (
     "matplotlib.figure",
     "matplotlib.backends.backend_agg",

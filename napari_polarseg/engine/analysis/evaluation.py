@@ -96,7 +96,7 @@ def segment_iou(
     t_ids, p_ids, inter = _contingency(truth, labels)
     union = inter.sum(axis=1)[:, None] + inter.sum(axis=0)[None, :] - inter
     iou = inter / union
-    from scipy.optimize import linear_sum_assignment  # ~0.1 s of start-up: when used
+    from scipy.optimize import linear_sum_assignment  # start-up cost: when used
 
     rows, cols = linear_sum_assignment(iou, maximize=True)
     per = {int(t): 0.0 for t in t_ids}
@@ -156,7 +156,7 @@ def block_accuracy(truth: np.ndarray, labels: np.ndarray, window: int) -> tuple[
     # pure blocks per (true material, majority label); best one-to-one matching
     table = np.zeros((t_ids.size, k), dtype=np.int64)
     np.add.at(table, (tb[pure, 0], majority[pure]), 1)
-    from scipy.optimize import linear_sum_assignment  # ~0.1 s of start-up: when used
+    from scipy.optimize import linear_sum_assignment  # start-up cost: when used
 
     rows, cols = linear_sum_assignment(table, maximize=True)
     right = int(table[rows, cols].sum())

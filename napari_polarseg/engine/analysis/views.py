@@ -128,7 +128,7 @@ def hsv_to_rgb(hsv: np.ndarray) -> np.ndarray:
 
     The closed form: channel n ∈ (5, 3, 1) for (R, G, B) is V − V·S·clip(min(k, 4 − k),
     0, 1) with k = (n + 6H) mod 6. Written here because matplotlib's ``hsv_to_rgb`` and
-    scikit-image's ``hsv2rgb`` take 3–6 times as long on a camera frame (boolean masks,
+    scikit-image's ``hsv2rgb`` take several times as long on a camera frame (boolean masks,
     six stacked candidates) and the composite is drawn on every run.
     """
     h, s, v = hsv[..., 0], hsv[..., 1], hsv[..., 2]
@@ -172,6 +172,6 @@ def aolp_dolp_composite(
     >>> rgb[0, 0].tolist()  # φ = 0, fully polarised, bright: pure red
     [255, 0, 0]
     """
-    # float32: half the time of float64 on a camera frame; an 8-bit picture needs no more
+    # float32: faster than float64, and an 8-bit picture needs no more
     rgb = hsv_to_rgb(hsv_planes(intensity, dop, phase, params).astype(np.float32))
     return np.round(np.clip(rgb, 0.0, 1.0) * np.float32(255.0)).astype(np.uint8)

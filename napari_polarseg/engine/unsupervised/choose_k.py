@@ -84,7 +84,7 @@ def estimate_k(
     ks = sorted({int(k) for k in k_range if 2 <= int(k) < n})
     if n < 3 or not ks or x.shape[1] == 0:
         return 1, 0.0, {}
-    # Imported here: scikit-learn costs ~0.7 s of start-up, and a run with k given
+    # Imported here: scikit-learn is most of the start-up, and a run with k given
     # never needs it.
     from sklearn.metrics import silhouette_score
 

@@ -283,7 +283,7 @@ def _superpixels(
 
     ``progress`` is called with 0.25 after the edge map and then every
     :data:`~napari_polarseg.engine.chunks.STOP_POLL_S` during the watershed (one
-    library call of ~0.6 s on a camera frame with no stop hook): when it raises, the
+    library call with no stop hook of its own): when it raises, the
     run stops at once (:func:`~napari_polarseg.engine.chunks.call_stoppable`).
     """
     area = p.area_of(i.shape)
