@@ -238,6 +238,27 @@ def _segment_pca_means(
     return pca
 
 
+def _pixel_means(
+    maps: list[np.ndarray], index: np.ndarray, k: int, valid: np.ndarray | None
+) -> list[np.ndarray]:
+    """The mean of every flat map over each segment's pixels where every map is finite
+    (and ``valid``), NaN for a segment with none; one count of those pixels, and no
+    masked copies when every pixel is used."""
+    ok = np.ones(index.size, dtype=bool)
+    for v in maps:
+        ok &= np.isfinite(v)
+    if valid is not None:
+        ok &= np.asarray(valid, dtype=bool).ravel()
+    every = bool(ok.all())
+    total = np.bincount(index, weights=None if every else ok.astype(np.float64), minlength=k)
+    out = []
+    for v in maps:
+        sums = np.bincount(index, weights=v if every else np.where(ok, v, 0.0), minlength=k)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            out.append(np.where(total > 0, sums / np.where(total > 0, total, 1), np.nan))
+    return out
+
+
 def segment_statistics(
     labels: np.ndarray,
     intensity: np.ndarray,
@@ -288,23 +309,10 @@ def segment_statistics(
     k = int(index.max()) + 1 if index.size else 0
     maps = [np.asarray(a, dtype=np.float64).ravel() for a in (intensity, dop, zenith)]
     phi = np.asarray(phase, dtype=np.float64).ravel()
-    ok = np.isfinite(phi)
-    for v in maps:
-        ok &= np.isfinite(v)
-    if valid is not None:
-        ok &= np.asarray(valid, dtype=bool).ravel()
-    # every pixel used (often): no masked copies; the sums and means are the same
-    every = bool(ok.all())
-    total = np.bincount(index, weights=None if every else ok.astype(np.float64), minlength=k)
-
-    def masked_mean(v: np.ndarray) -> np.ndarray:
-        sums = np.bincount(index, weights=v if every else np.where(ok, v, 0.0), minlength=k)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            return np.where(total > 0, sums / np.where(total > 0, total, 1), np.nan)
-
-    means = [masked_mean(v) for v in maps]
-    with np.errstate(invalid="ignore"):  # φ not finite: left out by ``ok``
-        s, c = masked_mean(np.sin(2 * phi)), masked_mean(np.cos(2 * phi))
+    with np.errstate(invalid="ignore"):  # φ not finite: left out of the means
+        maps += [np.sin(2 * phi), np.cos(2 * phi)]
+    i_mean, d_mean, z_mean, s, c = _pixel_means(maps, index, k, valid)
+    means = (i_mean, d_mean, z_mean)
     phase_mean = np.mod(np.rad2deg(0.5 * np.arctan2(s, c)), 180.0)
     pixels = np.bincount(index, minlength=k)
     pca = _segment_pca_means(k, block_labels, features, block_valid)
