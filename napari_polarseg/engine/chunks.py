@@ -114,7 +114,7 @@ def scratch(name: str, shape: tuple[int, ...]) -> np.ndarray:
 STOP_POLL_S = 0.02
 
 
-def call_stoppable(work: Callable[[], object], check: Callable[[], None]) -> object:
+def call_stoppable(work: Callable[[], T], check: Callable[[], None]) -> T:
     """``work()`` in a thread of its own, calling ``check()`` every :data:`STOP_POLL_S`
     seconds while it runs; when ``check`` raises (a stop asked for), the exception goes
     up at once and the work's result is dropped when it ends.
@@ -125,28 +125,14 @@ def call_stoppable(work: Callable[[], object], check: Callable[[], None]) -> obj
     Written by hand: ``concurrent.futures`` has no way to leave a running call behind
     without waiting for it on shutdown.
     """
-    box: dict[str, object] = {}
-
-    def target() -> None:
-        try:
-            box["value"] = work()
-        except BaseException as exc:  # handed to the caller below
-            box["error"] = exc
-
-    thread = threading.Thread(target=target, name="polarseg-stoppable", daemon=True)
-    thread.start()
-    while thread.is_alive():
-        check()
-        thread.join(STOP_POLL_S)
-    check()
-    if "error" in box:
-        raise box["error"]  # type: ignore[misc]
-    return box["value"]
+    return in_background(work)(check)
 
 
-def in_background(work: Callable[[], T]) -> Callable[[], T]:
-    """Start ``work()`` in a thread of its own; the returned callable waits for it and
-    gives its result (or raises its exception).
+def in_background(work: Callable[[], T]) -> Callable[..., T]:
+    """Start ``work()`` in a thread of its own (a daemon); the returned callable waits
+    for it and gives its result (or raises its exception). Called with ``check``, it
+    calls ``check()`` every :data:`STOP_POLL_S` seconds while it waits and once after
+    (``check`` may raise to stop waiting: :func:`call_stoppable`).
 
     For numpy work that releases the GIL and is needed later in the same run (the
     second core works while the first draws the superpixels). Written by hand: a
@@ -163,8 +149,14 @@ def in_background(work: Callable[[], T]) -> Callable[[], T]:
     thread = threading.Thread(target=target, name="polarseg-background", daemon=True)
     thread.start()
 
-    def result() -> T:
-        thread.join()
+    def result(check: Callable[[], None] | None = None) -> T:
+        if check is None:
+            thread.join()
+        while thread.is_alive():
+            check()  # type: ignore[misc]
+            thread.join(STOP_POLL_S)
+        if check is not None:
+            check()
         if "error" in box:
             raise box["error"]
         return box["value"]
