@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import argparse
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -50,6 +51,39 @@ STROKE_TARGET = 1.0
 FIRST_STROKES, STROKE_LENGTH = 6, 48
 #: Brush strokes painted one at a time after the first scribbles, and the brush size.
 STROKES, BRUSH_SIZE = 3, 5
+
+
+def run_events(
+    until: Callable[[], bool],
+    timeout: float,
+    interval_ms: int = 2,
+    ticks: list[float] | None = None,
+) -> None:
+    """Turn the Qt event loop (idle in between, as in a running napari) until ``until()``
+    or ``timeout`` seconds; ``ticks`` gets the time of every timer tick (the longest gap
+    is the GUI's stall)."""
+    from qtpy.QtCore import QEventLoop, QTimer
+
+    loop, timer = QEventLoop(), QTimer()
+    deadline = time.perf_counter() + timeout
+
+    def tick() -> None:
+        now = time.perf_counter()
+        if ticks is not None:
+            ticks.append(now)
+        if until() or now > deadline:
+            loop.quit()
+
+    timer.setInterval(interval_ms)
+    timer.timeout.connect(tick)
+    timer.start()
+    loop.exec()
+    timer.stop()
+
+
+def widget_idle(widget) -> bool:  # noqa: ANN001
+    """Whether the Segment widget has nothing running or pending."""
+    return not (widget.busy or widget._waiting())
 
 
 def reference_stack(cache: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -114,7 +148,6 @@ def main(argv: list[str] | None = None) -> None:
         return
 
     import napari
-    from qtpy.QtCore import QEventLoop, QTimer
 
     from napari_polarseg.widgets.segment import LIVE_DELAY_MS, PRESETS
 
@@ -162,36 +195,23 @@ def main(argv: list[str] | None = None) -> None:
 
     ticks: list[float] = []  # times of a 5 ms timer: the longest gap is the GUI's stall
 
-    def run_events(until, timeout: float = 60.0) -> None:
-        """Turn the Qt event loop (idle in between, as in a running napari) until done."""
-        loop, timer = QEventLoop(), QTimer()
-        deadline = time.perf_counter() + timeout
-
-        def tick() -> None:
-            ticks.append(time.perf_counter())
-            if until() or ticks[-1] > deadline:
-                loop.quit()
-
-        timer.setInterval(5)
-        timer.timeout.connect(tick)
-        timer.start()
-        loop.exec()
-        timer.stop()
+    def events(until, timeout: float = 60.0) -> None:  # noqa: ANN001
+        run_events(until, timeout, 5, ticks)
 
     def idle() -> bool:
-        return not (widget.busy or widget._waiting())
+        return widget_idle(widget)
 
     def measure(action) -> tuple[float, float, dict]:  # noqa: ANN001
         # let the canvas draw the previous result first, as it has when a user moves on
-        run_events(lambda: False, timeout=SETTLE)
+        events(lambda: False, timeout=SETTLE)
         split.clear()
         shown.clear()
         t0 = time.perf_counter()
         action()
         ticks[:] = [time.perf_counter()]
         # a live update starts LIVE_DELAY_MS after the last change (debounce)
-        run_events(lambda: not idle() or time.perf_counter() - t0 > 5)
-        run_events(idle)
+        events(lambda: not idle() or time.perf_counter() - t0 > 5)
+        events(idle)
         split["stall"] = float(np.diff(ticks).max()) if len(ticks) > 1 else 0.0
         delay = 0.0 if widget.live.value is False else LIVE_DELAY_MS / 1000
         end = shown.get("all", time.perf_counter())
@@ -201,7 +221,7 @@ def main(argv: list[str] | None = None) -> None:
     seg, total, parts = measure(widget.run_button.clicked.emit)
     rows = [("cold run (Run button)", seg, total, 1.5, parts)]
     widget.live.value = True
-    run_events(idle)
+    events(idle)
     base = widget.params()
     changes = [
         ("n_segments", base.n_segments + 1),
@@ -217,7 +237,7 @@ def main(argv: list[str] | None = None) -> None:
     from napari_polarseg.engine.synthetic.scenes import scribble_strokes
 
     scribbles = widget.new_scribbles_layer()
-    run_events(idle)
+    events(idle)
     first = scribble_strokes(labels, seed=0, per_material=FIRST_STROKES, length=STROKE_LENGTH)
     seg, total, parts = measure(lambda: setattr(scribbles, "data", first))
     rows.append((f"first strokes ({np.count_nonzero(first)} px)", seg, total, None, parts))
@@ -275,7 +295,6 @@ def main(argv: list[str] | None = None) -> None:
 def frame_main(path: Path, mosaic: tuple[int, ...]) -> None:
     """Issue 22's figures: the default preset on a camera frame in a fresh viewer."""
     import napari
-    from qtpy.QtCore import QEventLoop, QTimer
 
     from napari_polarseg.io import read_stack
     from napari_polarseg.widgets.segment import LIVE_DELAY_MS
@@ -308,26 +327,20 @@ def frame_main(path: Path, mosaic: tuple[int, ...]) -> None:
 
     widget._reshow = timed_reshow
 
-    def run_events(until, timeout: float = 120.0) -> None:  # noqa: ANN001
-        loop, timer = QEventLoop(), QTimer()
-        deadline = time.perf_counter() + timeout
-        timer.setInterval(2)
-        timer.timeout.connect(lambda: (until() or time.perf_counter() > deadline) and loop.quit())
-        timer.start()
-        loop.exec()
-        timer.stop()
+    def events(until, timeout: float = 120.0) -> None:  # noqa: ANN001
+        run_events(until, timeout)
 
     def idle() -> bool:
-        return not (widget.busy or widget._waiting())
+        return widget_idle(widget)
 
     def measure(action, live: bool = True):  # noqa: ANN001, ANN202
-        run_events(lambda: False, timeout=SETTLE)
+        events(lambda: False, timeout=SETTLE)
         done.clear()
         engine.clear()
         t0 = time.perf_counter()
         action()
-        run_events(lambda: not idle() or time.perf_counter() - t0 > 5)
-        run_events(idle)
+        events(lambda: not idle() or time.perf_counter() - t0 > 5)
+        events(idle)
         end = done.get("shown", time.perf_counter())
         return (
             end - t0 - (LIVE_DELAY_MS / 1000 if live else 0.0),
@@ -337,7 +350,7 @@ def frame_main(path: Path, mosaic: tuple[int, ...]) -> None:
 
     rows = [("cold run (Run button)", *measure(widget.run_button.clicked.emit, live=False), None)]
     widget.live.value = True
-    run_events(idle)
+    events(idle)
     base = widget.params()
     for name, value in (
         ("n_segments", base.n_segments + 1),
@@ -385,7 +398,6 @@ def first_result_main(path: Path, mosaic: tuple[int, ...]) -> None:
     import threading
 
     import napari
-    from qtpy.QtCore import QEventLoop, QTimer
 
     import napari_polarseg.widgets._layers as layers_module
     from napari_polarseg.io import read_stack
@@ -416,20 +428,8 @@ def first_result_main(path: Path, mosaic: tuple[int, ...]) -> None:
     viewer_class.add_image = timed("add", viewer_class.add_image)
     viewer_class.add_labels = timed("add", viewer_class.add_labels)
 
-    def run_events(until, timeout: float = 600.0) -> None:  # noqa: ANN001
-        loop, timer = QEventLoop(), QTimer()
-        deadline = time.perf_counter() + timeout
-
-        def tick() -> None:
-            ticks.append(time.perf_counter())
-            if until() or ticks[-1] > deadline:
-                loop.quit()
-
-        timer.setInterval(2)
-        timer.timeout.connect(tick)
-        timer.start()
-        loop.exec()
-        timer.stop()
+    def events(until, timeout: float = 600.0) -> None:  # noqa: ANN001
+        run_events(until, timeout, 2, ticks)
 
     def freeze() -> float:
         """The longest gap between ticks from the first shown result on."""
@@ -466,14 +466,14 @@ def first_result_main(path: Path, mosaic: tuple[int, ...]) -> None:
     rows = []
 
     def measure(label: str, widget, start) -> None:  # noqa: ANN001
-        run_events(lambda: False, timeout=SETTLE)
+        events(lambda: False, timeout=SETTLE)
         for key in spent:
             spent[key] = 0.0
         marks.clear()
         t0 = time.perf_counter()
         start()
-        run_events(lambda: not (widget.busy or widget._waiting()) and "shown" in marks)
-        run_events(lambda: False, timeout=2.0)  # napari draws the new layers
+        events(lambda: widget_idle(widget) and "shown" in marks)
+        events(lambda: False, timeout=2.0)  # napari draws the new layers
         rows.append((label, time.perf_counter() - t0 - 2.0, freeze(), dict(spent)))
 
     viewer.add_image(data.stack, name=path.stem, metadata=meta)
@@ -488,16 +488,16 @@ def first_result_main(path: Path, mosaic: tuple[int, ...]) -> None:
 
     # the plots dock: opening it (matplotlib imported in the background meanwhile),
     # loading the segmentation (cached), the histograms (a worker) and drawing them
-    run_events(lambda: False, timeout=SETTLE)
+    events(lambda: False, timeout=SETTLE)
     t0 = time.perf_counter()
     _, plots = viewer.window.add_plugin_dock_widget("napari-polarseg", "Polarisation plots")
     opened = time.perf_counter() - t0
     plots.run()
-    run_events(lambda: not plots.busy)
+    events(lambda: not plots.busy)
     ticks.clear()
     t0 = time.perf_counter()
     plots.plot.value = "histograms"
-    run_events(lambda: not plots.busy)
+    events(lambda: not plots.busy)
     histograms = time.perf_counter() - t0
     stall = float(np.diff(ticks).max()) if len(ticks) > 1 else 0.0
     h, w = data.stack.shape[1:]

@@ -22,6 +22,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from bench_gui import run_events, widget_idle
 
 #: Issue 23's targets (seconds).
 FIRST_TARGET, STROKE_TARGET = 2.0, 0.3
@@ -49,7 +50,6 @@ def scribble_frame_main(path: Path, mosaic: tuple[int, ...], crop=None) -> None:
     """Print the scribble loop's figures on ``path`` (optionally its top-left ``crop``);
     the frame is read with its truth file's mosaic layout (``mosaic`` is not used)."""
     import napari
-    from qtpy.QtCore import QEventLoop, QTimer
     from robot_user import deepest_point, disc_radius, initial_scribbles, largest_wrong_region
 
     from napari_polarseg.io import read_stack
@@ -78,32 +78,26 @@ def scribble_frame_main(path: Path, mosaic: tuple[int, ...], crop=None) -> None:
 
     widget._show = timed_show
 
-    def run_events(until, timeout: float = 300.0) -> None:  # noqa: ANN001
-        loop, timer = QEventLoop(), QTimer()
-        deadline = time.perf_counter() + timeout
-        timer.setInterval(2)
-        timer.timeout.connect(lambda: (until() or time.perf_counter() > deadline) and loop.quit())
-        timer.start()
-        loop.exec()
-        timer.stop()
+    def events(until, timeout: float = 300.0) -> None:  # noqa: ANN001
+        run_events(until, timeout)
 
     def idle() -> bool:
-        return not (widget.busy or widget._waiting())
+        return widget_idle(widget)
 
     def measure(action, delay: float) -> tuple[float, float, dict]:  # noqa: ANN001
-        run_events(lambda: False, timeout=SETTLE)
+        events(lambda: False, timeout=SETTLE)
         shown.clear()
         t0 = time.perf_counter()
         action()
-        run_events(lambda: not idle() or time.perf_counter() - t0 > 5)
-        run_events(idle)
+        events(lambda: not idle() or time.perf_counter() - t0 > 5)
+        events(idle)
         end = shown.get("all", time.perf_counter())
         engine = {**shown.get("engine", {}), "show": shown.get("show", 0.0)}
         return shown.get("first", end) - t0 - delay, end - t0 - delay, engine
 
     t0 = time.perf_counter()
     layer = widget.new_scribbles_layer()
-    run_events(idle)
+    events(idle)
     features = time.perf_counter() - t0
     widget.live.value = True
     radius = disc_radius(truth.shape)
