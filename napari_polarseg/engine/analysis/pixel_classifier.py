@@ -59,6 +59,12 @@ class ClassifierParams:
         seeded sample); 0 = all.
     smoothing : float
         Radius (pixels) of the edge-aware smoothing of the probabilities; 0 = none.
+        Not used while ``region_walk`` > 0 (the walk regularises instead).
+    region_walk : float
+        γ of the random walk with priors over the superpixel graph
+        (:mod:`.region_walk`): the weight of the classifier's probabilities against the
+        graph (dimensionless, > 0; smaller lets a stroke label more of its surface);
+        0 = no walk, every pixel labelled by the classifier alone.
     seed : int
         Random seed of the forest and the sampling.
     """
@@ -69,6 +75,7 @@ class ClassifierParams:
     balance_classes: bool = False
     max_pixels_per_class: int = 5_000
     smoothing: float = 3.0
+    region_walk: float = 0.03
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -84,6 +91,8 @@ class ClassifierParams:
             )
         if not (math.isfinite(self.smoothing) and self.smoothing >= 0):
             raise PolarsegError(f"smoothing must be >= 0, got {self.smoothing}")
+        if not (math.isfinite(self.region_walk) and self.region_walk >= 0):
+            raise PolarsegError(f"region_walk must be >= 0, got {self.region_walk}")
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)

@@ -47,6 +47,7 @@ from .pixel_classifier import (
     predict_pixels,
     train_pixel_classifier,
 )
+from .region_walk import RegionGraph, region_graph, walked_prediction
 
 
 @dataclass(frozen=True)
@@ -99,6 +100,7 @@ class PixelSegmenter:
     stride: int = PREDICTION_STRIDE
     _features: tuple[Any, FeatureStack] | None = field(default=None, init=False, repr=False)
     _colour_images: tuple[int, list] | None = field(default=None, init=False, repr=False)
+    _graph: tuple[int, RegionGraph] | None = field(default=None, init=False, repr=False)
 
     def __post_init__(self) -> None:
         if self.colour_stack is not None:
@@ -179,6 +181,37 @@ class PixelSegmenter:
         """
         return None if self._features is None else self._features[1]
 
+    def graph(self, segment_params: SegmentParams | None = None) -> RegionGraph:
+        """The superpixel graph of the region walk (:mod:`.region_walk`) on the maps of
+        :meth:`maps` (kept while the polarisation image stays)."""
+        pol = self.pipeline.get("polarisation", segment_params)
+        if self._graph is None or self._graph[0] != id(pol):
+            self._graph = (id(pol), region_graph(*self.maps(segment_params)))
+        return self._graph[1]
+
+    def predict(
+        self,
+        classifier: PixelClassifier,
+        features: FeatureStack,
+        scribbles: np.ndarray | None = None,
+        cancel: Any = None,
+        segment_params: SegmentParams | None = None,
+        stride: int | None = None,
+        coarse: np.ndarray | None = None,
+    ) -> PixelPrediction:
+        """Every pixel's class: with ``classifier.params.region_walk`` > 0 the walk over
+        the superpixel graph from ``scribbles``
+        (:func:`~.region_walk.walked_prediction`), else the classifier alone coarse to
+        fine, edge-aware smoothed (:func:`~.pixel_classifier.predict_pixels`).
+        ``stride``: the grid step (default :attr:`stride`); ``coarse``: its
+        probabilities when already predicted."""
+        s = self.stride if stride is None else int(stride)
+        if classifier.params.region_walk > 0:
+            graph = self.graph(segment_params)
+            return walked_prediction(classifier, features, graph, s, scribbles, cancel, coarse)
+        guide = self.guide(segment_params) if classifier.params.smoothing > 0 else None
+        return predict_pixels(classifier, features, guide, cancel, s, coarse)
+
     def guide(self, segment_params: SegmentParams | None = None) -> np.ndarray:
         """Guide image of the edge-aware smoothing: log Î."""
         intensity = self.maps(segment_params)[0]
@@ -255,8 +288,7 @@ class PixelSegmenter:
             with timed(seconds, "train"):
                 classifier = self.train(scribbles, feats.params, params, segment_params)
         with timed(seconds, "predict"):
-            guide = self.guide(segment_params) if classifier.params.smoothing > 0 else None
-            prediction = predict_pixels(classifier, feats, guide, cancel, self.stride)
+            prediction = self.predict(classifier, feats, scribbles, cancel, segment_params)
         return prediction, classifier, seconds
 
     def result(

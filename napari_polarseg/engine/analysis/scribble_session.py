@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from ..chunks import in_background
 from ..errors import PolarsegError
 from ..features.pixel_features import FeatureStack, PixelFeatureParams
 from ..params import SegmentParams
@@ -39,7 +40,6 @@ from .pixel_classifier import (
     PixelPrediction,
     margin_uncertainty,
     most_probable,
-    predict_pixels,
     smooth_probabilities,
 )
 from .pixel_segmentation import PixelSegmentation, PixelSegmenter
@@ -123,6 +123,7 @@ class ScribbleSession:
     n_predicted: int = field(default=0, init=False)
     segmenter: PixelSegmenter = field(init=False, repr=False)
     _coarse: tuple[int, np.ndarray] | None = field(default=None, init=False, repr=False)
+    _scribbles: np.ndarray | None = field(default=None, init=False, repr=False)
 
     def __post_init__(self) -> None:
         if self.pipeline is None:
@@ -150,10 +151,15 @@ class ScribbleSession:
         """The pixel features (computed at the first call, then kept while the
         polarisation image and the parameters stay; :attr:`feature_runs` counts the
         computations). ``colour``: with a colour stack, every colour's features too.
-        ``progress(share)`` is called while they are computed (it may raise to stop)."""
+        ``progress(share)`` is called while they are computed (it may raise to stop).
+        The superpixel graph of the region walk is drawn meanwhile on a second thread
+        (the watershed releases the GIL)."""
         params = params or self.features_params
         before = self.segmenter.cached_features
+        self.pipeline.get("polarisation", self.segment_params)  # shared by both threads
+        graph = in_background(lambda: self.segmenter.graph(self.segment_params))
         feats = self.segmenter.features(params, colour, self.segment_params, progress)
+        graph()
         if feats is not before:
             self.feature_runs += 1
         return feats
@@ -177,7 +183,7 @@ class ScribbleSession:
                 self.classifier_params,
                 self.segment_params,
             )
-        self._coarse = None
+        self._coarse, self._scribbles = None, np.asarray(scribbles)
         return self.classifier
 
     def use(self, classifier: PixelClassifier) -> None:
@@ -188,7 +194,7 @@ class ScribbleSession:
         colour = any(name.split(":", 1)[0] in colours for name in classifier.feature_names)
         with timed(self.seconds, "features"):
             self.features(classifier.feature_params, colour)
-        self.classifier, self._coarse = classifier, None
+        self.classifier, self._coarse, self._scribbles = classifier, None, None
 
     def preview(self, cancel: Any = None) -> PixelPrediction:
         """The prediction of the grid of ``preview_stride`` interpolated to every pixel
@@ -200,6 +206,12 @@ class ScribbleSession:
             coarse = grid_probabilities(clf.model, feats, s, cancel)
             if s == self.prediction_params.stride:
                 self._coarse = (id(clf), coarse)
+            if clf.params.region_walk > 0:
+                self.prediction = self.segmenter.predict(
+                    clf, feats, self._scribbles, cancel, self.segment_params, s, coarse
+                )
+                self.n_predicted = self.prediction.n_predicted
+                return self.prediction
             if clf.params.smoothing > 0:
                 rows, cols = grid_index(feats.shape, s)
                 guide = self.segmenter.guide(self.segment_params)[rows[:, None], cols[None, :]]
@@ -218,9 +230,10 @@ class ScribbleSession:
         clf, feats = self._ready()
         coarse = self._coarse[1] if self._coarse and self._coarse[0] == id(clf) else None
         with timed(self.seconds, "predict"):
-            guide = self.segmenter.guide(self.segment_params) if clf.params.smoothing else None
             s = int(self.prediction_params.stride)
-            self.prediction = predict_pixels(clf, feats, guide, cancel, s, coarse)
+            self.prediction = self.segmenter.predict(
+                clf, feats, self._scribbles, cancel, self.segment_params, s, coarse
+            )
         self.n_predicted = self.prediction.n_predicted
         return self.prediction
 
