@@ -594,10 +594,12 @@ def test_segment_with_scribbles_and_ground_truth(tmp_path, capsys, scene_tif):
     assert labels.shape == (H, W) and set(np.unique(labels)) == {1, 2}
     uncertainty = read_tif(out / "uncertainty.tif")
     assert uncertainty.shape == (H, W) and 0 <= uncertainty.min() <= uncertainty.max() <= 1
-    assert adjusted_rand_score(truth.ravel(), labels.ravel()) > 0.9
-    # value 1 left of the boundary at column 30 (pixel labels: a few pixels' band at the
-    # boundary may go either way)
-    assert np.all(labels[:, :26] == 1) and np.all(labels[:, 34:] == 2)
+    # the walk over the superpixels (issue 23) costs on this scene, whose material border
+    # is no edge: 0.881 (the classifier alone 0.957; tests/test_region_walk.py)
+    assert adjusted_rand_score(truth.ravel(), labels.ravel()) > 0.85
+    # value 1 left of the boundary at column 30, value 2 right of it (the superpixels
+    # along the boundary may go either way)
+    assert np.mean(labels[:, :26] == 1) > 0.95 and np.mean(labels[:, 34:] == 2) > 0.95
     proba = read_tif(out / "probabilities.tif")
     assert proba.shape == (2, H, W) and proba.dtype == np.float32
     np.testing.assert_allclose(proba.sum(axis=0), 1.0, atol=1e-5)
@@ -640,18 +642,17 @@ def test_saved_classifier_applies_to_another_stack_without_retraining(tmp_path, 
     )
     assert code == 0, err and clf.is_file()
     assert f"wrote the classifier to {clf}" in stdout
-    # the same stack with the saved classifier: identical labels and probabilities
+    # the same stack with the saved classifier: the labels of training there, but for
+    # the strokes the walk started from (issue 23: a loaded classifier walks from its
+    # probabilities alone), so they agree on nearly every pixel
     code, stdout, err = run(
         capsys, "segment", path, "--out", tmp_path / "b", *FAST, "--classifier", clf
     )
     assert code == 0, err and "not retrained" in stdout
-    np.testing.assert_array_equal(
-        read_tif(tmp_path / "a" / "labels.tif"), read_tif(tmp_path / "b" / "labels.tif")
-    )
-    np.testing.assert_array_equal(
-        read_tif(tmp_path / "a" / "probabilities.tif"),
-        read_tif(tmp_path / "b" / "probabilities.tif"),
-    )
+    trained, applied = (read_tif(tmp_path / d / "labels.tif") for d in ("a", "b"))
+    assert np.mean(trained == applied) > 0.95
+    proba = read_tif(tmp_path / "b" / "probabilities.tif")
+    np.testing.assert_allclose(proba.sum(axis=0), 1.0, atol=1e-5)
     summary = json.loads((tmp_path / "b" / "summary.json").read_text())
     assert summary["labels_from"] == "classifier"
     assert summary["classifier"]["seconds"]["train"] == 0
@@ -663,7 +664,7 @@ def test_saved_classifier_applies_to_another_stack_without_retraining(tmp_path, 
     )
     assert code == 0, err
     labels = read_tif(tmp_path / "c" / "labels.tif")
-    assert adjusted_rand_score(truth[:, ::-1].ravel(), labels.ravel()) > 0.9
+    assert adjusted_rand_score(truth[:, ::-1].ravel(), labels.ravel()) > 0.85
     # a tampered file: one line, exit 2, no output folder
     bad = tmp_path / "bad.polarseg-clf"
     data = bytearray(clf.read_bytes())

@@ -6,20 +6,22 @@ point to another class. What the classifier does not use is that a material's su
 is connected: its superpixels border each other across weak edges, while a border
 between materials is an edge of intensity or polarisation.
 
-So the class probabilities are taken per superpixel and spread over the region graph
-by the random walker with priors (Grady 2005, "Multilabel random walker image
+So the class probabilities are taken per node — a superpixel, split in two or more
+where the classifier's labels divide it (a superpixel may straddle a material border
+that is no edge) — and spread over the graph of the nodes by the random walker with
+priors (Grady 2005, "Multilabel random walker image
 segmentation using prior models", CVPR, eq. 8–11): for every class k the region
 probabilities x_k minimise
 
-    E(x_k) = x_kᵀ L x_k + γ ‖x_k − λ_k‖²,  with x_k = 1 on the regions scribbled k and
-    0 on the regions scribbled another class,
+    E(x_k) = x_kᵀ L x_k + γ ‖x_k − λ_k‖²,  with x_k = 1 on the nodes scribbled k and
+    0 on the nodes scribbled another class,
 
 where L = D − W is the Laplacian of the edge-aware region graph
 (:func:`~napari_polarseg.engine.unsupervised.region_diffusion.edge_aware_adjacency`:
-w_ab = L_ab · exp(−(e_ab / τ)²) over the border of regions a and b, normalised to mean
-1), λ_k the classifier's mean p_k over the region and γ the weight of the classifier
+w_ab = L_ab · exp(−(e_ab / τ)²) over the border of nodes a and b, normalised by the
+mean weight between superpixels), λ_k the classifier's mean p_k over the node and γ the weight of the classifier
 against the graph (dimensionless). Setting the gradient to zero gives one sparse linear
-system per class over the unscribbled regions u,
+system per class over the unscribbled nodes u,
 
     (L_uu + γ I) x_k,u = γ λ_k,u − L_us x_k,s,
 
@@ -27,7 +29,13 @@ solved together by one sparse LU factorisation (SciPy). The x_k sum to 1 over k.
 γ lets a stroke label its whole surface; large γ returns the classifier's own
 probabilities. Written here because scikit-image's ``random_walker`` works on the pixel
 grid without a prior term, and a pixel-grid solve of a camera frame takes seconds where
-the region graph of a few thousand nodes takes milliseconds.
+the graph of a few thousand nodes takes milliseconds.
+
+Measured with the robot user (``benchmarks/robot_user.py``): the walk is what lets one
+stroke label a whole fruit or panel. Its cost: a material border that is neither an
+intensity nor a polarisation edge (two textures of one brightness) is found only where
+the classifier's labels split the superpixels, so there the labels are coarser than the
+classifier's own (``region_walk`` = 0).
 """
 
 from __future__ import annotations
@@ -38,63 +46,80 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sps
 
-from ..features.pixel_features import (
-    MAX_REGION_AREA,
-    MIN_REGION_AREA,
-    PIXELS_PER_REGION_SEED,
-)
+from ..features.pixel_features import MAX_REGION_AREA, PIXELS_PER_REGION_SEED
 from ..features.superpixels import auto_region_area
-from ..unsupervised.region_diffusion import edge_aware_adjacency
-from ..unsupervised.region_graph import polarisation_superpixels, superpixel_edges
-from .pixel_classifier import PixelClassifier, PixelPrediction
+from ..unsupervised.region_diffusion import border_strength
+from ..unsupervised.region_graph import polarisation_superpixels, relabel, superpixel_edges
+from .pixel_classifier import PixelClassifier, PixelPrediction, most_probable
 from .refined_prediction import grid_probabilities, upsampled
 
 #: τ of the graph's edge weights, in units of the median border strength.
 EDGE_TAU = 1.0
+#: Smallest automatic superpixel area of the walk, pixels (a 240 × 320 scene: 25 px).
+MIN_REGION_AREA = 16
 
 
 @dataclass(frozen=True)
 class RegionGraph:
-    """Superpixels of an image and the edge-aware graph between them.
+    """Superpixels of an image and what weighs the borders between them.
 
     Attributes
     ----------
     regions : ndarray (H, W) int32
-        Region of every pixel, 0 … n − 1.
-    adjacency : scipy.sparse.csr_matrix (n, n)
-        Symmetric weights w_ab (module docstring), mean 1 over the borders.
-    counts : ndarray (n,) float64
-        Pixels of every region.
+        Superpixel of every pixel, 0 … n − 1.
+    edges : ndarray (H, W)
+        Edge map the superpixels were grown on (dimensionless).
+    scale : float
+        τ × the median border strength of the superpixels: e_ab is divided by it.
+    norm : float
+        Mean weight L_ab · exp(−(e_ab / scale)²) over the superpixels' borders: every
+        weight is divided by it (so γ means the same on every image).
     """
 
     regions: np.ndarray
-    adjacency: sps.csr_matrix
-    counts: np.ndarray
+    edges: np.ndarray
+    scale: float
+    norm: float
 
-    @property
-    def n(self) -> int:
-        """Number of regions."""
-        return int(self.counts.size)
+    def nodes(self, labels: np.ndarray, k: int) -> np.ndarray:
+        """The walk's nodes (H, W) int32, 0 … m − 1: every superpixel split by the
+        classifier's ``labels`` (H, W; 0 … k − 1) into one node per class it holds, so a
+        superpixel that straddles a border the watershed missed is not forced into
+        one class."""
+        return relabel(self.regions.astype(np.int64) * int(k) + labels)
 
-    def means(self, planes: np.ndarray) -> np.ndarray:
-        """Mean of every plane (K, H, W) over each region: (n, K) float64."""
-        flat = self.regions.ravel()
-        sums = [np.bincount(flat, weights=p.ravel(), minlength=self.n) for p in planes]
-        return np.stack(sums, axis=1) / np.maximum(self.counts, 1)[:, None]
+    def adjacency(self, nodes: np.ndarray) -> sps.csr_matrix:
+        """Symmetric (m, m) weights w_ab / :attr:`norm` between the ``nodes`` (module
+        docstring)."""
+        rows, cols, length, strength = border_strength(nodes, self.edges)
+        m = int(nodes.max()) + 1
+        w = length * np.exp(-np.minimum((strength / self.scale) ** 2, 50.0)) / self.norm
+        half = sps.coo_matrix((w, (rows, cols)), shape=(m, m)).tocsr()
+        return (half + half.T).tocsr()
 
-    def seeds(self, scribbles: np.ndarray, classes: np.ndarray) -> np.ndarray:
-        """(n,) int: for every region the index into ``classes`` of the class most of its
-        scribbled pixels hold, −1 where nothing is scribbled (values not in ``classes``,
-        e.g. on masked pixels, are ignored)."""
-        flat = np.asarray(scribbles).ravel()
-        marked = np.flatnonzero(flat > 0)
-        index = np.searchsorted(classes, flat[marked])
-        known = (index < classes.size) & (
-            classes[np.minimum(index, classes.size - 1)] == flat[marked]
-        )
-        votes = np.zeros((self.n, classes.size))
-        np.add.at(votes, (self.regions.ravel()[marked[known]], index[known]), 1.0)
-        return np.where(votes.sum(axis=1) > 0, votes.argmax(axis=1), -1)
+
+def node_means(nodes: np.ndarray, planes: np.ndarray) -> np.ndarray:
+    """Mean of every plane (K, H, W) over each node of ``nodes`` (H, W): (m, K)."""
+    flat = nodes.ravel()
+    m = int(flat.max()) + 1
+    counts = np.maximum(np.bincount(flat, minlength=m), 1)
+    sums = [np.bincount(flat, weights=p.ravel(), minlength=m) for p in planes]
+    return np.stack(sums, axis=1) / counts[:, None]
+
+
+def node_seeds(nodes: np.ndarray, scribbles: np.ndarray, classes: np.ndarray) -> np.ndarray:
+    """(m,) int: for every node the index into ``classes`` of the class most of its
+    scribbled pixels hold, −1 where nothing is scribbled (values not in ``classes``,
+    e.g. on masked pixels, are ignored)."""
+    flat = np.asarray(scribbles).ravel()
+    m = int(nodes.max()) + 1
+    marked = np.flatnonzero(flat > 0)
+    index = np.searchsorted(classes, flat[marked])
+    clipped = np.minimum(index, classes.size - 1)
+    known = (index < classes.size) & (classes[clipped] == flat[marked])
+    votes = np.zeros((m, classes.size))
+    np.add.at(votes, (nodes.ravel()[marked[known]], index[known]), 1.0)
+    return np.where(votes.sum(axis=1) > 0, votes.argmax(axis=1), -1)
 
 
 def region_graph(
@@ -111,11 +136,12 @@ def region_graph(
     )
     edges = superpixel_edges(intensity, dop, phase)
     regions = polarisation_superpixels(intensity, dop, phase, area, edges=edges)
-    adjacency = edge_aware_adjacency(regions, edges, EDGE_TAU)
-    if adjacency.nnz:
-        adjacency = adjacency / float(adjacency.data.mean())
-    counts = np.bincount(regions.ravel()).astype(np.float64)
-    return RegionGraph(regions, sps.csr_matrix(adjacency), counts)
+    _, _, length, strength = border_strength(regions, edges)
+    if length.size == 0:
+        return RegionGraph(regions, edges, 1.0, 1.0)
+    scale = max(EDGE_TAU * float(np.median(strength)), 1e-12)
+    w = length * np.exp(-np.minimum((strength / scale) ** 2, 50.0))
+    return RegionGraph(regions, edges, scale, max(float(w.mean()), 1e-12))
 
 
 def walk(
@@ -145,24 +171,6 @@ def walk(
     return out / np.where(total > 0, total, 1.0)
 
 
-def walked_regions(
-    graph: RegionGraph,
-    probabilities: np.ndarray,
-    weight: float,
-    scribbles: np.ndarray | None = None,
-    classes: np.ndarray | None = None,
-) -> np.ndarray:
-    """Region probabilities x (n, K) after the walk: the classifier's ``probabilities``
-    (K, H, W) averaged per region as the prior λ, the regions holding ``scribbles``
-    (values ``classes``; no seeds when None) as seeds."""
-    prior = graph.means(probabilities)
-    if scribbles is None or classes is None:
-        seeds = np.full(graph.n, -1)
-    else:
-        seeds = graph.seeds(scribbles, np.asarray(classes))
-    return walk(graph.adjacency, prior, seeds, weight)
-
-
 def walked_prediction(
     classifier: PixelClassifier,
     features: Any,
@@ -185,10 +193,17 @@ def walked_prediction(
     if coarse is None:
         coarse = grid_probabilities(classifier.model, features, s, cancel)
     prior = upsampled(coarse, s, features.shape)
-    x = walked_regions(graph, prior, classifier.params.region_walk, scribbles, classifier.classes)
+    classes = classifier.classes
+    nodes = graph.nodes(most_probable(prior), classes.size)
+    if scribbles is None:
+        seeds = np.full(int(nodes.max()) + 1, -1)
+    else:
+        seeds = node_seeds(nodes, scribbles, classes)
+    weight = classifier.params.region_walk
+    x = walk(graph.adjacency(nodes), node_means(nodes, prior), seeds, weight)
     ordered = np.sort(x, axis=1)
     margin = ordered[:, -1] - (ordered[:, -2] if x.shape[1] > 1 else 0.0)
-    regions = graph.regions
+    regions = nodes
     proba = np.empty(prior.shape, dtype=np.float32)
     for k in range(x.shape[1]):
         np.take(x[:, k].astype(np.float32), regions, out=proba[k])

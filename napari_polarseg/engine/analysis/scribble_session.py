@@ -1,18 +1,21 @@
 """The scribble loop as an object: paint, update, look, paint again.
 
 :class:`ScribbleSession` holds one image (an angle stack), its pixel features
-(:mod:`..features.pixel_features`, computed once and kept between updates) and the
-classifier trained on the last scribbles. Each :meth:`~ScribbleSession.update` retrains
-on the strokes (:func:`~.pixel_classifier.train_pixel_classifier`) and predicts every
-pixel coarse to fine (:mod:`.refined_prediction`): the samples of a grid of stride s,
-then every pixel of the grid cells on a border between classes. The class
-probabilities are smoothed edge-aware as in
-:func:`~.pixel_classifier.predict_pixels` (guided filter steered by log Î).
+(:mod:`..features.pixel_features`, computed once and kept between updates), the
+superpixel graph of the region walk (:mod:`.region_walk`, drawn beside the features)
+and the classifier trained on the last scribbles. Each :meth:`~ScribbleSession.update`
+retrains on the strokes (:func:`~.pixel_classifier.train_pixel_classifier`), predicts
+the samples of a grid of stride s and spreads the strokes and the grid's class
+probabilities over the superpixel graph by a random walk with priors
+(:func:`~.region_walk.walked_prediction`): every pixel takes its region's class. With
+``region_walk`` = 0 the classifier labels every pixel alone, coarse to fine
+(:mod:`.refined_prediction`: the grid, then every pixel of the cells on a border between
+classes, smoothed edge-aware as in :func:`~.pixel_classifier.predict_pixels`).
 
-:meth:`~ScribbleSession.preview` is the grid's answer alone (probabilities smoothed on
-the grid and interpolated to every pixel): what an interactive front end shows first,
-while :meth:`~ScribbleSession.refine` predicts the borders. The plugin's scribble mode
-runs on a session per stack.
+:meth:`~ScribbleSession.preview` is the answer of a coarser grid: what an interactive
+front end shows first, while :meth:`~ScribbleSession.refine` predicts the finer grid
+(and, without the walk, the borders). The plugin's scribble mode runs on a session per
+stack.
 
 Labels from :meth:`~ScribbleSession.update` are the scribbles' own values (a pixel
 painted 3 is labelled 3 where the classifier agrees); :attr:`~ScribbleSession.prediction`
@@ -197,9 +200,10 @@ class ScribbleSession:
         self.classifier, self._coarse, self._scribbles = classifier, None, None
 
     def preview(self, cancel: Any = None) -> PixelPrediction:
-        """The prediction of the grid of ``preview_stride`` interpolated to every pixel
-        (module docstring): probabilities smoothed on the grid, the uncertainty taken
-        there and interpolated too; no border predicted yet."""
+        """The prediction of the grid of ``preview_stride`` (module docstring): walked
+        over the superpixel graph, or without the walk interpolated to every pixel
+        (probabilities smoothed on the grid, the uncertainty taken there and
+        interpolated too; no border predicted yet)."""
         clf, feats = self._ready()
         s = int(self.prediction_params.preview_stride)
         with timed(self.seconds, "preview"):
