@@ -19,9 +19,9 @@ probabilities x_k minimise
 where L = D − W is the Laplacian of the edge-aware region graph
 (:func:`~napari_polarseg.engine.unsupervised.region_diffusion.edge_aware_adjacency`:
 w_ab = L_ab · exp(−(e_ab / τ)²) over the border of nodes a and b, normalised by the
-mean weight between superpixels), λ_k the classifier's mean p_k over the node and γ the weight of the classifier
-against the graph (dimensionless). Setting the gradient to zero gives one sparse linear
-system per class over the unscribbled nodes u,
+mean weight between superpixels), λ_k the classifier's mean p_k over the node and γ the
+weight of the classifier against the graph (dimensionless). Setting the gradient to
+zero gives one sparse linear system per class over the unscribbled nodes u,
 
     (L_uu + γ I) x_k,u = γ λ_k,u − L_us x_k,s,
 
