@@ -1,5 +1,5 @@
 """The Segment widget's classifier settings (advanced section): feature groups, scales,
-model and trees of the scribble classifier.
+model, trees and region walk of the scribble classifier.
 
 Each control's tooltip is its parameter's one description
 (:func:`~napari_polarseg.engine.analysis.classifier_settings.setting_help`, from the
@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from magicgui.widgets import ComboBox, Container, LineEdit, Select, SpinBox
+from magicgui.widgets import ComboBox, Container, FloatSpinBox, LineEdit, Select, SpinBox
 
 from ..engine import PolarsegError
 from ..engine.analysis.classifier_settings import (
@@ -27,7 +27,7 @@ MAX_TREES = 1000
 
 
 class ClassifierControls(Container):
-    """Feature groups, scales, model and trees of the scribble classifier."""
+    """Feature groups, scales, model, trees and region walk of the scribble classifier."""
 
     def __init__(self) -> None:
         default = ClassifierSettings()
@@ -56,15 +56,21 @@ class ClassifierControls(Container):
             max=MAX_TREES,
             tooltip=setting_help("n_estimators"),
         )
-        super().__init__(
-            widgets=[self.groups, self.scales, self.model, self.trees], labels=True, label=""
+        self.walk = FloatSpinBox(
+            label="region walk γ",
+            value=default.classifier.region_walk,
+            min=0.0,
+            max=100.0,
+            step=0.01,
+            tooltip=setting_help("region_walk"),
         )
+        super().__init__(widgets=self.controls, labels=True, label="")
         self.margins = (0, 0, 0, 0)
 
     @property
     def controls(self) -> list[Any]:
         """The controls whose changes a live update reruns after."""
-        return [self.groups, self.scales, self.model, self.trees]
+        return [self.groups, self.scales, self.model, self.trees, self.walk]
 
     def settings(self) -> ClassifierSettings:
         """The settings the controls describe; raises :class:`PolarsegError` naming a
@@ -77,6 +83,7 @@ class ClassifierControls(Container):
             scales=str(self.scales.value),
             model=str(self.model.value),
             n_estimators=int(self.trees.value),
+            region_walk=float(self.walk.value),
         )
 
     def settings_or_none(self) -> ClassifierSettings | None:

@@ -1,5 +1,5 @@
 """The classifier settings in the Segment dock's advanced section (issue 23, item 4):
-feature groups, scales, model and trees reach the classifier the strokes train."""
+feature groups, scales, model, trees and the region walk reach the classifier the strokes train."""
 
 from __future__ import annotations
 
@@ -27,11 +27,13 @@ def test_classifier_settings_train_the_classifier(viewer, open_sample, add_widge
     controls.scales.value = "1, 3"
     controls.model.value = "random_forest"
     controls.trees.value = 7
+    controls.walk.value = 0.0  # the classifier alone, no region walk
     run_and_wait(qtbot, widget)
     assert error_messages() == []
     clf = widget.classifier
     assert clf.params.model == "random_forest" and clf.params.n_estimators == 7
     assert len(clf.model.estimators_) == 7
+    assert clf.params.region_walk == 0.0 and controls.walk.tooltip == setting_help("region_walk")
     assert clf.feature_params.groups == ("intensity", "polarisation")
     assert clf.feature_params.scales == (1.0, 3.0)
     assert not any(n.startswith("region:") for n in clf.feature_names)

@@ -1,4 +1,5 @@
-"""The pixel classifier's settings a user chooses: feature groups and scales, model, trees.
+"""The pixel classifier's settings a user chooses: feature groups and scales, model, trees
+and the region walk.
 
 :class:`ClassifierSettings` pairs the two parameter dataclasses the classifier is trained
 with (:class:`~napari_polarseg.engine.features.pixel_features.PixelFeatureParams`,
@@ -25,6 +26,7 @@ SETTINGS: dict[str, tuple[type, str]] = {
     "scales": (PixelFeatureParams, "scales"),
     "model": (ClassifierParams, "model"),
     "n_estimators": (ClassifierParams, "n_estimators"),
+    "region_walk": (ClassifierParams, "region_walk"),
 }
 
 #: The choices of the settings that have a fixed set of values.
@@ -63,6 +65,7 @@ class ClassifierSettings:
         scales: tuple[float, ...] | str | None = None,
         model: str | None = None,
         n_estimators: int | None = None,
+        region_walk: float | None = None,
     ) -> ClassifierSettings:
         """The defaults with the given settings (``scales`` may be text: ``"1, 2, 4"``);
         raises :class:`PolarsegError` naming a bad value."""
@@ -77,6 +80,8 @@ class ClassifierSettings:
             classifier = replace(classifier, model=model)
         if n_estimators is not None:
             classifier = replace(classifier, n_estimators=int(n_estimators))
+        if region_walk is not None:
+            classifier = replace(classifier, region_walk=float(region_walk))
         return cls(features, classifier)
 
 
