@@ -16,6 +16,7 @@ from skimage import io as skio
 from napari_polarseg import cli
 from napari_polarseg import io as pio
 from napari_polarseg.engine import SegmentParams
+from napari_polarseg.engine.analysis.pixel_classifier import ClassifierParams
 from napari_polarseg.engine.analysis.pixel_segmentation import PixelSegmenter
 from napari_polarseg.engine.errors import PolarsegError
 from napari_polarseg.engine.physics.colour_mosaic import (
@@ -320,7 +321,9 @@ def test_colour_features_separate_materials_of_one_luminance():
     scribbles = np.zeros(truth.shape, dtype=np.int64)
     scribbles[4:8, 3:15] = 1
     scribbles[24:28, 25:37] = 2
-    mono = PixelSegmenter(pipe).segment(scribbles, reconstruction=False)
+    # without the region walk: a loaded classifier then labels as the trained one did
+    alone = ClassifierParams(region_walk=0.0)
+    mono = PixelSegmenter(pipe).segment(scribbles, params=alone, reconstruction=False)
     colour = PixelSegmenter(pipe, colour_stack=stack).segment(scribbles, reconstruction=False)
     names = colour.classifier.feature_names
     assert set(mono.classifier.feature_names) < set(names)
@@ -333,7 +336,8 @@ def test_colour_features_separate_materials_of_one_luminance():
     assert red.dop[left].mean() - red.dop[right].mean() > 0.2
     accuracy = np.mean(colour.result.labels == truth)
     assert accuracy > 0.95 and accuracy > np.mean(mono.result.labels == truth) + 0.1
-    # a classifier trained without colour still applies to the colour segmenter
+    # a classifier trained without colour still applies to the colour segmenter (its own
+    # features; no walk, so the labels of training)
     again = PixelSegmenter(pipe, colour_stack=stack).segment(classifier=mono.classifier)
     np.testing.assert_array_equal(again.result.labels, mono.result.labels)
 

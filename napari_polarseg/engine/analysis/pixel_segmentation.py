@@ -183,10 +183,14 @@ class PixelSegmenter:
 
     def graph(self, segment_params: SegmentParams | None = None) -> RegionGraph:
         """The superpixel graph of the region walk (:mod:`.region_walk`) on the maps of
-        :meth:`maps` (kept while the polarisation image stays)."""
+        :meth:`maps` and, with a colour stack, the edges of every colour's polarisation
+        image too (kept while the polarisation image stays)."""
         pol = self.pipeline.get("polarisation", segment_params)
         if self._graph is None or self._graph[0] != id(pol):
-            self._graph = (id(pol), region_graph(*self.maps(segment_params)))
+            colours = self.colour_images(segment_params)
+            channels = [(c.intensity, c.dop, c.phase) for c in colours]
+            graph = region_graph(*self.maps(segment_params), channels=channels)
+            self._graph = (id(pol), graph)
         return self._graph[1]
 
     def predict(

@@ -40,6 +40,7 @@ classifier's own (``region_walk`` = 0).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -123,18 +124,26 @@ def node_seeds(nodes: np.ndarray, scribbles: np.ndarray, classes: np.ndarray) ->
 
 
 def region_graph(
-    intensity: np.ndarray, dop: np.ndarray, phase: np.ndarray, region_area: int = 0
+    intensity: np.ndarray,
+    dop: np.ndarray,
+    phase: np.ndarray,
+    region_area: int = 0,
+    channels: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]] = (),
 ) -> RegionGraph:
     """The :class:`RegionGraph` of a polarisation image (Î, ρ, φ radians): superpixels
     following intensity and polarisation edges
-    (:func:`~napari_polarseg.engine.unsupervised.region_graph.polarisation_superpixels`)
-    of ``region_area`` pixels (0: the pixel features' automatic area), weights of
+    (:func:`~napari_polarseg.engine.unsupervised.region_graph.superpixel_edges`, each
+    in units of its median, summed over the image and every colour's image in
+    ``channels``, so a border seen in one colour only is an edge too) of
+    ``region_area`` pixels (0: the pixel features' automatic area), weights of
     τ = :data:`EDGE_TAU`."""
     shape = np.shape(intensity)
     area = int(region_area) or auto_region_area(
         shape, PIXELS_PER_REGION_SEED, MIN_REGION_AREA, MAX_REGION_AREA
     )
     edges = superpixel_edges(intensity, dop, phase)
+    for image in channels:
+        edges += superpixel_edges(*image)
     regions = polarisation_superpixels(intensity, dop, phase, area, edges=edges)
     _, _, length, strength = border_strength(regions, edges)
     if length.size == 0:
