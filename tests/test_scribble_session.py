@@ -84,8 +84,14 @@ def test_save_load_predicts_the_same(scene, session, tmp_path):
     other = ScribbleSession(s.stack, ANGLES)
     other.use(loaded)
     other.refine()
-    np.testing.assert_array_equal(other.labels, session.labels)
-    np.testing.assert_allclose(other.probabilities, session.probabilities, atol=1e-6)
+    # the classifier in memory, applied the same way (without the strokes, which the
+    # region walk of the trained session also started from)
+    reference = ScribbleSession(s.stack, ANGLES)
+    reference.use(session.classifier)
+    reference.refine()
+    np.testing.assert_array_equal(other.labels, reference.labels)
+    np.testing.assert_allclose(other.probabilities, reference.probabilities, atol=1e-6)
+    assert np.mean(other.labels == session.labels) > 0.9
 
 
 def test_nothing_to_save_or_show_before_an_update(scene, tmp_path):

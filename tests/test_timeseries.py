@@ -412,8 +412,13 @@ def test_cli_timeseries_with_a_saved_classifier(tmp_path, capsys) -> None:
     l1, l2 = tifffile.imread(out / "labels_01.tif"), tifffile.imread(out / "labels_02.tif")
     change = tifffile.imread(out / "change_01.tif")
     np.testing.assert_array_equal(change, (l1 != l2).astype(np.uint8))
-    # the same stack and classifier as `segment`: day 1 equals its labels
-    np.testing.assert_array_equal(l1, tifffile.imread(tmp_path / "seg" / "labels.tif"))
+    # the same stack and classifier as `segment --classifier`: day 1 equals its labels
+    applied = tmp_path / "applied"
+    assert cli.main([*argv[:3], str(applied), *argv[4:], "--classifier", str(clf)]) == 0
+    np.testing.assert_array_equal(l1, tifffile.imread(applied / "labels.tif"))
+    # and nearly the labels of training there (the region walk also started from the
+    # strokes then)
+    assert np.mean(l1 == tifffile.imread(tmp_path / "seg" / "labels.tif")) > 0.95
     summary = json.loads((out / "summary.json").read_text())
     assert summary["labels_from"] == "classifier"
     bad = tmp_path / "bad.polarseg-clf"

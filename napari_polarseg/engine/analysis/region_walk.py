@@ -13,10 +13,13 @@ priors (Grady 2005, "Multilabel random walker image
 segmentation using prior models", CVPR, eq. 8–11): for every class k the region
 probabilities x_k minimise
 
-    E(x_k) = x_kᵀ L x_k + γ ‖x_k − λ_k‖²,  with x_k = 1 on the nodes scribbled k and
-    0 on the nodes scribbled another class,
+    E(x_k) = x_kᵀ L x_k + γ ‖x_k − λ_k‖²,  with x_k = 1 on the nodes seeded k and
+    0 on the nodes seeded another class,
 
-where L = D − W is the Laplacian of the edge-aware region graph
+where the seeds are the nodes the user scribbled and those whose λ gives one class at
+least :data:`CONFIDENT` (so a loaded classifier, without strokes, is not averaged away
+over the whole graph; with them the same classifier labels an image nearly as it did
+while trained on it), L = D − W is the Laplacian of the edge-aware region graph
 (:func:`~napari_polarseg.engine.unsupervised.region_diffusion.edge_aware_adjacency`:
 w_ab = L_ab · exp(−(e_ab / τ)²) over the border of nodes a and b, normalised by the
 mean weight between superpixels), λ_k the classifier's mean p_k over the node and γ the
@@ -52,10 +55,16 @@ from ..features.superpixels import auto_region_area
 from ..unsupervised.region_diffusion import border_strength
 from ..unsupervised.region_graph import polarisation_superpixels, relabel, superpixel_edges
 from .pixel_classifier import PixelClassifier, PixelPrediction, most_probable
-from .refined_prediction import grid_probabilities, upsampled
+from .refined_prediction import grid_probabilities, refined_probabilities, upsampled
 
 #: τ of the graph's edge weights, in units of the median border strength.
 EDGE_TAU = 1.0
+#: A pixel pair's edge value: the smaller of its two pixels' (the blurred edge map is
+#: high on both sides of a border; only the pair straddling it has both pixels on the crest).
+EDGE_PAIR = np.minimum
+#: Nodes whose mean classifier probability of one class is at least this are seeds of
+#: that class too (beside the scribbled ones).
+CONFIDENT = 0.9
 #: Smallest automatic superpixel area of the walk, pixels (a 240 × 320 scene: 25 px).
 MIN_REGION_AREA = 16
 
@@ -92,7 +101,7 @@ class RegionGraph:
     def adjacency(self, nodes: np.ndarray) -> sps.csr_matrix:
         """Symmetric (m, m) weights w_ab / :attr:`norm` between the ``nodes`` (module
         docstring)."""
-        rows, cols, length, strength = border_strength(nodes, self.edges)
+        rows, cols, length, strength = border_strength(nodes, self.edges, EDGE_PAIR)
         m = int(nodes.max()) + 1
         w = length * np.exp(-np.minimum((strength / self.scale) ** 2, 50.0)) / self.norm
         half = sps.coo_matrix((w, (rows, cols)), shape=(m, m)).tocsr()
@@ -123,6 +132,12 @@ def node_seeds(nodes: np.ndarray, scribbles: np.ndarray, classes: np.ndarray) ->
     return np.where(votes.sum(axis=1) > 0, votes.argmax(axis=1), -1)
 
 
+def confident_seeds(prior: np.ndarray, least: float = CONFIDENT) -> np.ndarray:
+    """(m,) int: the class index of the nodes whose prior (m, K) gives one class at
+    least ``least``, −1 elsewhere."""
+    return np.where(prior.max(axis=1) >= least, prior.argmax(axis=1), -1)
+
+
 def region_graph(
     intensity: np.ndarray,
     dop: np.ndarray,
@@ -145,7 +160,7 @@ def region_graph(
     for image in channels:
         edges += superpixel_edges(*image)
     regions = polarisation_superpixels(intensity, dop, phase, area, edges=edges)
-    _, _, length, strength = border_strength(regions, edges)
+    _, _, length, strength = border_strength(regions, edges, EDGE_PAIR)
     if length.size == 0:
         return RegionGraph(regions, edges, 1.0, 1.0)
     scale = max(EDGE_TAU * float(np.median(strength)), 1e-12)
@@ -188,34 +203,40 @@ def walked_prediction(
     scribbles: np.ndarray | None = None,
     cancel: Any = None,
     coarse: np.ndarray | None = None,
+    borders: bool = True,
 ) -> PixelPrediction:
-    """Every pixel's class from the walk: the classifier predicts the grid of
-    ``stride`` (:func:`~.refined_prediction.grid_probabilities`, or ``coarse`` when
-    already predicted), interpolated to every pixel as the prior, walked with
-    γ = ``classifier.params.region_walk`` from the ``scribbles`` (None: from the prior
-    alone, e.g. a loaded classifier on a new image); each pixel takes its region's
-    probabilities, label and uncertainty 1 − (x_(1) − x_(2)).
+    """Every pixel's class from the walk, γ = ``classifier.params.region_walk``.
 
-    The borders are the superpixels' (they follow intensity and polarisation edges),
-    so no pixel is predicted on its own beyond the grid."""
+    The prior: the classifier's probabilities of the grid of ``stride``
+    (:func:`~.refined_prediction.grid_probabilities`, or ``coarse`` when already
+    predicted) interpolated to every pixel, and with ``borders`` every pixel of the
+    grid cells on a border between classes predicted on its own
+    (:func:`~.refined_prediction.refined_probabilities`), so the nodes split where the
+    pixels' own labels change. The seeds: the confident nodes
+    (:func:`confident_seeds`) and those holding ``scribbles`` (None: none, e.g. a loaded
+    classifier on a new image). Each pixel takes its node's probabilities, label and
+    uncertainty 1 − (x_(1) − x_(2))."""
     s = max(1, int(stride))
-    if coarse is None:
-        coarse = grid_probabilities(classifier.model, features, s, cancel)
-    prior = upsampled(coarse, s, features.shape)
+    if borders:
+        refined = refined_probabilities(classifier.model, features, s, cancel, coarse)
+        prior, n_predicted = refined.probabilities, refined.n_predicted
+    else:
+        if coarse is None:
+            coarse = grid_probabilities(classifier.model, features, s, cancel)
+        prior, n_predicted = upsampled(coarse, s, features.shape), int(coarse[0].size)
     classes = classifier.classes
     nodes = graph.nodes(most_probable(prior), classes.size)
-    if scribbles is None:
-        seeds = np.full(int(nodes.max()) + 1, -1)
-    else:
-        seeds = node_seeds(nodes, scribbles, classes)
-    weight = classifier.params.region_walk
-    x = walk(graph.adjacency(nodes), node_means(nodes, prior), seeds, weight)
+    means = node_means(nodes, prior)
+    seeds = confident_seeds(means)
+    if scribbles is not None:
+        painted = node_seeds(nodes, scribbles, classes)
+        seeds = np.where(painted >= 0, painted, seeds)
+    x = walk(graph.adjacency(nodes), means, seeds, classifier.params.region_walk)
     ordered = np.sort(x, axis=1)
     margin = ordered[:, -1] - (ordered[:, -2] if x.shape[1] > 1 else 0.0)
-    regions = nodes
     proba = np.empty(prior.shape, dtype=np.float32)
     for k in range(x.shape[1]):
-        np.take(x[:, k].astype(np.float32), regions, out=proba[k])
-    labels = np.take(np.argmax(x, axis=1).astype(np.int32), regions)
-    uncertainty = np.take((1.0 - margin).astype(np.float32), regions)
-    return PixelPrediction(labels, proba, uncertainty, classifier.classes, int(coarse[0].size))
+        np.take(x[:, k].astype(np.float32), nodes, out=proba[k])
+    labels = np.take(np.argmax(x, axis=1).astype(np.int32), nodes)
+    uncertainty = np.take((1.0 - margin).astype(np.float32), nodes)
+    return PixelPrediction(labels, proba, uncertainty, classes, n_predicted)

@@ -212,7 +212,7 @@ class ScribbleSession:
                 self._coarse = (id(clf), coarse)
             if clf.params.region_walk > 0:
                 self.prediction = self.segmenter.predict(
-                    clf, feats, self._scribbles, cancel, self.segment_params, s, coarse
+                    clf, feats, self._scribbles, cancel, self.segment_params, s, coarse, False
                 )
                 self.n_predicted = self.prediction.n_predicted
                 return self.prediction

@@ -19,13 +19,14 @@ borders and hardly at all across strong ones.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 import scipy.sparse as sps
 
 
 def border_strength(
-    regions: np.ndarray, edges: np.ndarray
+    regions: np.ndarray, edges: np.ndarray, pair: Callable[..., np.ndarray] = np.maximum
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Shared borders of neighbouring regions and their edge strength.
 
@@ -35,6 +36,10 @@ def border_strength(
         Region of every pixel, 0 … n − 1.
     edges : float array (H, W)
         Edge map (any non-negative units).
+    pair : ufunc
+        How a pixel pair's edge value is made of its two pixels' (``np.maximum``: the
+        larger; ``np.minimum``: the smaller, which places a blurred edge between the
+        two pixels that both lie on its crest).
 
     Returns
     -------
@@ -43,7 +48,7 @@ def border_strength(
     length : float array (m,)
         4-neighbour pixel pairs across the border.
     strength : float array (m,)
-        Mean over those pairs of the larger of the two pixels' edge values.
+        Mean over those pairs of the pair's edge value (``pair``).
     """
     a_parts, b_parts, e_parts = [], [], []
     for sl_a, sl_b in (
@@ -54,7 +59,7 @@ def border_strength(
         differ = a != b
         a_parts.append(a[differ])
         b_parts.append(b[differ])
-        e_parts.append(np.maximum(edges[sl_a][differ], edges[sl_b][differ]))
+        e_parts.append(pair(edges[sl_a][differ], edges[sl_b][differ]))
     a = np.concatenate(a_parts).astype(np.int64)
     b = np.concatenate(b_parts).astype(np.int64)
     e = np.concatenate(e_parts).astype(np.float64)
