@@ -37,12 +37,14 @@ The half means are also given without the marked scenes.
 Usage::
 
     python benchmarks/robot_user.py --real --rendered all --rounds 15
+    python benchmarks/robot_user.py --real --rendered all --markdown docs/quality.md
     python benchmarks/robot_user.py --rendered dev
 """
 
 from __future__ import annotations
 
 import argparse
+import shlex
 import sys
 import time
 from collections.abc import Callable
@@ -58,7 +60,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from baselines import plain_features, real_frames  # noqa: E402
 from ilastik_features import ilastik_features  # noqa: E402
+from materials import replace_block  # noqa: E402
 
+#: The block of ``docs/quality.md`` that ``--markdown`` rewrites.
+MARKDOWN_BEGIN = "<!-- robot user: begin -->"
+MARKDOWN_END = "<!-- robot user: end -->"
 #: Corrections after which the ARI is reported.
 MILESTONES = (0, 2, 5, 10, 15)
 #: The ARI whose number of corrections is reported.
@@ -372,6 +378,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--methods", help="only these rows (comma-separated: product, plain RF, ilastik RF)"
     )
+    parser.add_argument(
+        "--markdown", type=Path, help="also write the tables into this page's robot-user block"
+    )
     args = parser.parse_args(argv)
     if not args.real and not args.rendered:
         parser.error("choose --real and/or --rendered dev|test|all")
@@ -392,6 +401,13 @@ def main(argv: list[str] | None = None) -> int:
     print()
     print("\n".join(half_means(rows, args.rounds)))
     print(f"\ntotal {time.perf_counter() - t0:.1f} s")
+    if args.markdown:
+        body = "\n".join(
+            [header(args.rounds), *(format_row(r, args.rounds) for r in rows), ""]
+            + half_means(rows, args.rounds)
+        )
+        command = shlex.join(["python", "benchmarks/robot_user.py", *(argv or sys.argv[1:])])
+        replace_block(args.markdown, body, command, MARKDOWN_BEGIN, MARKDOWN_END)
     return 0
 
 
