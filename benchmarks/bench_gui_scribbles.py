@@ -11,9 +11,10 @@ Timed, each from the action to the layers on screen, minus the live-update debou
 
 - background features: from *New scribbles layer* to the stack's pixel features ready
   (the worker computes them while the first strokes are painted);
-- first strokes → labels: the discs of every material set at once (training, the
-  grid's labels shown; then every pixel's);
-- each correction → labels: the grid's labels (the preview) and every pixel's.
+- first strokes → labels: the discs of every material set at once (training, then the
+  preview: every pixel's labels from the region walk on the 8 px grid's prediction;
+  then the final labels: the walk on the 4 px grid and the border cells);
+- each correction → labels: the preview's labels and the final ones.
 """
 
 from __future__ import annotations
@@ -116,8 +117,9 @@ def scribble_frame_main(path: Path, mosaic: tuple[int, ...], crop=None) -> None:
     h, w = stack.shape[1:]
     print(f"napari plugin, scribble loop on {w} x {h} x {stack.shape[0]} frame {path.name}")
     print(f"pixel features in the background after 'New scribbles layer': {features:.2f} s")
-    print("seconds from the action to the labels on screen: 'preview' = the grid's labels,")
-    print(f"'all' = every pixel's; corrections minus the live debounce ({LIVE_DELAY_MS} ms)")
+    print("seconds from the action to the labels on screen: 'preview' = every pixel's labels")
+    print("from the walk on the 8 px grid, 'all' = the final ones (4 px grid and border")
+    print(f"cells); corrections minus the live debounce ({LIVE_DELAY_MS} ms)")
     print(f"{'action':<28}| preview |  all   | engine train, preview, predict | show preview")
     for label, first_s, all_s, eng in rows:
         parts = ", ".join(f"{eng.get(k, 0.0):.3f}" for k in ("train", "preview", "predict", "show"))
@@ -128,14 +130,14 @@ def scribble_frame_main(path: Path, mosaic: tuple[int, ...], crop=None) -> None:
         median_all = float(np.median([r[2] for r in strokes]))
         verdict = "met" if median <= STROKE_TARGET else "MISSED"
         print(
-            f"correction -> labels on screen: median {median:.3f} s preview, "
-            f"{median_all:.3f} s every pixel, of {len(strokes)} (target {STROKE_TARGET} s: "
+            f"correction -> labels of every pixel on screen: median {median:.3f} s preview, "
+            f"{median_all:.3f} s final, of {len(strokes)} (target {STROKE_TARGET} s: "
             f"{verdict})"
         )
     verdict = "met" if rows[0][1] <= FIRST_TARGET else "MISSED"
     print(
         f"first training -> labels on screen: {rows[0][1]:.3f} s preview, {rows[0][2]:.3f} s "
-        f"every pixel (features computed before; target {FIRST_TARGET} s: {verdict})"
+        f"final (features computed before; target {FIRST_TARGET} s: {verdict})"
     )
     print(f"status: {widget.status.value}")
     viewer.close()
