@@ -134,10 +134,12 @@ def scribble_frame_main(path: Path, mosaic: tuple[int, ...], crop=None) -> None:
             f"{median_all:.3f} s final, of {len(strokes)} (target {STROKE_TARGET} s: "
             f"{verdict})"
         )
-    verdict = "met" if rows[0][1] <= FIRST_TARGET else "MISSED"
+    opened = features + rows[0][1]
+    verdict = "met" if opened <= FIRST_TARGET else "MISSED"
     print(
         f"first training -> labels on screen: {rows[0][1]:.3f} s preview, {rows[0][2]:.3f} s "
-        f"final (features computed before; target {FIRST_TARGET} s: {verdict})"
+        f"final once the features are computed; {opened:.3f} s from 'New scribbles layer' "
+        f"(features + preview; target {FIRST_TARGET} s: {verdict})"
     )
     print(f"status: {widget.status.value}")
     viewer.close()

@@ -138,3 +138,27 @@ def test_one_disc_per_material_labels_the_fruits():
     assert session.feature_runs == 1
     assert scores[0.03] > 0.6
     assert scores[0.03] > scores[0.0] + 0.2
+
+
+def test_a_node_without_a_prior_takes_its_neighbours_answer():
+    prior = np.array([[1.0, 0.0], [1.0, 0.0], [0.5, 0.5], [0.0, 1.0], [0.0, 1.0]])
+    weight = np.array([1.0, 1.0, 0.0, 1.0, 1.0])  # node 2: no grid sample
+    x = walk(path_graph(5), prior, np.full(5, -1), weight)
+    assert np.allclose(x[2], [0.5, 0.5]) and x[0, 0] > 0.5 and x[4, 1] > 0.5
+    lonely = walk(sps.csr_matrix((1, 1)), np.array([[0.2, 0.8]]), np.array([-1]), 0.0)
+    assert np.allclose(lonely, [[0.2, 0.8]])  # no neighbours, no prior weight: no 0 pivot
+
+
+def test_the_preview_shows_nearly_the_final_labels():
+    """The preview (the walk over whole superpixels from the 8 px grid) is what the
+    plugin shows first; the final labels split the superpixels at the classifier's
+    borders."""
+    from napari_polarseg.engine.synthetic.scenes import make_scene, scribble_strokes
+
+    scene = make_scene("fruit", shape=(120, 130), angles_deg=[0, 45, 90, 135])
+    session = ScribbleSession(scene.stack, [0, 45, 90, 135])
+    session.train(scribble_strokes(scene.labels, seed=0))
+    preview = session.preview().labels.copy()
+    final = session.refine().labels
+    assert preview.shape == final.shape and np.mean(preview == final) > 0.9
+    assert session.n_predicted > 0

@@ -45,6 +45,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -55,7 +56,12 @@ from ..features.superpixels import auto_region_area
 from ..unsupervised.region_diffusion import border_strength
 from ..unsupervised.region_graph import polarisation_superpixels, relabel, superpixel_edges
 from .pixel_classifier import PixelClassifier, PixelPrediction, most_probable
-from .refined_prediction import grid_probabilities, refined_probabilities, upsampled
+from .refined_prediction import (
+    grid_index,
+    grid_probabilities,
+    refined_probabilities,
+    upsampled,
+)
 
 #: τ of the graph's edge weights, in units of the median border strength.
 EDGE_TAU = 1.0
@@ -97,6 +103,11 @@ class RegionGraph:
         superpixel that straddles a border the watershed missed is not forced into
         one class."""
         return relabel(self.regions.astype(np.int64) * int(k) + labels)
+
+    @cached_property
+    def superpixel_adjacency(self) -> sps.csr_matrix:
+        """:meth:`adjacency` of the superpixels themselves (kept: the preview's graph)."""
+        return self.adjacency(self.regions)
 
     def adjacency(self, nodes: np.ndarray) -> sps.csr_matrix:
         """Symmetric (m, m) weights w_ab / :attr:`norm` between the ``nodes`` (module
@@ -165,15 +176,21 @@ def region_graph(
         return RegionGraph(regions, edges, 1.0, 1.0)
     scale = max(EDGE_TAU * float(np.median(strength)), 1e-12)
     w = length * np.exp(-np.minimum((strength / scale) ** 2, 50.0))
-    return RegionGraph(regions, edges, scale, max(float(w.mean()), 1e-12))
+    graph = RegionGraph(regions, edges, scale, max(float(w.mean()), 1e-12))
+    graph.superpixel_adjacency  # noqa: B018 (computed now, with the superpixels)
+    return graph
 
 
 def walk(
-    adjacency: sps.csr_matrix, prior: np.ndarray, seeds: np.ndarray, weight: float
+    adjacency: sps.csr_matrix,
+    prior: np.ndarray,
+    seeds: np.ndarray,
+    weight: float | np.ndarray,
 ) -> np.ndarray:
-    """Region class probabilities (n, K) of the random walker with priors (module
-    docstring): ``prior`` λ (n, K), ``seeds`` (n,) the class index of scribbled regions
-    (−1: none), ``weight`` γ > 0."""
+    """Node class probabilities (n, K) of the random walker with priors (module
+    docstring): ``prior`` λ (n, K), ``seeds`` (n,) the class index of seeded nodes
+    (−1: none), ``weight`` γ > 0, one for every node or (n,) per node (0 where a node
+    has no prior: its x is its neighbours' harmonic mean)."""
     from scipy.sparse.linalg import splu
 
     n, k = prior.shape
@@ -183,16 +200,65 @@ def walk(
     out[seeded, seeds[seeded]] = 1.0
     if free.size == 0:
         return out
+    # a node with neither prior nor neighbours keeps a trace of its prior (no 0 pivot)
+    gamma = np.maximum(np.broadcast_to(np.asarray(weight, dtype=float), (n,))[free], 1e-9)
     degree = np.asarray(adjacency.sum(axis=1)).ravel()
     laplacian = (sps.diags(degree) - adjacency).tocsr()
-    system = laplacian[free][:, free] + float(weight) * sps.identity(free.size)
-    rhs = float(weight) * prior[free]
+    system = laplacian[free][:, free] + sps.diags(gamma)
+    rhs = gamma[:, None] * prior[free]
     if seeded.any():
         rhs -= laplacian[free][:, np.flatnonzero(seeded)] @ out[seeded]
     out[free] = splu(sps.csc_matrix(system)).solve(np.ascontiguousarray(rhs))
     np.clip(out, 0.0, None, out=out)
     total = out.sum(axis=1, keepdims=True)
     return out / np.where(total > 0, total, 1.0)
+
+
+def preview_prediction(
+    classifier: PixelClassifier,
+    features: Any,
+    graph: RegionGraph,
+    stride: int,
+    scribbles: np.ndarray | None = None,
+    cancel: Any = None,
+    coarse: np.ndarray | None = None,
+) -> PixelPrediction:
+    """A fast :func:`walked_prediction` to show first: the walk over the superpixels
+    themselves (not split), each one's prior λ the mean of the grid samples of
+    ``stride`` inside it (``coarse`` when already predicted); a superpixel that holds
+    no sample takes its neighbours' answer (γ = 0 there). Every pixel takes its
+    superpixel's class."""
+    s = max(1, int(stride))
+    if coarse is None:
+        coarse = grid_probabilities(classifier.model, features, s, cancel)
+    rows, cols = grid_index(features.shape, s)
+    sampled = graph.regions[rows[:, None], cols[None, :]].ravel()
+    n = int(graph.regions.max()) + 1
+    counts = np.bincount(sampled, minlength=n).astype(float)
+    sums = [np.bincount(sampled, weights=c.ravel(), minlength=n) for c in coarse]
+    prior = np.stack(sums, axis=1) / np.maximum(counts, 1)[:, None]
+    weight = np.where(counts > 0, classifier.params.region_walk, 0.0)
+    seeds = np.where(counts > 0, confident_seeds(prior), -1)
+    if scribbles is not None:
+        painted = node_seeds(graph.regions, scribbles, classifier.classes)
+        seeds = np.where(painted >= 0, painted, seeds)
+    x = walk(graph.superpixel_adjacency, prior, seeds, weight)
+    return node_prediction(x, graph.regions, classifier.classes, int(coarse[0].size))
+
+
+def node_prediction(
+    x: np.ndarray, nodes: np.ndarray, classes: np.ndarray, n_predicted: int
+) -> PixelPrediction:
+    """Every pixel's probabilities, label and uncertainty 1 − (x_(1) − x_(2)) from its
+    node's x (m, K)."""
+    ordered = np.sort(x, axis=1)
+    margin = ordered[:, -1] - (ordered[:, -2] if x.shape[1] > 1 else 0.0)
+    proba = np.empty((x.shape[1], *nodes.shape), dtype=np.float32)
+    for k in range(x.shape[1]):
+        np.take(x[:, k].astype(np.float32), nodes, out=proba[k])
+    labels = np.take(np.argmax(x, axis=1).astype(np.int32), nodes)
+    uncertainty = np.take((1.0 - margin).astype(np.float32), nodes)
+    return PixelPrediction(labels, proba, uncertainty, classes, n_predicted)
 
 
 def walked_prediction(
@@ -232,11 +298,4 @@ def walked_prediction(
         painted = node_seeds(nodes, scribbles, classes)
         seeds = np.where(painted >= 0, painted, seeds)
     x = walk(graph.adjacency(nodes), means, seeds, classifier.params.region_walk)
-    ordered = np.sort(x, axis=1)
-    margin = ordered[:, -1] - (ordered[:, -2] if x.shape[1] > 1 else 0.0)
-    proba = np.empty(prior.shape, dtype=np.float32)
-    for k in range(x.shape[1]):
-        np.take(x[:, k].astype(np.float32), nodes, out=proba[k])
-    labels = np.take(np.argmax(x, axis=1).astype(np.int32), nodes)
-    uncertainty = np.take((1.0 - margin).astype(np.float32), nodes)
-    return PixelPrediction(labels, proba, uncertainty, classes, n_predicted)
+    return node_prediction(x, nodes, classes, n_predicted)

@@ -47,6 +47,7 @@ from .pixel_classifier import (
 )
 from .pixel_segmentation import PixelSegmentation, PixelSegmenter
 from .refined_prediction import grid_index, grid_probabilities, upsampled
+from .region_walk import preview_prediction
 
 
 @dataclass(frozen=True)
@@ -211,8 +212,9 @@ class ScribbleSession:
             if s == self.prediction_params.stride:
                 self._coarse = (id(clf), coarse)
             if clf.params.region_walk > 0:
-                self.prediction = self.segmenter.predict(
-                    clf, feats, self._scribbles, cancel, self.segment_params, s, coarse, False
+                graph = self.segmenter.graph(self.segment_params)
+                self.prediction = preview_prediction(
+                    clf, feats, graph, s, self._scribbles, cancel, coarse
                 )
                 self.n_predicted = self.prediction.n_predicted
                 return self.prediction
