@@ -594,9 +594,9 @@ def test_segment_with_scribbles_and_ground_truth(tmp_path, capsys, scene_tif):
     assert labels.shape == (H, W) and set(np.unique(labels)) == {1, 2}
     uncertainty = read_tif(out / "uncertainty.tif")
     assert uncertainty.shape == (H, W) and 0 <= uncertainty.min() <= uncertainty.max() <= 1
-    # the walk over the superpixels (issue 23) costs on this scene, whose material border
-    # is no edge: 0.881 (the classifier alone 0.957; tests/test_region_walk.py)
-    assert adjusted_rand_score(truth.ravel(), labels.ravel()) > 0.85
+    # the walk over the superpixels (issue 23) costs a little on this scene, whose
+    # material border is no edge: 0.947 (the classifier alone 0.957; test_region_walk.py)
+    assert adjusted_rand_score(truth.ravel(), labels.ravel()) > 0.9
     # value 1 left of the boundary at column 30, value 2 right of it (the superpixels
     # along the boundary may go either way)
     assert np.mean(labels[:, :26] == 1) > 0.95 and np.mean(labels[:, 34:] == 2) > 0.95

@@ -93,7 +93,7 @@ def texture_scene():
 
 
 def test_the_walk_costs_on_a_border_that_is_no_edge_but_stays_close():
-    """Measured: ARI 0.957 for the classifier alone, 0.881 with the walk (γ 0.03)."""
+    """Measured: ARI 0.957 for the classifier alone, 0.947 with the walk (γ 0.03)."""
     stack, angles, truth, strokes = texture_scene()
     scores = {}
     for gamma in (0.0, 0.03):
@@ -102,7 +102,7 @@ def test_the_walk_costs_on_a_border_that_is_no_edge_but_stays_close():
         )
         scores[gamma] = adjusted_rand_score(truth.ravel(), session.update(strokes).ravel())
     assert scores[0.0] > 0.9
-    assert 0.8 < scores[0.03] <= scores[0.0]
+    assert 0.9 < scores[0.03] <= scores[0.0]
 
 
 def deepest_discs(truth: np.ndarray, radius: int) -> np.ndarray:
@@ -122,7 +122,7 @@ def deepest_discs(truth: np.ndarray, radius: int) -> np.ndarray:
 def test_one_disc_per_material_labels_the_fruits():
     """The real fruits frame (apple, orange, banana on white paper): with one disc per
     material the classifier alone labels by shading (measured ARI 0.29); the walk
-    spreads each disc over its fruit (measured 0.67)."""
+    spreads each disc over its fruit (measured 0.69)."""
     truth_file = read_truth_file(TRUTH_DIR / "fruits_IMX250MZR.json")
     data = pio.read_stack(real_frame_path(truth_file, REAL_DIR), mosaic=truth_file.mosaic)
     truth = truth_file.truth

@@ -70,7 +70,7 @@ EDGE_TAU = 1.0
 EDGE_PAIR = np.minimum
 #: Nodes whose mean classifier probability of one class is at least this are seeds of
 #: that class too (beside the scribbled ones).
-CONFIDENT = 0.9
+CONFIDENT = 0.8
 #: Smallest automatic superpixel area of the walk, pixels (a 240 × 320 scene: 25 px).
 MIN_REGION_AREA = 16
 
