@@ -202,21 +202,17 @@ class PixelSegmenter:
         segment_params: SegmentParams | None = None,
         stride: int | None = None,
         coarse: np.ndarray | None = None,
-        borders: bool = True,
     ) -> PixelPrediction:
         """Every pixel's class: with ``classifier.params.region_walk`` > 0 the walk over
         the superpixel graph from ``scribbles``
         (:func:`~.region_walk.walked_prediction`), else the classifier alone coarse to
         fine, edge-aware smoothed (:func:`~.pixel_classifier.predict_pixels`).
         ``stride``: the grid step (default :attr:`stride`); ``coarse``: its
-        probabilities when already predicted; ``borders``: False walks from the grid
-        alone (a preview)."""
+        probabilities when already predicted."""
         s = self.stride if stride is None else int(stride)
         if classifier.params.region_walk > 0:
             graph = self.graph(segment_params)
-            return walked_prediction(
-                classifier, features, graph, s, scribbles, cancel, coarse, borders
-            )
+            return walked_prediction(classifier, features, graph, s, scribbles, cancel, coarse)
         guide = self.guide(segment_params) if classifier.params.smoothing > 0 else None
         return predict_pixels(classifier, features, guide, cancel, s, coarse)
 

@@ -45,7 +45,6 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -53,14 +52,13 @@ import scipy.sparse as sps
 
 from ..features.pixel_features import MAX_REGION_AREA, PIXELS_PER_REGION_SEED
 from ..features.superpixels import auto_region_area
-from ..unsupervised.region_diffusion import border_strength
+from ..unsupervised.region_diffusion import border_strength, border_weights, symmetric
 from ..unsupervised.region_graph import polarisation_superpixels, relabel, superpixel_edges
 from .pixel_classifier import PixelClassifier, PixelPrediction, most_probable
 from .refined_prediction import (
     grid_index,
     grid_probabilities,
     refined_probabilities,
-    upsampled,
 )
 
 #: τ of the graph's edge weights, in units of the median border strength.
@@ -90,12 +88,15 @@ class RegionGraph:
     norm : float
         Mean weight L_ab · exp(−(e_ab / scale)²) over the superpixels' borders: every
         weight is divided by it (so γ means the same on every image).
+    superpixel_adjacency : scipy.sparse.csr_matrix (n, n)
+        :meth:`adjacency` of the superpixels themselves (the preview's graph).
     """
 
     regions: np.ndarray
     edges: np.ndarray
     scale: float
     norm: float
+    superpixel_adjacency: sps.csr_matrix
 
     def nodes(self, labels: np.ndarray, k: int) -> np.ndarray:
         """The walk's nodes (H, W) int32, 0 … m − 1: every superpixel split by the
@@ -104,19 +105,12 @@ class RegionGraph:
         one class."""
         return relabel(self.regions.astype(np.int64) * int(k) + labels)
 
-    @cached_property
-    def superpixel_adjacency(self) -> sps.csr_matrix:
-        """:meth:`adjacency` of the superpixels themselves (kept: the preview's graph)."""
-        return self.adjacency(self.regions)
-
     def adjacency(self, nodes: np.ndarray) -> sps.csr_matrix:
         """Symmetric (m, m) weights w_ab / :attr:`norm` between the ``nodes`` (module
         docstring)."""
         rows, cols, length, strength = border_strength(nodes, self.edges, EDGE_PAIR)
-        m = int(nodes.max()) + 1
-        w = length * np.exp(-np.minimum((strength / self.scale) ** 2, 50.0)) / self.norm
-        half = sps.coo_matrix((w, (rows, cols)), shape=(m, m)).tocsr()
-        return (half + half.T).tocsr()
+        w = border_weights(length, strength, self.scale) / self.norm
+        return symmetric(rows, cols, w, int(nodes.max()) + 1)
 
 
 def node_means(nodes: np.ndarray, planes: np.ndarray) -> np.ndarray:
@@ -149,6 +143,17 @@ def confident_seeds(prior: np.ndarray, least: float = CONFIDENT) -> np.ndarray:
     return np.where(prior.max(axis=1) >= least, prior.argmax(axis=1), -1)
 
 
+def with_scribbles(
+    seeds: np.ndarray, nodes: np.ndarray, scribbles: np.ndarray | None, classes: np.ndarray
+) -> np.ndarray:
+    """``seeds`` (m,) with the nodes holding ``scribbles`` (:func:`node_seeds`; none
+    when None) set to their scribbled class."""
+    if scribbles is None:
+        return seeds
+    painted = node_seeds(nodes, scribbles, classes)
+    return np.where(painted >= 0, painted, seeds)
+
+
 def region_graph(
     intensity: np.ndarray,
     dop: np.ndarray,
@@ -171,14 +176,14 @@ def region_graph(
     for image in channels:
         edges += superpixel_edges(*image)
     regions = polarisation_superpixels(intensity, dop, phase, area, edges=edges)
-    _, _, length, strength = border_strength(regions, edges, EDGE_PAIR)
+    rows, cols, length, strength = border_strength(regions, edges, EDGE_PAIR)
+    n = int(regions.max()) + 1
     if length.size == 0:
-        return RegionGraph(regions, edges, 1.0, 1.0)
+        return RegionGraph(regions, edges, 1.0, 1.0, sps.csr_matrix((n, n)))
     scale = max(EDGE_TAU * float(np.median(strength)), 1e-12)
-    w = length * np.exp(-np.minimum((strength / scale) ** 2, 50.0))
-    graph = RegionGraph(regions, edges, scale, max(float(w.mean()), 1e-12))
-    graph.superpixel_adjacency  # noqa: B018 (computed now, with the superpixels)
-    return graph
+    w = border_weights(length, strength, scale)
+    norm = max(float(w.mean()), 1e-12)
+    return RegionGraph(regions, edges, scale, norm, symmetric(rows, cols, w / norm, n))
 
 
 def walk(
@@ -238,10 +243,8 @@ def preview_prediction(
     sums = [np.bincount(sampled, weights=c.ravel(), minlength=n) for c in coarse]
     prior = np.stack(sums, axis=1) / np.maximum(counts, 1)[:, None]
     weight = np.where(counts > 0, classifier.params.region_walk, 0.0)
-    seeds = np.where(counts > 0, confident_seeds(prior), -1)
-    if scribbles is not None:
-        painted = node_seeds(graph.regions, scribbles, classifier.classes)
-        seeds = np.where(painted >= 0, painted, seeds)
+    confident = np.where(counts > 0, confident_seeds(prior), -1)
+    seeds = with_scribbles(confident, graph.regions, scribbles, classifier.classes)
     x = walk(graph.superpixel_adjacency, prior, seeds, weight)
     return node_prediction(x, graph.regions, classifier.classes, int(coarse[0].size))
 
@@ -269,33 +272,22 @@ def walked_prediction(
     scribbles: np.ndarray | None = None,
     cancel: Any = None,
     coarse: np.ndarray | None = None,
-    borders: bool = True,
 ) -> PixelPrediction:
     """Every pixel's class from the walk, γ = ``classifier.params.region_walk``.
 
-    The prior: the classifier's probabilities of the grid of ``stride``
-    (:func:`~.refined_prediction.grid_probabilities`, or ``coarse`` when already
-    predicted) interpolated to every pixel, and with ``borders`` every pixel of the
-    grid cells on a border between classes predicted on its own
+    The prior: the classifier's probabilities of the grid of ``stride`` (``coarse``
+    when already predicted) interpolated to every pixel, and every pixel of the grid
+    cells on a border between classes predicted on its own
     (:func:`~.refined_prediction.refined_probabilities`), so the nodes split where the
     pixels' own labels change. The seeds: the confident nodes
     (:func:`confident_seeds`) and those holding ``scribbles`` (None: none, e.g. a loaded
     classifier on a new image). Each pixel takes its node's probabilities, label and
     uncertainty 1 − (x_(1) − x_(2))."""
-    s = max(1, int(stride))
-    if borders:
-        refined = refined_probabilities(classifier.model, features, s, cancel, coarse)
-        prior, n_predicted = refined.probabilities, refined.n_predicted
-    else:
-        if coarse is None:
-            coarse = grid_probabilities(classifier.model, features, s, cancel)
-        prior, n_predicted = upsampled(coarse, s, features.shape), int(coarse[0].size)
+    refined = refined_probabilities(classifier.model, features, stride, cancel, coarse)
+    prior = refined.probabilities
     classes = classifier.classes
     nodes = graph.nodes(most_probable(prior), classes.size)
     means = node_means(nodes, prior)
-    seeds = confident_seeds(means)
-    if scribbles is not None:
-        painted = node_seeds(nodes, scribbles, classes)
-        seeds = np.where(painted >= 0, painted, seeds)
+    seeds = with_scribbles(confident_seeds(means), nodes, scribbles, classes)
     x = walk(graph.adjacency(nodes), means, seeds, classifier.params.region_walk)
-    return node_prediction(x, nodes, classes, n_predicted)
+    return node_prediction(x, nodes, classes, refined.n_predicted)

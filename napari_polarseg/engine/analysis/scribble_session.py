@@ -156,14 +156,16 @@ class ScribbleSession:
         polarisation image and the parameters stay; :attr:`feature_runs` counts the
         computations). ``colour``: with a colour stack, every colour's features too.
         ``progress(share)`` is called while they are computed (it may raise to stop).
-        The superpixel graph of the region walk is drawn meanwhile on a second thread
-        (the watershed releases the GIL)."""
+        With the region walk on (``classifier_params``), its superpixel graph is drawn
+        meanwhile on a second thread (the watershed releases the GIL)."""
         params = params or self.features_params
         before = self.segmenter.cached_features
         self.pipeline.get("polarisation", self.segment_params)  # shared by both threads
-        graph = in_background(lambda: self.segmenter.graph(self.segment_params))
+        walk = (self.classifier_params or ClassifierParams()).region_walk > 0
+        graph = in_background(lambda: self.segmenter.graph(self.segment_params)) if walk else None
         feats = self.segmenter.features(params, colour, self.segment_params, progress)
-        graph()
+        if graph is not None:
+            graph()
         if feats is not before:
             self.feature_runs += 1
         return feats

@@ -81,10 +81,19 @@ def edge_aware_adjacency(
     if rows.size == 0:
         return sps.csr_matrix((n, n))
     scale = max(float(tau) * float(np.median(strength)), 1e-12)
+    return symmetric(rows, cols, border_weights(length, strength, scale), n)
+
+
+def border_weights(length: np.ndarray, strength: np.ndarray, scale: float) -> np.ndarray:
+    """w_ab = L_ab · exp(−(e_ab / ``scale``)²) of every border (module docstring)."""
     # capped at e^-50 so that every row keeps a normalisable (non-denormal) sum
-    w = length * np.exp(-np.minimum((strength / scale) ** 2, 50.0))
-    m = sps.coo_matrix((w, (rows, cols)), shape=(n, n)).tocsr()
-    return (m + m.T).tocsr()
+    return length * np.exp(-np.minimum((strength / scale) ** 2, 50.0))
+
+
+def symmetric(rows: np.ndarray, cols: np.ndarray, weights: np.ndarray, n: int) -> sps.csr_matrix:
+    """The symmetric (n, n) matrix with ``weights`` at (rows, cols) and (cols, rows)."""
+    half = sps.coo_matrix((weights, (rows, cols)), shape=(n, n)).tocsr()
+    return (half + half.T).tocsr()
 
 
 #: Most diffusion steps, whatever the image (bounds the time on very large frames).
