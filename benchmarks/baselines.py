@@ -126,7 +126,7 @@ def bound_features(
         return f
     from napari_polarseg.engine import pixel_features
 
-    rich = pixel_features(intensity, dop, phase).data
+    rich = np.moveaxis(pixel_features(intensity, dop, phase).planes(), 0, -1)
     return np.concatenate([f, rich], axis=-1)
 
 

@@ -283,7 +283,7 @@ def truth_threshold(synthetic: list, feature: str = "dolp@4") -> list[str]:
         if k != 2:
             continue
         fs = pixel_features(pol.intensity, pol.dop, pol.phase, PixelFeatureParams(scales=(scale,)))
-        x = fs.planes[fs.names.index(feature)].ravel()
+        x = fs.plane(feature).ravel()
         cuts = np.quantile(x, np.linspace(0.02, 0.98, 49))
         best = max(ari(truth, (x > c).reshape(truth.shape)) for c in cuts)
         lines.append(f"- {name} seed {seed}: {feature} at the truth-chosen threshold {best:.3f}")

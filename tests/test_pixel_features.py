@@ -7,16 +7,20 @@ import pytest
 from scipy import ndimage
 
 from napari_polarseg.engine.errors import PolarsegError
+from napari_polarseg.engine.features.feature_stack import upsample
 from napari_polarseg.engine.features.pixel_features import (
     GROUPS,
     PixelFeatureParams,
+    check_maps,
     gaussian_smooth,
     multichannel_features,
     pixel_features,
     pyramid_factor,
-    upsample,
 )
-from napari_polarseg.engine.features.superpixels import REGION_AREA, superpixels
+from napari_polarseg.engine.features.superpixels import (
+    REGION_AREA,
+    polarisation_superpixels,
+)
 
 
 def _image(shape=(96, 104), seed=0):
@@ -31,19 +35,25 @@ def test_names_shapes_and_dtype():
     groups = tuple(g for g in GROUPS if g != "regions")
     params = PixelFeatureParams(scales=(1.0, 4.0, 16.0), groups=groups)
     f = pixel_features(*_image(), params)
-    assert f.planes.dtype == np.float32
-    assert f.planes.shape == (len(f.names), 96, 104)
-    assert f.data.shape == (96, 104, len(f.names))
+    planes = f.planes()
+    assert planes.dtype == np.float32
+    assert planes.shape == (len(f.names), 96, 104)
     assert len(set(f.names)) == len(f.names)
     per_scale = len(f.names) // 3
     assert {n.split("@")[1] for n in f.names} == {"1", "4", "16"}
     assert all(sum(n.endswith(f"@{s}") for n in f.names) == per_scale for s in ("1", "4", "16"))
-    assert np.isfinite(f.planes).all()
-    # data is a view of planes, rows() and pixels() agree with it
-    np.testing.assert_array_equal(f.rows(10, 12), f.data[10:12].reshape(-1, len(f.names)))
+    assert np.isfinite(planes).all()
+    # the σ >= 4 features are kept on their coarse grid: rows(), pixels() and the grid
+    # read them interpolated exactly as the whole planes are
+    data = np.moveaxis(planes, 0, -1)
+    assert f.nbytes < planes.nbytes / 2
+    np.testing.assert_allclose(f.rows(10, 12), data[10:12].reshape(-1, len(f.names)), atol=1e-6)
     where = np.zeros((96, 104), bool)
-    where[5, 7] = where[50, 3] = True
-    np.testing.assert_array_equal(f.pixels(where), f.data[where])
+    where[5, 7] = where[50, 3] = where[95, 103] = True
+    np.testing.assert_allclose(f.pixels(where), data[where], atol=1e-6)
+    np.testing.assert_allclose(
+        f.grid_rows(8), data[4::8, 4::8].reshape(-1, len(f.names)), atol=1e-6
+    )
 
 
 def test_region_features_are_superpixel_means_of_the_fine_scales():
@@ -54,7 +64,7 @@ def test_region_features_are_superpixel_means_of_the_fine_scales():
     region_names = [n for n in f.names if n.startswith("region:")]
     fine = [n for n in f.names if n.endswith("@2") and not n.startswith("region:")]
     assert region_names == [f"region:{n}" for n in fine]
-    regions = superpixels(i, params.regions_of(i.shape))
+    regions = polarisation_superpixels(*check_maps(i, d, p), params.regions_of(i.shape))
     assert regions.max() + 1 == region_count(i.shape, params.regions_of(i.shape))
     # the regions follow the edge at column 52: nearly every pixel is in a region that
     # lies mostly on its side (a seed placed on the edge itself may spill a little)
@@ -68,7 +78,7 @@ def test_region_features_are_superpixel_means_of_the_fine_scales():
     k, src = f.names.index("region:dolp@2"), f.names.index("dolp@2")
     for r in np.unique(regions)[:20]:
         inside = regions == r
-        np.testing.assert_allclose(f.planes[k][inside], f.planes[src][inside].mean(), rtol=1e-4)
+        np.testing.assert_allclose(f.plane(k)[inside], f.plane(src)[inside].mean(), rtol=1e-4)
 
 
 def test_stokes_dolp_is_unbiased_where_mean_dop_is_not():
@@ -83,11 +93,11 @@ def test_stokes_dolp_is_unbiased_where_mean_dop_is_not():
 
     p = polarisation_image(stack, angles)
     f = pixel_features(p.intensity, p.dop, p.phase, PixelFeatureParams(scales=(8.0,)))
-    dolp = f.planes[f.names.index("dolp@8")][32:-32, 32:-32]
-    mean_dop = f.planes[f.names.index("dop@8")][32:-32, 32:-32]
+    dolp = f.plane("dolp@8")[32:-32, 32:-32]
+    mean_dop = f.plane("dop@8")[32:-32, 32:-32]
     assert abs(float(np.median(dolp)) - true_rho) < 0.002
     assert float(np.median(mean_dop)) > true_rho + 0.003  # the bias the DoLP avoids
-    coherence = f.planes[f.names.index("aolp_coherence@8")]
+    coherence = f.plane("aolp_coherence@8")
     assert 0 < float(np.median(coherence)) < 1
 
 
@@ -120,13 +130,13 @@ def test_filters_are_in_per_pixel_units_at_every_scale(sigma):
     params = PixelFeatureParams(scales=(sigma,), groups=("filters",))
     f = pixel_features(ramp, np.full(shape, 0.05), np.zeros(shape), params)
     inner = (slice(60, 100), slice(60, 100))
-    grad = f.planes[f.names.index(f"log_intensity_gradient@{sigma:g}")][inner]
+    grad = f.plane(f"log_intensity_gradient@{sigma:g}")[inner]
     np.testing.assert_allclose(grad, 0.01, rtol=0.02)
     dop = 0.05 + 1e-4 * ((rows - 80) ** 2 + 3 * (cols - 80) ** 2)
     f = pixel_features(np.ones(shape), dop, np.zeros(shape), params)
-    lap = f.planes[f.names.index(f"dop_laplacian@{sigma:g}")][inner]
-    hmax = f.planes[f.names.index(f"dop_hessian_max@{sigma:g}")][inner]
-    hmin = f.planes[f.names.index(f"dop_hessian_min@{sigma:g}")][inner]
+    lap = f.plane(f"dop_laplacian@{sigma:g}")[inner]
+    hmax = f.plane(f"dop_hessian_max@{sigma:g}")[inner]
+    hmin = f.plane(f"dop_hessian_min@{sigma:g}")[inner]
     np.testing.assert_allclose(lap, 8e-4, rtol=0.03)
     np.testing.assert_allclose(hmax, 6e-4, rtol=0.03)
     np.testing.assert_allclose(hmin, 2e-4, rtol=0.05)
@@ -139,10 +149,10 @@ def test_invariant_features_do_not_change_with_the_shading_level():
     b = pixel_features(3.0 * i, d, p, params)
     for k, name in enumerate(a.names):
         if name.startswith("log_intensity@"):
-            np.testing.assert_allclose(b.planes[k] - a.planes[k], np.log(3.0), atol=1e-5)
+            np.testing.assert_allclose(b.plane(k) - a.plane(k), np.log(3.0), atol=1e-5)
         else:
             # float32 local covariances: differences of means, ~1 % of a small value
-            np.testing.assert_allclose(b.planes[k], a.planes[k], rtol=1e-2, atol=2e-4)
+            np.testing.assert_allclose(b.plane(k), a.plane(k), rtol=1e-2, atol=2e-4)
 
 
 def test_multichannel_names_carry_the_channel():
@@ -150,7 +160,7 @@ def test_multichannel_names_carry_the_channel():
     params = PixelFeatureParams(scales=(2.0,), groups=("polarisation",))
     f = multichannel_features([(i, d, p), (2 * i, d / 2, p)], params, ["red", "green"])
     assert f.names[0].startswith("red:") and f.names[-1].startswith("green:")
-    assert f.planes.shape[0] == 2 * len(pixel_features(i, d, p, params).names)
+    assert f.n_features == 2 * len(pixel_features(i, d, p, params).names)
     assert multichannel_features([(i, d, p)], params).names == pixel_features(i, d, p, params).names
 
 

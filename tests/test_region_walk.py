@@ -16,6 +16,7 @@ from napari_polarseg import io as pio
 from napari_polarseg.engine import Pipeline, ScribbleSession
 from napari_polarseg.engine.analysis.pixel_classifier import ClassifierParams
 from napari_polarseg.engine.analysis.region_walk import node_seeds, region_graph, walk
+from napari_polarseg.engine.features.superpixels import polarisation_superpixels, superpixel_edges
 from napari_polarseg.truth import TRUTH_DIR, read_truth_file, real_frame_path
 
 REAL_DIR = (
@@ -70,7 +71,9 @@ def test_seeds_are_the_majority_of_a_nodes_scribbles():
 def test_superpixels_split_by_the_classifier_labels_are_separate_nodes():
     rng = np.random.default_rng(2)
     i = 100 + rng.normal(0, 1, (40, 40))
-    graph = region_graph(i, np.full_like(i, 0.1), np.zeros_like(i), region_area=100)
+    maps = (i, np.full_like(i, 0.1), np.zeros_like(i))
+    edges = superpixel_edges(*maps)
+    graph = region_graph(polarisation_superpixels(*maps, 100, edges=edges), edges)
     labels = np.zeros((40, 40), dtype=np.int64)
     labels[:, 20:] = 1
     nodes = graph.nodes(labels, 2)
@@ -92,8 +95,10 @@ def texture_scene():
     return stack, np.deg2rad(ANGLES), truth, _strokes()
 
 
-def test_the_walk_costs_on_a_border_that_is_no_edge_but_stays_close():
-    """Measured: ARI 0.957 for the classifier alone, 0.947 with the walk (γ 0.03)."""
+def test_the_walk_stays_close_to_the_classifier_on_a_border_that_is_no_edge():
+    """Measured: ARI 0.913 for the classifier alone, 0.929 with the walk (γ 0.03); with
+    region features on intensity-only superpixels they were 0.957 and 0.947. The walk
+    finds this border only where the classifier's labels split the superpixels."""
     stack, angles, truth, strokes = texture_scene()
     scores = {}
     for gamma in (0.0, 0.03):
@@ -102,7 +107,8 @@ def test_the_walk_costs_on_a_border_that_is_no_edge_but_stays_close():
         )
         scores[gamma] = adjusted_rand_score(truth.ravel(), session.update(strokes).ravel())
     assert scores[0.0] > 0.9
-    assert 0.9 < scores[0.03] <= scores[0.0]
+    assert scores[0.03] > 0.9
+    assert abs(scores[0.03] - scores[0.0]) < 0.03
 
 
 def deepest_discs(truth: np.ndarray, radius: int) -> np.ndarray:

@@ -7,6 +7,7 @@ import pytest
 from sklearn.metrics import adjusted_rand_score
 
 from napari_polarseg.engine.errors import PolarsegError
+from napari_polarseg.engine.features.superpixels import polarisation_superpixels
 from napari_polarseg.engine.unsupervised.params import (
     CLUSTERINGS,
     NODE_FEATURES,
@@ -16,11 +17,7 @@ from napari_polarseg.engine.unsupervised.region_features import (
     dop_given_intensity,
     node_features,
 )
-from napari_polarseg.engine.unsupervised.segmenter import (
-    polarisation_superpixels,
-    region_adjacency,
-    segment_unsupervised,
-)
+from napari_polarseg.engine.unsupervised.segmenter import region_adjacency, segment_unsupervised
 
 
 def planted(k: int = 3, shape: tuple[int, int] = (96, 120), seed: int = 0):
@@ -175,7 +172,7 @@ def test_params_round_trip():
 
 
 def test_relabel_matches_unique_inverse():
-    from napari_polarseg.engine.unsupervised.region_graph import relabel
+    from napari_polarseg.engine.features.superpixels import relabel
 
     rng = np.random.default_rng(0)
     for labels in (

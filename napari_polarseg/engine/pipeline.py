@@ -371,18 +371,24 @@ class Pipeline:
         cut_limits: dict[str, int] | None = None,
         params: SegmentParams | None = None,
         superpixels: dict[str, Any] | None = None,
+        maps: bool = True,
     ) -> SegmentationResult:
         """A :class:`SegmentationResult` of the cached stages for ``params`` and the
         given labels.
 
         Used by the runs whose labels do not come from the cut (block and pixel
-        classifiers): ``block`` (R, C) and ``labels`` (H, W) are theirs.
+        classifiers): ``block`` (R, C) and ``labels`` (H, W) are theirs. ``maps``: with
+        the thesis's harmonic coefficients and PCA features (always with the
+        reconstruction, which is made from them).
         """
         run = StageRun(self.snapshot(params))
+        maps = maps or reconstruction
         with self._lock:
             pol = self.stage_value("polarisation", run)
             nrm = self.stage_value("normals", run)
-            coef, pca = self.stage_value("harmonics", run), self.stage_value("pca", run)
+            coef = pca = None
+            if maps:
+                coef, pca = self.stage_value("harmonics", run), self.stage_value("pca", run)
             rec = self.stage_value("reconstruction", run) if reconstruction else None
         return SegmentationResult(
             params=run.params,
@@ -394,8 +400,8 @@ class Pipeline:
             azimuth=nrm.azimuth,
             clamped=nrm.clamped,
             coefficients=coef,
-            features=pca.features,
-            explained_variance_ratio=pca.explained_variance_ratio,
+            features=None if pca is None else pca.features,
+            explained_variance_ratio=None if pca is None else pca.explained_variance_ratio,
             block_labels=block,
             labels=labels,
             ncut_values=ncut_values,

@@ -20,11 +20,13 @@ can tell materials apart by the colour of their polarised reflection as well.
 
 from __future__ import annotations
 
+import threading
 from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
 
+from ..chunks import in_background
 from ..features.harmonics import top_left_block_labels
 from ..features.pixel_features import (
     EPS_INTENSITY,
@@ -33,6 +35,7 @@ from ..features.pixel_features import (
     multichannel_features,
     pixel_features,
 )
+from ..features.superpixels import polarisation_superpixels, superpixel_edges
 from ..params import SegmentParams
 from ..physics.colour_mosaic import COLOURS, colour_polarisation_images
 from ..physics.pixel_mask import fill_from_nearest
@@ -47,7 +50,7 @@ from .pixel_classifier import (
     predict_pixels,
     train_pixel_classifier,
 )
-from .region_walk import RegionGraph, region_graph, walked_prediction
+from .region_walk import RegionGraph, region_graph, walk_region_area, walked_prediction
 
 
 @dataclass(frozen=True)
@@ -101,6 +104,9 @@ class PixelSegmenter:
     _features: tuple[Any, FeatureStack] | None = field(default=None, init=False, repr=False)
     _colour_images: tuple[int, list] | None = field(default=None, init=False, repr=False)
     _graph: tuple[int, RegionGraph] | None = field(default=None, init=False, repr=False)
+    _edges: dict[Any, Any] = field(default_factory=dict, init=False, repr=False)
+    _regions: dict[Any, Any] = field(default_factory=dict, init=False, repr=False)
+    _lock: threading.RLock = field(default_factory=threading.RLock, init=False, repr=False)
 
     def __post_init__(self) -> None:
         if self.colour_stack is not None:
@@ -143,22 +149,65 @@ class PixelSegmenter:
         """The feature stack for ``params`` (kept while the image and params stay):
         the luminance image's features and, with ``colour`` and a colour stack, every
         colour's. ``segment_params``: the pipeline parameters of the polarisation image
-        (default: the pipeline's last run's)."""
+        (default: the pipeline's last run's). The ``regions`` group's superpixels
+        (:meth:`superpixels`) are drawn on a second thread meanwhile (the watershed
+        releases the GIL)."""
         params = params or PixelFeatureParams()
         pol = self.pipeline.get("polarisation", segment_params)
         colour = colour and self.colour_stack is not None
         key = (id(pol), params, colour)
         if self._features is None or self._features[0] != key:
             maps = self.maps(segment_params)
+            regions = None
+            if "regions" in params.groups:
+                area = params.regions_of(maps[0].shape)
+                regions = in_background(lambda: self.superpixels(area, segment_params, colour))
             if colour:
                 images = [maps]
                 colours = self.colour_images(segment_params)
                 images += [(c.intensity, c.dop, c.phase) for c in colours]
-                feats = multichannel_features(images, params, channels=["", *self.colours])
+                channels = ["", *self.colours]
+                feats = multichannel_features(images, params, channels, regions=regions)
             else:
-                feats = pixel_features(*maps, params, progress=progress)
+                feats = pixel_features(*maps, params, progress=progress, regions=regions)
             self._features = (key, feats)
         return self._features[1]
+
+    def edges(self, segment_params: SegmentParams | None = None, colour: bool = True) -> np.ndarray:
+        """The superpixels' edge map: :func:`superpixel_edges` of the maps of
+        :meth:`maps` plus, with ``colour`` and a colour stack, every colour's
+        polarisation image's (a border seen in one colour only is an edge too); kept
+        while the polarisation image stays."""
+        pol = self.pipeline.get("polarisation", segment_params)
+        colour = colour and self.colour_stack is not None
+        with self._lock:
+            if self._edges.get("image") != id(pol):
+                self._edges = {"image": id(pol)}
+            if colour not in self._edges:
+                edges = superpixel_edges(*self.maps(segment_params))
+                for c in self.colour_images(segment_params) if colour else []:
+                    edges += superpixel_edges(c.intensity, c.dop, c.phase)
+                self._edges[colour] = edges
+            return self._edges[colour]
+
+    def superpixels(
+        self, area: int, segment_params: SegmentParams | None = None, colour: bool = True
+    ) -> np.ndarray:
+        """Superpixels (H, W) of ``area`` pixels on :meth:`edges` (``colour``: with the
+        colours' edges) (:func:`polarisation_superpixels`), kept while the polarisation
+        image stays: the pixel features' regions and the region walk's graph share
+        them when their areas agree (a camera frame). Thread-safe: a second caller
+        waits for the first one's watershed."""
+        pol = self.pipeline.get("polarisation", segment_params)
+        colour = colour and self.colour_stack is not None
+        with self._lock:
+            if self._regions.get("image") != id(pol):
+                self._regions = {"image": id(pol)}
+            if (area, colour) not in self._regions:
+                i, d, p = self.maps(segment_params)
+                edges = self.edges(segment_params, colour)
+                self._regions[area, colour] = polarisation_superpixels(i, d, p, area, edges=edges)
+            return self._regions[area, colour]
 
     def maps(self, segment_params: SegmentParams | None = None) -> tuple[np.ndarray, ...]:
         """Î, ρ, φ the features are computed on: the pipeline's polarisation image, and
@@ -182,15 +231,14 @@ class PixelSegmenter:
         return None if self._features is None else self._features[1]
 
     def graph(self, segment_params: SegmentParams | None = None) -> RegionGraph:
-        """The superpixel graph of the region walk (:mod:`.region_walk`) on the maps of
-        :meth:`maps` and, with a colour stack, the edges of every colour's polarisation
-        image too (kept while the polarisation image stays)."""
+        """The superpixel graph of the region walk (:mod:`.region_walk`): superpixels
+        of its area (:func:`~.region_walk.walk_region_area`) on :meth:`edges`, kept
+        while the polarisation image stays."""
         pol = self.pipeline.get("polarisation", segment_params)
         if self._graph is None or self._graph[0] != id(pol):
-            colours = self.colour_images(segment_params)
-            channels = [(c.intensity, c.dop, c.phase) for c in colours]
-            graph = region_graph(*self.maps(segment_params), channels=channels)
-            self._graph = (id(pol), graph)
+            area = walk_region_area(self.pipeline.stack.shape[1:])
+            regions = self.superpixels(area, segment_params)
+            self._graph = (id(pol), region_graph(regions, self.edges(segment_params)))
         return self._graph[1]
 
     def predict(
@@ -303,12 +351,14 @@ class PixelSegmenter:
         segment_params: SegmentParams | None = None,
     ) -> SegmentationResult:
         """A :class:`SegmentationResult` of the pipeline's maps for ``segment_params``
-        (default: the pipeline's last run's) and these pixel labels."""
+        (default: the pipeline's last run's) and these pixel labels; with
+        ``reconstruction`` the thesis's harmonics, PCA features and error map too
+        (without, they are None, as for the other methods that do not read them)."""
         pipe = self.pipeline
         segment_params = segment_params or pipe.params
         block = top_left_block_labels(labels, segment_params.window)
-        names = ["polarisation", "normals", "harmonics", "pca"]
-        names += ["reconstruction"] if reconstruction else []
+        names = ["polarisation", "normals"]
+        names += ["harmonics", "pca", "reconstruction"] if reconstruction else []
         for name in names:
             pipe.get(name, segment_params)
         timings = {s: pipe.stage_seconds(s) for s in names}
@@ -321,4 +371,5 @@ class PixelSegmenter:
             timings=timings,
             recomputed=names + ["pixel_classifier"],
             params=segment_params,
+            maps=reconstruction,
         )

@@ -43,7 +43,6 @@ classifier's own (``region_walk`` = 0).
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -51,9 +50,8 @@ import numpy as np
 import scipy.sparse as sps
 
 from ..features.pixel_features import MAX_REGION_AREA, PIXELS_PER_REGION_SEED
-from ..features.superpixels import auto_region_area
+from ..features.superpixels import auto_region_area, relabel
 from ..unsupervised.region_diffusion import border_strength, border_weights, symmetric
-from ..unsupervised.region_graph import polarisation_superpixels, relabel, superpixel_edges
 from .pixel_classifier import PixelClassifier, PixelPrediction, most_probable
 from .refined_prediction import (
     grid_index,
@@ -154,28 +152,19 @@ def with_scribbles(
     return np.where(painted >= 0, painted, seeds)
 
 
-def region_graph(
-    intensity: np.ndarray,
-    dop: np.ndarray,
-    phase: np.ndarray,
-    region_area: int = 0,
-    channels: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]] = (),
-) -> RegionGraph:
-    """The :class:`RegionGraph` of a polarisation image (Î, ρ, φ radians): superpixels
-    following intensity and polarisation edges
-    (:func:`~napari_polarseg.engine.unsupervised.region_graph.superpixel_edges`, each
-    in units of its median, summed over the image and every colour's image in
-    ``channels``, so a border seen in one colour only is an edge too) of
-    ``region_area`` pixels (0: the pixel features' automatic area), weights of
-    τ = :data:`EDGE_TAU`."""
-    shape = np.shape(intensity)
-    area = int(region_area) or auto_region_area(
-        shape, PIXELS_PER_REGION_SEED, MIN_REGION_AREA, MAX_REGION_AREA
-    )
-    edges = superpixel_edges(intensity, dop, phase)
-    for image in channels:
-        edges += superpixel_edges(*image)
-    regions = polarisation_superpixels(intensity, dop, phase, area, edges=edges)
+def walk_region_area(shape: tuple[int, int]) -> int:
+    """The walk's automatic superpixel area (pixels) on an image of ``shape``: the
+    pixel features' (:data:`PIXELS_PER_REGION_SEED`-th of the image), but down to
+    :data:`MIN_REGION_AREA`."""
+    return auto_region_area(shape, PIXELS_PER_REGION_SEED, MIN_REGION_AREA, MAX_REGION_AREA)
+
+
+def region_graph(regions: np.ndarray, edges: np.ndarray) -> RegionGraph:
+    """The :class:`RegionGraph` of superpixels ``regions`` (H, W; 0 … n − 1) grown on
+    the edge map ``edges`` (H, W, dimensionless:
+    :func:`~napari_polarseg.engine.features.superpixels.superpixel_edges` of a
+    polarisation image, summed with every colour's so a border seen in one colour only
+    is an edge too), weights of τ = :data:`EDGE_TAU`."""
     rows, cols, length, strength = border_strength(regions, edges, EDGE_PAIR)
     n = int(regions.max()) + 1
     if length.size == 0:

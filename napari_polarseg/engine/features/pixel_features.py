@@ -28,7 +28,8 @@ scale σ (pixels):
   Gaussians (G_σ − G_1.6σ), gradient magnitude, Laplacian, the two eigenvalues of the
   structure tensor and of the Hessian;
 - ``regions``: the mean of every other feature of σ ≤ 4 over the pixel's superpixel
-  (:mod:`.superpixels`: edge-following regions of ``region_area`` px), named
+  (:func:`~.superpixels.polarisation_superpixels`: regions of ``region_area`` px whose
+  borders follow intensity and polarisation edges), named
   ``"region:<feature>@<σ>"`` — what the whole patch of surface looks like, not only the
   pixel's neighbourhood, so one material's shades share a description;
 - ``invariant``: features that do not change with the shading level — DoLP_σ / G_σ ρ
@@ -37,18 +38,20 @@ scale σ (pixels):
   zenith, thesis section 6.2), and ρ relative to its surround (G_σ ρ / G_2σ ρ).
 
 At σ ≥ 4 every local mean is taken on a block-averaged grid (factor 2 at σ = 4 and 8,
-4 at σ = 16, :func:`pyramid_factor`) and the finished features are interpolated back
-(:func:`gaussian_smooth`, :func:`upsample`): 4–16× fewer pixels to filter, within
-0.5 % of the feature's range of full-resolution filtering (tested). Every feature is
-float32; names are ``"<feature>@<σ>"`` with an optional ``"<channel>:"`` prefix for
+4 at σ = 16, :func:`pyramid_factor`): 4–16× fewer pixels to filter, within 0.5 % of
+the feature's range of full-resolution filtering (tested). The finished features stay
+on that grid and are interpolated back only at the pixels a reader asks for
+(:mod:`.feature_stack`, :func:`~.feature_stack.upsample`). Every feature is float32;
+names are ``"<feature>@<σ>"`` with an optional ``"<channel>:"`` prefix for
 multi-channel inputs.
 """
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from typing import Any
 
 import numpy as np
@@ -56,7 +59,8 @@ from scipy import ndimage
 
 from ..errors import PolarsegError
 from ..physics.fresnel import zenith_from_diffuse_dop
-from .superpixels import auto_region_area, region_means, superpixels
+from .feature_stack import FeatureStack, GridBlock, RegionBlock, upsample
+from .superpixels import auto_region_area, polarisation_superpixels
 
 #: Feature groups (module docstring), in the order their features appear.
 GROUPS = ("intensity", "polarisation", "zenith", "filters", "invariant", "regions")
@@ -149,105 +153,12 @@ class PixelFeatureParams:
             raise PolarsegError(f"bad pixel feature parameters ({exc})") from None
 
 
-@dataclass(frozen=True)
-class FeatureStack:
-    """A float32 feature stack and the name of every feature.
-
-    Attributes
-    ----------
-    planes : ndarray (F, H, W) float32
-        One image per feature (the layout the filters write; interleaving them into
-        (H, W, F) would copy the whole stack once more, which at 200 features of a
-        camera frame costs more than the chunked copies :meth:`rows` makes).
-    names : tuple of str
-        ``names[f]`` describes ``planes[f]``.
-    params : PixelFeatureParams
-    """
-
-    planes: np.ndarray
-    names: tuple[str, ...]
-    params: PixelFeatureParams = field(default_factory=PixelFeatureParams)
-    _grids: dict[int, np.ndarray] = field(
-        default_factory=dict, init=False, repr=False, compare=False
-    )
-
-    @property
-    def data(self) -> np.ndarray:
-        """(H, W, F) view of the features (no copy)."""
-        return np.moveaxis(self.planes, 0, -1)
-
-    @property
-    def shape(self) -> tuple[int, int]:
-        """(H, W)."""
-        return self.planes.shape[1:]
-
-    @property
-    def n_features(self) -> int:
-        return self.planes.shape[0]
-
-    def pixels(self, where: np.ndarray) -> np.ndarray:
-        """(n, F) C-contiguous float32 rows of the pixels where ``where`` (H, W) is True."""
-        return np.ascontiguousarray(self.planes[:, where].T)
-
-    def take(self, index: np.ndarray) -> np.ndarray:
-        """(n, F) C-contiguous float32 rows of the pixels at flat (row-major) ``index``."""
-        return np.ascontiguousarray(self.planes.reshape(self.n_features, -1)[:, index].T)
-
-    def grid_rows(self, stride: int) -> np.ndarray:
-        """(n, F) C-contiguous float32 rows of the pixels of a grid of step ``stride``:
-        pixel (i·s + ⌊s/2⌋, j·s + ⌊s/2⌋) of every s × s cell (the last row and column
-        of the image for a cut-off cell), row-major over the ⌈H/s⌉ × ⌈W/s⌉ cells. Kept:
-        the same array on every call for a stride (copied once, then read by every
-        prediction)."""
-        s = int(stride)
-        if s not in self._grids:
-            h, w = self.shape
-            r = np.minimum(np.arange(0, h, s) + s // 2, h - 1)
-            c = np.minimum(np.arange(0, w, s) + s // 2, w - 1)
-            block = self.planes[:, r[:, None], c[None, :]].reshape(self.n_features, -1)
-            self._grids[s] = np.ascontiguousarray(block.T)
-        return self._grids[s]
-
-    def rows(self, start: int, stop: int) -> np.ndarray:
-        """(n, F) C-contiguous float32 rows of image rows ``start:stop``, row-major."""
-        block = self.planes[:, start:stop].reshape(self.n_features, -1)
-        return np.ascontiguousarray(block.T)
-
-
 def _block_mean(a: np.ndarray, f: int) -> np.ndarray:
     """Mean of f × f blocks; the edge blocks repeat their last row/column."""
     h, w = a.shape
     hh, ww = -(-h // f) * f, -(-w // f) * f
     padded = np.pad(a, ((0, hh - h), (0, ww - w)), mode="edge")
     return padded.reshape(hh // f, f, ww // f, f).mean(axis=(1, 3), dtype=np.float32)
-
-
-def _upsample_axis(x: np.ndarray, f: int, axis: int) -> np.ndarray:
-    """Linear interpolation by an integer factor f along one axis (pixel-area grid).
-
-    Block k covers fine pixels k·f … k·f + f − 1, so fine pixel k·f + a sits at
-    u = (a + ½)/f − ½ blocks from block k's centre: the same as ``scipy.ndimage.zoom(…,
-    order=1, grid_mode=True, mode="nearest")`` (tested), written out because zoom costs
-    4× as much (it evaluates a general spline per output pixel).
-    """
-    x = np.moveaxis(x, axis, 0)
-    padded = np.concatenate([x[:1], x, x[-1:]])  # padded[k + 1] = x[k]
-    n = x.shape[0]
-    out = np.empty((n, f) + x.shape[1:], dtype=np.float32)
-    for a in range(f):
-        u = (a + 0.5) / f - 0.5
-        if u < 0:
-            out[:, a] = padded[:n] * (-u) + padded[1 : n + 1] * (1 + u)
-        else:
-            out[:, a] = padded[1 : n + 1] * (1 - u) + padded[2 : n + 2] * u
-    return np.moveaxis(out.reshape((n * f,) + x.shape[1:]), 0, axis)
-
-
-def upsample(small: np.ndarray, f: int, shape: tuple[int, int]) -> np.ndarray:
-    """A map of the f-times coarser grid interpolated back to ``shape`` (H, W)."""
-    if f == 1:
-        return small
-    return _upsample_axis(_upsample_axis(small, f, 0), f, 1)[: shape[0], : shape[1]]
 
 
 def pyramid_factor(sigma: float) -> int:
@@ -418,8 +329,9 @@ def pixel_features(
     *,
     channel: str = "",
     progress: Callable[[float], None] | None = None,
+    regions: np.ndarray | Callable[[], np.ndarray] | None = None,
 ) -> FeatureStack:
-    """The feature stack (H, W, F) of one polarisation image.
+    """The feature stack of one polarisation image.
 
     Parameters
     ----------
@@ -431,48 +343,60 @@ def pixel_features(
         Prefix of every name (``"<channel>:"``) for multi-channel inputs.
     progress : callable(share), optional
         Called with the share of the scales done after each (it may raise to stop).
+    regions : array (H, W) int or callable, optional
+        The superpixels (0 … n − 1) of the ``regions`` group, or a function giving them
+        (called once the other features are made, so a caller may draw them on another
+        thread meanwhile). Default: :func:`~.superpixels.polarisation_superpixels` of
+        ``params.regions_of`` the image's shape.
 
     Returns
     -------
     FeatureStack
-        float32 features, ``names[f] = "<feature>@<σ>"``.
+        float32 features, ``names[f] = "<feature>@<σ>"``; the σ ≥ 4 features kept on
+        their coarse grid, the region means per region (:mod:`.feature_stack`).
 
     Examples
     --------
     >>> import numpy as np
     >>> f = pixel_features(np.ones((16, 16)), np.full((16, 16), 0.1), np.zeros((16, 16)),
     ...                    PixelFeatureParams(scales=(1.0,), groups=("polarisation",)))
-    >>> f.names[:2], round(float(f.planes[0, 8, 8]), 4)
+    >>> f.names[:2], round(float(f.plane("dolp@1")[8, 8]), 4)
     (('dolp@1', 'dop@1'), 0.1)
     """
     params = params or PixelFeatureParams()
     i, d, p = check_maps(intensity, dop, phase)
     prefix = f"{channel}:" if channel else ""
-    names = feature_names(params)
-    # one allocation for the whole stack, each feature written into it as it is made
-    # (fresh pages are costly on small VMs: a list of planes + np.stack touched twice)
-    out = np.empty((len(names),) + i.shape, dtype=np.float32)
     levels = {1: _moments(i, d, p, params.groups)}
-    k = 0
+    blocks: list[GridBlock | RegionBlock] = []
+    names: list[str] = []
+    local: list[GridBlock] = []  # the blocks whose region means the regions group takes
     for sigma in params.scales:
         f = pyramid_factor(sigma)
         if f not in levels:
             # coarsen from the finest level already built that divides f
             base = max(q for q in levels if f % q == 0)
             levels[f] = {q: _block_mean(v, f // base) for q, v in levels[base].items()}
-        for v in _level_features(levels[f], sigma, f, params).values():
-            out[k] = upsample(v.astype(np.float32, copy=False), f, i.shape)
-            k += 1
+        made = _level_features(levels[f], sigma, f, params)
+        shape = (-(-i.shape[0] // f), -(-i.shape[1] // f))
+        values = np.empty((len(made), *shape), dtype=np.float32)
+        for j, v in enumerate(made.values()):
+            values[j] = v
+        blocks.append(GridBlock(values, f, i.shape))
+        names += [f"{name}@{sigma:g}" for name in made]
+        if sigma <= REGION_MAX_SIGMA:
+            local.append(blocks[-1])
         if progress is not None:
             progress(0.9 * (params.scales.index(sigma) + 1) / len(params.scales))
-    local = [q for q in range(k) if _scale_of(names[q]) <= REGION_MAX_SIGMA]
+    del levels
     if "regions" in params.groups and local:
-        regions = superpixels(i, params.regions_of(i.shape))
-        means = region_means([out[q] for q in local], regions)
-        for m in means:
-            np.take(m, regions, out=out[k])
-            k += 1
-    return FeatureStack(out, tuple(f"{prefix}{n}" for n in names), params)
+        if regions is None:
+            regions = polarisation_superpixels(i, d, p, params.regions_of(i.shape))
+        labels = np.asarray(regions() if callable(regions) else regions)
+        local_names = [n for n in names if _scale_of(n) <= REGION_MAX_SIGMA]
+        means = FeatureStack(tuple(local), tuple(local_names)).region_means(labels)
+        blocks.append(RegionBlock(means, labels))
+        names += [f"region:{n}" for n in local_names]
+    return FeatureStack(tuple(blocks), tuple(f"{prefix}{n}" for n in names), params)
 
 
 def _scale_of(name: str) -> float:
@@ -498,11 +422,14 @@ def multichannel_features(
     images: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]],
     params: PixelFeatureParams | None = None,
     channels: Sequence[str] | None = None,
+    regions: np.ndarray | Callable[[], np.ndarray] | None = None,
 ) -> FeatureStack:
     """Features of every channel's polarisation image side by side.
 
     ``images[c] = (Î, ρ, φ)`` of channel c (e.g. each colour of a colour-polarisation
     sensor); names carry the channel name (``channels[c]``, default ``"c0"``, ``"c1"``…).
+    ``regions``: the superpixels every channel's ``regions`` group averages over (as in
+    :func:`pixel_features`; default: each channel's own).
     """
     if not images:
         raise PolarsegError("no channels to compute features of")
@@ -511,11 +438,10 @@ def multichannel_features(
     channels = list(channels)
     if len(channels) != len(images):
         raise PolarsegError(f"{len(images)} channels but {len(channels)} channel names")
-    if len(images) == 1:
-        return pixel_features(*images[0], params, channel=channels[0])
+    if callable(regions):
+        regions = functools.cache(regions)  # the first channel to need them waits
     stacks = [
-        pixel_features(*im, params, channel=c) for im, c in zip(images, channels, strict=True)
+        pixel_features(*im, params, channel=c, regions=regions)
+        for im, c in zip(images, channels, strict=True)
     ]
-    planes = np.concatenate([s.planes for s in stacks], axis=0)
-    names = tuple(n for s in stacks for n in s.names)
-    return FeatureStack(planes, names, stacks[0].params)
+    return stacks[0] if len(stacks) == 1 else FeatureStack.joined(stacks)

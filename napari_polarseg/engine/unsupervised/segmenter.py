@@ -88,13 +88,14 @@ from ..degenerate import degenerate_result
 from ..errors import PolarsegError
 from ..features.pca import pca_features, whiten
 from ..features.pixel_features import check_maps
+from ..features.superpixels import polarisation_superpixels, relabel, superpixel_edges
 from ..physics.pixel_mask import nearest_valid
 from .boundaries import refine_maps, refined_labels
 from .kmeans import squared_distances, weighted_kmeans
 from .params import UnsupervisedParams, UnsupervisedResult
 from .region_diffusion import diffuse, diffusion_steps, edge_aware_adjacency
 from .region_features import node_features, pixel_terms
-from .region_graph import polarisation_superpixels, region_adjacency, relabel, superpixel_edges
+from .region_graph import region_adjacency
 from .shape_trend import (
     region_polarisation,
     surface_trend_share,
@@ -216,7 +217,6 @@ def _region_features(
     cols = [node_features(i, d, ph, regions, p.features, trend, terms)] if p.features else []
     if p.pixel_scales:
         from ..features.pixel_features import PixelFeatureParams, pixel_features
-        from ..features.superpixels import region_means
 
         stack = pixel_features(
             i,
@@ -224,7 +224,7 @@ def _region_features(
             ph,
             PixelFeatureParams(scales=p.pixel_scales, groups=p.pixel_groups),
         )
-        cols.append(region_means(stack.planes, regions).T.astype(np.float64))
+        cols.append(stack.region_means(regions).T.astype(np.float64))
         names += [f"pixel:{nm}" for nm in stack.names]
     x = np.concatenate(cols, axis=1)
     return np.where(np.isfinite(x), x, 0.0), names

@@ -30,12 +30,14 @@ if TYPE_CHECKING:
     from ...engine.analysis.pixel_segmentation import PixelSegmentation
     from ...engine.analysis.scribble_session import ScribbleSession
 
-#: Stages of the scribble mode: the pipeline's maps and block features (for the result's
-#: plots and error map), the pixel features, the classifier (training and prediction, or
-#: prediction only for a loaded classifier) and the reconstruction. The cut's own stages
-#: (affinity, cut, labels) are neither computed nor invalidated.
-PIPELINE_STAGES = ("polarisation", "normals", "harmonics", "pca")
-CLASSIFIER_STAGES = (*PIPELINE_STAGES, "pixel features", "pixel classifier", "reconstruction")
+#: Stages of the scribble mode: the pipeline's maps the labels need, the pixel features,
+#: the classifier (training and prediction, or prediction only for a loaded classifier),
+#: then the thesis's block features (for the result's plots) and the error map, after
+#: the labels are shown. The cut's own stages (affinity, cut, labels) are neither
+#: computed nor invalidated.
+PIPELINE_STAGES = ("polarisation", "normals")
+MAP_STAGES = ("harmonics", "pca", "reconstruction")
+CLASSIFIER_STAGES = (*PIPELINE_STAGES, "pixel features", "pixel classifier", *MAP_STAGES)
 #: The session's seconds that make up the "pixel classifier" stage.
 CLASSIFIER_SECONDS = ("train", "preview", "predict")
 
@@ -131,18 +133,19 @@ def classifier_stages(
 
     Trains the pixel classifier on ``scribbles`` with ``settings`` (default the
     defaults), or applies ``classifier`` (exactly one of them). Yields ``(stage, stages
-    done, total)`` as each stage starts (at most ``len(CLASSIFIER_STAGES)``, one fewer
-    without the reconstruction). The pipeline's cached stages and ``session``'s feature
-    stack are reused: once they are computed, a new stroke reruns only training and
-    prediction. The labels of the classifier's grid
+    done, total)`` as each stage starts (at most ``len(CLASSIFIER_STAGES)``; without the
+    reconstruction, none of :data:`MAP_STAGES`). The pipeline's cached stages and
+    ``session``'s feature stack are reused: once they are computed, a new stroke reruns
+    only training and prediction. The labels of the classifier's grid
     (:meth:`~napari_polarseg.engine.ScribbleSession.preview`) are yielded as a
-    :class:`Partial` first, then every pixel's; when the reconstruction still has to be
-    computed, the output without it is yielded as a :class:`Partial` too (the segments
-    are shown while the error map is computed). ``cancel`` is handed to the prediction,
+    :class:`Partial` first, then every pixel's; when the thesis maps and the
+    reconstruction still have to be computed, the output without them is yielded as a
+    :class:`Partial` too (the segments are shown while they are computed). ``cancel`` is handed to the prediction,
     which raises :class:`~napari_polarseg.engine.errors.Cancelled` between chunks when
     it returns True.
     """
-    names = CLASSIFIER_STAGES if reconstruction else CLASSIFIER_STAGES[:-1]
+    labelled = len(PIPELINE_STAGES) + 2  # the stages up to the labels
+    names = CLASSIFIER_STAGES if reconstruction else CLASSIFIER_STAGES[:labelled]
     total = len(names)
     timings: dict[str, float] = {}
     recomputed: list[str] = []
@@ -174,7 +177,7 @@ def classifier_stages(
         seg = session.segmentation(with_reconstruction)
         seconds = session.seconds
         timings["pixel classifier"] = sum(seconds.get(k, 0.0) for k in CLASSIFIER_SECONDS)
-        stages = names if with_reconstruction else names[:-1]
+        stages = names if with_reconstruction else names[:labelled]
         result = replace(
             seg.result,
             params=params,
@@ -190,8 +193,9 @@ def classifier_stages(
     if not partial:
         return output(reconstruction)
     yield Partial(output(False))
-    yield names[-1], total - 1, total
-    run_stage(names[-1])
+    for i, name in enumerate(MAP_STAGES):
+        yield name, labelled + i, total
+        run_stage(name)
     return output(True)
 
 
