@@ -140,9 +140,10 @@ def classifier_stages(
     (:meth:`~napari_polarseg.engine.ScribbleSession.preview`) are yielded as a
     :class:`Partial` first, then every pixel's; when the thesis maps and the
     reconstruction still have to be computed, the output without them is yielded as a
-    :class:`Partial` too (the segments are shown while they are computed). ``cancel`` is handed to the prediction,
-    which raises :class:`~napari_polarseg.engine.errors.Cancelled` between chunks when
-    it returns True.
+    :class:`Partial` too (the segments are shown while they are computed). ``cancel``
+    is handed to the prediction, which raises
+    :class:`~napari_polarseg.engine.errors.Cancelled` between chunks when it returns
+    True.
     """
     labelled = len(PIPELINE_STAGES) + 2  # the stages up to the labels
     names = CLASSIFIER_STAGES if reconstruction else CLASSIFIER_STAGES[:labelled]
