@@ -119,6 +119,10 @@ def test_upsample_is_linear_interpolation_on_the_pixel_area_grid(f):
     np.testing.assert_allclose(upsample(small, f, expected.shape), expected, atol=1e-6)
     cropped = upsample(small, f, (17 * f - 1, 23 * f - 3))
     np.testing.assert_allclose(cropped, expected[: 17 * f - 1, : 23 * f - 3], atol=1e-6)
+    # a band of rows, from the coarse rows it needs, equals those rows of the whole map
+    for start, stop in ((0, 1), (3, 9), (5 * f + 1, 5 * f + 2), (17 * f - 4, 17 * f)):
+        band = upsample(small, f, expected.shape, (start, stop))
+        np.testing.assert_allclose(band, expected[start:stop], atol=1e-6)
 
 
 @pytest.mark.parametrize("sigma", [1.0, 4.0, 16.0])

@@ -22,6 +22,8 @@ from ..palette import label_rgba
 
 #: Metadata key of a scribbles layer holding its material names.
 NAMES_KEY = "polarseg_materials"
+#: Events of a Labels layer after which its painted values may differ.
+PAINT_EVENTS = ("data", "paint", "labels_update")
 
 
 def swatch_style(value: int) -> str:
@@ -41,6 +43,7 @@ class MaterialList(Container):
 
     def __init__(self, changed: Callable[[], None] | None = None) -> None:
         self.layer: Any = None
+        self._painted: set[int] | None = None  # the layer's painted values (kept)
         self._changed = changed
         self._syncing = False
         self.material = ComboBox(
@@ -84,12 +87,19 @@ class MaterialList(Container):
         if old is not None:
             try:
                 old.events.selected_label.disconnect(self._on_selected_label)
+                for event in PAINT_EVENTS:
+                    getattr(old.events, event).disconnect(self._on_painted)
             except (TypeError, ValueError, RuntimeError):
                 pass
-        self.layer = layer
+        self.layer, self._painted = layer, None
         if layer is not None:
             layer.events.selected_label.connect(self._on_selected_label)
+            for event in PAINT_EVENTS:
+                getattr(layer.events, event).connect(self._on_painted)
         self.refresh()
+
+    def _on_painted(self, *_: Any) -> None:
+        self._painted = None  # counted again when next asked
 
     def names(self) -> dict[int, str]:
         """Value → name of the named materials of the layer (empty without a layer)."""
@@ -122,9 +132,9 @@ class MaterialList(Container):
         """The layer's materials: painted values, named ones and the brush's label."""
         if self.layer is None:
             return []
-        data = np.asarray(self.layer.data)
-        found = {int(v) for v in np.unique(data) if v > 0}
-        found |= set(self.names())
+        if self._painted is None:  # the menu asks at every layer added: once per edit
+            self._painted = {int(v) for v in np.unique(np.asarray(self.layer.data)) if v > 0}
+        found = self._painted | set(self.names())
         selected = int(self.layer.selected_label)
         if selected > 0:
             found.add(selected)

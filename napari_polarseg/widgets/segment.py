@@ -32,7 +32,7 @@ from .segment_inputs import CUT_ONLY, NO_MASK, NO_SCRIBBLES, SegmentInputs, Snap
 from .segment_layers import SegmentLayers, ShownEntry, WithContrast, with_contrast
 from .segment_params import ParameterControls
 from .session import (
-    PIPELINE_STAGES,
+    FEATURES_JOB_STAGES,
     ClassifierOutput,
     Delivery,
     LoadedClassifier,
@@ -260,7 +260,7 @@ class SegmentWidget(StackWidget, SegmentDock):
         for w in self.classifier_controls.controls:
             w.changed.connect(self._on_value_changed)
         self.live.changed.connect(self._on_value_changed)
-        self.scribbles_layer.changed.connect(self._prefetch_features)
+        self.scribbles_layer.changed.connect(self.prefetch_features)
 
     # -- the parts' public members ----------------------------------------------------
     def params(self) -> SegmentParams:
@@ -520,11 +520,11 @@ class SegmentWidget(StackWidget, SegmentDock):
         args, total = request.args, request.total
         self._submit(job, args, total, on_result, on_partial, self._live_run, True, request.reports)
 
-    def _prefetch_features(self, *_: Any) -> None:
-        """Compute the stack's pixel features in the worker as soon as a scribbles layer
-        without strokes of two materials is chosen (while the first ones are painted),
-        unless a run is going or waiting."""
-        if self.scribbles_layer.value is None or self.busy or self._waiting():
+    def prefetch_features(self, *_: Any, force: bool = False) -> None:
+        """Compute the stack's pixel features in the worker (while the first strokes are
+        painted) once a scribbles layer is chosen (or ``force``), unless its strokes
+        already train or a run is going or waiting."""
+        if (self.scribbles_layer.value is None and not force) or self.busy or self._waiting():
             return
         try:
             layer, angles_deg = self.current_stack()
@@ -543,7 +543,7 @@ class SegmentWidget(StackWidget, SegmentDock):
             problem = scribble_problem(np.zeros(1) if strokes is None else strokes)
             self._set_status(f"pixel features ready ({n_features} features); {problem or ''}")
 
-        self._submit(features_job, args, len(PIPELINE_STAGES) + 1, ready, live=True)
+        self._submit(features_job, args, FEATURES_JOB_STAGES, ready, live=True)
 
     def _reshow(self, layer: Layer, snap: Snapshot) -> bool:
         """Show the stack's result again when only parameters its method does not read

@@ -191,6 +191,7 @@ class SegmentInputs:
         if stack is None:
             self._fail(PolarsegError("choose an angle-stack image layer first"))
             return None
+        self._owner.prefetch_features(force=True)  # started before napari adds the layer
         h, w = stack.data.shape[-2:]
         layer = self._viewer.add_labels(
             np.zeros((h, w), dtype=np.int32),

@@ -46,6 +46,11 @@ def test_material_list_colours_and_names_everywhere(
     materials = widget.materials
     materials.refresh()
     assert materials.values() == [1, *VALUES]  # the brush's label 1 and the painted ones
+    # the painted values are counted once per edit: a brush stroke shows in the list
+    scribbles.paint((0, 0), 9, refresh=True)
+    assert materials.values() == [1, *VALUES, 9]
+    scribbles.paint((0, 0), 0, refresh=True)
+    assert materials.values() == [1, *VALUES]
     # choosing a material sets the brush; its swatch is its viewer colour
     materials.material.value = 5
     assert scribbles.selected_label == 5

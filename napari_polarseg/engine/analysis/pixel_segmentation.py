@@ -35,7 +35,7 @@ from ..features.pixel_features import (
     multichannel_features,
     pixel_features,
 )
-from ..features.superpixels import polarisation_superpixels, superpixel_edges
+from ..features.superpixels import polarisation_superpixels, superpixel_edges, watershed_grid
 from ..params import SegmentParams
 from ..physics.colour_mosaic import COLOURS, colour_polarisation_images
 from ..physics.pixel_mask import fill_from_nearest
@@ -194,8 +194,9 @@ class PixelSegmenter:
         self, area: int, segment_params: SegmentParams | None = None, colour: bool = True
     ) -> np.ndarray:
         """Superpixels (H, W) of ``area`` pixels on :meth:`edges` (``colour``: with the
-        colours' edges) (:func:`polarisation_superpixels`), kept while the polarisation
-        image stays: the pixel features' regions and the region walk's graph share
+        colours' edges) (:func:`polarisation_superpixels`, on the coarser grid of
+        :func:`watershed_grid` for large regions), kept while the polarisation image
+        stays: the pixel features' regions and the region walk's graph share
         them when their areas agree (a camera frame). Thread-safe: a second caller
         waits for the first one's watershed."""
         pol = self.pipeline.get("polarisation", segment_params)
@@ -206,7 +207,9 @@ class PixelSegmenter:
             if (area, colour) not in self._regions:
                 i, d, p = self.maps(segment_params)
                 edges = self.edges(segment_params, colour)
-                self._regions[area, colour] = polarisation_superpixels(i, d, p, area, edges=edges)
+                grid = watershed_grid(area)
+                regions = polarisation_superpixels(i, d, p, area, edges=edges, grid=grid)
+                self._regions[area, colour] = regions
             return self._regions[area, colour]
 
     def maps(self, segment_params: SegmentParams | None = None) -> tuple[np.ndarray, ...]:

@@ -60,16 +60,42 @@ def interpolation_at(
 def upsample(
     small: np.ndarray, f: int, shape: tuple[int, int], rows: tuple[int, int] | None = None
 ) -> np.ndarray:
-    """Maps (…, h, w) of the f-times coarser grid interpolated to ``shape`` (H, W):
-    rows first, then columns (:func:`interpolation_weights`); ``rows`` = (start, stop)
-    gives only those fine rows."""
+    """Maps (…, h, w) of the f-times coarser grid interpolated to ``shape`` (H, W), rows
+    first, then columns (the weights of :func:`interpolation_weights`, applied by
+    slices: one per phase of the f fine pixels of a cell, no gathers); ``rows`` =
+    (start, stop) gives only those fine rows (from the coarse rows they need)."""
     if f == 1:
         return small if rows is None else small[..., rows[0] : rows[1], :]
     start, stop = (0, shape[0]) if rows is None else rows
-    lo, hi, a, b = interpolation_weights(shape[0], f, start, stop)
-    tall = small[..., lo, :] * a[:, None] + small[..., hi, :] * b[:, None]
-    lo, hi, a, b = interpolation_weights(shape[1], f)
-    return (tall[..., lo] * a + tall[..., hi] * b).astype(np.float32, copy=False)
+    # the coarse rows of the band and one more on each side (what its edge rows read)
+    k0, k1 = max(start // f - 1, 0), min(-(-stop // f) + 1, small.shape[-2])
+    tall = _upsample_axis(small[..., k0:k1, :], f, -2)
+    tall = tall[..., start - k0 * f : stop - k0 * f, :]
+    wide = _upsample_axis(tall, f, -1)
+    return wide if wide.shape[-1] == shape[1] else np.ascontiguousarray(wide[..., : shape[1]])
+
+
+def _upsample_axis(x: np.ndarray, f: int, axis: int) -> np.ndarray:
+    """Linear interpolation by the factor f along ``axis`` (:func:`interpolation_weights`;
+    the first and last cell repeated beyond the edges); C-contiguous, so the maps read
+    next (region means, rows) are not strided."""
+    axis %= x.ndim
+    n = x.shape[axis]
+
+    def cells(start: int, stop: int) -> tuple[slice, ...]:
+        return (slice(None),) * axis + (slice(start, stop),)
+
+    padded = np.concatenate([x[cells(0, 1)], x, x[cells(n - 1, n)]], axis=axis)
+    out = np.empty(x.shape[: axis + 1] + (f,) + x.shape[axis + 1 :], dtype=np.float32)
+    for a in range(f):
+        u = (a + 0.5) / f - 0.5
+        phase = (slice(None),) * (axis + 1) + (a,)
+        if u < 0:  # between cell k − 1 and k
+            lo, hi, w_lo = padded[cells(0, n)], padded[cells(1, n + 1)], np.float32(-u)
+        else:  # between cell k and k + 1
+            lo, hi, w_lo = padded[cells(1, n + 1)], padded[cells(2, n + 2)], np.float32(1 - u)
+        out[phase] = lo * w_lo + hi * (np.float32(1) - w_lo)
+    return out.reshape(x.shape[:axis] + (n * f,) + x.shape[axis + 1 :])
 
 
 @dataclass(frozen=True)

@@ -50,7 +50,9 @@ from __future__ import annotations
 
 import functools
 import math
+import os
 from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import asdict, dataclass
 from typing import Any
 
@@ -71,6 +73,8 @@ MIN_REGION_AREA = 64
 MAX_REGION_AREA = 1024
 #: Scales (σ ≤ this, pixels) whose features the ``regions`` group averages.
 REGION_MAX_SIGMA = 4.0
+#: Most threads :func:`pixel_features` computes scales on.
+MAX_FEATURE_THREADS = 4
 #: Below this σ (pixels) a map is filtered at full resolution.
 PYRAMID_MIN_SIGMA = 4.0
 #: Floor added to ρ and DoLP before a ratio (ρ of a pixel is rarely exactly 0).
@@ -367,36 +371,56 @@ def pixel_features(
     i, d, p = check_maps(intensity, dop, phase)
     prefix = f"{channel}:" if channel else ""
     levels = {1: _moments(i, d, p, params.groups)}
+    for f in sorted({pyramid_factor(s) for s in params.scales}):
+        if f not in levels:  # coarsen from the finest level already built that divides f
+            base = max(q for q in levels if f % q == 0)
+            levels[f] = {q: _block_mean(v, f // base) for q, v in levels[base].items()}
     blocks: list[GridBlock | RegionBlock] = []
     names: list[str] = []
     local: list[GridBlock] = []  # the blocks whose region means the regions group takes
-    for sigma in params.scales:
-        f = pyramid_factor(sigma)
-        if f not in levels:
-            # coarsen from the finest level already built that divides f
-            base = max(q for q in levels if f % q == 0)
-            levels[f] = {q: _block_mean(v, f // base) for q, v in levels[base].items()}
-        made = _level_features(levels[f], sigma, f, params)
-        shape = (-(-i.shape[0] // f), -(-i.shape[1] // f))
-        values = np.empty((len(made), *shape), dtype=np.float32)
-        for j, v in enumerate(made.values()):
-            values[j] = v
-        blocks.append(GridBlock(values, f, i.shape))
-        names += [f"{name}@{sigma:g}" for name in made]
-        if sigma <= REGION_MAX_SIGMA:
-            local.append(blocks[-1])
-        if progress is not None:
-            progress(0.9 * (params.scales.index(sigma) + 1) / len(params.scales))
-    del levels
-    if "regions" in params.groups and local:
-        if regions is None:
-            regions = polarisation_superpixels(i, d, p, params.regions_of(i.shape))
-        labels = np.asarray(regions() if callable(regions) else regions)
-        local_names = [n for n in names if _scale_of(n) <= REGION_MAX_SIGMA]
-        means = FeatureStack(tuple(local), tuple(local_names)).region_means(labels)
-        blocks.append(RegionBlock(means, labels))
-        names += [f"region:{n}" for n in local_names]
+    # the scales on threads of their own: the filters and ufuncs release the GIL
+    with ThreadPoolExecutor(feature_threads()) as pool:
+        made = [
+            pool.submit(_scale_block, levels[pyramid_factor(s)], s, params, i.shape)
+            for s in params.scales
+        ]
+        for n, (sigma, future) in enumerate(zip(params.scales, made, strict=True)):
+            block, block_names = future.result()
+            blocks.append(block)
+            names += block_names
+            if sigma <= REGION_MAX_SIGMA:
+                local.append(block)
+            if progress is not None:
+                progress(0.9 * (n + 1) / len(params.scales))
+        del levels, made
+        if "regions" in params.groups and local:
+            if regions is None:
+                regions = polarisation_superpixels(i, d, p, params.regions_of(i.shape))
+            labels = np.asarray(regions() if callable(regions) else regions)
+            means = pool.map(lambda b: FeatureStack((b,), ("",) * b.n_features), local)
+            table = np.concatenate(list(pool.map(lambda s: s.region_means(labels), means)))
+            blocks.append(RegionBlock(table, labels))
+            names += [f"region:{n}" for n in names if _scale_of(n) <= REGION_MAX_SIGMA]
     return FeatureStack(tuple(blocks), tuple(f"{prefix}{n}" for n in names), params)
+
+
+def feature_threads() -> int:
+    """Threads :func:`pixel_features` computes the scales on: the cores, at most
+    :data:`MAX_FEATURE_THREADS` (each holds a scale's temporaries)."""
+    return max(1, min(os.cpu_count() or 1, MAX_FEATURE_THREADS))
+
+
+def _scale_block(
+    level: dict[str, np.ndarray], sigma: float, params: PixelFeatureParams, shape: tuple
+) -> tuple[GridBlock, list[str]]:
+    """The features of scale σ (a :class:`GridBlock` on the level's grid) and their
+    names, from the moments ``level`` of its pyramid factor."""
+    f = pyramid_factor(sigma)
+    made = _level_features(level, sigma, f, params)
+    values = np.empty((len(made), -(-shape[0] // f), -(-shape[1] // f)), dtype=np.float32)
+    for j, v in enumerate(made.values()):
+        values[j] = v
+    return GridBlock(values, f, shape), [f"{name}@{sigma:g}" for name in made]
 
 
 def _scale_of(name: str) -> float:

@@ -35,6 +35,7 @@ from .classify import (
 from .files import write_params_json
 from .inputs import colour_stack_of, content_digest, input_info, region_digest
 from .jobs import (
+    FEATURES_JOB_STAGES,
     SegmentRequest,
     classifier_job,
     export_job,
@@ -74,6 +75,7 @@ __all__ = [
     "StageFailed",
     "blas_share",
     "classifier_job",
+    "FEATURES_JOB_STAGES",
     "features_job",
     "classifier_parts",
     "classifier_stages",

@@ -30,14 +30,20 @@ if TYPE_CHECKING:
     from ...engine.analysis.pixel_segmentation import PixelSegmentation
     from ...engine.analysis.scribble_session import ScribbleSession
 
-#: Stages of the scribble mode: the pipeline's maps the labels need, the pixel features,
-#: the classifier (training and prediction, or prediction only for a loaded classifier),
-#: then the thesis's block features (for the result's plots) and the error map, after
-#: the labels are shown. The cut's own stages (affinity, cut, labels) are neither
-#: computed nor invalidated.
-PIPELINE_STAGES = ("polarisation", "normals")
+#: Stages of the scribble mode: the polarisation image, the pixel features, the normals
+#: (the result's zenith map), the classifier (training and prediction, or prediction
+#: only for a loaded classifier), then the thesis's block features (for the result's
+#: plots) and the error map, after the labels are shown. The cut's own stages
+#: (affinity, cut, labels) are neither computed nor invalidated.
+PIPELINE_STAGES = ("polarisation",)
 MAP_STAGES = ("harmonics", "pca", "reconstruction")
-CLASSIFIER_STAGES = (*PIPELINE_STAGES, "pixel features", "pixel classifier", *MAP_STAGES)
+CLASSIFIER_STAGES = (
+    *PIPELINE_STAGES,
+    "pixel features",
+    "normals",
+    "pixel classifier",
+    *MAP_STAGES,
+)
 #: The session's seconds that make up the "pixel classifier" stage.
 CLASSIFIER_SECONDS = ("train", "preview", "predict")
 
@@ -141,11 +147,10 @@ def classifier_stages(
     :class:`Partial` first, then every pixel's; when the thesis maps and the
     reconstruction still have to be computed, the output without them is yielded as a
     :class:`Partial` too (the segments are shown while they are computed). ``cancel``
-    is handed to the prediction, which raises
-    :class:`~napari_polarseg.engine.errors.Cancelled` between chunks when it returns
-    True.
+    is handed to the prediction: it raises :class:`~napari_polarseg.engine.Cancelled`
+    between chunks once ``cancel()`` is True.
     """
-    labelled = len(PIPELINE_STAGES) + 2  # the stages up to the labels
+    labelled = len(PIPELINE_STAGES) + 3  # the stages up to the labels
     names = CLASSIFIER_STAGES if reconstruction else CLASSIFIER_STAGES[:labelled]
     total = len(names)
     timings: dict[str, float] = {}
@@ -172,6 +177,8 @@ def classifier_stages(
     if session.feature_runs != before:
         timings["pixel features"] = session.seconds.get("features", 0.0)
         recomputed.append("pixel features")
+    yield "normals", len(PIPELINE_STAGES) + 1, total
+    run_stage("normals")
     recomputed.append("pixel classifier")
 
     def output(with_reconstruction: bool, preview: bool = False) -> ClassifierOutput:
@@ -187,7 +194,7 @@ def classifier_stages(
         )
         return ClassifierOutput(replace(seg, result=result), classifier is None, None, preview)
 
-    yield "pixel classifier", len(PIPELINE_STAGES) + 1, total
+    yield "pixel classifier", len(PIPELINE_STAGES) + 2, total
     session.preview(cancel)
     yield Partial(output(False, preview=True))
     session.refine(cancel)

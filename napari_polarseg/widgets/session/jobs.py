@@ -136,6 +136,10 @@ def classifier_job(
     )
 
 
+#: Stages :func:`features_job` reports: the pipeline's, the pixel features, the normals.
+FEATURES_JOB_STAGES = len(PIPELINE_STAGES) + 2
+
+
 def features_job(
     store: PipelineStore,
     key: str,
@@ -151,15 +155,18 @@ def features_job(
     kept by its :class:`~napari_polarseg.engine.ScribbleSession`, so the first strokes
     only train and predict. Returns the number of features."""
     pipe = store.obtain(key, data, angles_rad, params, region=region, mask_key=mask_key)
-    total = len(PIPELINE_STAGES) + 1
+    total = FEATURES_JOB_STAGES
     for i, name in enumerate(PIPELINE_STAGES):
         yield name, i, total
         pipe.get(name, params)
     session = store.session(key, colour_stack)
     assert session is not None
     session.segment_params = params
-    yield "pixel features", total - 1, total
-    return session.features().n_features
+    yield "pixel features", total - 2, total
+    n = session.features().n_features
+    yield "normals", total - 1, total
+    pipe.get("normals", params)
+    return n
 
 
 def read_classifier_job(path: Path) -> Generator[Stage, None, PixelClassifier]:
