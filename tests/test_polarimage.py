@@ -128,6 +128,26 @@ def test_unweighted_fast_path_equals_weighted_fit(angles_deg, robust):
     assert np.array_equal(fast.angles, slow.angles)
 
 
+def test_weighted_fit_in_chunks_reports_every_pixels_weights():
+    """The weighted fit runs on chunks of FIT_CHUNK_PIXELS pixels: one missing sample in
+    the last chunk reports the weights of every pixel (the full chunks' too), and every
+    other pixel is the fit without weights."""
+    from napari_polarseg.engine.physics.polarimage import FIT_CHUNK_PIXELS
+
+    shape = (FIT_CHUNK_PIXELS // 100 + 7, 200)  # two chunks and a short third
+    a = np.deg2rad([0, 30, 60, 90, 120, 150])
+    stack = render(*known_image(shape, seed=3), a)
+    weights = np.ones(stack.shape)
+    weights[2, -1, -1] = 0.0
+    fit = polarisation_image(stack, a, weights=weights)
+    plain = polarisation_image(stack, a)
+    assert fit.sample_weights is not None and fit.sample_weights.shape == weights.shape
+    np.testing.assert_array_equal(fit.sample_weights, weights)
+    for name in ("intensity", "dop", "phase"):
+        np.testing.assert_allclose(getattr(fit, name), getattr(plain, name), atol=1e-12)
+    assert polarisation_image(stack, a, weights=np.ones(stack.shape)).sample_weights is None
+
+
 def test_integer_stack_is_fitted_without_a_float64_copy():
     """Camera counts stay integers (no float64 copy of the stack); the fit converts them
     chunk by chunk and gives the float fit's numbers, duplicate angles (0° and 180°)

@@ -44,6 +44,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..chunks import chunk_bounds, run_chunks
 from ..errors import PolarsegError
 from .pixel_mask import (
     DARK,
@@ -60,6 +61,8 @@ from .sinusoid_fit import ROBUST_LOSSES, irls, sinusoid_design, unweighted_fit, 
 ANGLE_TOLERANCE = 1e-6
 #: Largest magnitude of a sample: beyond it squares overflow in float64 downstream.
 MAX_ABS_VALUE = 1e100
+#: Pixels per chunk of the weighted least-squares fit (:func:`_weighted_polarisation`).
+FIT_CHUNK_PIXELS = 1 << 16
 
 
 @dataclass(frozen=True)
@@ -365,24 +368,74 @@ def _weighted_polarisation(
 
     Duplicate angles averaged (:func:`average_duplicate_angles`), then one weighted
     pseudo-inverse for the pixels whose every sample is usable and a 3 × 3 solve per
-    pixel for the others; ``robust``: IRLS with ``loss`` from there (eq. 3.14).
+    pixel for the others (:func:`_fit_pixels`); ``robust``: IRLS with ``loss`` from
+    there (eq. 3.14). The least-squares fit runs on chunks of
+    :data:`FIT_CHUNK_PIXELS` pixels on the cores (:func:`~..chunks.run_chunks`): its
+    float64 temporaries stay small and are reused instead of a dozen whole-image arrays
+    of fresh pages (3× faster on a camera frame). The robust fit, whose iterations stop
+    together, runs on the whole image.
     """
     n, h, w = data.shape
-    data = data.astype(np.float64, copy=False)
-    finite = np.isfinite(data)
     if weights is not None:
-        weights = np.asarray(weights, dtype=np.float64)
+        weights = np.asarray(weights)
         if weights.shape != data.shape:
             raise PolarsegError(
                 f"sample weights have shape {weights.shape} but the stack is {data.shape}"
             )
-        if not np.all(np.isfinite(weights)) or np.any(weights < 0):
+        if not (_all_finite(weights) and (weights.size == 0 or weights.min() >= 0)):
             raise PolarsegError("sample weights must be finite numbers >= 0")
-    bad_pixel = ~np.all(finite, axis=0).ravel()
+    flat = data.reshape(n, -1)
+    flat_w = None if weights is None else weights.reshape(n, -1)
+    if robust:
+        coef, ok, good, residual, final_w, _, fit_angles = _fit_pixels(
+            flat, angles, flat_w, robust, loss, iterations
+        )
+        report_w = None if final_w is None else final_w.reshape(-1, h, w).astype(np.float32)
+        return _polarisation_result(coef, ok, good, residual, report_w, fit_angles, (h, w))
+    p = h * w
+    g = int(angle_groups(angles).max()) + 1
+    coef, residual = np.empty((3, p)), np.empty(p)
+    ok, good = np.empty(p, dtype=bool), np.empty(p, dtype=bool)
+    final = np.empty((g, p), dtype=np.float32)  # pages touched only where written
+    uniform: dict[int, np.ndarray] = {}  # chunk start -> its one weight per state
+    states: list[np.ndarray] = []
+
+    def work(a: int, b: int) -> None:
+        w_ab = None if flat_w is None else flat_w[:, a:b]
+        c, o, gd, r, f, ref, fa = _fit_pixels(flat[:, a:b], angles, w_ab, False, loss, 1)
+        coef[:, a:b], ok[a:b], good[a:b], residual[a:b] = c, o, gd, r
+        if f is None:
+            uniform[a] = ref
+        else:
+            final[:, a:b] = f
+        states.append(fa)
+
+    bounds = chunk_bounds(p, FIT_CHUNK_PIXELS)
+    run_chunks(bounds, work, p)
+    report_w = None
+    if len(uniform) < len(bounds):  # some pixel had a missing sample
+        for a, ref in uniform.items():
+            final[:, a : a + FIT_CHUNK_PIXELS] = ref[:, None]
+        report_w = final.reshape(g, h, w)
+    return _polarisation_result(coef, ok, good, residual, report_w, states[0], (h, w))
+
+
+def _fit_pixels(
+    data: np.ndarray,
+    angles: np.ndarray,
+    weights: np.ndarray | None,
+    robust: bool,
+    loss: str,
+    iterations: int,
+) -> tuple[np.ndarray, ...]:
+    """The fit of eq. 3.14 for pixels (columns) of ``data`` (N, Q) with ``weights``
+    (N, Q) or None: (coef (3, Q), ok (Q,), good (Q,): every sample finite, RMS residual
+    (Q,), final weights (G, Q) or None when every pixel had the weights ``ref`` (G,),
+    ``ref``, the states' angles)."""
+    data = data.astype(np.float64, copy=False)
+    bad_pixel = ~np.all(np.isfinite(data), axis=0)
     fit_y, fit_angles, fit_w = average_duplicate_angles(data, angles, weights)
-    g = fit_angles.size
-    y = fit_y.reshape(g, -1)
-    base = fit_w.reshape(g, -1)
+    y, base = fit_y, fit_w
     design = sinusoid_design(fit_angles)
     # Pixels whose every sample is usable share one weight per state (the number of shots
     # averaged into it): one weighted 3 x G pseudo-inverse solves them all at once.
@@ -406,10 +459,8 @@ def _weighted_polarisation(
     misfit *= misfit
     misfit[~usable] = 0.0
     residual = np.sqrt(misfit.sum(axis=0) / n_used)
-    report_w = None
-    if not (uniform and final_w is base):
-        report_w = final_w.reshape(g, h, w).astype(np.float32)
-    return _polarisation_result(coef, ok, ~bad_pixel, residual, report_w, fit_angles, (h, w))
+    reported = None if (uniform and final_w is base) else final_w
+    return coef, ok, ~bad_pixel, residual, reported, ref, fit_angles
 
 
 def _polarisation_result(
