@@ -62,7 +62,7 @@ ANGLE_TOLERANCE = 1e-6
 #: Largest magnitude of a sample: beyond it squares overflow in float64 downstream.
 MAX_ABS_VALUE = 1e100
 #: Pixels per chunk of the weighted least-squares fit (:func:`_weighted_polarisation`).
-FIT_CHUNK_PIXELS = 1 << 16
+FIT_CHUNK_PIXELS = 1 << 18
 
 
 @dataclass(frozen=True)
