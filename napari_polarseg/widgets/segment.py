@@ -260,6 +260,7 @@ class SegmentWidget(StackWidget, SegmentDock):
         for w in self.classifier_controls.controls:
             w.changed.connect(self._on_value_changed)
         self.live.changed.connect(self._on_value_changed)
+        self.live.changed.connect(self.layers.prepare_segments)
         self.scribbles_layer.changed.connect(self.prefetch_features)
 
     # -- the parts' public members ----------------------------------------------------
@@ -521,9 +522,8 @@ class SegmentWidget(StackWidget, SegmentDock):
         self._submit(job, args, total, on_result, on_partial, self._live_run, True, request.reports)
 
     def prefetch_features(self, *_: Any, force: bool = False) -> None:
-        """Compute the stack's pixel features in the worker (while the first strokes are
-        painted) once a scribbles layer is chosen (or ``force``), unless its strokes
-        already train or a run is going or waiting."""
+        """Compute the pixel features in the worker while the first strokes are painted,
+        once a scribbles layer is chosen (or ``force``), unless they train or a run waits."""
         if (self.scribbles_layer.value is None and not force) or self.busy or self._waiting():
             return
         try:
@@ -534,14 +534,14 @@ class SegmentWidget(StackWidget, SegmentDock):
             return
         if scribbles is not None and scribble_problem(scribbles) is None:
             return  # strokes to train on: their run computes the features
-        key, params = source_key(layer), self.params()
-        args = (self.store, key, layer.data, np.deg2rad(angles_deg), params, region, mask_key)
-        args += (colour_stack_of(layer),)
+        args = (self.store, source_key(layer), layer.data, np.deg2rad(angles_deg), self.params())
+        args += (region, mask_key, colour_stack_of(layer))
 
         def ready(run_id: int, n_features: int) -> None:
             strokes = self.current_scribbles()[1]
             problem = scribble_problem(np.zeros(1) if strokes is None else strokes)
             self._set_status(f"pixel features ready ({n_features} features); {problem or ''}")
+            self.layers.prepare_segments()  # with live update on: the labels fill it
 
         self._submit(features_job, args, FEATURES_JOB_STAGES, ready, live=True)
 

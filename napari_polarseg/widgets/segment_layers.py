@@ -216,6 +216,18 @@ class SegmentLayers:
         self._owner.export.record(layer, angles_deg, shown)
         self._done(shown.status(seconds))
 
+    def prepare_segments(self, *_: Any) -> None:
+        """With live update on and a scribbles layer chosen, add the chosen stack's
+        segments layer, empty (all 0: transparent), if it has none: made while the first
+        strokes are painted, the first labels then only replace its data (napari takes
+        about 0.3 s to add a Labels layer to a camera frame's viewer)."""
+        owner, viewer = self._owner, self._viewer
+        layer = owner.stack_layer.value
+        if not owner.live.value or owner.scribbles_layer.value is None or layer is None:
+            return
+        if layer in viewer.layers and find_output(viewer, "segments", layer) is None:
+            show_output(viewer, "segments", np.zeros(layer.data.shape[-2:], np.int32), layer)
+
     def _queue(self, role: str, layer: Layer, action: Callable[[], Any]) -> None:
         """Run ``action`` (which adds or updates ``layer``'s ``role`` layer) in a later
         event-loop turn, if ``layer`` is still in the viewer then; it replaces an action
