@@ -156,16 +156,22 @@ class ScribbleSession:
         polarisation image and the parameters stay; :attr:`feature_runs` counts the
         computations). ``colour``: with a colour stack, every colour's features too.
         ``progress(share)`` is called while they are computed (it may raise to stop).
-        With the region walk on (``classifier_params``), its superpixel graph is drawn
-        meanwhile on a second thread (the watershed releases the GIL)."""
+        Meanwhile a second thread draws the region walk's superpixel graph (with the walk
+        on, ``classifier_params``) and computes the normals the result shows (the
+        watershed and numpy release the GIL)."""
         params = params or self.features_params
         before = self.segmenter.cached_features
         self.pipeline.get("polarisation", self.segment_params)  # shared by both threads
         walk = (self.classifier_params or ClassifierParams()).region_walk > 0
-        graph = in_background(lambda: self.segmenter.graph(self.segment_params)) if walk else None
+
+        def beside() -> None:
+            if walk:
+                self.segmenter.graph(self.segment_params)
+            self.pipeline.get("normals", self.segment_params)
+
+        done = in_background(beside)
         feats = self.segmenter.features(params, colour, self.segment_params, progress)
-        if graph is not None:
-            graph()
+        done()
         if feats is not before:
             self.feature_runs += 1
         return feats

@@ -48,11 +48,11 @@ multi-channel inputs.
 
 from __future__ import annotations
 
-import functools
 import math
 import os
+import threading
 from collections.abc import Callable, Sequence
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import asdict, dataclass
 from typing import Any
 
@@ -370,38 +370,52 @@ def pixel_features(
     params = params or PixelFeatureParams()
     i, d, p = check_maps(intensity, dop, phase)
     prefix = f"{channel}:" if channel else ""
+    if "regions" not in params.groups:
+        labels = None
+    elif regions is None:
+        labels = _once(lambda: polarisation_superpixels(i, d, p, params.regions_of(i.shape)))
+    else:
+        labels = _once(regions if callable(regions) else lambda: regions)
     levels = {1: _moments(i, d, p, params.groups)}
-    for f in sorted({pyramid_factor(s) for s in params.scales}):
-        if f not in levels:  # coarsen from the finest level already built that divides f
-            base = max(q for q in levels if f % q == 0)
-            levels[f] = {q: _block_mean(v, f // base) for q, v in levels[base].items()}
-    blocks: list[GridBlock | RegionBlock] = []
-    names: list[str] = []
-    local: list[GridBlock] = []  # the blocks whose region means the regions group takes
-    # the scales on threads of their own: the filters and ufuncs release the GIL
+    # every scale on a thread (the filters and ufuncs release the GIL); a local scale's
+    # region means on the same thread once the superpixels are there
     with ThreadPoolExecutor(feature_threads()) as pool:
-        made = [
-            pool.submit(_scale_block, levels[pyramid_factor(s)], s, params, i.shape)
-            for s in params.scales
-        ]
-        for n, (sigma, future) in enumerate(zip(params.scales, made, strict=True)):
-            block, block_names = future.result()
-            blocks.append(block)
-            names += block_names
-            if sigma <= REGION_MAX_SIGMA:
-                local.append(block)
+
+        def submit(sigma: float) -> Future:
+            level = levels[pyramid_factor(sigma)]
+            return pool.submit(_scale_block, level, sigma, params, i.shape, labels)
+
+        made = {s: submit(s) for s in params.scales if pyramid_factor(s) == 1}
+        for f in sorted({pyramid_factor(s) for s in params.scales}):  # meanwhile: levels
+            if f not in levels:  # coarsen from the finest level already built that divides f
+                base = max(q for q in levels if f % q == 0)
+                levels[f] = {q: _block_mean(v, f // base) for q, v in levels[base].items()}
+        made.update({s: submit(s) for s in params.scales if s not in made})
+        parts = []
+        for n, sigma in enumerate(params.scales):
+            parts.append(made[sigma].result())
             if progress is not None:
                 progress(0.9 * (n + 1) / len(params.scales))
-        del levels, made
-        if "regions" in params.groups and local:
-            if regions is None:
-                regions = polarisation_superpixels(i, d, p, params.regions_of(i.shape))
-            labels = np.asarray(regions() if callable(regions) else regions)
-            means = pool.map(lambda b: FeatureStack((b,), ("",) * b.n_features), local)
-            table = np.concatenate(list(pool.map(lambda s: s.region_means(labels), means)))
-            blocks.append(RegionBlock(table, labels))
-            names += [f"region:{n}" for n in names if _scale_of(n) <= REGION_MAX_SIGMA]
+    blocks: list[GridBlock | RegionBlock] = [block for block, _, _ in parts]
+    names = [name for _, block_names, _ in parts for name in block_names]
+    means = [m for _, _, m in parts if m is not None]
+    if means:
+        blocks.append(RegionBlock(np.concatenate(means), labels()))
+        names += [f"region:{n}" for n in names if _scale_of(n) <= REGION_MAX_SIGMA]
     return FeatureStack(tuple(blocks), tuple(f"{prefix}{n}" for n in names), params)
+
+
+def _once(make: Callable[[], Any]) -> Callable[[], np.ndarray]:
+    """``make()`` called once, by whichever thread asks first (the others wait)."""
+    lock, box = threading.Lock(), []
+
+    def get() -> np.ndarray:
+        with lock:
+            if not box:
+                box.append(np.asarray(make()))
+            return box[0]
+
+    return get
 
 
 def feature_threads() -> int:
@@ -411,16 +425,26 @@ def feature_threads() -> int:
 
 
 def _scale_block(
-    level: dict[str, np.ndarray], sigma: float, params: PixelFeatureParams, shape: tuple
-) -> tuple[GridBlock, list[str]]:
-    """The features of scale σ (a :class:`GridBlock` on the level's grid) and their
-    names, from the moments ``level`` of its pyramid factor."""
+    level: dict[str, np.ndarray],
+    sigma: float,
+    params: PixelFeatureParams,
+    shape: tuple[int, int],
+    regions: Callable[[], np.ndarray] | None,
+) -> tuple[GridBlock, list[str], np.ndarray | None]:
+    """The features of scale σ (a :class:`GridBlock` on the level's grid), their names
+    and, for σ ≤ :data:`REGION_MAX_SIGMA` with ``regions`` (a function giving the
+    superpixels), their means over every region (else None), from the moments
+    ``level`` of its pyramid factor."""
     f = pyramid_factor(sigma)
     made = _level_features(level, sigma, f, params)
     values = np.empty((len(made), -(-shape[0] // f), -(-shape[1] // f)), dtype=np.float32)
     for j, v in enumerate(made.values()):
         values[j] = v
-    return GridBlock(values, f, shape), [f"{name}@{sigma:g}" for name in made]
+    block, names = GridBlock(values, f, shape), [f"{name}@{sigma:g}" for name in made]
+    means = None
+    if regions is not None and sigma <= REGION_MAX_SIGMA:
+        means = FeatureStack((block,), tuple(names)).region_means(regions())
+    return block, names, means
 
 
 def _scale_of(name: str) -> float:
@@ -463,7 +487,7 @@ def multichannel_features(
     if len(channels) != len(images):
         raise PolarsegError(f"{len(images)} channels but {len(channels)} channel names")
     if callable(regions):
-        regions = functools.cache(regions)  # the first channel to need them waits
+        regions = _once(regions)  # the first channel to need them waits
     stacks = [
         pixel_features(*im, params, channel=c, regions=regions)
         for im, c in zip(images, channels, strict=True)
