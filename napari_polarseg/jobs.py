@@ -26,8 +26,7 @@ from .engine.analysis.evaluation import adjusted_rand_index, evaluate
 from .engine.errors import PolarsegError
 from .engine.limits import check_pipeline_memory
 from .engine.params import SegmentParams
-from .engine.physics.pixel_mask import PixelMask
-from .engine.physics.polarimage import validity_mask
+from .engine.physics.pixel_mask import PixelMask, validity_mask
 from .engine.timing import timed
 from .io.read_options import ReadOptions
 from .job_options import OutputOptions

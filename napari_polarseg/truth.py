@@ -197,7 +197,8 @@ def frame_polarisation_image(truth: TruthFile, folder: str | PathLike[str]) -> P
     PolarsegError
         If the frame is missing or its super-pixel grid is not :attr:`TruthFile.shape`.
     """
-    from .engine.physics.polarimage import polarisation_image, validity_mask
+    from .engine.physics.pixel_mask import validity_mask
+    from .engine.physics.polarimage import polarisation_image
     from .io import read_stack
 
     data = read_stack(real_frame_path(truth, folder), mosaic=list(truth.mosaic))

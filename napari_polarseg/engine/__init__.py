@@ -119,7 +119,7 @@ PUBLIC: dict[str, str] = {
     "average_duplicate_angles": ".physics.polarimage",
     "distinct_angle_count": ".physics.polarimage",
     "polarisation_image": ".physics.polarimage",
-    "validity_mask": ".physics.polarimage",
+    "validity_mask": ".physics.pixel_mask",
     # physics.registration
     "register_stack": ".physics.registration",
     # pipeline

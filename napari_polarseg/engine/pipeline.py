@@ -31,7 +31,7 @@ from .features import harmonics
 from .graph import affinity, ncut
 from .matrix_pool import DenseDistances, MatrixPool
 from .params import SegmentParams
-from .physics import polarimage
+from .physics import pixel_mask, polarimage
 from .physics.pixel_mask import PixelMask
 from .result import SegmentationResult
 from .stages import (
@@ -62,7 +62,7 @@ class Pipeline:
     mask : array (H, W) or PixelMask, optional
         Which pixels the fit and the block features use. An (H, W) array is the user's
         region (non-zero = segment here), combined with the samples flagged by
-        :func:`~napari_polarseg.engine.physics.polarimage.validity_mask` with its defaults
+        :func:`~napari_polarseg.engine.physics.pixel_mask.validity_mask` with its defaults
         (saturated at the integer dtype's maximum, black at or below 0, not finite). A
         :class:`~napari_polarseg.engine.PixelMask` is used as it is (e.g. with
         another saturation level, or found by the reader before dark subtraction). None:
@@ -98,14 +98,14 @@ class Pipeline:
             raise PolarsegError("params must be a SegmentParams")
         self._params = params
         if not isinstance(mask, PixelMask):
-            mask = polarimage.validity_mask(raw, region=mask)
+            mask = pixel_mask.validity_mask(raw, region=mask)
         elif mask.flags.shape != self.stack.shape:
             raise PolarsegError(
                 f"the pixel mask covers {mask.flags.shape} samples but the stack is "
                 f"{self.stack.shape}"
             )
         self.mask: PixelMask = mask
-        polarimage.check_usable(self.stack, self.mask)
+        pixel_mask.check_usable(self.stack, self.mask)
         #: how often each stage was computed
         self.calls: Counter = Counter()
         #: memory for the dense n × n matrices, and the kept distances (stages.py)

@@ -55,7 +55,7 @@ and float data are read as they are. Saturated samples are found on the data as
 recorded, before any conversion: at or above ``saturation`` — by default (``"auto"``)
 the integer dtype's maximum, or 2**bits − 1 when a TIFF declares fewer bits per sample
 (12-bit TIFFs), and none for float data — and returned as :attr:`StackData.saturated`
-for :func:`~napari_polarseg.engine.physics.polarimage.validity_mask`. A dark frame (``dark``: an
+for :func:`~napari_polarseg.engine.physics.pixel_mask.validity_mask`. A dark frame (``dark``: an
 image of the same size as the raw frames, or an array) and/or a constant ``offset`` are
 then subtracted and negative results set to 0 (the stack becomes float64).
 

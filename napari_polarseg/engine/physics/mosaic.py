@@ -298,7 +298,7 @@ def subtract_dark(
     -------
     ndarray, float64, same shape as ``data``
         ``max(data − dark − offset, 0)``. Values clipped to 0 count as black for
-        :func:`~napari_polarseg.engine.physics.polarimage.validity_mask`.
+        :func:`~napari_polarseg.engine.physics.pixel_mask.validity_mask`.
 
     Raises
     ------

@@ -1,7 +1,7 @@
 """The mask of usable samples and pixels: saturated, black, non-finite, outside a region.
 
 :class:`PixelMask` holds one flag byte per sample (:data:`SATURATED`, :data:`DARK`,
-:data:`NONFINITE`) and the user's region; :func:`~.polarimage.validity_mask` builds it
+:data:`NONFINITE`) and the user's region; :func:`validity_mask` builds it
 from a stack and the levels (:func:`auto_saturation_level` for integer data).
 """
 
@@ -199,3 +199,140 @@ def nearest_valid(valid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         raise PolarsegError("the mask leaves no pixel to segment")
     _, (ri, ci) = ndimage.distance_transform_edt(~valid, return_indices=True)
     return ri, ci
+
+
+# -- the mask of a stack ---------------------------------------------------------------
+
+
+def validity_mask(
+    stack: np.ndarray,
+    saturation: float | str | None = "auto",
+    dark_level: float | None = 0.0,
+    region: np.ndarray | None = None,
+    saturated: np.ndarray | None = None,
+) -> PixelMask:
+    """Flag saturated, black and non-finite samples and combine them with a user region.
+
+    Parameters
+    ----------
+    stack : array (N, H, W)
+        The angle stack **in the units it was recorded in** (before any conversion that
+        loses the saturation level, e.g. dark subtraction or interpolation).
+    saturation : float, "auto" or None
+        Samples at or above this level are saturated. ``"auto"``: the maximum of an
+        integer dtype (255 for uint8, 65535 for uint16), nothing for float data. None:
+        no saturation check.
+    dark_level : float or None
+        Samples at or below this level are black (default 0: exactly black or negative).
+        None: no darkness check.
+    region : array (H, W), optional
+        The user's region: non-zero (True) = segment here, 0 = leave out.
+    saturated : array (N, H, W) of bool, optional
+        Saturated samples already found (e.g. by the reader on the raw data before dark
+        subtraction or demosaicing); used instead of the ``saturation`` level check, and
+        ``saturation`` (if a number) is only recorded as the level they were found at.
+
+    Returns
+    -------
+    PixelMask
+
+    Raises
+    ------
+    PolarsegError
+        If the shapes do not match or a level is not a finite number.
+
+    Examples
+    --------
+    >>> stack = np.array([[[10, 255]], [[0, 40]], [[30, 50]]], dtype=np.uint8)
+    >>> m = validity_mask(stack)
+    >>> m.valid.tolist(), m.counts()["saturated_pixels"], m.counts()["dark_pixels"]
+    ([[False, False]], 1, 1)
+    """
+    stack = np.asarray(stack)
+    if stack.ndim != 3:
+        raise PolarsegError(f"a validity mask needs a stack (N, H, W), got shape {stack.shape}")
+    if stack.dtype == np.bool_:
+        stack = stack.astype(np.uint8)
+    level = _saturation_level(saturation, stack.dtype)
+    dark = finite_level(dark_level, "dark level")
+    # uint8 flags set in place (no int64 temporaries of the stack's size); an integer
+    # stack is finite everywhere
+    flags = np.zeros(stack.shape, dtype=np.uint8)
+    finite = np.isfinite(stack) if stack.dtype.kind == "f" else None
+
+    def flag(bit: int, where: np.ndarray) -> None:
+        if finite is not None:
+            where &= finite
+        np.bitwise_or(flags, np.uint8(bit), out=flags, where=where)
+
+    if finite is not None:
+        np.bitwise_or(flags, np.uint8(NONFINITE), out=flags, where=~finite)
+    with np.errstate(invalid="ignore"):
+        if saturated is not None:
+            saturated = np.asarray(saturated, dtype=bool)
+            if saturated.shape != stack.shape:
+                raise PolarsegError(
+                    f"saturated samples have shape {saturated.shape} but the stack is {stack.shape}"
+                )
+            flag(SATURATED, saturated.copy())
+        elif level is not None:
+            flag(SATURATED, stack >= level)
+        if dark is not None:
+            flag(DARK, stack <= dark)
+    keep = None if region is None else _region_pixels(region, stack.shape)
+    return PixelMask(flags, keep, level, dark)
+
+
+def _saturation_level(saturation: float | str | None, dtype: np.dtype) -> float | None:
+    """The level of :func:`validity_mask`'s ``saturation``: a number, "auto" or None."""
+    if isinstance(saturation, str):
+        if saturation != "auto":
+            raise PolarsegError(f"saturation must be a number, 'auto' or None, got {saturation!r}")
+        return auto_saturation_level(dtype)
+    return finite_level(saturation, "saturation level")
+
+
+def _region_pixels(region: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
+    """The user's region of a stack of ``shape`` (N, H, W) as (H, W) bool: non-zero = in."""
+    region = np.asarray(region)
+    if region.shape != shape[1:]:
+        raise PolarsegError(
+            f"the mask is {region.shape[0]} x {region.shape[1]} pixels but the frames are "
+            f"{shape[1]} x {shape[2]}"
+            if region.ndim == 2
+            else f"the mask must be a 2-D image, got shape {region.shape}"
+        )
+    return region.astype(bool) if region.dtype.kind != "f" else np.nan_to_num(region) != 0
+
+
+def check_usable(stack: np.ndarray, mask: PixelMask) -> None:
+    """Refuse a stack with nothing to segment: no usable pixel, or all samples equal.
+
+    Parameters
+    ----------
+    stack : array (N, H, W)
+        The angle stack (float64 as :func:`check_stack` returns it).
+    mask : PixelMask
+        Its validity mask.
+
+    Raises
+    ------
+    PolarsegError
+        Naming how many pixels were excluded for which reason, or the constant value.
+    """
+    valid = mask.valid
+    if not valid.any():
+        c = mask.counts()
+        reasons = mask_reasons(c, dark="black (at or below the dark level)")
+        raise PolarsegError(
+            f"no usable pixel: all {valid.size} pixels are excluded ({', '.join(reasons)})"
+        )
+    if valid.size > 1:
+        stack = np.asarray(stack)
+        used = stack if valid.all() else stack[:, valid]
+        lo, hi = float(np.min(used)), float(np.max(used))
+        if lo == hi:
+            raise PolarsegError(
+                f"the angle stack is constant (every usable sample is {lo:g}): "
+                "there is nothing to segment"
+            )
