@@ -40,12 +40,15 @@ from napari_polarseg.engine.physics.mosaic import (
     spread_flags_interpolated,
     subtract_dark,
 )
-from napari_polarseg.engine.physics.pixel_mask import PixelMask, auto_saturation_level
+from napari_polarseg.engine.physics.pixel_mask import (
+    PixelMask,
+    auto_saturation_level,
+    validity_mask,
+)
 from napari_polarseg.engine.physics.polarimage import (
     angle_groups,
     average_duplicate_angles,
     duplicate_angle_frames,
-    validity_mask,
 )
 from napari_polarseg.engine.physics.registration import register_stack
 from napari_polarseg.engine.synthetic.scenes import make_scene
