@@ -311,7 +311,7 @@ def check_usable(stack: np.ndarray, mask: PixelMask) -> None:
     Parameters
     ----------
     stack : array (N, H, W)
-        The angle stack (float64 as :func:`check_stack` returns it).
+        The angle stack (float64 as :func:`~.polarimage.check_stack` returns it).
     mask : PixelMask
         Its validity mask.
 
