@@ -27,11 +27,11 @@ import numpy as np
 from .superpixels import region_means
 
 
-def interpolation_weights(
-    n: int, f: int, start: int = 0, stop: int | None = None
+def interpolation_at(
+    x: np.ndarray, f: int, m: int
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Linear interpolation of fine coordinates ``start:stop`` (of ``n``) from a grid f
-    times coarser (pixel-area grid): (lo, hi, w_lo, w_hi), value = w_lo x[lo] + w_hi x[hi].
+    """Linear interpolation at fine coordinates ``x`` from an axis f times coarser of
+    ``m`` cells (pixel-area grid): (lo, hi, w_lo, w_hi), value = w_lo x[lo] + w_hi x[hi].
 
     Coarse cell k covers fine pixels k·f … k·f + f − 1, so fine pixel k·f + a sits at
     u = (a + ½)/f − ½ cells from cell k's centre; beyond the first and last cell the
@@ -39,15 +39,6 @@ def interpolation_weights(
     mode="nearest")`` (tested), written out because zoom evaluates a general spline per
     output pixel (4× slower) and cannot give single pixels.
     """
-    x = np.arange(start, n if stop is None else stop)
-    return interpolation_at(x, f, -(-n // f))
-
-
-def interpolation_at(
-    x: np.ndarray, f: int, m: int
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """:func:`interpolation_weights` at fine coordinates ``x`` of a coarse axis of
-    ``m`` cells."""
     k, a = np.divmod(np.asarray(x, dtype=np.int64), f)
     u = ((a + 0.5) / f - 0.5).astype(np.float32)
     before = u < 0
@@ -61,7 +52,7 @@ def upsample(
     small: np.ndarray, f: int, shape: tuple[int, int], rows: tuple[int, int] | None = None
 ) -> np.ndarray:
     """Maps (…, h, w) of the f-times coarser grid interpolated to ``shape`` (H, W), rows
-    first, then columns (the weights of :func:`interpolation_weights`, applied by
+    first, then columns (the weights of :func:`interpolation_at`, applied by
     slices: one per phase of the f fine pixels of a cell, no gathers); ``rows`` =
     (start, stop) gives only those fine rows (from the coarse rows they need)."""
     if f == 1:
@@ -76,7 +67,7 @@ def upsample(
 
 
 def _upsample_axis(x: np.ndarray, f: int, axis: int) -> np.ndarray:
-    """Linear interpolation by the factor f along ``axis`` (:func:`interpolation_weights`;
+    """Linear interpolation by the factor f along ``axis`` (:func:`interpolation_at`;
     the first and last cell repeated beyond the edges); C-contiguous, so the maps read
     next (region means, rows) are not strided."""
     axis %= x.ndim
