@@ -9,8 +9,10 @@ point of the largest wrong region of the labels on screen.
 Timed, each from the action to the layers on screen, minus the live-update debounce
 (``LIVE_DELAY_MS``, printed) for the painted corrections:
 
-- background features: from *New scribbles layer* to the stack's pixel features ready
-  (the worker computes them while the first strokes are painted);
+- background features: from *New scribbles layer* (clicked 0.5 s after the dock opened
+  on the frame: the polarisation image, computed once the stack is chosen, is ready) to
+  the stack's pixel features ready (the worker computes them while the first strokes
+  are painted);
 - first strokes → labels: the discs of every material set at once (training, then the
   preview: every pixel's labels from the region walk on the 8 px grid's prediction;
   then the final labels: the walk on the 4 px grid and the border cells);
@@ -96,6 +98,9 @@ def scribble_frame_main(path: Path, mosaic: tuple[int, ...], crop=None) -> None:
         engine = {**shown.get("engine", {}), "show": shown.get("show", 0.0)}
         return shown.get("first", end) - t0 - delay, end - t0 - delay, engine
 
+    # the user's first look at the frame (SETTLE) before *New scribbles layer*: the
+    # polarisation image, computed in the background once the stack is chosen, is ready
+    events(lambda: False, timeout=SETTLE)
     t0 = time.perf_counter()
     layer = widget.new_scribbles_layer()
     events(idle)

@@ -13,6 +13,7 @@ from magicgui.widgets import PushButton
 from napari.layers import Labels
 
 from ..engine import PolarsegError, SegmentParams
+from ..engine.chunks import in_background
 from ._layers import label_colormap, source_key
 from .classifier_controls import ClassifierControls
 from .materials import MaterialList
@@ -146,6 +147,28 @@ class SegmentInputs:
         self.scribbles_layer.changed.connect(self.sync_watches)
         self.scribbles_layer.changed.connect(self.on_scribbles_changed)
         self.new_scribbles_button.changed.connect(self.new_scribbles_layer)
+        owner.stack_layer.changed.connect(self.prefetch_polarisation)
+        self.prefetch_polarisation()  # the stack chosen when the dock opens
+
+    def prefetch_polarisation(self, *_: Any) -> None:
+        """Compute the chosen stack's polarisation image, which every method reads, on a
+        background thread as soon as the stack is chosen: a run, or the scribbles'
+        features, started meanwhile waits for it on the pipeline's lock."""
+        owner = self._owner
+        try:
+            layer, angles_deg = owner.current_stack()
+            mask_key, region = self.current_mask()
+            params = owner.params()
+        except PolarsegError:
+            return  # nothing to compute yet; a run says why
+        store, key, data, angles = owner.store, source_key(layer), layer.data, angles_deg
+
+        def polarisation() -> None:
+            rad = np.deg2rad(angles)
+            pipe = store.obtain(key, data, rad, params, region=region, mask_key=mask_key)
+            pipe.get("polarisation", params)
+
+        in_background(polarisation)  # its errors are the run's to report
 
     def unwatch(self, *_: Any) -> None:
         """Stop listening to the edits of the watched layers (the widget is closed)."""

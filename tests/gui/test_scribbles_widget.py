@@ -39,6 +39,26 @@ def material_blocks(truth: np.ndarray, window: int) -> dict[int, list[tuple[int,
     return out
 
 
+def test_a_chosen_stack_gets_its_polarisation_image_before_any_run(
+    viewer, open_sample, add_widget, qtbot
+):
+    """The polarisation image every method reads is computed in the background when a
+    stack is chosen (here: when the dock opens on it), without a run or a status."""
+    stack = open_sample("leaves")
+    widget = add_widget("Segment by material")
+    params = widget.params()
+
+    def ready() -> bool:
+        pipe = widget.pipeline
+        return pipe is not None and pipe.is_fresh("polarisation", params)
+
+    qtbot.waitUntil(ready, timeout=20000)
+    assert widget.pipeline.calls["polarisation"] == 1
+    assert widget.output("segments", stack) is None and not widget.busy
+    run_and_wait(qtbot, widget)
+    assert widget.pipeline.calls["polarisation"] == 1  # the run took it as computed
+
+
 def test_new_scribbles_layer_and_fewer_than_two_materials(viewer, open_sample, add_widget, qtbot):
     stack = open_sample("leaves")
     h, w = stack.data.shape[1:]
