@@ -104,8 +104,8 @@ class PixelSegmenter:
     _features: tuple[Any, FeatureStack] | None = field(default=None, init=False, repr=False)
     _colour_images: tuple[int, list] | None = field(default=None, init=False, repr=False)
     _graph: tuple[int, RegionGraph] | None = field(default=None, init=False, repr=False)
-    _edges: dict[Any, Any] = field(default_factory=dict, init=False, repr=False)
-    _regions: dict[Any, Any] = field(default_factory=dict, init=False, repr=False)
+    #: The edge maps and superpixels of the polarisation image of ``"image"`` (its id).
+    _kept: dict[Any, Any] = field(default_factory=dict, init=False, repr=False)
     _lock: threading.RLock = field(default_factory=threading.RLock, init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -178,17 +178,15 @@ class PixelSegmenter:
         :meth:`maps` plus, with ``colour`` and a colour stack, every colour's
         polarisation image's (a border seen in one colour only is an edge too); kept
         while the polarisation image stays."""
-        pol = self.pipeline.get("polarisation", segment_params)
         colour = colour and self.colour_stack is not None
         with self._lock:
-            if self._edges.get("image") != id(pol):
-                self._edges = {"image": id(pol)}
-            if colour not in self._edges:
+            kept = self._kept_for(segment_params)
+            if ("edges", colour) not in kept:
                 edges = superpixel_edges(*self.maps(segment_params))
                 for c in self.colour_images(segment_params) if colour else []:
                     edges += superpixel_edges(c.intensity, c.dop, c.phase)
-                self._edges[colour] = edges
-            return self._edges[colour]
+                kept["edges", colour] = edges
+            return kept["edges", colour]
 
     def superpixels(
         self, area: int, segment_params: SegmentParams | None = None, colour: bool = True
@@ -199,18 +197,24 @@ class PixelSegmenter:
         stays: the pixel features' regions and the region walk's graph share
         them when their areas agree (a camera frame). Thread-safe: a second caller
         waits for the first one's watershed."""
-        pol = self.pipeline.get("polarisation", segment_params)
         colour = colour and self.colour_stack is not None
         with self._lock:
-            if self._regions.get("image") != id(pol):
-                self._regions = {"image": id(pol)}
-            if (area, colour) not in self._regions:
+            kept = self._kept_for(segment_params)
+            if ("regions", area, colour) not in kept:
                 i, d, p = self.maps(segment_params)
                 edges = self.edges(segment_params, colour)
                 grid = watershed_grid(area)
                 regions = polarisation_superpixels(i, d, p, area, edges=edges, grid=grid)
-                self._regions[area, colour] = regions
-            return self._regions[area, colour]
+                kept["regions", area, colour] = regions
+            return kept["regions", area, colour]
+
+    def _kept_for(self, segment_params: SegmentParams | None) -> dict[Any, Any]:
+        """What :meth:`edges` and :meth:`superpixels` keep, emptied when the
+        polarisation image changes."""
+        pol = self.pipeline.get("polarisation", segment_params)
+        if self._kept.get("image") != id(pol):
+            self._kept = {"image": id(pol)}
+        return self._kept
 
     def maps(self, segment_params: SegmentParams | None = None) -> tuple[np.ndarray, ...]:
         """Î, ρ, φ the features are computed on: the pipeline's polarisation image, and

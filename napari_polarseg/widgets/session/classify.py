@@ -150,7 +150,7 @@ def classifier_stages(
     is handed to the prediction: it raises :class:`~napari_polarseg.engine.Cancelled`
     between chunks once ``cancel()`` is True.
     """
-    labelled = len(PIPELINE_STAGES) + 3  # the stages up to the labels
+    labelled = CLASSIFIER_STAGES.index(MAP_STAGES[0])  # the stages up to the labels
     names = CLASSIFIER_STAGES if reconstruction else CLASSIFIER_STAGES[:labelled]
     total = len(names)
     timings: dict[str, float] = {}
@@ -169,7 +169,7 @@ def classifier_stages(
     for i, name in enumerate(PIPELINE_STAGES):
         yield name, i, total
         run_stage(name)
-    yield "pixel features", len(PIPELINE_STAGES), total
+    yield "pixel features", CLASSIFIER_STAGES.index("pixel features"), total
     before = session.feature_runs
     problem = fit_session(session, params, scribbles, classifier, settings)
     if problem is not None:
@@ -177,7 +177,7 @@ def classifier_stages(
     if session.feature_runs != before:
         timings["pixel features"] = session.seconds.get("features", 0.0)
         recomputed.append("pixel features")
-    yield "normals", len(PIPELINE_STAGES) + 1, total
+    yield "normals", CLASSIFIER_STAGES.index("normals"), total
     run_stage("normals")
     recomputed.append("pixel classifier")
 
@@ -194,7 +194,7 @@ def classifier_stages(
         )
         return ClassifierOutput(replace(seg, result=result), classifier is None, None, preview)
 
-    yield "pixel classifier", len(PIPELINE_STAGES) + 2, total
+    yield "pixel classifier", CLASSIFIER_STAGES.index("pixel classifier"), total
     session.preview(cancel)
     yield Partial(output(False, preview=True))
     session.refine(cancel)

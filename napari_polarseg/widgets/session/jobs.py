@@ -136,8 +136,9 @@ def classifier_job(
     )
 
 
-#: Stages :func:`features_job` reports: the pipeline's, the pixel features, the normals.
-FEATURES_JOB_STAGES = len(PIPELINE_STAGES) + 2
+#: Stages :func:`features_job` reports: the pipeline's and the pixel features (the
+#: session computes the normals beside them).
+FEATURES_JOB_STAGES = len(PIPELINE_STAGES) + 1
 
 
 def features_job(
@@ -162,11 +163,8 @@ def features_job(
     session = store.session(key, colour_stack)
     assert session is not None
     session.segment_params = params
-    yield "pixel features", total - 2, total
-    n = session.features().n_features
-    yield "normals", total - 1, total
-    pipe.get("normals", params)
-    return n
+    yield "pixel features", total - 1, total
+    return session.features().n_features
 
 
 def read_classifier_job(path: Path) -> Generator[Stage, None, PixelClassifier]:
