@@ -53,6 +53,9 @@ RENDERED_DIR = Path(__file__).resolve().parents[2] / "shared" / "data" / "render
 #: Seeds of each half of the rendered set.
 HALVES = {"dev": tuple(range(12)), "test": tuple(range(12, 24))}
 HALF_NAMES = {"dev": "development half (seeds 0–11)", "test": "test half (seeds 12–23)"}
+#: Renders of seeds nobody chose or tuned on (``render_scenes.py --seeds 100-123``).
+UNSEEN_DIR = Path(__file__).resolve().parent / "renders"
+UNSEEN_NAME = "unseen renders (render_scenes.py, never chosen or tuned on)"
 #: A result is degenerate when one segment holds this share of the scored pixels.
 DEGENERATE_SHARE = 0.90
 #: Registered methods shown as columns of their own beside the default (those that are
@@ -235,6 +238,12 @@ def add_arguments(parser) -> None:
     )
     parser.add_argument("--rendered-dir", type=Path, default=RENDERED_DIR, help=f"[{RENDERED_DIR}]")
     parser.add_argument(
+        "--unseen",
+        action="store_true",
+        help="also the unseen renders of --unseen-dir (made by render_scenes.py)",
+    )
+    parser.add_argument("--unseen-dir", type=Path, default=UNSEEN_DIR, help=f"[{UNSEEN_DIR}]")
+    parser.add_argument(
         "--markdown",
         type=Path,
         metavar="PAGE",
@@ -245,7 +254,12 @@ def add_arguments(parser) -> None:
 
 def subset_only(args) -> bool:
     """True when the flags pick a subset of the material tables (skip everything else)."""
-    return bool(args.rendered or args.real)
+    return bool(args.rendered or args.real or args.unseen)
+
+
+def unseen_seeds(folder: Path) -> list[int]:
+    """Seeds of the ``scene_<seed>.npz`` files in ``folder``, in order."""
+    return sorted(int(f.stem.split("_")[1]) for f in Path(folder).glob("scene_*.npz"))
 
 
 def verdict_lines(sets: dict[str, list[dict]]) -> str:
@@ -277,11 +291,14 @@ def verdict_lines(sets: dict[str, list[dict]]) -> str:
     for key, rows in sets.items():
         if not rows:
             continue
-        if key in HALVES:
+        if key in HALVES or key == "unseen":
             mean = {c: float(np.mean([r[c] for r in rows])) for c in (default, plain, km)}
-            target = TARGET_TEST_HALF if key == "test" else None
+            target = TARGET_TEST_HALF if key in ("test", "unseen") else None
             what = verdict(mean[default], target, mean[plain], mean[km])
-            lines.append(f"- {HALF_NAMES[key]}, mean {mean[default]:.3f}: {what}")
+            marked = sum(default in r["marks"] for r in rows)
+            what += f"; degenerate on {marked} of {len(rows)}" if marked else ""
+            name = HALF_NAMES.get(key, UNSEEN_NAME)
+            lines.append(f"- {name}, mean {mean[default]:.3f}: {what}")
             continue
         for r in rows:
             what = verdict(r[default], TARGET_REAL_FRAME, r[plain], r[km])
@@ -324,7 +341,7 @@ def run(args, real_dir: Path, command: str | None = None) -> None:
             print(f"\n{text}", flush=True)
             blocks.append(text)
 
-    if args.rendered or not args.real:
+    if args.rendered or not (args.real or args.unseen):
         if not Path(args.rendered_dir).is_dir():
             add(f"no rendered scenes in {args.rendered_dir}: their tables are skipped")
         else:
@@ -332,7 +349,14 @@ def run(args, real_dir: Path, command: str | None = None) -> None:
                 rows = sets[half] = rendered_rows(HALVES[half], args.bounds, args.rendered_dir)
                 if rows:
                     add(table(rows, "rendered scenes, " + HALF_NAMES[half]), k_lines(rows))
-    if args.real or not args.rendered:
+    if args.unseen:
+        seeds = unseen_seeds(args.unseen_dir)
+        rows = sets["unseen"] = rendered_rows(seeds, args.bounds, args.unseen_dir)
+        if rows:
+            add(table(rows, f"{UNSEEN_NAME}, seeds {seeds[0]}–{seeds[-1]}"), k_lines(rows))
+        else:
+            add(f"no unseen renders in {args.unseen_dir}: their table is skipped")
+    if args.real or not (args.rendered or args.unseen):
         rows = sets["real"] = real_rows(real_dir, args.bounds) if Path(real_dir).is_dir() else []
         if rows:
             add(table(rows, "real frames (hand-labelled truth)"), k_lines(rows))
