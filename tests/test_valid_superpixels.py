@@ -123,3 +123,36 @@ def test_merge_closest_joins_the_nearest_centroids_by_area():
     nodes = np.array([0, 1, 2, 2, 3])  # segment 0 ≈ 1, 2 between them and 3
     np.testing.assert_array_equal(merge_closest(z, weight, nodes, 3), [0, 0, 2, 3])
     np.testing.assert_array_equal(merge_closest(z, weight, nodes, 2), [0, 0, 2, 2])
+
+
+def test_merge_undone_when_it_would_leave_one_segment_with_nearly_everything():
+    """Two large materials of equal ρ (intensity 1.0 and 0.6) and a small patch (6 % of
+    the pixels) of another ρ: k + 1 = 3 clusters are the three, and the closest pair
+    is the two large materials, so merging would leave one segment with 94 % of the
+    pixels; the merge is undone and k = 2 made directly split the two materials."""
+    from napari_polarseg.engine.methods.surface_superpixels import SurfaceSuperpixels
+    from napari_polarseg.engine.unsupervised.merge import (
+        GUARD_SHARE,
+        largest_share,
+        merge_closest,
+        merged_clustering,
+    )
+    from napari_polarseg.engine.unsupervised.segmenter import cluster_regions, prepare_regions
+
+    rng = np.random.default_rng(0)
+    h, w = 96, 128
+    rows, cols = np.mgrid[0:h, 0:w]
+    truth = (cols >= 0.6 * w).astype(int)
+    patch = (np.abs(rows - 24) < 14) & (np.abs(cols - 24) < 14)
+    level = np.where(patch, 0.8, np.where(truth == 0, 1.0, 0.6))
+    rho = np.where(patch, 0.12, 0.05)
+    intensity = (0.6 + 0.3 * np.sin(rows / h * np.pi)) * level
+    intensity *= 1 + 0.01 * rng.standard_normal((h, w))
+    dop = rho * (1 + 0.05 * rng.standard_normal((h, w)))
+    model = prepare_regions(intensity, dop, np.zeros((h, w)), SurfaceSuperpixels().params)
+    three = cluster_regions(model, 3).node_labels
+    merged = merge_closest(model.z, model.weight, three, 2)[three]
+    assert largest_share(merged, model.weight) >= GUARD_SHARE  # what the guard is for
+    labels = merged_clustering(model, 2).labels
+    assert np.bincount(labels.ravel()).max() / labels.size < GUARD_SHARE
+    assert adjusted_rand_score(truth[~patch], labels[~patch]) > 0.9
