@@ -81,6 +81,8 @@ DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 REAL_DIR = DATA / "polanalyser"
 RENDERED_DIR = DATA / "rendered"
 HALVES = {"dev": range(0, 12), "test": range(12, 24)}
+#: Held-out renders made by ``render_scenes.py`` (git-ignored; never tuned on).
+UNSEEN_DIR = Path(__file__).resolve().parent / "renders"
 
 #: An update: scribbles (H, W), 0 = none, else a truth value -> predicted truth values.
 Update = Callable[[np.ndarray], np.ndarray]
@@ -287,11 +289,11 @@ def real_scenes(folder: Path = REAL_DIR) -> list[Scene]:
     ]
 
 
-def rendered_scene(seed: int, folder: Path = RENDERED_DIR) -> Scene:
-    """``scene_<seed>.npz`` (dev for seeds 0-11, test for 12-23)."""
+def rendered_scene(seed: int, folder: Path = RENDERED_DIR, half: str | None = None) -> Scene:
+    """``scene_<seed>.npz`` (``half``: by default dev for seeds 0-11, test for 12-23)."""
     with np.load(folder / f"scene_{seed}.npz", allow_pickle=False) as f:
         stack, angles, labels = f["stack"], np.deg2rad(f["angles"]), f["labels"]
-    half = "dev" if seed in HALVES["dev"] else "test"
+    half = half or ("dev" if seed in HALVES["dev"] else "test")
     return Scene(f"scene_{seed}", stack, angles, labels.astype(np.int32), half)
 
 
@@ -347,7 +349,7 @@ def half_means(rows: list[dict], rounds: int) -> list[str]:
     """Per half and method: mean ARI after 5 corrections (or the last), and the bound."""
     at = min(5, rounds)
     lines = []
-    for half in ("dev", "test"):
+    for half in ("dev", "test", "unseen"):
         mine = [r for r in rows if r["half"] == half]
         if not mine:
             continue
@@ -373,6 +375,11 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--real", action="store_true", help="the hand-labelled real frames")
     parser.add_argument("--rendered", choices=("dev", "test", "all"), help="rendered scenes")
+    parser.add_argument(
+        "--unseen",
+        action="store_true",
+        help=f"the held-out renders of render_scenes.py in {UNSEEN_DIR}",
+    )
     parser.add_argument("--rounds", type=int, default=15, help="corrections [15]")
     parser.add_argument("--seeds", help="only these rendered seeds (comma-separated)")
     parser.add_argument(
@@ -382,8 +389,8 @@ def main(argv: list[str] | None = None) -> int:
         "--markdown", type=Path, help="also write the tables into this page's robot-user block"
     )
     args = parser.parse_args(argv)
-    if not args.real and not args.rendered:
-        parser.error("choose --real and/or --rendered dev|test|all")
+    if not args.real and not args.rendered and not args.unseen:
+        parser.error("choose --real, --rendered dev|test|all and/or --unseen")
     methods = None if not args.methods else tuple(m.strip() for m in args.methods.split(","))
     t0 = time.perf_counter()
     print(header(args.rounds), flush=True)
@@ -398,6 +405,11 @@ def main(argv: list[str] | None = None) -> int:
             seeds = [s for s in seeds if str(s) in args.seeds.split(",")]
         for seed in seeds:
             rows += evaluate_scene(rendered_scene(seed), args.rounds, bound=True, methods=methods)
+    if args.unseen:
+        files = sorted(UNSEEN_DIR.glob("scene_*.npz"), key=lambda f: int(f.stem.split("_")[1]))
+        for f in files:
+            scene = rendered_scene(int(f.stem.split("_")[1]), UNSEEN_DIR, "unseen")
+            rows += evaluate_scene(scene, args.rounds, bound=True, methods=methods)
     print()
     print("\n".join(half_means(rows, args.rounds)))
     print(f"\ntotal {time.perf_counter() - t0:.1f} s")

@@ -79,3 +79,21 @@ def test_markdown_needs_the_markers(tmp_path):
     with pytest.raises(SystemExit):
         materials.run(_args(tmp_path, page), tmp_path / "no-real-frames", "cmd")
     assert page.read_text(encoding="utf-8") == "# no block here\n"
+
+
+def test_unseen_renders_get_a_table_and_a_verdict_of_their_own(tmp_path, capsys):
+    """``--unseen``: every ``scene_<seed>.npz`` of the held-out folder is scored, in seed
+    order, in a table and a verdict line of its own; the halves are not run."""
+    _rendered_folder(tmp_path)
+    (tmp_path / "scene_0.npz").rename(tmp_path / "scene_101.npz")
+    parser = argparse.ArgumentParser()
+    materials.add_arguments(parser)
+    args = parser.parse_args(["--unseen", "--bounds", "none", "--unseen-dir", str(tmp_path)])
+    assert materials.subset_only(args)
+    assert materials.unseen_seeds(tmp_path) == [101]
+    materials.run(args, tmp_path / "no-real-frames", "cmd")
+    out = capsys.readouterr().out
+    assert f"{materials.UNSEEN_NAME}, seeds 101–101" in out
+    assert "| scene_101 | 2 |" in out
+    assert f"- {materials.UNSEEN_NAME}, mean" in out and "target 0.5" in out
+    assert "development half" not in out
