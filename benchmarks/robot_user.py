@@ -60,7 +60,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from baselines import plain_features, real_frames  # noqa: E402
 from ilastik_features import ilastik_features  # noqa: E402
-from materials import replace_block  # noqa: E402
+from materials import UNSEEN_DIR, replace_block, unseen_seeds  # noqa: E402
 
 #: The block of ``docs/quality.md`` that ``--markdown`` rewrites.
 MARKDOWN_BEGIN = "<!-- robot user: begin -->"
@@ -81,8 +81,6 @@ DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 REAL_DIR = DATA / "polanalyser"
 RENDERED_DIR = DATA / "rendered"
 HALVES = {"dev": range(0, 12), "test": range(12, 24)}
-#: Held-out renders made by ``render_scenes.py`` (git-ignored; never tuned on).
-UNSEEN_DIR = Path(__file__).resolve().parent / "renders"
 
 #: An update: scribbles (H, W), 0 = none, else a truth value -> predicted truth values.
 Update = Callable[[np.ndarray], np.ndarray]
@@ -406,9 +404,10 @@ def main(argv: list[str] | None = None) -> int:
         for seed in seeds:
             rows += evaluate_scene(rendered_scene(seed), args.rounds, bound=True, methods=methods)
     if args.unseen:
-        files = sorted(UNSEEN_DIR.glob("scene_*.npz"), key=lambda f: int(f.stem.split("_")[1]))
-        for f in files:
-            scene = rendered_scene(int(f.stem.split("_")[1]), UNSEEN_DIR, "unseen")
+        for seed in unseen_seeds(UNSEEN_DIR):
+            if args.seeds and str(seed) not in args.seeds.split(","):
+                continue
+            scene = rendered_scene(seed, UNSEEN_DIR, "unseen")
             rows += evaluate_scene(scene, args.rounds, bound=True, methods=methods)
     print()
     print("\n".join(half_means(rows, args.rounds)))
