@@ -2,15 +2,17 @@
 and the variants tried beside it, on the rendered development half and the real frames.
 
 Every variant is the valid-superpixel method (``engine/methods/valid_superpixels.py``:
-invalid pixels left out, k + 1 clusters merged to k) with other
-``UnsupervisedParams``; the rows print the mean ARI over the development half (seeds
-0–11) and over the four labelled real frames, and each real frame's ARI, scored as in
-``materials.py`` (k = the truth's classes, ARI over the labelled pixels). Then the
-number of materials found by itself (``n_segments = 0``) by the silhouette rule with
-each tolerance (``estimate_k``: the fewest k within that share of the best score), for
-the 7 % diffusion of ``valid_superpixels`` and the 20 % one of the default: exact and
-within ±1 of the true k. The test half (seeds 12–23) is only read with ``--test``:
-choose on the development half, report on the test half.
+invalid pixels left out, k + 1 clusters merged to k, the two closest in features) with
+other ``UnsupervisedParams``; the last rows are the wide diffusion with the default's
+merge rule (``engine/unsupervised/merge.py``: the weakest border). The rows print the
+mean ARI over the development half (seeds 0–11) and over the four labelled real
+frames, and each real frame's ARI, scored as in ``materials.py`` (k = the truth's
+classes, ARI over the labelled pixels). Then the number of materials found by itself
+(``n_segments = 0``) by the silhouette rule with each tolerance (``estimate_k``: the
+fewest k within that share of the best score), for the 7 % diffusion of
+``valid_superpixels`` and the 20 % one of the default: exact and within ±1 of the true
+k. The test half (seeds 12–23) is only read with ``--test``: choose on the development
+half, report on the test half.
 
 Usage::
 
@@ -33,7 +35,12 @@ from napari_polarseg.engine import Pipeline
 from napari_polarseg.engine.methods.surface_superpixels import BORDER_SCALE, REACH
 from napari_polarseg.engine.methods.valid_superpixels import choose_k, clustered_pixels
 from napari_polarseg.engine.params import PRESETS
-from napari_polarseg.engine.unsupervised.merge import merged_clustering
+from napari_polarseg.engine.unsupervised.merge import (
+    Merge,
+    closest_centroids,
+    merged_clustering,
+    weakest_border,
+)
 from napari_polarseg.engine.unsupervised.params import UnsupervisedParams
 from napari_polarseg.engine.unsupervised.segmenter import prepare_regions
 
@@ -41,8 +48,8 @@ V = UnsupervisedParams()  # valid_superpixels
 W = V.replace(diffusion_range=REACH, diffusion_tau=BORDER_SCALE)  # surface_superpixels
 
 
-def _variants() -> dict[str, UnsupervisedParams]:
-    out = {"valid_superpixels (reach 7 %, τ 0.75)": V}
+def _variants() -> dict[str, UnsupervisedParams | tuple[UnsupervisedParams, Merge]]:
+    out: dict = {"valid_superpixels (reach 7 %, τ 0.75)": V}
     for reach in (0.10, 0.14, 0.17, 0.20):
         for tau in (0.75, 1.0, 1.25):
             out[f"reach {reach * 100:.0f} %, τ {tau}"] = V.replace(
@@ -61,6 +68,8 @@ def _variants() -> dict[str, UnsupervisedParams]:
     out["reach 14 %, log Î counted twice"] = V.replace(
         features=V.features + ("log_intensity",), diffusion_range=0.14
     )
+    out["reach 20 %, τ 1.25, weakest-border merge (default)"] = (W, weakest_border)
+    out["reach 20 %, τ 1.25, k + 2, weakest-border merge"] = (W, weakest_border, 2)
     return out
 
 
@@ -83,12 +92,16 @@ def frames(test: bool) -> list[tuple[str, str, tuple, np.ndarray, int]]:
     return out
 
 
-def score(params: UnsupervisedParams, data: list, tolerances=(0.0,)) -> dict:
-    """ARI per frame of the k + 1 → k clustering, and the k found per tolerance."""
+def score(variant, data: list, tolerances=(0.0,)) -> dict:
+    """ARI per frame of the k + extra → k clustering of ``variant`` (parameters, or
+    (parameters, merge rule[, extra])), and the k found per tolerance."""
+    if not isinstance(variant, tuple):
+        variant = (variant, closest_centroids)
+    params, merge, extra = (*variant, 1)[:3]
     row: dict = {"ari": {}, "k": {t: {} for t in tolerances}}
     for _group, name, (i, d, ph, invalid), truth, k in data:
         model = prepare_regions(i, d, ph, params, clustered_pixels(None, invalid))
-        labels = merged_clustering(model, k).labels
+        labels = merged_clustering(model, k, extra, merge).labels
         scored = truth > 0
         row["ari"][name] = float(adjusted_rand_score(truth[scored], labels[scored]))
         for t in tolerances:
@@ -98,7 +111,7 @@ def score(params: UnsupervisedParams, data: list, tolerances=(0.0,)) -> dict:
 
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--variants", help="comma-separated names (default: all)")
+    parser.add_argument("--variants", help="names separated by ; (default: all)")
     parser.add_argument("--test", action="store_true", help="also score the test half")
     args = parser.parse_args(argv)
     t0 = time.perf_counter()
@@ -106,7 +119,7 @@ def main(argv: list[str] | None = None) -> None:
     groups = [g for g in ("dev", "test", "real") if any(f[0] == g for f in data)]
     real = [f[1] for f in data if f[0] == "real"]
     variants = _variants()
-    names = args.variants.split(",") if args.variants else list(variants)
+    names = args.variants.split(";") if args.variants else list(variants)
     print(
         "| variant | " + " | ".join(f"{g} mean" for g in groups) + " | " + " | ".join(real) + " |"
     )

@@ -419,12 +419,13 @@ RECOMMENDED = SegmentParams(
 
 
 #: The default of ``segment``, ``demo`` and the plugin (preset ``auto``): the superpixel
-#: method on the valid pixels, k + 1 clusters merged to k, the node features diffused
-#: over whole surfaces (``method="surface_superpixels"``), the best unsupervised method
-#: measured on the rendered development scenes and the hand-labelled real frames
-#: together (``benchmarks/evaluate_unsupervised.py``, figures in ``docs/quality.md``; it
-#: replaced ``"valid_superpixels"``, which replaced ``"superpixels"``); the recommended
-#: block parameters give the thesis maps when asked for.
+#: method on the valid pixels, k + 1 clusters merged to k across the weakest border,
+#: the node features diffused over whole surfaces (``method="surface_superpixels"``),
+#: the best unsupervised method measured on the rendered development scenes and the
+#: hand-labelled real frames together (``benchmarks/evaluate_unsupervised.py``, figures
+#: in ``docs/quality.md``; it replaced ``"valid_superpixels"``, which replaced
+#: ``"superpixels"``); the recommended block parameters give the thesis maps when
+#: asked for.
 AUTO = RECOMMENDED.replace(method="surface_superpixels")
 
 #: The named starting points of the CLI's ``--preset`` and the plugin's preset menu.
@@ -443,8 +444,8 @@ DEFAULT_PRESET = "auto"
 #: What each preset is: the CLI's ``--preset`` help and the plugin's preset tooltip.
 PRESET_HELP: dict[str, str] = {
     "auto": "superpixels of the valid pixels, their polarisation features spread over the "
-    "surface each lies on, clustered into one segment more than asked, the closest two "
-    "merged: the best unsupervised method "
+    "surface each lies on, clustered into one segment more than asked, the two whose "
+    "shared border is weakest merged: the best unsupervised method "
     "measured on rendered and real frames (--segments 0: the number found by itself; a "
     "close-up of one smooth surface: by where its polarisation departs from the "
     "surface's trend)",

@@ -20,6 +20,11 @@ wall) ρ and the shading drift across the frame, and a short diffusion leaves th
 in the features, so k-means cuts the surface in two along it and merges two materials
 elsewhere.
 
+Of the k + 1 clusters, the two merged are those whose shared border is **weakest on
+average** (:func:`~napari_polarseg.engine.unsupervised.merge.weakest_border`), not the
+two closest in feature space: where the clustering still cuts one surface along its
+shading or a soft shadow, the two parts meet along a border with no edge.
+
 With ``n_segments = 0`` the number of segments is the fewest among 2..6 whose
 silhouette comes within :data:`K_TOLERANCE` of the best one: the diffused features
 form smooth continua that more clusters always cut a little better, so the best
@@ -31,6 +36,7 @@ The figures that chose these values, and their neighbours, are in ``docs/quality
 
 from __future__ import annotations
 
+from ..unsupervised.merge import weakest_border
 from ..unsupervised.params import UnsupervisedParams
 from .valid_superpixels import ValidSuperpixels
 
@@ -50,6 +56,7 @@ class SurfaceSuperpixels(ValidSuperpixels):
     name = "surface_superpixels"
     title = "superpixels on valid pixels, features spread over surfaces (unsupervised)"
     k_tolerance = K_TOLERANCE
+    merge_rule = staticmethod(weakest_border)
 
     def __init__(self, params: UnsupervisedParams | None = None) -> None:
         super().__init__(

@@ -39,7 +39,7 @@ import numpy as np
 
 from ..params import SegmentParams
 from ..unsupervised.choose_k import K_RANGE, estimate_k
-from ..unsupervised.merge import merged_clustering
+from ..unsupervised.merge import closest_centroids, merged_clustering
 from ..unsupervised.segmenter import RegionModel, cluster_regions, prepare_regions
 from .base import MethodOutput, MethodRun
 from .superpixel_clustering import SuperpixelClustering
@@ -90,6 +90,8 @@ class ValidSuperpixels(SuperpixelClustering):
     finds_k = True
     #: ``tolerance`` of :func:`choose_k`
     k_tolerance = 0.0
+    #: Which two of the k + 1 segments are merged (:mod:`..unsupervised.merge`)
+    merge_rule = staticmethod(closest_centroids)
 
     def segment(
         self, scene: Scene, params: SegmentParams, inputs: dict[str, Any], run: MethodRun
@@ -118,7 +120,7 @@ class ValidSuperpixels(SuperpixelClustering):
             k = choice["k"]
             record["k_confidence"] = round(choice["confidence"], 4)
             record["k_scores"] = {str(j): round(s, 4) for j, s in choice["scores"].items()}
-        seg = merged_clustering(model, k)
+        seg = merged_clustering(model, k, merge=self.merge_rule)
         record["k"] = k
         record.update(surface_share=round(seg.surface_share, 6), close_up=seg.close_up)
         return MethodOutput(seg.labels, record=record, extra={"unsupervised": seg})

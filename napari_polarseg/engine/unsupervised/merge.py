@@ -1,21 +1,33 @@
-"""Over-segment, then merge: k + extra clusters of the superpixels, the closest merged.
+"""Over-segment, then merge: k + extra clusters of the superpixels, two at a time merged.
 
 :func:`merged_clustering` clusters a :class:`~.segmenter.RegionModel` into
 k + ``extra`` segments (:func:`~.segmenter.cluster_regions`) and then merges, one pair
-at a time, the two segments whose area-weighted mean node features (the projected,
-whitened features ``RegionModel.z``) are closest in Euclidean distance (centroid
-linkage; the merged segment's mean is the area-weighted mean of the two), until k are
-left. The extra segment takes what fits none of the k well (a shadow, a highlight, a
-band of superpixels straddling two materials) and is then given to the material it
-resembles most, instead of pulling a whole material's cluster towards itself.
+at a time, until k are left. The extra segment takes what fits none of the k well (a
+shadow, a highlight, a band of superpixels straddling two materials, one half of a
+surface under a light gradient) and is then given to a material. Which pair is merged
+is the method's choice (``merge``):
+
+- :func:`closest_centroids`: the two whose area-weighted mean node features (the
+  projected, whitened ``RegionModel.z``) are closest in Euclidean distance (centroid
+  linkage; the merged segment's mean is the area-weighted mean of the two);
+- :func:`weakest_border`: the two whose shared border is weakest on average, the
+  largest Σ w_ab / Σ L_ab over the superpixel borders between them, with the
+  edge-aware weights w_ab = L_ab · exp(−(e_ab / τ)²) of the diffusion
+  (``RegionModel.borders``) and the border lengths L_ab (``RegionModel.adjacency``).
+  A surface that the clustering cut along a shading gradient or a soft shadow meets
+  itself along a border with no edge, two materials along an edge; a segment inside
+  another (fish in water) has all its border there but an edge all along it, so the
+  *mean* weight, not the share of the border, is what is compared. Segments that
+  share no border are not merged this way (when no two do, the closest centroids).
 
 Measured (``benchmarks/evaluate_unsupervised.py`` and the variants beside it, mean ARI,
-valid pixels only): on the rendered development half k + 1 → k 0.435, k + 2 → k 0.443,
-2k → k 0.438, 3k → k 0.425, against 0.361 for k directly; Ward linkage instead of the
-centroid one 0.375 (2k), merging by the edge strength along the shared border 0.430
-but degenerate on the real carps frame. On the real frames k + 1 → k gave camera
-0.992, carps 0.902, fruits 0.660, polariser 1.000 (k directly: 0.992, 0.349, 0.663,
-1.000); k + 2 → k lost fruits (0.599), so k + 1 is the default.
+valid pixels only), closest centroids: on the rendered development half k + 1 → k
+0.435, k + 2 → k 0.443, 2k → k 0.438, 3k → k 0.425, against 0.361 for k directly; Ward
+linkage instead of the centroid one 0.375 (2k), merging 2k → k by the edge strength
+along the shared border 0.430 but degenerate on the real carps frame. On the real
+frames k + 1 → k gave camera 0.992, carps 0.902, fruits 0.660, polariser 1.000 (k
+directly: 0.992, 0.349, 0.663, 1.000); k + 2 → k lost fruits (0.599), so k + 1 is the
+default. The weakest border's figures are in ``docs/quality.md``.
 
 The merge is undone when it leaves one segment holding :data:`GUARD_SHARE` or more of
 the clustered pixels and k clusters made directly do not: then the extra segment had
@@ -26,9 +38,11 @@ benchmarks' mark of a degenerate result (``benchmarks/materials.py``), not a tun
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import replace
 
 import numpy as np
+import scipy.sparse as sps
 
 from .params import UnsupervisedResult
 from .segmenter import RegionModel, cluster_regions, first_appearance
@@ -77,18 +91,67 @@ def merge_closest(z: np.ndarray, weight: np.ndarray, node_labels: np.ndarray, k:
     return target
 
 
+def closest_centroids(model: RegionModel, node_labels: np.ndarray, k: int) -> np.ndarray:
+    """(m,) int: :func:`merge_closest` of ``model``'s node features (module docstring)."""
+    return merge_closest(model.z, model.weight, node_labels, k)
+
+
+def weakest_border(model: RegionModel, node_labels: np.ndarray, k: int) -> np.ndarray:
+    """(m,) int: the segment each of the m = ``node_labels.max() + 1`` segments joins
+    (its lowest-numbered member) after merging, one pair at a time until ``k`` are
+    left, the two whose shared border has the largest mean edge-aware weight
+    Σ w_ab / Σ L_ab (module docstring); the closest centroids when no two segments
+    share a border, or when ``model`` has no border weights."""
+    m = int(node_labels.max()) + 1
+    if model.borders is None:
+        return closest_centroids(model, node_labels, k)
+    member = sps.csr_matrix(
+        (np.ones(node_labels.size), (node_labels, np.arange(node_labels.size))),
+        shape=(m, node_labels.size),
+    )
+    weights = (member @ model.borders @ member.T).toarray()
+    lengths = (member @ model.adjacency @ member.T).toarray()
+    target = np.arange(m)
+    alive = np.ones(m, dtype=bool)
+    while alive.sum() > max(k, 1):
+        idx = np.flatnonzero(alive)
+        w, length = weights[np.ix_(idx, idx)], lengths[np.ix_(idx, idx)]
+        mean = np.where(length > 0, w / np.maximum(length, 1e-12), -np.inf)
+        mean[np.tril_indices(idx.size)] = -np.inf
+        if not np.isfinite(mean).any():  # no two left share a border
+            kept, compact = np.unique(target[node_labels], return_inverse=True)
+            joined = closest_centroids(model, compact, k)
+            return kept[joined][np.searchsorted(kept, target)]
+        i, j = np.unravel_index(int(np.argmax(mean)), mean.shape)
+        a, b = idx[i], idx[j]
+        for table in (weights, lengths):
+            table[a] += table[b]
+            table[:, a] += table[:, b]
+        alive[b] = False
+        target[target == b] = a
+    return target
+
+
+#: How two segments are chosen for merging: a function of (model, node labels, k)
+#: returning each segment's target (:func:`closest_centroids`, :func:`weakest_border`).
+Merge = Callable[[RegionModel, np.ndarray, int], np.ndarray]
+
+
 def merged_clustering(
-    model: RegionModel, k: int, extra: int = EXTRA_SEGMENTS
+    model: RegionModel,
+    k: int,
+    extra: int = EXTRA_SEGMENTS,
+    merge: Merge = closest_centroids,
 ) -> UnsupervisedResult:
-    """The labels of ``model`` for k segments: k + ``extra`` clustered, the closest merged
-    (module docstring); k directly when there are too few superpixels for more, or when
-    the merge leaves one segment with :data:`GUARD_SHARE` of the pixels and k directly
-    does not."""
+    """The labels of ``model`` for k segments: k + ``extra`` clustered, then merged two
+    at a time by ``merge`` (module docstring); k directly when there are too few
+    superpixels for more, or when the merge leaves one segment with
+    :data:`GUARD_SHARE` of the pixels and k directly does not."""
     extra = max(0, min(int(extra), model.n - k))
     seg = cluster_regions(model, k + extra)
     if extra == 0 or k < 1:
         return seg
-    target = merge_closest(model.z, model.weight, seg.node_labels, k)
+    target = merge(model, seg.node_labels, k)
     if k > 1 and largest_share(target[seg.node_labels], model.weight) >= GUARD_SHARE:
         direct = cluster_regions(model, k)
         if largest_share(direct.node_labels, model.weight) < GUARD_SHARE:

@@ -339,6 +339,11 @@ class RegionModel:
     nearest : ndarray (H, W) of int or None
         With a mask, the flat index of the nearest valid pixel of every pixel
         (:func:`~napari_polarseg.engine.physics.pixel_mask.nearest_valid`), made once.
+    borders : scipy.sparse.csr_matrix (n, n) or None
+        Edge-aware border weights L_ab · exp(−(e_ab / τ)²) between superpixels
+        (:func:`.region_diffusion.edge_aware_adjacency`, τ = ``diffusion_tau``): the
+        diffusion's graph and the merge's (:func:`.merge.weakest_border`); None below
+        two superpixels.
     """
 
     maps: tuple[np.ndarray, np.ndarray, np.ndarray]
@@ -354,6 +359,7 @@ class RegionModel:
     params: UnsupervisedParams
     refine_maps: np.ndarray | None = None
     nearest: np.ndarray | None = None
+    borders: sps.csr_matrix | None = None
 
     @property
     def used_params(self) -> UnsupervisedParams:
@@ -424,13 +430,12 @@ def prepare_regions(
     step(0.8)
     weight = np.bincount(regions.ravel(), minlength=n).astype(float)[keep]
     adjacency = region_adjacency(regions)[keep][:, keep].tocsr()
+    borders = None
     if n < 2:
         z = np.zeros((n, 0))
-    else:
-        graph = None
-        if diffusion_steps(q.diffusion_range, n, q.diffusion):
-            graph = edge_aware_adjacency(regions, edges, q.diffusion_tau)[keep][:, keep].tocsr()
-        z = _project(x[keep], weight, graph, adjacency, q)
+    else:  # the border weights serve the diffusion and the merge by weakest border
+        borders = edge_aware_adjacency(regions, edges, q.diffusion_tau)[keep][:, keep].tocsr()
+        z = _project(x[keep], weight, borders, adjacency, q)
     maps = refine_maps(i, d) if q.refine_boundaries else None
     return RegionModel(
         (i, d, ph),
@@ -446,6 +451,7 @@ def prepare_regions(
         p,
         maps,
         nearest,
+        borders,
     )
 
 
