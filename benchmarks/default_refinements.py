@@ -1,7 +1,9 @@
 """Two refinements of the default's clusters tried for issue 24, measured beside it.
 
-The default (preset ``auto``: ``surface_superpixels``, k + 1 clusters merged to k) on the
-development half of the rendered scenes and the four labelled real frames, and:
+The default as it was then (preset ``auto``: ``surface_superpixels``, k + 1 clusters,
+the two closest merged; since 2026-12-03 the default merges across the weakest border
+instead) on the development half of the rendered scenes and the four labelled real
+frames, and:
 
 - **self-training**: the pixel classifier of the scribble loop (``ScribbleSession``)
   trained on every cluster's interior (eroded by ``--erode`` px), then every pixel
