@@ -161,7 +161,8 @@ def test_merge_undone_when_it_would_leave_one_segment_with_nearly_everything():
 def test_weakest_border_merges_across_the_faint_border_not_the_nearest_centroids():
     """Three segments of one superpixel each: 0 and 1 meet along a long border with no
     edge (mean weight 0.9, one surface cut along its shading), 1 and 2 along an edge
-    (mean 0.1) though their features are the closest; a short border 0–2 (0.1)."""
+    (mean 0.1) though their features are the closest; a short border 0–2 (0.1). Far
+    apart in features (a bruise on its fruit), a faint border is not enough."""
     from types import SimpleNamespace
 
     import scipy.sparse as sps
@@ -170,20 +171,25 @@ def test_weakest_border_merges_across_the_faint_border_not_the_nearest_centroids
 
     lengths = sps.csr_matrix(np.array([[0, 10, 2], [10, 0, 10], [2, 10, 0]], float))
     weights = sps.csr_matrix(np.array([[0, 9, 0.2], [9, 0, 1], [0.2, 1, 0]], float))
-    z = np.array([[0.0], [5.0], [5.5]])
+    z = np.array([[0.0], [0.6], [0.9]])  # whitened: within one standard deviation
     model = SimpleNamespace(z=z, weight=np.ones(3), adjacency=lengths, borders=weights)
     nodes = np.arange(3)
     np.testing.assert_array_equal(weakest_border(model, nodes, 2), [0, 0, 2])
     np.testing.assert_array_equal(closest_centroids(model, nodes, 2), [0, 1, 1])
     np.testing.assert_array_equal(weakest_border(model, nodes, 1), [0, 0, 0])
-    # segments that share no border: the closest centroids decide
-    apart = SimpleNamespace(
-        z=z, weight=np.ones(3), adjacency=sps.csr_matrix((3, 3)), borders=sps.csr_matrix((3, 3))
+    # 0 three standard deviations away: (0.9 / 10) < (0.1 / 1.09), the edge is crossed
+    far = SimpleNamespace(
+        z=np.array([[-3.0], [0.0], [0.1]]), weight=np.ones(3), adjacency=lengths, borders=weights
     )
+    np.testing.assert_array_equal(weakest_border(far, nodes, 2), [0, 1, 1])
+    # segments that share no border: the closest centroids decide
+    none = sps.csr_matrix((3, 3))
+    apart = SimpleNamespace(z=z, weight=np.ones(3), adjacency=none, borders=none)
     np.testing.assert_array_equal(weakest_border(apart, nodes, 2), [0, 1, 1])
-    # two segments of several superpixels: their borders are summed
+    # segments of several superpixels: their borders are summed; segment 0 = superpixels
+    # 0 and 1, 1 = 2, 2 = 3: 0–1 weight 5 over length 6, 0–2 1 over 12, 1–2 1 over 10
     many = SimpleNamespace(
-        z=np.array([[0.0], [0.0], [5.0], [5.5]]),
+        z=np.array([[0.0], [0.0], [0.5], [0.8]]),
         weight=np.ones(4),
         adjacency=sps.csr_matrix(
             np.array([[0, 4, 6, 0], [4, 0, 0, 12], [6, 0, 0, 10], [0, 12, 10, 0]], float)
@@ -192,6 +198,4 @@ def test_weakest_border_merges_across_the_faint_border_not_the_nearest_centroids
             np.array([[0, 4, 5, 0], [4, 0, 0, 1], [5, 0, 0, 1], [0, 1, 1, 0]], float)
         ),
     )
-    # segment 0 = superpixels 0, 1; 1 = superpixel 2; 2 = superpixel 3
-    # 0–1: weight 5 over length 6 (0.83); 0–2: 1 / 12; 1–2: 1 / 10
     np.testing.assert_array_equal(weakest_border(many, np.array([0, 0, 1, 2]), 2), [0, 0, 2])

@@ -10,15 +10,19 @@ is the method's choice (``merge``):
 - :func:`closest_centroids`: the two whose area-weighted mean node features (the
   projected, whitened ``RegionModel.z``) are closest in Euclidean distance (centroid
   linkage; the merged segment's mean is the area-weighted mean of the two);
-- :func:`weakest_border`: the two whose shared border is weakest on average, the
-  largest Σ w_ab / Σ L_ab over the superpixel borders between them, with the
-  edge-aware weights w_ab = L_ab · exp(−(e_ab / τ)²) of the diffusion
-  (``RegionModel.borders``) and the border lengths L_ab (``RegionModel.adjacency``).
-  A surface that the clustering cut along a shading gradient or a soft shadow meets
-  itself along a border with no edge, two materials along an edge; a segment inside
-  another (fish in water) has all its border there but an edge all along it, so the
-  *mean* weight, not the share of the border, is what is compared. Segments that
-  share no border are not merged this way (when no two do, the closest centroids).
+- :func:`weakest_border`: the two whose shared border is weakest on average *and*
+  whose features are close: the largest (Σ w_ab / Σ L_ab) / (1 + d²), the mean of the
+  diffusion's edge-aware weights w_ab = L_ab · exp(−(e_ab / τ)²)
+  (``RegionModel.borders``) over the border lengths L_ab (``RegionModel.adjacency``)
+  between them, divided by one plus the squared distance d² of their centroids in the
+  whitened node features (units of one standard deviation, so 1 is the scale at which
+  the features start to count). A surface that the clustering cut along a shading
+  gradient or a soft shadow meets itself along a border with no edge, two materials
+  along an edge; a segment inside another (fish in water) has all its border there
+  but an edge all along it, so the *mean* weight, not the share of the border, is
+  what is compared; a bruise meets its fruit along a faint border too, and its
+  distance in features is what keeps the two apart. Segments that share no border are
+  not merged this way (when no two do, the closest centroids).
 
 Measured (``benchmarks/evaluate_unsupervised.py`` and the variants beside it, mean ARI,
 valid pixels only), closest centroids: on the rendered development half k + 1 → k
@@ -60,22 +64,25 @@ def largest_share(node_labels: np.ndarray, weight: np.ndarray) -> float:
     return float(w.max() / max(w.sum(), 1e-12))
 
 
+def segment_centres(
+    z: np.ndarray, weight: np.ndarray, node_labels: np.ndarray, m: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """(w (m,), centres (m, c)): the pixels of each of m segments and the area-weighted
+    mean of ``z`` over its superpixels."""
+    w = np.bincount(node_labels, weights=weight, minlength=m)
+    sums = [
+        np.bincount(node_labels, weights=weight * z[:, j], minlength=m) for j in range(z.shape[1])
+    ]
+    centres = np.stack(sums, axis=1) if sums else np.zeros((m, 0))
+    return w, centres / np.maximum(w, 1e-12)[:, None]
+
+
 def merge_closest(z: np.ndarray, weight: np.ndarray, node_labels: np.ndarray, k: int) -> np.ndarray:
     """(m,) int: the segment each of the m = ``node_labels.max() + 1`` segments joins
     (its lowest-numbered member) after merging the closest pair of area-weighted
     centroids of ``z`` until ``k`` are left (module docstring)."""
     m = int(node_labels.max()) + 1
-    w = np.bincount(node_labels, weights=weight, minlength=m)
-    centres = (
-        np.stack(
-            [
-                np.bincount(node_labels, weights=weight * z[:, j], minlength=m)
-                for j in range(z.shape[1])
-            ],
-            axis=1,
-        )
-        / np.maximum(w, 1e-12)[:, None]
-    )
+    w, centres = segment_centres(z, weight, node_labels, m)
     target = np.arange(m)
     alive = np.ones(m, dtype=bool)
     while alive.sum() > max(k, 1):
@@ -99,9 +106,11 @@ def closest_centroids(model: RegionModel, node_labels: np.ndarray, k: int) -> np
 def weakest_border(model: RegionModel, node_labels: np.ndarray, k: int) -> np.ndarray:
     """(m,) int: the segment each of the m = ``node_labels.max() + 1`` segments joins
     (its lowest-numbered member) after merging, one pair at a time until ``k`` are
-    left, the two whose shared border has the largest mean edge-aware weight
-    Σ w_ab / Σ L_ab (module docstring); the closest centroids when no two segments
-    share a border, or when ``model`` has no border weights."""
+    left, the two with the largest (Σ w_ab / Σ L_ab) / (1 + d²): the mean edge-aware
+    weight along their shared border over one plus the squared distance of their
+    area-weighted centroids in the whitened node features ``z`` (module docstring); the
+    closest centroids when no two segments share a border, or when ``model`` has no
+    border weights."""
     m = int(node_labels.max()) + 1
     if model.borders is None:
         return closest_centroids(model, node_labels, k)
@@ -111,22 +120,27 @@ def weakest_border(model: RegionModel, node_labels: np.ndarray, k: int) -> np.nd
     )
     weights = (member @ model.borders @ member.T).toarray()
     lengths = (member @ model.adjacency @ member.T).toarray()
+    w, centres = segment_centres(model.z, model.weight, node_labels, m)
     target = np.arange(m)
     alive = np.ones(m, dtype=bool)
     while alive.sum() > max(k, 1):
         idx = np.flatnonzero(alive)
-        w, length = weights[np.ix_(idx, idx)], lengths[np.ix_(idx, idx)]
-        mean = np.where(length > 0, w / np.maximum(length, 1e-12), -np.inf)
-        mean[np.tril_indices(idx.size)] = -np.inf
-        if not np.isfinite(mean).any():  # no two left share a border
+        shared = lengths[np.ix_(idx, idx)]
+        d2 = ((centres[idx, None, :] - centres[None, idx, :]) ** 2).sum(axis=-1)
+        mean = weights[np.ix_(idx, idx)] / np.maximum(shared, 1e-12)
+        score = np.where(shared > 0, mean / (1.0 + d2), -np.inf)
+        score[np.tril_indices(idx.size)] = -np.inf
+        if not np.isfinite(score).any():  # no two left share a border
             kept, compact = np.unique(target[node_labels], return_inverse=True)
             joined = closest_centroids(model, compact, k)
             return kept[joined][np.searchsorted(kept, target)]
-        i, j = np.unravel_index(int(np.argmax(mean)), mean.shape)
+        i, j = np.unravel_index(int(np.argmax(score)), score.shape)
         a, b = idx[i], idx[j]
         for table in (weights, lengths):
             table[a] += table[b]
             table[:, a] += table[:, b]
+        centres[a] = (w[a] * centres[a] + w[b] * centres[b]) / max(w[a] + w[b], 1e-12)
+        w[a] += w[b]
         alive[b] = False
         target[target == b] = a
     return target
