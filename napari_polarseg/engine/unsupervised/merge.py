@@ -64,38 +64,43 @@ def largest_share(node_labels: np.ndarray, weight: np.ndarray) -> float:
     return float(w.max() / max(w.sum(), 1e-12))
 
 
-def segment_centres(
-    z: np.ndarray, weight: np.ndarray, node_labels: np.ndarray, m: int
-) -> tuple[np.ndarray, np.ndarray]:
-    """(w (m,), centres (m, c)): the pixels of each of m segments and the area-weighted
-    mean of ``z`` over its superpixels."""
-    w = np.bincount(node_labels, weights=weight, minlength=m)
-    sums = [
-        np.bincount(node_labels, weights=weight * z[:, j], minlength=m) for j in range(z.shape[1])
-    ]
+def segment_centres(z: np.ndarray, weight: np.ndarray, labels: np.ndarray, m: int) -> np.ndarray:
+    """(m, c): the area-weighted mean of ``z`` over each of the m segments' superpixels
+    (``weight``: pixels per superpixel; 0 for a segment with none)."""
+    w = np.bincount(labels, weights=weight, minlength=m)
+    sums = [np.bincount(labels, weights=weight * z[:, j], minlength=m) for j in range(z.shape[1])]
     centres = np.stack(sums, axis=1) if sums else np.zeros((m, 0))
-    return w, centres / np.maximum(w, 1e-12)[:, None]
+    return centres / np.maximum(w, 1e-12)[:, None]
+
+
+def greedy_merge(
+    node_labels: np.ndarray, k: int, pair_score: Callable[[np.ndarray, int], np.ndarray]
+) -> np.ndarray:
+    """(m,) int: the segment each of the m = ``node_labels.max() + 1`` segments joins
+    (its lowest-numbered member) after merging, one pair at a time until ``k`` are
+    left, the pair with the highest ``pair_score(labels, m)`` ((m, m), the segments'
+    labels as merged so far; segments merged away are ignored)."""
+    m = int(node_labels.max()) + 1
+    target = np.arange(m)
+    while (alive := np.unique(target)).size > max(k, 1):
+        score = pair_score(target[node_labels], m)[np.ix_(alive, alive)]
+        score[np.tril_indices(alive.size)] = -np.inf
+        i, j = np.unravel_index(int(np.argmax(score)), score.shape)
+        target[target == alive[j]] = alive[i]
+    return target
+
+
+def centre_distances(z: np.ndarray, weight: np.ndarray, labels: np.ndarray, m: int) -> np.ndarray:
+    """(m, m) squared distances of the m segments' area-weighted centroids of ``z``."""
+    centres = segment_centres(z, weight, labels, m)
+    return ((centres[:, None, :] - centres[None, :, :]) ** 2).sum(axis=-1)
 
 
 def merge_closest(z: np.ndarray, weight: np.ndarray, node_labels: np.ndarray, k: int) -> np.ndarray:
     """(m,) int: the segment each of the m = ``node_labels.max() + 1`` segments joins
     (its lowest-numbered member) after merging the closest pair of area-weighted
     centroids of ``z`` until ``k`` are left (module docstring)."""
-    m = int(node_labels.max()) + 1
-    w, centres = segment_centres(z, weight, node_labels, m)
-    target = np.arange(m)
-    alive = np.ones(m, dtype=bool)
-    while alive.sum() > max(k, 1):
-        idx = np.flatnonzero(alive)
-        d = ((centres[idx, None, :] - centres[None, idx, :]) ** 2).sum(axis=-1)
-        d[np.tril_indices(idx.size)] = np.inf
-        i, j = np.unravel_index(int(np.argmin(d)), d.shape)
-        a, b = idx[i], idx[j]
-        centres[a] = (w[a] * centres[a] + w[b] * centres[b]) / max(w[a] + w[b], 1e-12)
-        w[a] += w[b]
-        alive[b] = False
-        target[target == b] = a
-    return target
+    return greedy_merge(node_labels, k, lambda labels, m: -centre_distances(z, weight, labels, m))
 
 
 def closest_centroids(model: RegionModel, node_labels: np.ndarray, k: int) -> np.ndarray:
@@ -111,39 +116,22 @@ def weakest_border(model: RegionModel, node_labels: np.ndarray, k: int) -> np.nd
     area-weighted centroids in the whitened node features ``z`` (module docstring); the
     closest centroids when no two segments share a border, or when ``model`` has no
     border weights."""
-    m = int(node_labels.max()) + 1
     if model.borders is None:
         return closest_centroids(model, node_labels, k)
-    member = sps.csr_matrix(
-        (np.ones(node_labels.size), (node_labels, np.arange(node_labels.size))),
-        shape=(m, node_labels.size),
-    )
-    weights = (member @ model.borders @ member.T).toarray()
-    lengths = (member @ model.adjacency @ member.T).toarray()
-    w, centres = segment_centres(model.z, model.weight, node_labels, m)
-    target = np.arange(m)
-    alive = np.ones(m, dtype=bool)
-    while alive.sum() > max(k, 1):
-        idx = np.flatnonzero(alive)
-        shared = lengths[np.ix_(idx, idx)]
-        d2 = ((centres[idx, None, :] - centres[None, idx, :]) ** 2).sum(axis=-1)
-        mean = weights[np.ix_(idx, idx)] / np.maximum(shared, 1e-12)
-        score = np.where(shared > 0, mean / (1.0 + d2), -np.inf)
-        score[np.tril_indices(idx.size)] = -np.inf
-        if not np.isfinite(score).any():  # no two left share a border
-            kept, compact = np.unique(target[node_labels], return_inverse=True)
-            joined = closest_centroids(model, compact, k)
-            return kept[joined][np.searchsorted(kept, target)]
-        i, j = np.unravel_index(int(np.argmax(score)), score.shape)
-        a, b = idx[i], idx[j]
-        for table in (weights, lengths):
-            table[a] += table[b]
-            table[:, a] += table[:, b]
-        centres[a] = (w[a] * centres[a] + w[b] * centres[b]) / max(w[a] + w[b], 1e-12)
-        w[a] += w[b]
-        alive[b] = False
-        target[target == b] = a
-    return target
+
+    def score(labels: np.ndarray, m: int) -> np.ndarray:
+        member = sps.csr_matrix(
+            (np.ones(labels.size), (labels, np.arange(labels.size))), shape=(m, labels.size)
+        )
+        weights = (member @ model.borders @ member.T).toarray()
+        lengths = (member @ model.adjacency @ member.T).toarray()
+        d2 = centre_distances(model.z, model.weight, labels, m)
+        mean = weights / np.maximum(lengths, 1e-12)
+        out = np.where(lengths > 0, mean / (1.0 + d2), -np.inf)
+        np.fill_diagonal(out, -np.inf)
+        return out if np.isfinite(out).any() else -d2  # no two share a border
+
+    return greedy_merge(node_labels, k, score)
 
 
 #: How two segments are chosen for merging: a function of (model, node labels, k)
