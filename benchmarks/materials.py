@@ -39,6 +39,7 @@ from __future__ import annotations
 import shlex
 import sys
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -53,9 +54,49 @@ RENDERED_DIR = Path(__file__).resolve().parents[2] / "shared" / "data" / "render
 #: Seeds of each half of the rendered set.
 HALVES = {"dev": tuple(range(12)), "test": tuple(range(12, 24))}
 HALF_NAMES = {"dev": "development half (seeds 0–11)", "test": "test half (seeds 12–23)"}
+
+
+@dataclass(frozen=True)
+class RenderSet:
+    """Scenes made by ``render_scenes.py`` in a folder beside this script.
+
+    ``role``: ``held-out`` sets are never chosen or tuned on and are read against the
+    test half's target; ``development`` sets are for choosing, and their table shows
+    the means by number of materials instead of one line per scene."""
+
+    folder: Path
+    title: str
+    role: str
+    command: str
+
+
+HERE = Path(__file__).resolve().parent
+#: The render sets (flag name → set); their files are git-ignored, ``command`` makes them.
+RENDER_SETS = {
+    "dev-renders": RenderSet(
+        HERE / "renders_dev",
+        "development renders (seeds 1000–1059, and two-material seeds 200–519; for choosing)",
+        "development",
+        "render_scenes.py --seeds 1000-1059 --out benchmarks/renders_dev; "
+        "render_scenes.py --seeds 200-519 --two-materials --out benchmarks/renders_dev",
+    ),
+    "unseen": RenderSet(
+        HERE / "renders",
+        "unseen renders (render_scenes.py, never chosen or tuned on)",
+        "held-out",
+        "render_scenes.py --seeds 100-123 --out benchmarks/renders",
+    ),
+    "two-materials": RenderSet(
+        HERE / "renders_two",
+        "held-out two-material renders (render_scenes.py --two-materials, never chosen or "
+        "tuned on)",
+        "held-out",
+        "render_scenes.py --seeds 520-999 --two-materials --out benchmarks/renders_two",
+    ),
+}
 #: Renders of seeds nobody chose or tuned on (``render_scenes.py --seeds 100-123``).
-UNSEEN_DIR = Path(__file__).resolve().parent / "renders"
-UNSEEN_NAME = "unseen renders (render_scenes.py, never chosen or tuned on)"
+UNSEEN_DIR = RENDER_SETS["unseen"].folder
+UNSEEN_NAME = RENDER_SETS["unseen"].title
 #: A result is degenerate when one segment holds this share of the scored pixels.
 DEGENERATE_SHARE = 0.90
 #: Registered methods shown as columns of their own beside the default (those that are
@@ -217,6 +258,30 @@ def table(rows: list[dict], title: str) -> str:
     return "\n".join(lines)
 
 
+def summary_table(rows: list[dict], title: str) -> str:
+    """Markdown table of the mean of every column of ``rows`` over all scenes and over
+    the scenes of each number of materials, with the count of degenerate results."""
+    cols = [c for c in COLUMNS if any(c in r for r in rows)]
+    groups = {"all": rows}
+    for k in sorted({r["k"] for r in rows}):
+        groups[f"{k} materials"] = [r for r in rows if r["k"] == k]
+    lines = [
+        f"{title}: mean ARI over the labelled pixels (‡ n = degenerate results, one "
+        f"segment ≥ {DEGENERATE_SHARE:.0%} of them)",
+        "",
+        "| scenes | n | " + " | ".join(cols) + " |",
+        "|---|---:|" + "---:|" * len(cols),
+    ]
+    for name, group in groups.items():
+        cells = []
+        for c in cols:
+            marked = sum(r["marks"].get(c) == "‡" for r in group)
+            mean = _mean([r[c] for r in group if c in r])
+            cells.append(mean + (f" ‡ {marked}" if marked else ""))
+        lines.append(f"| {name} | {len(group)} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
 def add_arguments(parser) -> None:
     """The subset flags shared by both evaluate scripts."""
     parser.add_argument(
@@ -237,12 +302,15 @@ def add_arguments(parser) -> None:
         help="truth-trained left→right bounds of the material tables [all]",
     )
     parser.add_argument("--rendered-dir", type=Path, default=RENDERED_DIR, help=f"[{RENDERED_DIR}]")
-    parser.add_argument(
-        "--unseen",
-        action="store_true",
-        help="also the unseen renders of --unseen-dir (made by render_scenes.py)",
-    )
-    parser.add_argument("--unseen-dir", type=Path, default=UNSEEN_DIR, help=f"[{UNSEEN_DIR}]")
+    for name, render_set in RENDER_SETS.items():
+        parser.add_argument(
+            f"--{name}",
+            action="store_true",
+            help=f"also the {render_set.title} (made by `{render_set.command}`)",
+        )
+        parser.add_argument(
+            f"--{name}-dir", type=Path, default=render_set.folder, help=f"[{render_set.folder}]"
+        )
     parser.add_argument(
         "--markdown",
         type=Path,
@@ -254,7 +322,12 @@ def add_arguments(parser) -> None:
 
 def subset_only(args) -> bool:
     """True when the flags pick a subset of the material tables (skip everything else)."""
-    return bool(args.rendered or args.real or args.unseen)
+    return bool(args.rendered or args.real or chosen_render_sets(args))
+
+
+def chosen_render_sets(args) -> list[str]:
+    """The :data:`RENDER_SETS` whose flags are given."""
+    return [name for name in RENDER_SETS if getattr(args, name.replace("-", "_"), False)]
 
 
 def unseen_seeds(folder: Path) -> list[int]:
@@ -291,13 +364,14 @@ def verdict_lines(sets: dict[str, list[dict]]) -> str:
     for key, rows in sets.items():
         if not rows:
             continue
-        if key in HALVES or key == "unseen":
+        if key in HALVES or key in RENDER_SETS:
             mean = {c: float(np.mean([r[c] for r in rows])) for c in (default, plain, km)}
-            target = TARGET_TEST_HALF if key in ("test", "unseen") else None
+            held_out = key == "test" or (key in RENDER_SETS and RENDER_SETS[key].role == "held-out")
+            target = TARGET_TEST_HALF if held_out else None
             what = verdict(mean[default], target, mean[plain], mean[km])
             marked = sum(default in r["marks"] for r in rows)
             what += f"; degenerate on {marked} of {len(rows)}" if marked else ""
-            name = HALF_NAMES.get(key, UNSEEN_NAME)
+            name = HALF_NAMES[key] if key in HALVES else RENDER_SETS[key].title
             lines.append(f"- {name}, mean {mean[default]:.3f}: {what}")
             continue
         for r in rows:
@@ -341,7 +415,8 @@ def run(args, real_dir: Path, command: str | None = None) -> None:
             print(f"\n{text}", flush=True)
             blocks.append(text)
 
-    if args.rendered or not (args.real or args.unseen):
+    renders = chosen_render_sets(args)
+    if args.rendered or not (args.real or renders):
         if not Path(args.rendered_dir).is_dir():
             add(f"no rendered scenes in {args.rendered_dir}: their tables are skipped")
         else:
@@ -349,14 +424,21 @@ def run(args, real_dir: Path, command: str | None = None) -> None:
                 rows = sets[half] = rendered_rows(HALVES[half], args.bounds, args.rendered_dir)
                 if rows:
                     add(table(rows, "rendered scenes, " + HALF_NAMES[half]), k_lines(rows))
-    if args.unseen:
-        seeds = unseen_seeds(args.unseen_dir)
-        rows = sets["unseen"] = rendered_rows(seeds, args.bounds, args.unseen_dir)
-        if rows:
-            add(table(rows, f"{UNSEEN_NAME}, seeds {seeds[0]}–{seeds[-1]}"), k_lines(rows))
+    for name in renders:
+        render_set = RENDER_SETS[name]
+        folder = getattr(args, f"{name.replace('-', '_')}_dir")
+        seeds = unseen_seeds(folder)
+        rows = sets[name] = rendered_rows(seeds, args.bounds, folder)
+        if not rows:
+            add(
+                f"no {render_set.title} in {folder} (make them with "
+                f"`{render_set.command}`): their table is skipped"
+            )
+        elif render_set.role == "development":
+            add(summary_table(rows, f"{render_set.title}, {len(rows)} scenes"))
         else:
-            add(f"no unseen renders in {args.unseen_dir}: their table is skipped")
-    if args.real or not (args.rendered or args.unseen):
+            add(table(rows, f"{render_set.title}, seeds {seeds[0]}–{seeds[-1]}"), k_lines(rows))
+    if args.real or not (args.rendered or renders):
         rows = sets["real"] = real_rows(real_dir, args.bounds) if Path(real_dir).is_dir() else []
         if rows:
             add(table(rows, "real frames (hand-labelled truth)"), k_lines(rows))

@@ -137,6 +137,11 @@ def sample_scene(seed: int) -> dict:
     }
 
 
+def object_materials(params: dict) -> int:
+    """How many distinct materials the objects were drawn with (1 or 2)."""
+    return len({obj["mat"] for obj in params["objects"]})
+
+
 def camera_origin(params: dict) -> list[float]:
     """Camera position: elevation above the floor, azimuth 0 looking along +y."""
     el = np.radians(params["elevation"])
@@ -368,6 +373,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seeds", default="100-123", help="e.g. 100-123 or 5,7,9")
     ap.add_argument("--out", default=str(Path(__file__).parent / "renders"))
     ap.add_argument("--spp", type=int, default=256)
+    ap.add_argument(
+        "--two-materials",
+        action="store_true",
+        help="render only the seeds whose objects all draw one material (floor + one)",
+    )
     ap.add_argument("--from-json", help="re-render a shared scene_<n>.npz's parameters")
     ap.add_argument("--compare", action="store_true", help="with --from-json: print a table")
     ap.add_argument("--sun-irradiance", type=float, help="with --from-json: sun/sky ratio")
@@ -381,7 +391,10 @@ def main(argv: list[str] | None = None) -> int:
             params["sun_irradiance"] = args.sun_irradiance
         jobs = [(Path(args.from_json).stem + "_rerender", params, 0)]
     else:
-        jobs = [(f"scene_{s}", None, s) for s in parse_seeds(args.seeds)]
+        seeds = parse_seeds(args.seeds)
+        if args.two_materials:
+            seeds = [s for s in seeds if object_materials(sample_scene(s)) == 1]
+        jobs = [(f"scene_{s}", None, s) for s in seeds]
     for name, params, seed in jobs:
         params = params if params is not None else sample_scene(seed)
         t0 = time.perf_counter()

@@ -97,3 +97,38 @@ def test_unseen_renders_get_a_table_and_a_verdict_of_their_own(tmp_path, capsys)
     assert "| scene_101 | 2 |" in out
     assert f"- {materials.UNSEEN_NAME}, mean" in out and "target 0.5" in out
     assert "development half" not in out
+
+
+def test_development_renders_get_means_by_number_of_materials(tmp_path, capsys):
+    """``--dev-renders``: a development set prints the means over all its scenes and
+    over those of each number of materials (no line per scene) and no target verdict;
+    ``--two-materials`` is a held-out set, read against the test half's target."""
+    dev, two = tmp_path / "dev", tmp_path / "two"
+    for folder in (dev, two):
+        folder.mkdir()
+        _rendered_folder(folder)
+    (dev / "scene_0.npz").rename(dev / "scene_1000.npz")
+    with np.load(dev / "scene_1000.npz") as f:  # a second scene, its right third a third class
+        labels = f["labels"].copy()
+        labels[:, 48:][labels[:, 48:] == 1] = 3
+        np.savez(dev / "scene_1001.npz", stack=f["stack"], angles=f["angles"], labels=labels)
+    (two / "scene_0.npz").rename(two / "scene_600.npz")
+    parser = argparse.ArgumentParser()
+    materials.add_arguments(parser)
+    args = parser.parse_args(
+        ["--dev-renders", "--two-materials", "--bounds", "none"]
+        + ["--dev-renders-dir", str(dev), "--two-materials-dir", str(two)]
+    )
+    assert materials.chosen_render_sets(args) == ["dev-renders", "two-materials"]
+    materials.run(args, tmp_path / "no-real-frames", "cmd")
+    out = capsys.readouterr().out
+    dev_title = materials.RENDER_SETS["dev-renders"].title
+    two_title = materials.RENDER_SETS["two-materials"].title
+    assert f"{dev_title}, 2 scenes" in out
+    assert "| all | 2 |" in out and "| 2 materials | 1 |" in out and "| 3 materials | 1 |" in out
+    assert "| scene_1000 |" not in out  # means only
+    assert f"{two_title}, seeds 600–600" in out and "| scene_600 | 2 |" in out
+    verdicts = out.split("against issue 24's targets")[1]
+    dev_line = next(line for line in verdicts.splitlines() if line.startswith(f"- {dev_title}"))
+    two_line = next(line for line in verdicts.splitlines() if line.startswith(f"- {two_title}"))
+    assert "target" not in dev_line and "target 0.5" in two_line
