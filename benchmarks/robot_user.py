@@ -60,7 +60,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from baselines import plain_features, real_frames  # noqa: E402
 from ilastik_features import ilastik_features  # noqa: E402
-from materials import UNSEEN_DIR, replace_block, unseen_seeds  # noqa: E402
+from materials import RENDER_SETS, replace_block, unseen_seeds  # noqa: E402
 
 #: The block of ``docs/quality.md`` that ``--markdown`` rewrites.
 MARKDOWN_BEGIN = "<!-- robot user: begin -->"
@@ -347,10 +347,8 @@ def half_means(rows: list[dict], rounds: int) -> list[str]:
     """Per half and method: mean ARI after 5 corrections (or the last), and the bound."""
     at = min(5, rounds)
     lines = []
-    for half in ("dev", "test", "unseen"):
+    for half in dict.fromkeys(r["half"] for r in rows):
         mine = [r for r in rows if r["half"] == half]
-        if not mine:
-            continue
         scenes = {r["scene"]: r for r in mine}
         fair = {n for n, r in scenes.items() if r["comparable"]}
         parts = []
@@ -373,11 +371,9 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--real", action="store_true", help="the hand-labelled real frames")
     parser.add_argument("--rendered", choices=("dev", "test", "all"), help="rendered scenes")
-    parser.add_argument(
-        "--unseen",
-        action="store_true",
-        help=f"the held-out renders of render_scenes.py in {UNSEEN_DIR}",
-    )
+    held_out = [name for name, render_set in RENDER_SETS.items() if render_set.role == "held-out"]
+    for name in held_out:
+        parser.add_argument(f"--{name}", action="store_true", help=f"the {RENDER_SETS[name].title}")
     parser.add_argument("--rounds", type=int, default=15, help="corrections [15]")
     parser.add_argument("--seeds", help="only these rendered seeds (comma-separated)")
     parser.add_argument(
@@ -387,8 +383,12 @@ def main(argv: list[str] | None = None) -> int:
         "--markdown", type=Path, help="also write the tables into this page's robot-user block"
     )
     args = parser.parse_args(argv)
-    if not args.real and not args.rendered and not args.unseen:
-        parser.error("choose --real, --rendered dev|test|all and/or --unseen")
+    sets = [name for name in held_out if getattr(args, name.replace("-", "_"))]
+    if not args.real and not args.rendered and not sets:
+        parser.error(
+            "choose --real, --rendered dev|test|all and/or "
+            + ", ".join(f"--{name}" for name in held_out)
+        )
     methods = None if not args.methods else tuple(m.strip() for m in args.methods.split(","))
     t0 = time.perf_counter()
     print(header(args.rounds), flush=True)
@@ -403,11 +403,12 @@ def main(argv: list[str] | None = None) -> int:
             seeds = [s for s in seeds if str(s) in args.seeds.split(",")]
         for seed in seeds:
             rows += evaluate_scene(rendered_scene(seed), args.rounds, bound=True, methods=methods)
-    if args.unseen:
-        for seed in unseen_seeds(UNSEEN_DIR):
+    for name in sets:
+        folder = RENDER_SETS[name].folder
+        for seed in unseen_seeds(folder):
             if args.seeds and str(seed) not in args.seeds.split(","):
                 continue
-            scene = rendered_scene(seed, UNSEEN_DIR, "unseen")
+            scene = rendered_scene(seed, folder, name)
             rows += evaluate_scene(scene, args.rounds, bound=True, methods=methods)
     print()
     print("\n".join(half_means(rows, args.rounds)))
