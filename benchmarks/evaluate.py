@@ -31,7 +31,8 @@ the ARI against ground truth of every option the "Segmentation quality" table
 - the material tables (``materials.py``): the rendered scenes (development half, seeds
   0–11, and test half, seeds 12–23, each with its means) and the real frames, one row
   per frame: intensity k-means, smoothed k-means, the default (preset ``auto``) and the
-  truth-trained left→right bounds; degenerate results marked ‡ and counted;
+  truth-trained left→right bounds; degenerate results marked ‡ and counted (the render
+  sets of ``materials.RENDER_SETS`` with their flags);
 - with ``--sweep``: the best cell of a parameter grid per scene (chosen on the same
   scene, so an optimistic upper bound, not a fair score), and the cells with the best
   worst case over all scenes and seeds (how ``RECOMMENDED`` was chosen);

@@ -13,8 +13,10 @@ and its time on a 720 × 660 rendering and on the real frames. Then the material
 (``materials.py``): the rendered scenes by half (development, seeds 0–11; test, seeds
 12–23) and the real frames, one row per frame — intensity k-means, smoothed k-means, the
 default (preset ``auto``), the truth-trained left→right bounds; degenerate results ‡;
-the k the default finds by itself; the default against issue 24's targets. With
-``--markdown PAGE`` the same text replaces the marked block of PAGE.
+the k the default finds by itself; the default against issue 24's targets; with
+``--dev-renders``, ``--unseen`` and ``--two-materials`` the render sets of
+``materials.RENDER_SETS`` too. With ``--markdown PAGE`` the same text replaces the
+marked block of PAGE.
 
 Usage::
 
