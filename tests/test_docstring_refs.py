@@ -71,9 +71,11 @@ def _references(path: Path):
     tree = ast.parse(path.read_text(encoding="utf-8"))
 
     def visit(node: ast.AST, context: list[str]):
-        doc = ast.get_docstring(node, clean=False) if isinstance(
-            node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)
-        ) else None
+        doc = (
+            ast.get_docstring(node, clean=False)
+            if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef))
+            else None
+        )
         if doc:
             line = getattr(node, "lineno", 1)
             for match in ROLE.finditer(doc):
@@ -122,6 +124,8 @@ def test_every_docstring_reference_resolves() -> None:
         gui = module.startswith(GUI_PREFIXES)
         for line, role, target, context in _references(path):
             if not _resolves(target, module, context, gui):
-                broken.append(f"{path.relative_to(Path(napari_polarseg.__file__).parents[1])}"
-                              f":{line} :{role}:`{target}`")
+                broken.append(
+                    f"{path.relative_to(Path(napari_polarseg.__file__).parents[1])}"
+                    f":{line} :{role}:`{target}`"
+                )
     assert not broken, f"{len(broken)} references do not resolve:\n" + "\n".join(broken)
