@@ -17,7 +17,11 @@ outside the project's venv, and CI never runs it::
     python3.11 -m venv ../render-venv            # any venv outside the project
     ../render-venv/bin/pip install mitsuba==3.9.1 numpy
     ../render-venv/bin/python benchmarks/render_scenes.py --seeds 100-123 \\
-        --out benchmarks/renders [--spp 256] [--from-json PATH]
+        --out benchmarks/renders [--spp 256] [--from-json PATH] [--two-materials]
+
+``--two-materials`` renders only the seeds whose objects all draw one material (the
+floor's and one more, as the shared set's two-material scenes were drawn). The render
+sets the benchmarks read, their seeds and folders are ``materials.RENDER_SETS``.
 
 Mitsuba's LLVM backend needs an LLVM it can compile with; on this Debian image the
 system's LLVM 15 fails on AVX-512 ("Cannot select: fminimum"), so install ``libllvm19``
