@@ -17,6 +17,7 @@ import numpy as np
 
 from .engine.params import PRESETS
 from .engine.physics.pixel_mask import mask_reasons
+from .engine.unsupervised.choose_k import choice_text
 
 if TYPE_CHECKING:
     from .jobs import LabelSource, Run
@@ -67,6 +68,8 @@ def limit_lines(run: Run) -> list[str]:
     if done:
         lines.append(f"{PROG}: the cut {' and '.join(done)} (cut_limits in summary.json)")
     record = run.result.superpixels
+    if choice_text(record):
+        lines.append(f"{PROG}: {choice_text(record)} (k_scores in summary.json)")
     if record.get("close_up"):
         lines.append(
             f"{PROG}: one smooth surface fills the frame (it explains "

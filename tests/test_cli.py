@@ -796,3 +796,19 @@ def test_the_thesis_maps_are_written_when_the_method_needs_them_or_asked(
     assert (summary["explained_variance"] is not None) is wanted
     rows = (out / "segments.csv").read_text().splitlines()
     assert len(rows) == 3  # the header and two segments, with or without the maps
+
+
+def test_segments_auto_says_what_it_found_and_how_sure(tmp_path, capsys):
+    """``--segments auto`` (preset auto): the number is found by the method, the lines say
+    which k of which range and the silhouettes it was chosen on, and summary.json keeps
+    them; a run with k given says nothing of the kind."""
+    stack = _stack_file(tmp_path)
+    code, out, _ = run(capsys, "segment", stack, "-o", tmp_path / "found", "--segments", "auto")
+    assert code == 0
+    record = json.loads((tmp_path / "found" / "summary.json").read_text())["superpixels"]
+    assert record["k_found"] is True and record["k_tolerance"] == 0.1
+    k, scores = record["k"], record["k_scores"]
+    assert f"{k} segments found by itself (k in 2–6, by the silhouette" in out
+    assert f"{scores[str(k)]:.2f}" in out and "(k_scores in summary.json)" in out
+    code, out, _ = run(capsys, "segment", stack, "-o", tmp_path / "given", "--segments", "2")
+    assert code == 0 and "found by itself" not in out

@@ -5,7 +5,10 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import pytest
+
 from napari_polarseg import cli
+from napari_polarseg.cli.arguments import UsageError
 from napari_polarseg.engine.params import PARAM_SPECS, ParamSpec
 
 # today's option list of `polarseg segment` (recorded before the flags came from the table)
@@ -47,3 +50,15 @@ def test_flags_take_the_field_types_and_help_from_the_table() -> None:
     assert options["window"][1]["help"] == PARAM_SPECS["window"].help
     assert json.dumps(list(options)) == json.dumps(list(PARAM_SPECS))
     assert Path(cli.__file__).is_file()
+
+
+def test_segments_takes_auto_for_found_by_itself() -> None:
+    """``--segments auto`` is 0 (the method finds the number), any case; other words are
+    refused with the words the flag takes."""
+    parse = cli.param_options()["n_segments"][1]["type"]
+    assert parse("auto") == 0 and parse(" AUTO ") == 0 and parse("4") == 4
+    parser = cli.build_parser()
+    args = parser.parse_args(["segment", "stack.tif", "-o", "out", "--segments", "auto"])
+    assert args.n_segments == 0
+    with pytest.raises(UsageError, match="expected a number or 'auto', got 'many'"):
+        parser.parse_args(["segment", "stack.tif", "-o", "out", "--segments", "many"])

@@ -11,7 +11,7 @@ from sklearn.metrics import adjusted_rand_score
 from napari_polarseg.engine import PolarsegError, Scene, SegmentParams
 from napari_polarseg.engine.methods import valid_superpixels
 from napari_polarseg.engine.params import AUTO as DEFAULT
-from napari_polarseg.engine.unsupervised.choose_k import estimate_k
+from napari_polarseg.engine.unsupervised.choose_k import choice_text, estimate_k
 
 ANGLES = np.deg2rad([0.0, 45.0, 90.0, 135.0])
 LEVEL = (1.0, 0.55, 1.5, 0.8)
@@ -57,6 +57,40 @@ def test_planted_materials_recovered_with_k_given_and_found(k):
     assert set(record["k_scores"]) == {"2", "3", "4", "5", "6"}
     np.testing.assert_array_equal(found.labels, given.labels)
     assert given.method_record["k_found"] is False and given.method_record["k"] == k
+    # said in words: the k chosen, the range, its silhouette and the runner-up's
+    text = choice_text(record)
+    assert text.startswith(f"{k} segments found by itself (k in 2–6, by the silhouette")
+    assert f"{record['k_scores'][str(k)]:.2f}" in text
+    assert choice_text(given.method_record) == ""
+
+
+def test_plugin_status_line_says_the_k_found():
+    """The Segment widget's status line (made without Qt) leads with the k found and
+    its silhouettes instead of the bare count."""
+    from napari_polarseg.widgets.session.results import shown_result
+
+    stack, _ = banded_stack(3)
+    found = Scene(stack, ANGLES).segment(AUTO.replace(n_segments=0))
+    status = shown_result(found, np.rad2deg(ANGLES)).status(0.5)
+    assert status.startswith(choice_text(found.method_record) + " · ")
+    given = Scene(stack, ANGLES).segment(AUTO.replace(n_segments=3))
+    assert shown_result(given, np.rad2deg(ANGLES)).status(0.5).startswith("3 segments · ")
+
+
+def test_choice_text_says_how_sure():
+    """Clearly ahead, a close call, and a k chosen by the tolerance over a better one."""
+    record = {"k_found": True, "k": 3, "k_scores": {"2": 0.40, "3": 0.80, "4": 0.50}}
+    assert choice_text(record) == (
+        "3 segments found by itself (k in 2–4, by the silhouette 0.80; next k = 4 at "
+        "0.50, 38% ahead)"
+    )
+    record["k_scores"]["4"] = 0.79
+    assert choice_text(record).endswith("next k = 4 at 0.79, a close call)")
+    record.update(k=2, k_scores={"2": 0.70, "3": 0.75}, k_tolerance=0.1)
+    assert choice_text(record) == (
+        "2 segments found by itself (k in 2–3, by the silhouette: the fewest within 10% "
+        "of the best, 0.70 against 0.75 for k = 3; a close call)"
+    )
 
 
 @pytest.mark.parametrize("k", [2, 3, 4])

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
@@ -87,6 +88,26 @@ def threshold_arg(text: str) -> float | str:
         return float(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected a number or 'none', got {text!r}") from None
+
+
+def worded_arg(kind: type, words: dict[str, int]) -> Callable[[str], Any]:
+    """An argparse type: one of ``words`` (any case) for its number, else ``kind(text)``
+    (``--segments auto`` for 0)."""
+
+    def parse(text: str) -> Any:
+        word = text.strip().lower()
+        if word in words:
+            return words[word]
+        try:
+            return kind(text)
+        except ValueError:
+            names = " or ".join(repr(w) for w in words)
+            raise argparse.ArgumentTypeError(
+                f"expected a number or {names}, got {text!r}"
+            ) from None
+
+    parse.__name__ = kind.__name__  # argparse names the type in its error messages
+    return parse
 
 
 def bayer_arg(text: str) -> str:

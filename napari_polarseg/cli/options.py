@@ -31,6 +31,7 @@ from .arguments import (
     level_arg,
     number_arg,
     threshold_arg,
+    worded_arg,
 )
 
 #: Presets of the commands whose own analysis cuts the block graph (sweep, timeseries).
@@ -65,7 +66,8 @@ def param_options(
             kwargs["type"] = threshold_arg
         else:
             kind = types.get(name, str)
-            kwargs["type"] = kind if kind in (int, float, str) else str
+            kind = kind if kind in (int, float, str) else str
+            kwargs["type"] = worded_arg(kind, spec.words) if spec.words else kind
         if spec.metavar:
             kwargs["metavar"] = spec.metavar
         kwargs["help"] = spec.help

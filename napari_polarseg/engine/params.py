@@ -66,6 +66,8 @@ class ParamSpec:
     registry : dict or None
         A live mapping name → menu text whose names are the choices (the registered
         segmentation methods); None: :attr:`choices`.
+    words : dict or None
+        Words the CLI takes for a number (``auto`` for 0 segments: find the number).
     """
 
     help: str
@@ -80,6 +82,7 @@ class ParamSpec:
     choice_names: dict[str, str] | None = None
     optional: bool = False
     registry: dict[str, str] | None = None
+    words: dict[str, int] | None = None
 
     def options(self) -> tuple[str, ...] | None:
         """The values a menu offers now: :attr:`choices`, or the names in
@@ -231,13 +234,14 @@ class SegmentParams:
     n_segments: int = _param(
         3,
         help="Number of segments the normalized cut stops at (k of the k-way clustering "
-        "and of the superpixel clustering); 0 = found by the method itself (only a "
-        "method that can, such as valid_superpixels)",
+        "and of the superpixel clustering); 0 (the CLI also takes auto) = found by the "
+        "method itself (only a method that can, such as valid_superpixels)",
         flag="--segments",
         metavar="K",
         label="segments",
         minimum=0,
         maximum=256,
+        words={"auto": 0},
     )
     ncut_threshold: float | None = _param(
         None,

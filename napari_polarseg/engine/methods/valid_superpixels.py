@@ -24,7 +24,9 @@ With ``n_segments = 0`` the number of segments is chosen among 2..6 by the silho
 of the clustering on the superpixels' node features (:func:`choose_k`,
 :func:`~napari_polarseg.engine.unsupervised.choose_k.estimate_k`); the record says
 which k was used (``k``), whether it was found (``k_found``), how sure the choice is
-(``k_confidence``) and every k's score (``k_scores``).
+(``k_confidence``), every k's score (``k_scores``) and the tolerance used
+(``k_tolerance``); :func:`~napari_polarseg.engine.unsupervised.choose_k.choice_text`
+says it in words (the CLI's lines and the plugin's status line).
 
 The figures that chose it (and the variants not kept) are in ``docs/quality.md``
 (*A default chosen on the development half*).
@@ -119,6 +121,7 @@ class ValidSuperpixels(SuperpixelClustering):
             choice = scene.cached(f"{self.name}:k", key, lambda: choose_k(model, self.k_tolerance))
             k = choice["k"]
             record["k_confidence"] = round(choice["confidence"], 4)
+            record["k_tolerance"] = self.k_tolerance
             record["k_scores"] = {str(j): round(s, 4) for j, s in choice["scores"].items()}
         seg = merged_clustering(model, k, merge=self.merge_rule)
         record["k"] = k

@@ -109,3 +109,35 @@ def estimate_k(
     other = max(v for k, v in scores.items() if k != chosen)
     confidence = 1.0 if other <= 0 else (own - other) / max(own, 1e-12)
     return chosen, float(min(max(confidence, 0.0), 1.0)), scores
+
+
+#: A margin below this share of the chosen k's silhouette is called a close call.
+CLOSE_CALL = 0.05
+
+
+def choice_text(record: dict) -> str:
+    """What the number of segments found by itself was and how sure, in words, from a
+    method's record (``k``, ``k_scores``: silhouette per k as text keys,
+    ``k_tolerance``); "" when k was given. The chosen k's silhouette against the best
+    other k's: a margin under :data:`CLOSE_CALL` of it, or a k chosen by the tolerance
+    over a better-scoring one, is a close call."""
+    scores = {int(j): float(s) for j, s in (record.get("k_scores") or {}).items()}
+    k = record.get("k")
+    if not record.get("k_found") or k not in scores:
+        return ""
+    tried = f"{min(scores)}–{max(scores)}" if len(scores) > 1 else str(k)
+    head = f"{k} segments found by itself (k in {tried}, by the silhouette"
+    others = {j: s for j, s in scores.items() if j != k}
+    if not others:
+        return f"{head} {scores[k]:.2f})"
+    j = max(others, key=others.get)
+    own, other = scores[k], others[j]
+    if other > own:
+        tolerance = float(record.get("k_tolerance", 0.0))
+        return (
+            f"{head}: the fewest within {tolerance:.0%} of the best, {own:.2f} against "
+            f"{other:.2f} for k = {j}; a close call)"
+        )
+    margin = (own - other) / max(abs(own), 1e-12)
+    verdict = "a close call" if margin < CLOSE_CALL else f"{margin:.0%} ahead"
+    return f"{head} {own:.2f}; next k = {j} at {other:.2f}, {verdict})"

@@ -17,7 +17,7 @@ import numpy as np
 
 from ...engine import SegmentationResult
 from .classify import ClassifierOutput, classifier_parts
-from .text import close_up_text, degenerate_text, mask_text
+from .text import close_up_text, degenerate_text, k_choice_text, mask_text
 
 #: The inputs of a run without mask, scribbles or classifier file.
 NO_INPUTS: dict[str, Any] = {"mask": None, "scribbles": None, "classifier": None}
@@ -77,7 +77,7 @@ class ShownResult:
             assert self.confidence is not None
             parts = classifier_parts(self.out, self.confidence, self.inputs.get("classifier"))
         else:
-            parts = [f"{summary['n_segments']} segments"]
+            parts = [k_choice_text(summary) or f"{summary['n_segments']} segments"]
             parts += [t for t in (close_up_text(summary), degenerate_text(summary)) if t]
         if self.partial:
             busy = "refining the borders…" if self.out is not None and self.out.preview else None

@@ -10,6 +10,7 @@ import numpy as np
 
 from ...engine import PolarsegError
 from ...engine.physics.pixel_mask import mask_reasons
+from ...engine.unsupervised.choose_k import choice_text
 from ...io.common import format_numbers
 from .runs import StageFailed
 
@@ -65,3 +66,9 @@ def mask_text(counts: dict[str, Any]) -> str:
     """``"masked: 120 saturated, 3 black"`` from ``result.mask_counts`` ("" if none)."""
     parts = mask_reasons(counts)
     return f"masked: {', '.join(parts)}" if parts else ""
+
+
+def k_choice_text(summary: dict[str, Any]) -> str:
+    """The status line's note of the number of segments found by itself and how sure
+    (``summary["superpixels"]``, ``n_segments = 0``); "" when k was given."""
+    return choice_text(summary.get("superpixels") or {})
