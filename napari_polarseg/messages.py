@@ -68,8 +68,9 @@ def limit_lines(run: Run) -> list[str]:
     if done:
         lines.append(f"{PROG}: the cut {' and '.join(done)} (cut_limits in summary.json)")
     record = run.result.superpixels
-    if choice_text(record):
-        lines.append(f"{PROG}: {choice_text(record)} (k_scores in summary.json)")
+    found = choice_text(record)
+    if found:
+        lines.append(f"{PROG}: {found} (k_scores in summary.json)")
     if record.get("close_up"):
         lines.append(
             f"{PROG}: one smooth surface fills the frame (it explains "
