@@ -30,9 +30,8 @@ import argparse
 import time
 
 import numpy as np
-from baselines import real_frames
 from evaluate import REAL_DIR
-from materials import HALVES, RENDER_SETS, RENDERED_DIR, load_rendered, unseen_seeds
+from materials import set_frames
 from sklearn.metrics import adjusted_rand_score
 
 from napari_polarseg.engine import Pipeline
@@ -98,23 +97,13 @@ def frames(test: bool, dev_renders: bool = False) -> list[tuple[str, str, tuple,
     renders (``materials.RENDER_SETS``); polarisation as preset ``auto`` fits it."""
     out = []
 
-    def add(group: str, name: str, stack, angles, truth, k: int) -> None:
-        pol = Pipeline(stack, angles, PRESETS["auto"].replace(n_segments=k)).get("polarisation")
-        maps = (pol.intensity, pol.dop, pol.phase, np.asarray(pol.invalid, bool))
-        out.append((group, name, maps, truth, k))
-
-    for group in ("dev", "test") if test else ("dev",):
-        for seed in HALVES[group]:
-            stack, angles, truth = load_rendered(seed, RENDERED_DIR)
-            add(group, f"scene_{seed}", stack, angles, truth, len(np.unique(truth[truth > 0])))
-    if dev_renders:
-        folder = RENDER_SETS["dev-renders"].folder
-        for seed in unseen_seeds(folder):
-            stack, angles, truth = load_rendered(seed, folder)
-            k = len(np.unique(truth[truth > 0]))
-            add("dev renders", f"scene_{seed}", stack, angles, truth, k)
-    for tf, data in real_frames(REAL_DIR):
-        add("real", tf.frame, data.stack, data.angles_rad, tf.truth, len(tf.classes))
+    groups = ["dev", *(["test"] if test else []), *(["dev-renders"] if dev_renders else [])]
+    for group in [*groups, "real"]:
+        for name, stack, angles, truth, k in set_frames(group, REAL_DIR):
+            pol = Pipeline(stack, angles, PRESETS["auto"].replace(n_segments=k))
+            pol = pol.get("polarisation")
+            maps = (pol.intensity, pol.dop, pol.phase, np.asarray(pol.invalid, bool))
+            out.append((group, name, maps, truth, k))
     return out
 
 
@@ -147,7 +136,7 @@ def main(argv: list[str] | None = None) -> None:
     args = parser.parse_args(argv)
     t0 = time.perf_counter()
     data = frames(args.test, args.dev_renders)
-    groups = [g for g in ("dev", "dev renders", "test", "real") if any(f[0] == g for f in data)]
+    groups = [g for g in ("dev", "dev-renders", "test", "real") if any(f[0] == g for f in data)]
     real = [f[1] for f in data if f[0] == "real"]
     variants = _variants()
     names = args.variants.split(";") if args.variants else list(variants)

@@ -94,9 +94,6 @@ RENDER_SETS = {
         "render_scenes.py --seeds 520-999 --two-materials --out benchmarks/renders_two",
     ),
 }
-#: Renders of seeds nobody chose or tuned on (``render_scenes.py --seeds 100-123``).
-UNSEEN_DIR = RENDER_SETS["unseen"].folder
-UNSEEN_NAME = RENDER_SETS["unseen"].title
 #: A result is degenerate when one segment holds this share of the scored pixels.
 DEGENERATE_SHARE = 0.90
 #: Registered methods shown as columns of their own beside the default (those that are
@@ -197,26 +194,47 @@ def k_lines(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
-def rendered_rows(seeds, bounds: str, folder: Path = RENDERED_DIR) -> list[dict]:
-    """:func:`score_frame` of every rendered seed whose file is in ``folder``."""
-    rows = []
+def rendered_frames(seeds, folder: Path = RENDERED_DIR):
+    """(name, stack, angles in radians, truth, k) of every rendered seed whose file is in
+    ``folder`` (k: the classes scored, ``truth > 0``)."""
     for seed in seeds:
         if not (Path(folder) / f"scene_{seed}.npz").is_file():
             print(f"rendered scene {seed} not in {folder}: skipped")
             continue
         stack, angles, truth = load_rendered(seed, folder)
-        k = len(np.unique(truth[truth > 0]))
-        rows.append(score_frame(f"scene_{seed}", stack, angles, truth, k, bounds))
-    return rows
+        yield f"scene_{seed}", stack, angles, truth, len(np.unique(truth[truth > 0]))
+
+
+def labelled_real_frames(folder: Path):
+    """(name, stack, angles in radians, truth, k) of every hand-labelled real frame found
+    in ``folder``."""
+    for tf, data in real_frames(folder):
+        yield tf.frame, data.stack, data.angles_rad, tf.truth, len(tf.classes)
+
+
+def set_frames(name: str, real_dir: Path):
+    """The frames of one set, as :func:`rendered_frames`: a half of the shared renders
+    (:data:`HALVES`), a render set (:data:`RENDER_SETS`, none when its folder is empty or
+    missing) or ``real`` (the labelled real frames in ``real_dir``)."""
+    if name in HALVES:
+        return rendered_frames(HALVES[name])
+    if name in RENDER_SETS:
+        folder = RENDER_SETS[name].folder
+        return rendered_frames(folder_seeds(folder), folder)
+    if name == "real":
+        return labelled_real_frames(real_dir)
+    known = ", ".join([*HALVES, *RENDER_SETS, "real"])
+    raise ValueError(f"unknown set {name!r}; known: {known}")
+
+
+def rendered_rows(seeds, bounds: str, folder: Path = RENDERED_DIR) -> list[dict]:
+    """:func:`score_frame` of every rendered seed whose file is in ``folder``."""
+    return [score_frame(*frame, bounds) for frame in rendered_frames(seeds, folder)]
 
 
 def real_rows(folder: Path, bounds: str) -> list[dict]:
     """:func:`score_frame` of every hand-labelled real frame found in ``folder``."""
-    rows = []
-    for tf, data in real_frames(folder):
-        k = len(tf.classes)
-        rows.append(score_frame(tf.frame, data.stack, data.angles_rad, tf.truth, k, bounds))
-    return rows
+    return [score_frame(*frame, bounds) for frame in labelled_real_frames(folder)]
 
 
 def _mean(values: list[float]) -> str:
@@ -326,11 +344,11 @@ def subset_only(args) -> bool:
 
 
 def chosen_render_sets(args) -> list[str]:
-    """The :data:`RENDER_SETS` whose flags are given."""
+    """The :data:`RENDER_SETS` whose flags are given (a parser may offer only some)."""
     return [name for name in RENDER_SETS if getattr(args, name.replace("-", "_"), False)]
 
 
-def unseen_seeds(folder: Path) -> list[int]:
+def folder_seeds(folder: Path) -> list[int]:
     """Seeds of the ``scene_<seed>.npz`` files in ``folder``, in order."""
     return sorted(int(f.stem.split("_")[1]) for f in Path(folder).glob("scene_*.npz"))
 
@@ -427,7 +445,7 @@ def run(args, real_dir: Path, command: str | None = None) -> None:
     for name in renders:
         render_set = RENDER_SETS[name]
         folder = getattr(args, f"{name.replace('-', '_')}_dir")
-        seeds = unseen_seeds(folder)
+        seeds = folder_seeds(folder)
         rows = sets[name] = rendered_rows(seeds, args.bounds, folder)
         if not rows:
             add(

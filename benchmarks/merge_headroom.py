@@ -22,21 +22,20 @@ import itertools
 import time
 
 import numpy as np
-from baselines import real_frames
 from evaluate import REAL_DIR
-from materials import HALVES, RENDER_SETS, RENDERED_DIR, load_rendered, unseen_seeds
+from materials import set_frames
 from sklearn.metrics import adjusted_rand_score
 
 from napari_polarseg.engine import Pipeline
-from napari_polarseg.engine.methods.surface_superpixels import BORDER_SCALE, REACH
+from napari_polarseg.engine.methods.registry import get_method
 from napari_polarseg.engine.methods.valid_superpixels import clustered_pixels
 from napari_polarseg.engine.params import PRESETS
-from napari_polarseg.engine.unsupervised.merge import merged_clustering, weakest_border
-from napari_polarseg.engine.unsupervised.params import UnsupervisedParams
+from napari_polarseg.engine.unsupervised.merge import merged_clustering
 from napari_polarseg.engine.unsupervised.segmenter import cluster_regions, prepare_regions
 
 EXTRAS = (0, 1, 2, 3)
-DEFAULT = UnsupervisedParams().replace(diffusion_range=REACH, diffusion_tau=BORDER_SCALE)
+#: The default method (preset auto's): its parameters and merge rule.
+DEFAULT = get_method(PRESETS["auto"].method)
 
 
 def pairs(x: np.ndarray) -> float:
@@ -74,31 +73,15 @@ def frame_row(stack, angles, truth: np.ndarray, k: int) -> list[float]:
     pol = Pipeline(stack, angles, PRESETS["auto"].replace(n_segments=k)).get("polarisation")
     invalid = np.asarray(pol.invalid, bool)
     model = prepare_regions(
-        pol.intensity, pol.dop, pol.phase, DEFAULT, clustered_pixels(None, invalid)
+        pol.intensity, pol.dop, pol.phase, DEFAULT.params, clustered_pixels(None, invalid)
     )
     scored = truth > 0
-    merged = merged_clustering(model, k, 1, weakest_border).labels
+    merged = merged_clustering(model, k, merge=DEFAULT.merge_rule).labels
     row = [float(adjusted_rand_score(truth[scored], merged[scored]))]
     for extra in EXTRAS:
         labels = cluster_regions(model, k + extra).labels
         row.append(best_grouping(labels[scored], truth[scored], k))
     return row
-
-
-def set_frames(name: str):
-    """(stack, angles, truth, k) of every frame of one set."""
-    if name in HALVES:
-        folder, seeds = RENDERED_DIR, HALVES[name]
-    elif name in RENDER_SETS:
-        folder = RENDER_SETS[name].folder
-        seeds = unseen_seeds(folder) if folder.is_dir() else []
-    else:
-        for tf, data in real_frames(REAL_DIR):
-            yield data.stack, data.angles_rad, tf.truth, len(tf.classes)
-        return
-    for seed in seeds:
-        stack, angles, truth = load_rendered(seed, folder)
-        yield stack, angles, truth, len(np.unique(truth[truth > 0]))
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -110,7 +93,7 @@ def main(argv: list[str] | None = None) -> None:
     print(f"| set | n | default (k + 1, weakest border) | {heads} |")
     print("|---|---:|" + "---:|" * (1 + len(EXTRAS)))
     for name in args.sets.split(","):
-        rows = [frame_row(*frame) for frame in set_frames(name)]
+        rows = [frame_row(*frame[1:]) for frame in set_frames(name, REAL_DIR)]
         if not rows:
             print(f"| {name} | 0 | (no frames) |")
             continue

@@ -60,7 +60,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from baselines import plain_features, real_frames  # noqa: E402
 from ilastik_features import ilastik_features  # noqa: E402
-from materials import RENDER_SETS, replace_block, unseen_seeds  # noqa: E402
+from materials import RENDER_SETS, chosen_render_sets, folder_seeds, replace_block  # noqa: E402
 
 #: The block of ``docs/quality.md`` that ``--markdown`` rewrites.
 MARKDOWN_BEGIN = "<!-- robot user: begin -->"
@@ -383,7 +383,7 @@ def main(argv: list[str] | None = None) -> int:
         "--markdown", type=Path, help="also write the tables into this page's robot-user block"
     )
     args = parser.parse_args(argv)
-    sets = [name for name in held_out if getattr(args, name.replace("-", "_"))]
+    sets = chosen_render_sets(args)
     if not args.real and not args.rendered and not sets:
         parser.error(
             "choose --real, --rendered dev|test|all and/or "
@@ -405,7 +405,7 @@ def main(argv: list[str] | None = None) -> int:
             rows += evaluate_scene(rendered_scene(seed), args.rounds, bound=True, methods=methods)
     for name in sets:
         folder = RENDER_SETS[name].folder
-        for seed in unseen_seeds(folder):
+        for seed in folder_seeds(folder):
             if args.seeds and str(seed) not in args.seeds.split(","):
                 continue
             scene = rendered_scene(seed, folder, name)

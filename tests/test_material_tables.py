@@ -90,12 +90,12 @@ def test_unseen_renders_get_a_table_and_a_verdict_of_their_own(tmp_path, capsys)
     materials.add_arguments(parser)
     args = parser.parse_args(["--unseen", "--bounds", "none", "--unseen-dir", str(tmp_path)])
     assert materials.subset_only(args)
-    assert materials.unseen_seeds(tmp_path) == [101]
+    assert materials.folder_seeds(tmp_path) == [101]
     materials.run(args, tmp_path / "no-real-frames", "cmd")
     out = capsys.readouterr().out
-    assert f"{materials.UNSEEN_NAME}, seeds 101–101" in out
+    assert f"{materials.RENDER_SETS['unseen'].title}, seeds 101–101" in out
     assert "| scene_101 | 2 |" in out
-    assert f"- {materials.UNSEEN_NAME}, mean" in out and "target 0.5" in out
+    assert f"- {materials.RENDER_SETS['unseen'].title}, mean" in out and "target 0.5" in out
     assert "development half" not in out
 
 
