@@ -11,9 +11,10 @@
   features, standardised — the plain *unsupervised* yardstick: what clustering the
   smoothed polarisation features does with no superpixels, no graph and no training.
 - :func:`truth_bound_halves`: a random forest on the same 20 features (or those plus the
-  engine's pixel features) trained on the *truth* of a scene's left half and scored on
-  its right half: what these features can tell apart given labels, without scoring
-  pixels the forest saw.
+  engine's pixel features, or those plus the default method's own superpixel node
+  features) trained on the *truth* of a scene's left half and scored on its right half:
+  what these features can tell apart given labels, without scoring pixels the forest
+  saw.
 """
 
 from __future__ import annotations
@@ -108,22 +109,51 @@ def smoothed_kmeans(
 
 
 #: Feature sets of :func:`truth_bound_halves`.
-BOUND_FEATURE_SETS = ("plain", "rich")
+BOUND_FEATURE_SETS = ("plain", "rich", "regions")
 #: Training pixels sampled from the left half's truth.
 BOUND_HALF_PIXELS = 20_000
 
 
+def region_features(
+    intensity: np.ndarray, dop: np.ndarray, phase: np.ndarray, invalid: np.ndarray | None = None
+) -> np.ndarray:
+    """(H, W, C) the default method's (preset ``auto``) projected superpixel node
+    features, each pixel carrying its superpixel's: what the default clusters, drawn on
+    the pixels it clusters (not ``invalid``; the others carry the nearest one's)."""
+    from napari_polarseg.engine.methods.registry import get_method
+    from napari_polarseg.engine.methods.valid_superpixels import clustered_pixels
+    from napari_polarseg.engine.params import PRESETS
+    from napari_polarseg.engine.unsupervised.segmenter import prepare_regions
+
+    default = get_method(PRESETS["auto"].method)
+    bad = np.zeros(np.shape(intensity), bool) if invalid is None else np.asarray(invalid, bool)
+    model = prepare_regions(intensity, dop, phase, default.params, clustered_pixels(None, bad))
+    nodes = np.zeros((int(model.regions.max()) + 1, model.z.shape[1]))
+    nodes[: model.n] = model.z  # with a mask, the region outside it stays 0
+    regions = model.regions if model.nearest is None else model.regions.ravel()[model.nearest]
+    return nodes[regions].astype(np.float32)
+
+
 def bound_features(
-    intensity: np.ndarray, dop: np.ndarray, phase: np.ndarray, features: str = "plain"
+    intensity: np.ndarray,
+    dop: np.ndarray,
+    phase: np.ndarray,
+    features: str = "plain",
+    invalid: np.ndarray | None = None,
 ) -> np.ndarray:
     """(H, W, F) features of the bound: ``plain`` = the 20 of :func:`plain_features`;
     ``rich`` = those plus the engine's default pixel feature stack
-    (``napari_polarseg.engine.pixel_features``, 88 features at σ = 1..16)."""
+    (``napari_polarseg.engine.pixel_features``, 88 features at σ = 1..16); ``regions`` =
+    the 20 plus the default method's node features (:func:`region_features`, which read
+    ``invalid``)."""
     if features not in BOUND_FEATURE_SETS:
         raise ValueError(f"features must be one of {BOUND_FEATURE_SETS}, got {features!r}")
     f = plain_features(intensity, dop, phase)
     if features == "plain":
         return f
+    if features == "regions":
+        regions = region_features(intensity, dop, phase, invalid).reshape(*f.shape[:2], -1)
+        return np.concatenate([f, regions], axis=-1)
     from napari_polarseg.engine import pixel_features
 
     rich = np.moveaxis(pixel_features(intensity, dop, phase).planes(), 0, -1)
@@ -136,6 +166,7 @@ def truth_bound_halves(
     phase: np.ndarray,
     truth: np.ndarray,
     features: str = "plain",
+    invalid: np.ndarray | None = None,
 ) -> tuple[float, bool]:
     """(ARI, every class seen) of a random forest trained on the truth of the LEFT half.
 
@@ -145,11 +176,11 @@ def truth_bound_halves(
     over those right-half pixels. The features are computed on the whole image (a
     smoothing scale reaches across the middle, as it would for any method). The flag is
     False when a class labelled in the right half has no pixel in the left half (the
-    forest cannot name it: the bound is lower than the features allow).
+    forest cannot name it: the bound is lower than the features allow). ``invalid``: the
+    image's invalid pixels, read by the ``regions`` features only. A method's labels are
+    scored on the same pixels by :func:`right_half_ari`.
     """
-    from sklearn.metrics import adjusted_rand_score
-
-    f = bound_features(intensity, dop, phase, features)
+    f = bound_features(intensity, dop, phase, features, invalid)
     half = truth.shape[1] // 2
     left, right = truth[:, :half], truth[:, half:]
     train = np.flatnonzero((left > 0).ravel())
@@ -161,9 +192,22 @@ def truth_bound_halves(
     fl = f[:, :half].reshape(-1, f.shape[-1])
     model = RandomForestClassifier(100, n_jobs=-1, random_state=0, class_weight="balanced")
     model.fit(fl[train], left.ravel()[train])
-    pred = model.predict(f[:, half:][scored])
+    pred = np.zeros(truth.shape, model.classes_.dtype)
+    pred[:, half:][scored] = model.predict(f[:, half:][scored])
     seen = set(np.unique(right[scored])) <= set(model.classes_)
-    return float(adjusted_rand_score(right[scored], pred)), bool(seen)
+    return right_half_ari(pred, truth), bool(seen)
+
+
+def right_half_ari(labels: np.ndarray, truth: np.ndarray) -> float:
+    """ARI of ``labels`` over the labelled pixels (``truth > 0``) of the columns right of
+    the middle: the pixels :func:`truth_bound_halves` scores, so that a method stands
+    beside the bounds on the same pixels."""
+    from sklearn.metrics import adjusted_rand_score
+
+    half = truth.shape[1] // 2
+    right = truth[:, half:]
+    scored = right > 0
+    return float(adjusted_rand_score(right[scored], np.asarray(labels)[:, half:][scored]))
 
 
 def real_frames(folder: Path) -> Iterator[tuple]:

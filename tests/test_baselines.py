@@ -15,7 +15,12 @@ import pytest
 from sklearn.metrics import adjusted_rand_score
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
-from baselines import smoothed_kmeans, truth_bound_halves  # noqa: E402
+from baselines import (  # noqa: E402
+    region_features,
+    right_half_ari,
+    smoothed_kmeans,
+    truth_bound_halves,
+)
 
 
 def _planted(shape=(160, 192), seed=0):
@@ -44,7 +49,7 @@ def test_smoothed_kmeans_fits_on_valid_pixels_only():
     assert adjusted_rand_score(truth[valid], labels[valid]) > 0.9
 
 
-@pytest.mark.parametrize("features", ["plain", "rich"])
+@pytest.mark.parametrize("features", ["plain", "rich", "regions"])
 def test_truth_bound_halves_is_one_on_a_separable_scene(features):
     intensity, dop, phase, truth = _planted()
     truth = truth.copy()
@@ -60,3 +65,36 @@ def test_truth_bound_halves_flags_a_class_missing_on_the_left():
     truth[:, 120:150] = 3  # a class only in the right half
     _, seen = truth_bound_halves(intensity, dop, phase, truth)
     assert not seen
+
+
+def test_region_features_are_constant_on_each_superpixel_and_split_the_materials():
+    intensity, dop, phase, truth = _planted()
+    f = region_features(intensity, dop, phase)
+    assert f.shape[:2] == truth.shape and f.shape[2] >= 1
+    # the two materials' pixels carry different node features (the first component)
+    top, bottom = f[truth == 1, 0], f[truth == 2, 0]
+    assert abs(np.median(top) - np.median(bottom)) > 3 * (top.std() + bottom.std()) / 2
+
+
+def test_region_features_fill_invalid_pixels_from_the_nearest_valid_one():
+    intensity, dop, phase, truth = _planted()
+    invalid = np.zeros(truth.shape, bool)
+    invalid[:10, :10] = True
+    f = region_features(intensity, dop, phase, invalid)
+    assert np.all(np.isfinite(f))
+    # each corner pixel carries a superpixel of the valid pixels just around the corner
+    border = np.concatenate(
+        [f[:11, 10:12].reshape(-1, f.shape[2]), f[10:12, :11].reshape(-1, f.shape[2])]
+    )
+    corner = f[:10, :10].reshape(-1, f.shape[2])
+    assert all(np.any(np.all(np.isclose(border, v), axis=1)) for v in corner)
+
+
+def test_right_half_ari_scores_only_the_labelled_right_half():
+    truth = np.zeros((4, 8), np.int32)
+    truth[:, 4:6], truth[:, 6:] = 1, 2
+    labels = np.zeros_like(truth)  # the left half is all wrong: not scored
+    labels[:, 4:6], labels[:, 6:] = 5, 7
+    assert right_half_ari(labels, truth) == pytest.approx(1.0)
+    labels[:, 6:] = 5
+    assert right_half_ari(labels, truth) == pytest.approx(0.0)
