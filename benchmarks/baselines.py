@@ -12,7 +12,8 @@
   smoothed polarisation features does with no superpixels, no graph and no training.
 - :func:`truth_bound_halves`: a random forest on the same 20 features (or those plus the
   engine's pixel features, or those plus the default method's own superpixel node
-  features) trained on the *truth* of a scene's left half and scored on its right half:
+  features; a forest, or gradient-boosted trees) trained on the *truth* of a scene's left
+  half and scored on its right half:
   what these features can tell apart given labels, without scoring pixels the forest
   saw.
 """
@@ -25,7 +26,7 @@ from pathlib import Path
 import numpy as np
 from scipy import ndimage
 from sklearn.cluster import KMeans
-from sklearn.ensemble import RandomForestClassifier
+from sklearn.ensemble import HistGradientBoostingClassifier, RandomForestClassifier
 from threadpoolctl import threadpool_limits
 
 PLAIN_SIGMAS = (1, 2, 4, 8, 16)
@@ -110,6 +111,8 @@ def smoothed_kmeans(
 
 #: Feature sets of :func:`truth_bound_halves`.
 BOUND_FEATURE_SETS = ("plain", "rich", "regions")
+#: Classifiers of :func:`truth_bound_halves`.
+BOUND_CLASSIFIERS = ("forest", "boosting")
 #: Training pixels sampled from the left half's truth.
 BOUND_HALF_PIXELS = 20_000
 
@@ -167,12 +170,15 @@ def truth_bound_halves(
     truth: np.ndarray,
     features: str = "plain",
     invalid: np.ndarray | None = None,
+    classifier: str = "forest",
 ) -> tuple[float, bool]:
-    """(ARI, every class seen) of a random forest trained on the truth of the LEFT half.
+    """(ARI, every class seen) of a classifier trained on the truth of the LEFT half.
 
-    A random forest (100 trees, seed 0, balanced classes) on :func:`bound_features`
-    learns from up to :data:`BOUND_HALF_PIXELS` labelled pixels (``truth > 0``) of the
-    columns left of the middle and predicts the labelled pixels right of it; the ARI is
+    A random forest (``forest``: 100 trees, seed 0, balanced classes) or gradient-boosted
+    trees (``boosting``: scikit-learn's ``HistGradientBoostingClassifier``, seed 0,
+    balanced classes) on :func:`bound_features` learns from up to
+    :data:`BOUND_HALF_PIXELS` labelled pixels (``truth > 0``) of the columns left of the
+    middle and predicts the labelled pixels right of it; the ARI is
     over those right-half pixels. The features are computed on the whole image (a
     smoothing scale reaches across the middle, as it would for any method). The flag is
     False when a class labelled in the right half has no pixel in the left half (the
@@ -190,7 +196,12 @@ def truth_bound_halves(
     rng = np.random.default_rng(0)
     train = rng.choice(train, min(BOUND_HALF_PIXELS, train.size), replace=False)
     fl = f[:, :half].reshape(-1, f.shape[-1])
-    model = RandomForestClassifier(100, n_jobs=-1, random_state=0, class_weight="balanced")
+    if classifier not in BOUND_CLASSIFIERS:
+        raise ValueError(f"classifier must be one of {BOUND_CLASSIFIERS}, got {classifier!r}")
+    if classifier == "forest":
+        model = RandomForestClassifier(100, n_jobs=-1, random_state=0, class_weight="balanced")
+    else:
+        model = HistGradientBoostingClassifier(random_state=0, class_weight="balanced")
     model.fit(fl[train], left.ravel()[train])
     pred = np.zeros(truth.shape, model.classes_.dtype)
     pred[:, half:][scored] = model.predict(f[:, half:][scored])

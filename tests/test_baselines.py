@@ -49,12 +49,15 @@ def test_smoothed_kmeans_fits_on_valid_pixels_only():
     assert adjusted_rand_score(truth[valid], labels[valid]) > 0.9
 
 
-@pytest.mark.parametrize("features", ["plain", "rich", "regions"])
-def test_truth_bound_halves_is_one_on_a_separable_scene(features):
+@pytest.mark.parametrize(
+    ("features", "classifier"),
+    [("plain", "forest"), ("rich", "forest"), ("regions", "forest"), ("regions", "boosting")],
+)
+def test_truth_bound_halves_is_one_on_a_separable_scene(features, classifier):
     intensity, dop, phase, truth = _planted()
     truth = truth.copy()
     truth[:, 88:104] = 0  # an unlabelled band, as the hand-drawn truth has
-    value, seen = truth_bound_halves(intensity, dop, phase, truth, features)
+    value, seen = truth_bound_halves(intensity, dop, phase, truth, features, None, classifier)
     assert seen
     assert value > 0.95
 
