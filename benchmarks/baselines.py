@@ -13,9 +13,8 @@
 - :func:`truth_bound_halves`: a random forest on the same 20 features (or those plus the
   engine's pixel features, or those plus the default method's own superpixel node
   features; a forest, or gradient-boosted trees) trained on the *truth* of a scene's left
-  half and scored on its right half:
-  what these features can tell apart given labels, without scoring pixels the forest
-  saw.
+  half and scored on its right half: what these features can tell apart given labels,
+  without scoring pixels the classifier saw.
 """
 
 from __future__ import annotations
@@ -117,12 +116,11 @@ BOUND_CLASSIFIERS = ("forest", "boosting")
 BOUND_HALF_PIXELS = 20_000
 
 
-def region_features(
+def default_region_model(
     intensity: np.ndarray, dop: np.ndarray, phase: np.ndarray, invalid: np.ndarray | None = None
-) -> np.ndarray:
-    """(H, W, C) the default method's (preset ``auto``) projected superpixel node
-    features, each pixel carrying its superpixel's: what the default clusters, drawn on
-    the pixels it clusters (not ``invalid``; the others carry the nearest one's)."""
+):
+    """The default method's (preset ``auto``) superpixels and projected node features
+    (``unsupervised.segmenter.RegionModel``) on the pixels it clusters (not ``invalid``)."""
     from napari_polarseg.engine.methods.registry import get_method
     from napari_polarseg.engine.methods.valid_superpixels import clustered_pixels
     from napari_polarseg.engine.params import PRESETS
@@ -130,7 +128,16 @@ def region_features(
 
     default = get_method(PRESETS["auto"].method)
     bad = np.zeros(np.shape(intensity), bool) if invalid is None else np.asarray(invalid, bool)
-    model = prepare_regions(intensity, dop, phase, default.params, clustered_pixels(None, bad))
+    return prepare_regions(intensity, dop, phase, default.params, clustered_pixels(None, bad))
+
+
+def region_features(
+    intensity: np.ndarray, dop: np.ndarray, phase: np.ndarray, invalid: np.ndarray | None = None
+) -> np.ndarray:
+    """(H, W, C) the default method's projected superpixel node features
+    (:func:`default_region_model`), each pixel carrying its superpixel's: what the
+    default clusters (``invalid`` pixels carry the nearest clustered one's)."""
+    model = default_region_model(intensity, dop, phase, invalid)
     nodes = np.zeros((int(model.regions.max()) + 1, model.z.shape[1]))
     nodes[: model.n] = model.z  # with a mask, the region outside it stays 0
     regions = model.regions if model.nearest is None else model.regions.ravel()[model.nearest]
@@ -186,6 +193,8 @@ def truth_bound_halves(
     image's invalid pixels, read by the ``regions`` features only. A method's labels are
     scored on the same pixels by :func:`right_half_ari`.
     """
+    if classifier not in BOUND_CLASSIFIERS:
+        raise ValueError(f"classifier must be one of {BOUND_CLASSIFIERS}, got {classifier!r}")
     f = bound_features(intensity, dop, phase, features, invalid)
     half = truth.shape[1] // 2
     left, right = truth[:, :half], truth[:, half:]
@@ -196,8 +205,6 @@ def truth_bound_halves(
     rng = np.random.default_rng(0)
     train = rng.choice(train, min(BOUND_HALF_PIXELS, train.size), replace=False)
     fl = f[:, :half].reshape(-1, f.shape[-1])
-    if classifier not in BOUND_CLASSIFIERS:
-        raise ValueError(f"classifier must be one of {BOUND_CLASSIFIERS}, got {classifier!r}")
     if classifier == "forest":
         model = RandomForestClassifier(100, n_jobs=-1, random_state=0, class_weight="balanced")
     else:

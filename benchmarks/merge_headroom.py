@@ -22,16 +22,16 @@ import itertools
 import time
 
 import numpy as np
+from baselines import default_region_model
 from evaluate import REAL_DIR
 from materials import set_frames
 from sklearn.metrics import adjusted_rand_score
 
 from napari_polarseg.engine import Pipeline
 from napari_polarseg.engine.methods.registry import get_method
-from napari_polarseg.engine.methods.valid_superpixels import clustered_pixels
 from napari_polarseg.engine.params import PRESETS
 from napari_polarseg.engine.unsupervised.merge import merged_clustering
-from napari_polarseg.engine.unsupervised.segmenter import cluster_regions, prepare_regions
+from napari_polarseg.engine.unsupervised.segmenter import cluster_regions
 
 EXTRAS = (0, 1, 2, 3)
 #: The default method (preset auto's): its parameters and merge rule.
@@ -71,10 +71,7 @@ def best_grouping(labels: np.ndarray, truth: np.ndarray, k: int) -> float:
 def frame_row(stack, angles, truth: np.ndarray, k: int) -> list[float]:
     """[the default's merge, the best grouping of k + e clusters for each e]."""
     pol = Pipeline(stack, angles, PRESETS["auto"].replace(n_segments=k)).get("polarisation")
-    invalid = np.asarray(pol.invalid, bool)
-    model = prepare_regions(
-        pol.intensity, pol.dop, pol.phase, DEFAULT.params, clustered_pixels(None, invalid)
-    )
+    model = default_region_model(pol.intensity, pol.dop, pol.phase, pol.invalid)
     scored = truth > 0
     merged = merged_clustering(model, k, merge=DEFAULT.merge_rule).labels
     row = [float(adjusted_rand_score(truth[scored], merged[scored]))]

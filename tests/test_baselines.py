@@ -70,7 +70,7 @@ def test_truth_bound_halves_flags_a_class_missing_on_the_left():
     assert not seen
 
 
-def test_region_features_are_constant_on_each_superpixel_and_split_the_materials():
+def test_region_features_split_the_materials():
     intensity, dop, phase, truth = _planted()
     f = region_features(intensity, dop, phase)
     assert f.shape[:2] == truth.shape and f.shape[2] >= 1
