@@ -15,7 +15,10 @@ k. The test half (seeds 12–23) is only read with ``--test``: choose on the dev
 half, report on the test half. ``--dev-renders`` adds the 72 development renders of
 ``render_scenes.py`` (``materials.RENDER_SETS``): twelve development scenes give a
 mean with a standard error of about 0.07, seventy-two about 0.03. The rows named
-"default with …" change one thing of the default (its merge included).
+"default with …" change one thing of the default (its merge included); "default with
+superpixels × f the area" draws superpixels f times the default's area on each frame
+(the default's area follows the frame's size: 32 px on a 240 × 320 render, 418 px on
+a 1224 × 1024 camera frame).
 
 Usage::
 
@@ -28,6 +31,7 @@ from __future__ import annotations
 
 import argparse
 import time
+from collections.abc import Callable
 
 import numpy as np
 from evaluate import REAL_DIR
@@ -47,11 +51,16 @@ from napari_polarseg.engine.unsupervised.merge import (
 from napari_polarseg.engine.unsupervised.params import UnsupervisedParams
 from napari_polarseg.engine.unsupervised.segmenter import prepare_regions
 
+#: A variant: its parameters (or a function of the frame's shape giving them), with
+#: optionally its merge rule and the extra clusters merged (``score``).
+Params = UnsupervisedParams | Callable[[tuple[int, int]], UnsupervisedParams]
+Variant = Params | tuple[Params, Merge] | tuple[Params, Merge, int]
+
 V = UnsupervisedParams()  # valid_superpixels
 W = V.replace(diffusion_range=REACH, diffusion_tau=BORDER_SCALE)  # surface_superpixels
 
 
-def _variants() -> dict[str, UnsupervisedParams | tuple[UnsupervisedParams, Merge]]:
+def _variants() -> dict[str, Variant]:
     out: dict = {"valid_superpixels (reach 7 %, τ 0.75)": V}
     for reach in (0.10, 0.14, 0.17, 0.20):
         for tau in (0.75, 1.0, 1.25):
@@ -88,7 +97,21 @@ def _variants() -> dict[str, UnsupervisedParams | tuple[UnsupervisedParams, Merg
         out[f"default with {name}"] = (params, weakest_border)
     out["reach 20 %, τ 1.25, weakest-border merge (default)"] = (W, weakest_border)
     out["reach 20 %, τ 1.25, k + 2, weakest-border merge"] = (W, weakest_border, 2)
+    for factor in AREA_FACTORS:
+        name = f"default with superpixels × {factor:g} the area"
+        out[name] = (area_times(factor), weakest_border)
     return out
+
+
+#: Superpixel areas tried, as multiples of the default's on each frame
+#: (``UnsupervisedParams.area_of``: 32 px on a 240 × 320 render, 418 px on a camera frame).
+AREA_FACTORS = (1.5, 2.0, 2.5, 3.0, 4.0)
+
+
+def area_times(factor: float) -> Callable[[tuple[int, int]], UnsupervisedParams]:
+    """The default's parameters with ``factor`` × its superpixel area on a frame of the
+    given shape (the default's area depends on the frame's size, so the variant does)."""
+    return lambda shape: W.replace(region_area=int(factor * W.area_of(shape)))
 
 
 def frames(test: bool, dev_renders: bool = False) -> list[tuple[str, str, tuple, np.ndarray, int]]:
@@ -109,13 +132,15 @@ def frames(test: bool, dev_renders: bool = False) -> list[tuple[str, str, tuple,
 
 def score(variant, data: list, tolerances=(0.0,)) -> dict:
     """ARI per frame of the k + extra → k clustering of ``variant`` (parameters, or
-    (parameters, merge rule[, extra])), and the k found per tolerance."""
+    (parameters, merge rule[, extra]); parameters may be a function of the frame's
+    shape), and the k found per tolerance."""
     if not isinstance(variant, tuple):
         variant = (variant, closest_centroids)
     params, merge, extra = (*variant, 1)[:3]
     row: dict = {"ari": {}, "k": {t: {} for t in tolerances}}
     for _group, name, (i, d, ph, invalid), truth, k in data:
-        model = prepare_regions(i, d, ph, params, clustered_pixels(None, invalid))
+        used = params(i.shape) if callable(params) else params
+        model = prepare_regions(i, d, ph, used, clustered_pixels(None, invalid))
         labels = merged_clustering(model, k, extra, merge).labels
         scored = truth > 0
         row["ari"][name] = float(adjusted_rand_score(truth[scored], labels[scored]))
