@@ -104,6 +104,17 @@ def control_tooltip(name: str, spec: ParamSpec) -> str:
     return details if effect is None else f"{effect}.\n\nDetails: {details}"
 
 
+def control_label(name: str, spec: ParamSpec) -> str:
+    """The control's label: the spec's (or the name), followed by the values that stand
+    for a word, as the command line takes them ("segments (0 = auto)"): a number box
+    cannot show the word itself (magicgui's integer box, superqt's ``QLargeIntSpinBox``,
+    has no special-value text)."""
+    label = spec.label or name
+    if not spec.words:
+        return label
+    return f"{label} ({', '.join(f'{v} = {w}' for w, v in spec.words.items())})"
+
+
 def param_control(name: str, spec: ParamSpec, value: Any, **kwargs: Any) -> ValueWidget:
     """The control of parameter ``name`` described by ``spec``, showing ``value``.
 
@@ -111,7 +122,7 @@ def param_control(name: str, spec: ParamSpec, value: Any, **kwargs: Any) -> Valu
     them, else an integer box; ``kwargs`` go to the widget (e.g. ``visible``).
     """
     common: dict[str, Any] = {
-        "label": spec.label or name,
+        "label": control_label(name, spec),
         "value": value,
         "tooltip": control_tooltip(name, spec),
         **kwargs,

@@ -37,3 +37,22 @@ def test_status_line_says_when_the_frame_is_a_close_up(viewer, open_sample, add_
     assert summary["superpixels"]["close_up"] is True
     ref = engine_result(stack, AUTO)
     np.testing.assert_array_equal(widget.output("segments").data, ref.labels + 1)
+
+
+def test_segments_box_says_what_0_means_and_0_finds_the_number(
+    viewer, open_sample, add_widget, qtbot
+):
+    """The box cannot show the word "auto", so its label names it, as the CLI takes it
+    (``--segments auto`` is 0); 0 runs the method's own choice of k, as the engine does."""
+    stack = open_sample("leaves")
+    widget = add_widget("Segment by material", preset=None)
+    assert widget.n_segments.label == "segments (0 = auto)"
+    assert widget.n_segments.min == 0
+    assert widget.window.label == "window size"  # a box with no word keeps its plain label
+    widget.n_segments.value = 0
+    run_and_wait(qtbot, widget)
+    assert error_messages() == []
+    ref = engine_result(stack, AUTO.replace(n_segments=0))
+    assert ref.method_record["k_found"] is True
+    np.testing.assert_array_equal(widget.output("segments").data, ref.labels + 1)
+    assert f"{ref.method_record['k']} segments" in widget.status.value
