@@ -26,11 +26,14 @@ def test_the_controls_show_the_table(add_widget):
     widget = add_widget("Segment by material", preset=None)
     for name in widget.controlled:
         spec, control = PARAM_SPECS[name], getattr(widget, name)
-        # what the control does, then the spec's help (issue 25)
-        assert control.label == spec.label and spec.help in control.tooltip
+        # what the control does, then the spec's help (issue 25); a number that stands
+        # for a word (the CLI's --segments auto) is named after the label
+        words = "".join(f" ({v} = {w})" for w, v in (spec.words or {}).items())
+        assert control.label == spec.label + words and spec.help in control.tooltip
         if spec.options() is not None:  # a menu: its choices, or the registered methods
             assert [v for _, v in spec.menu()] == list(control.choices)
         else:
             assert (control.min, control.max) == (spec.minimum, spec.maximum)
+    assert widget.n_segments.label == "segments (0 = auto)"
     assert widget.fit.native.currentText() == "least squares"
     assert widget.refractive_index.native.decimals() == 3
