@@ -11,10 +11,17 @@ from typing import TYPE_CHECKING, Any
 from magicgui.widgets import CheckBox, ComboBox, Container, PushButton
 
 from ..engine import PolarsegError, SegmentParams
-from ..engine.params import DEFAULT_PRESET, PARAM_SPECS, PRESET_HELP, PRESETS, ParamSpec
+from ..engine.params import (
+    DEFAULT_PRESET,
+    FINDS_K_METHODS,
+    PARAM_SPECS,
+    PRESET_HELP,
+    PRESETS,
+    ParamSpec,
+)
 from ..io import read_params_file
 from ._base import ask_file
-from .param_controls import controlled_names, param_controls
+from .param_controls import control_label, controlled_names, param_controls
 from .session import wants_maps, write_params_json
 
 if TYPE_CHECKING:
@@ -121,7 +128,13 @@ class ParameterControls:
 
     def _on_method_changed(self, method: Any) -> None:
         """The thesis method always computes the maps: the option shows them ticked and
-        cannot be changed; another method gets the user's choice back."""
+        cannot be changed; another method gets the user's choice back. The segments box
+        says "0 = auto" only under a method that finds the number itself."""
+        if "n_segments" in self.controls:
+            spec = self.param_specs["n_segments"]
+            finds_k = str(method) in FINDS_K_METHODS
+            label = control_label("n_segments", spec)
+            self.controls["n_segments"].label = label if finds_k else spec.label or "n_segments"
         box = self.thesis_maps
         if str(method) == "thesis":
             if box.enabled:

@@ -56,3 +56,22 @@ def test_segments_box_says_what_0_means_and_0_finds_the_number(
     assert ref.method_record["k_found"] is True
     np.testing.assert_array_equal(widget.output("segments").data, ref.labels + 1)
     assert f"{ref.method_record['k']} segments" in widget.status.value
+
+
+def test_segments_box_says_0_is_auto_only_under_a_method_that_finds_the_number(viewer, add_widget):
+    from qtpy.QtWidgets import QLabel
+
+    from napari_polarseg.engine.params import FINDS_K_METHODS
+
+    widget = add_widget("Segment by material", preset=None)
+
+    def on_screen() -> list[str]:  # the labels the dock shows
+        return [label.text() for label in widget.native.findChildren(QLabel)]
+
+    assert "thesis" not in FINDS_K_METHODS and AUTO.method in FINDS_K_METHODS
+    assert "segments (0 = auto)" in on_screen()
+    widget.method.value = "thesis"
+    assert widget.n_segments.label == "segments"
+    assert "segments" in on_screen() and "segments (0 = auto)" not in on_screen()
+    widget.method.value = AUTO.method
+    assert widget.n_segments.label == "segments (0 = auto)" and "segments (0 = auto)" in on_screen()
