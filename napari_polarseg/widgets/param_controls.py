@@ -104,13 +104,13 @@ def control_tooltip(name: str, spec: ParamSpec) -> str:
     return details if effect is None else f"{effect}.\n\nDetails: {details}"
 
 
-def control_label(name: str, spec: ParamSpec) -> str:
-    """The control's label: the spec's (or the name), followed by the values that stand
-    for a word, as the command line takes them ("segments (0 = auto)"): a number box
-    cannot show the word itself (magicgui's integer box, superqt's ``QLargeIntSpinBox``,
-    has no special-value text)."""
+def control_label(name: str, spec: ParamSpec, words: bool = True) -> str:
+    """The control's label: the spec's (or the name), followed, with ``words``, by the
+    values that stand for a word, as the command line takes them ("segments (0 =
+    auto)"): a number box cannot show the word itself (magicgui's integer box, superqt's
+    ``QLargeIntSpinBox``, has no special-value text)."""
     label = spec.label or name
-    if not spec.words:
+    if not (words and spec.words):
         return label
     return f"{label} ({', '.join(f'{v} = {w}' for w, v in spec.words.items())})"
 

@@ -131,10 +131,9 @@ class ParameterControls:
         cannot be changed; another method gets the user's choice back. The segments box
         says "0 = auto" only under a method that finds the number itself."""
         if "n_segments" in self.controls:
-            spec = self.param_specs["n_segments"]
             finds_k = str(method) in FINDS_K_METHODS
-            label = control_label("n_segments", spec)
-            self.controls["n_segments"].label = label if finds_k else spec.label or "n_segments"
+            spec = self.param_specs["n_segments"]
+            self.controls["n_segments"].label = control_label("n_segments", spec, finds_k)
         box = self.thesis_maps
         if str(method) == "thesis":
             if box.enabled:
