@@ -272,14 +272,21 @@ def _checked_k(shape: tuple[int, ...], n_segments: int) -> int:
     return k
 
 
+def _edge_weight(p: UnsupervisedParams) -> float:
+    """The weight of the polarisation edges in the superpixels' edge map (0: log Î alone)."""
+    return p.polarisation_edge_weight if p.boundary == "polarisation" else 0.0
+
+
 def _superpixels(
     i: np.ndarray,
     d: np.ndarray,
     ph: np.ndarray,
     p: UnsupervisedParams,
     progress: Callable[[float], None] | None = None,
+    edges: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """(superpixels, their edge map) of ``p.boundary`` (module docstring, step 1).
+    """(superpixels, their edge map) of ``p.boundary`` (module docstring, step 1); the
+    edge map is made unless given.
 
     ``progress`` is called with 0.25 after the edge map and then every
     :data:`~napari_polarseg.engine.chunks.STOP_POLL_S` during the watershed (one
@@ -287,8 +294,8 @@ def _superpixels(
     run stops at once (:func:`~napari_polarseg.engine.chunks.call_stoppable`).
     """
     area = p.area_of(i.shape)
-    edge_weight = p.polarisation_edge_weight if p.boundary == "polarisation" else 0.0
-    edges = superpixel_edges(i, d, ph, edge_weight)
+    if edges is None:
+        edges = superpixel_edges(i, d, ph, _edge_weight(p))
     if p.boundary == "polarisation":
 
         def work() -> np.ndarray:
@@ -303,6 +310,76 @@ def _superpixels(
         return work(), edges
     progress(0.25)
     return call_stoppable(work, lambda: progress(0.25)), edges
+
+
+@dataclass(frozen=True)
+class PixelMaps:
+    """What :func:`prepare_regions` reads of the pixels before it draws the superpixels,
+    the same at every superpixel size: :func:`pixel_maps` makes it once for several
+    region models of one image (:mod:`.consensus`).
+
+    Attributes
+    ----------
+    maps : tuple of ndarray (H, W)
+        Î, ρ, φ (outside the mask: the nearest valid pixel's values).
+    valid : ndarray (H, W) of bool or None
+        The pixels the clustering reads (None: every pixel).
+    nearest : ndarray (H, W) of int or None
+        With a mask, the flat index of the nearest valid pixel of every pixel.
+    terms : dict of str to ndarray (H, W)
+        The per-pixel maps of the node features (:func:`.region_features.pixel_terms`).
+    edges : ndarray (H, W)
+        The superpixels' edge map
+        (:func:`~napari_polarseg.engine.features.superpixels.superpixel_edges`), the
+        polarisation edges weighted ``edge_weight``.
+    edge_weight : float
+    """
+
+    maps: tuple[np.ndarray, np.ndarray, np.ndarray]
+    valid: np.ndarray | None
+    nearest: np.ndarray | None
+    terms: dict[str, np.ndarray]
+    edges: np.ndarray
+    edge_weight: float
+
+
+def _filled_maps(
+    intensity: np.ndarray, dop: np.ndarray, phase: np.ndarray, valid: np.ndarray | None
+) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray], np.ndarray | None, np.ndarray | None]:
+    """((Î, ρ, φ), valid, nearest): the checked maps, outside ``valid`` filled from the
+    nearest valid pixel, ``valid`` None when it is every pixel, and the flat index of
+    each pixel's nearest valid one (None without a mask)."""
+    i, d, ph = check_maps(intensity, dop, phase)
+    nearest = None
+    if valid is not None:
+        valid = np.asarray(valid, dtype=bool)
+        if valid.shape != i.shape:
+            raise PolarsegError(f"the mask is {valid.shape} but the maps are {i.shape}")
+        if valid.all():
+            valid = None
+        else:
+            rows, cols = nearest_valid(valid)
+            i, d, ph = i[rows, cols], d[rows, cols], ph[rows, cols]
+            nearest = rows * i.shape[1] + cols  # flat: one gather per use, not two
+    if min(i.shape) < 2:
+        raise PolarsegError(f"image too small to segment: {i.shape}")
+    return (i, d, ph), valid, nearest
+
+
+def pixel_maps(
+    intensity: np.ndarray,
+    dop: np.ndarray,
+    phase: np.ndarray,
+    params: UnsupervisedParams | None = None,
+    valid: np.ndarray | None = None,
+) -> PixelMaps:
+    """The :class:`PixelMaps` of :func:`prepare_regions` with these arguments, to be
+    given to it as ``pixels`` (so several superpixel sizes share them)."""
+    p = params or UnsupervisedParams()
+    (i, d, ph), valid, nearest = _filled_maps(intensity, dop, phase, valid)
+    terms = in_background(lambda: pixel_terms(i, d, ph))
+    edges = superpixel_edges(i, d, ph, _edge_weight(p))
+    return PixelMaps((i, d, ph), valid, nearest, terms(), edges, _edge_weight(p))
 
 
 @dataclass(frozen=True)
@@ -384,6 +461,7 @@ def prepare_regions(
     params: UnsupervisedParams | None = None,
     valid: np.ndarray | None = None,
     progress: Callable[[float], None] | None = None,
+    pixels: PixelMaps | None = None,
 ) -> RegionModel:
     """Superpixels, node features and their projection: everything but the clustering.
 
@@ -393,33 +471,28 @@ def prepare_regions(
     superpixels are drawn, and the pixels outside form one extra region that takes no
     part in the features' statistics, the projection or the clustering; so the labels
     inside the region do not depend on anything outside it. ``progress`` is called with
-    the share done after each step (it may raise to stop there).
+    the share done after each step (it may raise to stop there). ``pixels``
+    (:func:`pixel_maps` of the same maps and ``valid``) saves making what does not
+    depend on the superpixels' size again; ``intensity``, ``dop``, ``phase`` and
+    ``valid`` are then not read.
     """
     step = progress or (lambda share: None)
     p = params or UnsupervisedParams()
-    i, d, ph = check_maps(intensity, dop, phase)
-    nearest = None
-    if valid is not None:
-        valid = np.asarray(valid, dtype=bool)
-        if valid.shape != i.shape:
-            raise PolarsegError(f"the mask is {valid.shape} but the maps are {i.shape}")
-        if valid.all():
-            valid = None
-        else:
-            rows, cols = nearest_valid(valid)
-            i, d, ph = i[rows, cols], d[rows, cols], ph[rows, cols]
-            nearest = rows * i.shape[1] + cols  # flat: one gather per use, not two
-    if min(i.shape) < 2:
-        raise PolarsegError(f"image too small to segment: {i.shape}")
-    step(0.05)
-    # the per-pixel maps of the node features do not depend on the superpixels: made in
-    # a second thread while they are drawn (numpy and the watershed release the GIL)
-    terms = in_background(lambda: pixel_terms(i, d, ph))
-    regions, edges = _superpixels(i, d, ph, p, progress)
+    if pixels is None:
+        (i, d, ph), valid, nearest = _filled_maps(intensity, dop, phase, valid)
+        step(0.05)
+        # the per-pixel maps of the node features do not depend on the superpixels: made
+        # in a second thread while they are drawn (numpy and the watershed release the GIL)
+        terms = in_background(lambda: pixel_terms(i, d, ph))
+        edges = None
+    else:
+        (i, d, ph), valid, nearest = pixels.maps, pixels.valid, pixels.nearest
+        edges = pixels.edges if pixels.edge_weight == _edge_weight(p) else None
+    regions, edges = _superpixels(i, d, ph, p, progress, edges)
     step(0.5)
     regions, n = _masked_regions(regions, valid)
     keep = slice(0, n)
-    maps = terms()
+    maps = pixels.terms if pixels is not None else terms()
     stokes = (maps["s0"], maps["s1"], maps["s2"])
     z_region, count, centroid = region_polarisation(i, d, ph, regions, stokes)
     step(0.6)
@@ -455,12 +528,41 @@ def prepare_regions(
     )
 
 
+def pixel_labels(model: RegionModel, node_labels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(labels (H, W), node labels (n,)) of a :class:`RegionModel` whose n superpixels are
+    labelled ``node_labels``: every pixel takes its superpixel's label (outside a mask,
+    the nearest valid pixel's), the pixels on a segment border move to the neighbouring
+    segment they resemble most when the parameters ask for it
+    (:func:`.boundaries.refined_labels`), and the segments are renumbered in order of
+    first appearance (:func:`first_appearance`)."""
+    i, d, _ = model.maps
+    node_labels = np.asarray(node_labels, dtype=np.int32)
+    m = int(node_labels.max()) + 1 if node_labels.size else 1
+    if model.valid is not None:  # the outside region: relabelled from inside below
+        node_labels = np.append(node_labels, 0).astype(np.int32)
+    labels = node_labels[model.regions]
+    if model.nearest is not None:
+        labels = labels.ravel()[model.nearest]
+    if model.used_params.refine_boundaries and m > 1:
+        labels = refined_labels(labels, i, d, m, model.refine_maps)
+        if model.nearest is not None:
+            labels = labels.ravel()[model.nearest]
+    labels, node_labels = first_appearance(labels, node_labels)
+    return labels, node_labels[: model.n]
+
+
+def without_refinement(model: RegionModel) -> RegionModel:
+    """``model`` whose labels keep each pixel's superpixel label (no border refinement):
+    for what reads only the superpixels' labels."""
+    return replace(model, params=model.params.replace(refine_boundaries=False))
+
+
 def cluster_regions(model: RegionModel, n_segments: int) -> UnsupervisedResult:
     """The labels of a :class:`RegionModel` for k = ``n_segments`` (step 3 of the module
     docstring, then the border refinement); outside a mask, every pixel takes the label
     of the nearest valid pixel."""
     t0 = time.perf_counter()
-    i, d, ph = model.maps
+    i = model.maps[0]
     k = _checked_k(i.shape, n_segments)
     n, q = model.n, model.used_params
     if n < k:
@@ -469,20 +571,10 @@ def cluster_regions(model: RegionModel, n_segments: int) -> UnsupervisedResult:
         node_labels = np.zeros(n, dtype=np.int32)
     else:
         node_labels = _cluster(model.z, k, model.weight, model.adjacency, q)
-    node_labels = np.asarray(node_labels, dtype=np.int32)
-    if model.valid is not None:  # the outside region: relabelled from inside below
-        node_labels = np.append(node_labels, 0).astype(np.int32)
-    labels = node_labels[model.regions]
-    if model.nearest is not None:
-        labels = labels.ravel()[model.nearest]
-    if q.refine_boundaries and k > 1:
-        labels = refined_labels(labels, i, d, int(node_labels.max()) + 1, model.refine_maps)
-        if model.nearest is not None:
-            labels = labels.ravel()[model.nearest]
-    labels, node_labels = first_appearance(labels, node_labels)
+    labels, node_labels = pixel_labels(model, node_labels)
     return UnsupervisedResult(
         labels=labels,
-        node_labels=node_labels[:n],
+        node_labels=node_labels,
         regions=model.regions,
         node_features=model.z,
         feature_names=model.feature_names,
