@@ -34,7 +34,7 @@ The figures that chose it (and the variants not kept) are in ``docs/quality.md``
 
 from __future__ import annotations
 
-from dataclasses import replace
+from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -42,11 +42,18 @@ import numpy as np
 from ..params import SegmentParams
 from ..unsupervised.choose_k import K_RANGE, estimate_k
 from ..unsupervised.merge import closest_centroids, merged_clustering
-from ..unsupervised.segmenter import RegionModel, cluster_regions, prepare_regions
+from ..unsupervised.params import UnsupervisedParams, UnsupervisedResult
+from ..unsupervised.segmenter import (
+    RegionModel,
+    cluster_regions,
+    prepare_regions,
+    without_refinement,
+)
 from .base import MethodOutput, MethodRun
 from .superpixel_clustering import SuperpixelClustering
 
 if TYPE_CHECKING:
+    from ..physics.polarimage import PolarisationImage
     from .scene import Scene
 
 
@@ -71,7 +78,7 @@ def choose_k(model: RegionModel, tolerance: float = 0.0) -> dict[str, Any]:
     the real frames 2 / 4 of 4 against 1 / 3)."""
 
     # only the superpixels' labels are scored: no pixel-level border refinement
-    nodes_only = replace(model, params=model.params.replace(refine_boundaries=False))
+    nodes_only = without_refinement(model)
 
     def node_labels(k: int) -> np.ndarray:
         return cluster_regions(nodes_only, k).node_labels
@@ -95,35 +102,61 @@ class ValidSuperpixels(SuperpixelClustering):
     #: Which two of the k + 1 segments are merged (:mod:`..unsupervised.merge`)
     merge_rule = staticmethod(closest_centroids)
 
+    def region_models(
+        self, scene: Scene, pol: PolarisationImage, run: MethodRun
+    ) -> list[RegionModel]:
+        """The region models the labels are drawn from (here one, of ``self.params``),
+        kept in the scene's feature cache; ``run`` shows the progress and may stop it."""
+        return [self.region_model(scene, pol, self.params, run.within)]
+
+    def region_model(
+        self,
+        scene: Scene,
+        pol: PolarisationImage,
+        params: UnsupervisedParams,
+        progress: Callable[[float], None],
+    ) -> RegionModel:
+        """The superpixels and node features of ``params`` on the scene's clustered
+        pixels (:func:`clustered_pixels`), made once per image, region and parameters;
+        ``progress`` is called with the share done (it may raise to stop)."""
+
+        def prepare() -> RegionModel:
+            valid = clustered_pixels(scene.region, pol.invalid)
+            return prepare_regions(pol.intensity, pol.dop, pol.phase, params, valid, progress)
+
+        # the clustered pixels follow from the image (its invalid pixels) and the
+        # scene's region, fixed for the scene's life: the image's identity keys them
+        return scene.cached(self.name, (id(pol), params), prepare)
+
+    def labels(self, models: list[RegionModel], k: int) -> UnsupervisedResult:
+        """k segments of the region models: k + 1 clusters of the one model merged to k
+        by :attr:`merge_rule` (:func:`merged_clustering`)."""
+        return merged_clustering(models[0], k, merge=self.merge_rule)
+
     def segment(
         self, scene: Scene, params: SegmentParams, inputs: dict[str, Any], run: MethodRun
     ) -> MethodOutput:
         run.begin("superpixels")
         pol = scene.polarisation(params)
-
-        def prepare() -> RegionModel:
-            valid = clustered_pixels(scene.region, pol.invalid)
-            return prepare_regions(
-                pol.intensity, pol.dop, pol.phase, self.params, valid, run.within
-            )
-
-        # the clustered pixels follow from the image (its invalid pixels) and the
-        # scene's region, fixed for the scene's life: the image's identity keys them
-        key = (id(pol), self.params)
-        model = scene.cached(self.name, key, prepare)
+        models = self.region_models(scene, pol, run)
         run.begin("clustering")
+        shape = pol.intensity.shape
         record: dict[str, Any] = {
             "invalid_share": round(float(np.mean(pol.invalid)), 6),
             "k_found": params.n_segments == 0,
+            "region_areas": [m.params.area_of(shape) for m in models],
         }
         k = params.n_segments
-        if k == 0:
-            choice = scene.cached(f"{self.name}:k", key, lambda: choose_k(model, self.k_tolerance))
+        if k == 0:  # found on the first model's superpixels
+            key = (id(pol), models[0].params)
+            choice = scene.cached(
+                f"{self.name}:k", key, lambda: choose_k(models[0], self.k_tolerance)
+            )
             k = choice["k"]
             record["k_confidence"] = round(choice["confidence"], 4)
             record["k_tolerance"] = self.k_tolerance
             record["k_scores"] = {str(j): round(s, 4) for j, s in choice["scores"].items()}
-        seg = merged_clustering(model, k, merge=self.merge_rule)
+        seg = self.labels(models, k)
         record["k"] = k
         record.update(surface_share=round(seg.surface_share, 6), close_up=seg.close_up)
         return MethodOutput(seg.labels, record=record, extra={"unsupervised": seg})
