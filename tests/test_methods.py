@@ -48,7 +48,9 @@ def _with_bright_patch(stack: np.ndarray, outside: np.ndarray) -> np.ndarray:
     return out
 
 
-@pytest.mark.parametrize("method", ["superpixels", "valid_superpixels", "thesis", "classifier"])
+@pytest.mark.parametrize(
+    "method", ["superpixels", "valid_superpixels", "superpixel_consensus", "thesis", "classifier"]
+)
 def test_labels_inside_the_mask_do_not_depend_on_the_outside(method):
     stack, truth = planted_stack(K)
     w = stack.shape[2]

@@ -21,6 +21,7 @@ BUILT_IN: tuple[tuple[str, str], ...] = (
     ("pixel_classification", "PixelClassification"),
     ("valid_superpixels", "ValidSuperpixels"),
     ("surface_superpixels", "SurfaceSuperpixels"),
+    ("superpixel_consensus", "SuperpixelConsensus"),
 )
 
 _METHODS: dict[str, Segmenter] = {}
