@@ -102,12 +102,19 @@ RENDER_SETS = {
         "held-out",
         "render_scenes.py --seeds 520-999 --two-materials --out benchmarks/renders_two",
     ),
+    "second-held-out": RenderSet(
+        HERE / "renders_held_out",
+        "second held-out renders (render_scenes.py, rendered on 2026-12-04 and read once, "
+        "for the consensus over superpixel sizes)",
+        "held-out",
+        "render_scenes.py --seeds 3000-3079 --out benchmarks/renders_held_out",
+    ),
 }
 #: A result is degenerate when one segment holds this share of the scored pixels.
 DEGENERATE_SHARE = 0.90
 #: Registered methods shown as columns of their own beside the default (those that are
 #: not the default's method): the candidates and the previous defaults.
-METHOD_COLUMNS = ("superpixels", "valid_superpixels", "surface_superpixels")
+METHOD_COLUMNS = ("superpixels", "valid_superpixels", "surface_superpixels", "superpixel_consensus")
 UNSUPERVISED = ("intensity k-means", "smoothed k-means", *METHOD_COLUMNS, "auto (default)")
 #: The method that finds k by itself (``n_segments = 0``), scored by :func:`k_lines`:
 #: the default's.
