@@ -100,20 +100,6 @@ def test_one_size_alone_is_the_surface_method():
     np.testing.assert_array_equal(alone.labels, surface.labels)
 
 
-@pytest.mark.parametrize("k", [2, 3, 4])
-def test_planted_materials_recovered_with_k_given_and_found(k):
-    stack, truth = banded_stack(k)
-    scene = Scene(stack, ANGLES)
-    given = scene.segment(CONSENSUS.replace(n_segments=k))
-    assert adjusted_rand_score(truth.ravel(), given.labels.ravel()) > 0.95
-    assert not given.summary()["degenerate"]
-    found = scene.segment(CONSENSUS.replace(n_segments=0))
-    record = found.method_record
-    assert record["k_found"] is True and record["k"] == k
-    assert 0.0 < record["k_confidence"] <= 1.0
-    np.testing.assert_array_equal(found.labels, given.labels)
-
-
 def test_superpixels_drawn_once_per_size_and_kept(monkeypatch):
     calls = []
     prepare = superpixel_consensus.prepare_regions

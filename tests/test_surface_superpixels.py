@@ -31,13 +31,16 @@ def test_auto_preset_is_this_method_with_the_wider_diffusion():
     assert method.params.diffusion_tau > base.diffusion_tau
 
 
+@pytest.mark.parametrize("method", ["surface_superpixels", "superpixel_consensus"])
 @pytest.mark.parametrize("k", [2, 3, 4])
-def test_planted_materials_recovered_with_k_given_and_found(k):
+def test_planted_materials_recovered_with_k_given_and_found(k, method):
+    """This method and the consensus of it over superpixel sizes."""
     stack, truth = banded_stack(k)
     scene = Scene(stack, ANGLES)
-    given = scene.segment(AUTO.replace(n_segments=k))
+    given = scene.segment(AUTO.replace(method=method, n_segments=k))
     assert adjusted_rand_score(truth.ravel(), given.labels.ravel()) > 0.95
-    found = scene.segment(AUTO.replace(n_segments=0))
+    assert not given.summary()["degenerate"]
+    found = scene.segment(AUTO.replace(method=method, n_segments=0))
     record = found.method_record
     assert record["k_found"] is True and record["k"] == k
     assert 0.0 < record["k_confidence"] <= 1.0
