@@ -20,7 +20,8 @@ from napari_polarseg.engine.methods.superpixel_consensus import AREA_FACTORS, Su
 from napari_polarseg.engine.methods.surface_superpixels import SurfaceSuperpixels
 from napari_polarseg.engine.params import AUTO
 from napari_polarseg.engine.unsupervised.consensus import consensus_clustering, segment_shares
-from napari_polarseg.engine.unsupervised.segmenter import pixel_maps, prepare_regions
+from napari_polarseg.engine.unsupervised.pixel_maps import pixel_maps
+from napari_polarseg.engine.unsupervised.segmenter import prepare_regions
 from napari_polarseg.truth import TRUTH_DIR, read_truth_file, real_frame_path
 
 REAL_DIR = (

@@ -32,7 +32,8 @@ from typing import TYPE_CHECKING
 from ..chunks import in_background
 from ..unsupervised.consensus import consensus_clustering
 from ..unsupervised.params import UnsupervisedResult
-from ..unsupervised.segmenter import RegionModel, pixel_maps, prepare_regions
+from ..unsupervised.pixel_maps import pixel_maps
+from ..unsupervised.segmenter import RegionModel, prepare_regions
 from .base import MethodRun
 from .surface_superpixels import SurfaceSuperpixels
 from .valid_superpixels import clustered_pixels

@@ -87,12 +87,11 @@ from ..chunks import call_stoppable, in_background
 from ..degenerate import degenerate_result
 from ..errors import PolarsegError
 from ..features.pca import pca_features, whiten
-from ..features.pixel_features import check_maps
 from ..features.superpixels import polarisation_superpixels, relabel, superpixel_edges
-from ..physics.pixel_mask import nearest_valid
 from .boundaries import refine_maps, refined_labels
 from .kmeans import squared_distances, weighted_kmeans
 from .params import UnsupervisedParams, UnsupervisedResult
+from .pixel_maps import PixelMaps, edge_weight, filled_maps
 from .region_diffusion import diffuse, diffusion_steps, edge_aware_adjacency
 from .region_features import node_features, pixel_terms
 from .region_graph import region_adjacency
@@ -272,11 +271,6 @@ def _checked_k(shape: tuple[int, ...], n_segments: int) -> int:
     return k
 
 
-def _edge_weight(p: UnsupervisedParams) -> float:
-    """The weight of the polarisation edges in the superpixels' edge map (0: log Î alone)."""
-    return p.polarisation_edge_weight if p.boundary == "polarisation" else 0.0
-
-
 def _superpixels(
     i: np.ndarray,
     d: np.ndarray,
@@ -295,7 +289,7 @@ def _superpixels(
     """
     area = p.area_of(i.shape)
     if edges is None:
-        edges = superpixel_edges(i, d, ph, _edge_weight(p))
+        edges = superpixel_edges(i, d, ph, edge_weight(p))
     if p.boundary == "polarisation":
 
         def work() -> np.ndarray:
@@ -310,76 +304,6 @@ def _superpixels(
         return work(), edges
     progress(0.25)
     return call_stoppable(work, lambda: progress(0.25)), edges
-
-
-@dataclass(frozen=True)
-class PixelMaps:
-    """What :func:`prepare_regions` reads of the pixels before it draws the superpixels,
-    the same at every superpixel size: :func:`pixel_maps` makes it once for several
-    region models of one image (:mod:`.consensus`).
-
-    Attributes
-    ----------
-    maps : tuple of ndarray (H, W)
-        Î, ρ, φ (outside the mask: the nearest valid pixel's values).
-    valid : ndarray (H, W) of bool or None
-        The pixels the clustering reads (None: every pixel).
-    nearest : ndarray (H, W) of int or None
-        With a mask, the flat index of the nearest valid pixel of every pixel.
-    terms : dict of str to ndarray (H, W)
-        The per-pixel maps of the node features (:func:`.region_features.pixel_terms`).
-    edges : ndarray (H, W)
-        The superpixels' edge map
-        (:func:`~napari_polarseg.engine.features.superpixels.superpixel_edges`), the
-        polarisation edges weighted ``edge_weight``.
-    edge_weight : float
-    """
-
-    maps: tuple[np.ndarray, np.ndarray, np.ndarray]
-    valid: np.ndarray | None
-    nearest: np.ndarray | None
-    terms: dict[str, np.ndarray]
-    edges: np.ndarray
-    edge_weight: float
-
-
-def _filled_maps(
-    intensity: np.ndarray, dop: np.ndarray, phase: np.ndarray, valid: np.ndarray | None
-) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray], np.ndarray | None, np.ndarray | None]:
-    """((Î, ρ, φ), valid, nearest): the checked maps, outside ``valid`` filled from the
-    nearest valid pixel, ``valid`` None when it is every pixel, and the flat index of
-    each pixel's nearest valid one (None without a mask)."""
-    i, d, ph = check_maps(intensity, dop, phase)
-    nearest = None
-    if valid is not None:
-        valid = np.asarray(valid, dtype=bool)
-        if valid.shape != i.shape:
-            raise PolarsegError(f"the mask is {valid.shape} but the maps are {i.shape}")
-        if valid.all():
-            valid = None
-        else:
-            rows, cols = nearest_valid(valid)
-            i, d, ph = i[rows, cols], d[rows, cols], ph[rows, cols]
-            nearest = rows * i.shape[1] + cols  # flat: one gather per use, not two
-    if min(i.shape) < 2:
-        raise PolarsegError(f"image too small to segment: {i.shape}")
-    return (i, d, ph), valid, nearest
-
-
-def pixel_maps(
-    intensity: np.ndarray,
-    dop: np.ndarray,
-    phase: np.ndarray,
-    params: UnsupervisedParams | None = None,
-    valid: np.ndarray | None = None,
-) -> PixelMaps:
-    """The :class:`PixelMaps` of :func:`prepare_regions` with these arguments, to be
-    given to it as ``pixels`` (so several superpixel sizes share them)."""
-    p = params or UnsupervisedParams()
-    (i, d, ph), valid, nearest = _filled_maps(intensity, dop, phase, valid)
-    terms = in_background(lambda: pixel_terms(i, d, ph))
-    edges = superpixel_edges(i, d, ph, _edge_weight(p))
-    return PixelMaps((i, d, ph), valid, nearest, terms(), edges, _edge_weight(p))
 
 
 @dataclass(frozen=True)
@@ -472,14 +396,14 @@ def prepare_regions(
     part in the features' statistics, the projection or the clustering; so the labels
     inside the region do not depend on anything outside it. ``progress`` is called with
     the share done after each step (it may raise to stop there). ``pixels``
-    (:func:`pixel_maps` of the same maps and ``valid``) saves making what does not
+    (:func:`.pixel_maps.pixel_maps` of the same maps and ``valid``) saves making what does not
     depend on the superpixels' size again; ``intensity``, ``dop``, ``phase`` and
     ``valid`` are then not read.
     """
     step = progress or (lambda share: None)
     p = params or UnsupervisedParams()
     if pixels is None:
-        (i, d, ph), valid, nearest = _filled_maps(intensity, dop, phase, valid)
+        (i, d, ph), valid, nearest = filled_maps(intensity, dop, phase, valid)
         step(0.05)
         # the per-pixel maps of the node features do not depend on the superpixels: made
         # in a second thread while they are drawn (numpy and the watershed release the GIL)
@@ -487,7 +411,7 @@ def prepare_regions(
         edges = None
     else:
         (i, d, ph), valid, nearest = pixels.maps, pixels.valid, pixels.nearest
-        edges = pixels.edges if pixels.edge_weight == _edge_weight(p) else None
+        edges = pixels.edges if pixels.edge_weight == edge_weight(p) else None
     regions, edges = _superpixels(i, d, ph, p, progress, edges)
     step(0.5)
     regions, n = _masked_regions(regions, valid)

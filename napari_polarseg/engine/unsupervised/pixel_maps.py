@@ -1,0 +1,95 @@
+"""What the superpixel clustering reads of the pixels before it draws the superpixels,
+whatever their size (:func:`~.segmenter.prepare_regions`): the maps checked and, with a
+mask, filled from the nearest valid pixel (:func:`filled_maps`), the per-pixel terms of
+the node features and the superpixels' edge map (:func:`pixel_maps`, :class:`PixelMaps`,
+made once when several sizes are drawn from one image).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..chunks import in_background
+from ..errors import PolarsegError
+from ..features.pixel_features import check_maps
+from ..features.superpixels import superpixel_edges
+from ..physics.pixel_mask import nearest_valid
+from .params import UnsupervisedParams
+from .region_features import pixel_terms
+
+
+def edge_weight(p: UnsupervisedParams) -> float:
+    """The weight of the polarisation edges in the superpixels' edge map (0: log Î alone)."""
+    return p.polarisation_edge_weight if p.boundary == "polarisation" else 0.0
+
+
+@dataclass(frozen=True)
+class PixelMaps:
+    """What :func:`~.segmenter.prepare_regions` reads of the pixels before it draws the
+    superpixels, the same at every superpixel size: :func:`pixel_maps` makes it once for
+    several region models of one image (:mod:`.consensus`).
+
+    Attributes
+    ----------
+    maps : tuple of ndarray (H, W)
+        Î, ρ, φ (outside the mask: the nearest valid pixel's values).
+    valid : ndarray (H, W) of bool or None
+        The pixels the clustering reads (None: every pixel).
+    nearest : ndarray (H, W) of int or None
+        With a mask, the flat index of the nearest valid pixel of every pixel.
+    terms : dict of str to ndarray (H, W)
+        The per-pixel maps of the node features (:func:`.region_features.pixel_terms`).
+    edges : ndarray (H, W)
+        The superpixels' edge map
+        (:func:`~napari_polarseg.engine.features.superpixels.superpixel_edges`), the
+        polarisation edges weighted ``edge_weight``.
+    edge_weight : float
+    """
+
+    maps: tuple[np.ndarray, np.ndarray, np.ndarray]
+    valid: np.ndarray | None
+    nearest: np.ndarray | None
+    terms: dict[str, np.ndarray]
+    edges: np.ndarray
+    edge_weight: float
+
+
+def filled_maps(
+    intensity: np.ndarray, dop: np.ndarray, phase: np.ndarray, valid: np.ndarray | None
+) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray], np.ndarray | None, np.ndarray | None]:
+    """((Î, ρ, φ), valid, nearest): the checked maps, outside ``valid`` filled from the
+    nearest valid pixel, ``valid`` None when it is every pixel, and the flat index of
+    each pixel's nearest valid one (None without a mask)."""
+    i, d, ph = check_maps(intensity, dop, phase)
+    nearest = None
+    if valid is not None:
+        valid = np.asarray(valid, dtype=bool)
+        if valid.shape != i.shape:
+            raise PolarsegError(f"the mask is {valid.shape} but the maps are {i.shape}")
+        if valid.all():
+            valid = None
+        else:
+            rows, cols = nearest_valid(valid)
+            i, d, ph = i[rows, cols], d[rows, cols], ph[rows, cols]
+            nearest = rows * i.shape[1] + cols  # flat: one gather per use, not two
+    if min(i.shape) < 2:
+        raise PolarsegError(f"image too small to segment: {i.shape}")
+    return (i, d, ph), valid, nearest
+
+
+def pixel_maps(
+    intensity: np.ndarray,
+    dop: np.ndarray,
+    phase: np.ndarray,
+    params: UnsupervisedParams | None = None,
+    valid: np.ndarray | None = None,
+) -> PixelMaps:
+    """The :class:`PixelMaps` of :func:`~.segmenter.prepare_regions` with these
+    arguments, to be given to it as ``pixels`` (so several superpixel sizes share them)."""
+    p = params or UnsupervisedParams()
+    (i, d, ph), valid, nearest = filled_maps(intensity, dop, phase, valid)
+    terms = in_background(lambda: pixel_terms(i, d, ph))
+    edges = superpixel_edges(i, d, ph, edge_weight(p))
+    return PixelMaps((i, d, ph), valid, nearest, terms(), edges, edge_weight(p))
