@@ -1,6 +1,6 @@
 """What the superpixel clustering reads of the pixels before it draws the superpixels,
 whatever their size (:func:`~.segmenter.prepare_regions`): the maps checked and, with a
-mask, filled from the nearest valid pixel (:func:`filled_maps`), the per-pixel terms of
+mask, filled from the nearest valid pixel (``_filled_maps``), the per-pixel terms of
 the node features and the superpixels' edge map (:func:`pixel_maps`, :class:`PixelMaps`,
 made once when several sizes are drawn from one image).
 """
@@ -56,7 +56,7 @@ class PixelMaps:
     edge_weight: float
 
 
-def filled_maps(
+def _filled_maps(
     intensity: np.ndarray, dop: np.ndarray, phase: np.ndarray, valid: np.ndarray | None
 ) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray], np.ndarray | None, np.ndarray | None]:
     """((Î, ρ, φ), valid, nearest): the checked maps, outside ``valid`` filled from the
@@ -87,9 +87,11 @@ def pixel_maps(
     valid: np.ndarray | None = None,
 ) -> PixelMaps:
     """The :class:`PixelMaps` of :func:`~.segmenter.prepare_regions` with these
-    arguments, to be given to it as ``pixels`` (so several superpixel sizes share them)."""
+    arguments, to be given to it as ``pixels`` (so several superpixel sizes share them).
+    The node features' per-pixel terms are made in a second thread while the edge map
+    is (numpy releases the GIL)."""
     p = params or UnsupervisedParams()
-    (i, d, ph), valid, nearest = filled_maps(intensity, dop, phase, valid)
+    (i, d, ph), valid, nearest = _filled_maps(intensity, dop, phase, valid)
     terms = in_background(lambda: pixel_terms(i, d, ph))
     edges = superpixel_edges(i, d, ph, edge_weight(p))
     return PixelMaps((i, d, ph), valid, nearest, terms(), edges, edge_weight(p))

@@ -27,8 +27,8 @@ def pixel_terms(intensity: np.ndarray, dop: np.ndarray, phase: np.ndarray) -> di
     """The per-pixel maps whose region sums give :func:`node_features` (float64): Î, S1,
     S2, log Î (centred on its median), (log Î)², ρ, ρ², ρ log Î, cos 2φ and sin 2φ.
 
-    They do not depend on the regions, so :func:`~.segmenter.prepare_regions` computes them while
-    the superpixels are drawn.
+    They do not depend on the regions, so :func:`~.pixel_maps.pixel_maps` computes them
+    while the superpixels' edge map is drawn, once for every superpixel size.
     """
     log_i = np.log(np.maximum(intensity, EPS_INTENSITY)).astype(np.float64)
     log_i -= np.median(log_i)

@@ -83,7 +83,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 import scipy.sparse as sps
 
-from ..chunks import call_stoppable, in_background
+from ..chunks import call_stoppable
 from ..degenerate import degenerate_result
 from ..errors import PolarsegError
 from ..features.pca import pca_features, whiten
@@ -91,9 +91,9 @@ from ..features.superpixels import polarisation_superpixels, relabel, superpixel
 from .boundaries import refine_maps, refined_labels
 from .kmeans import squared_distances, weighted_kmeans
 from .params import UnsupervisedParams, UnsupervisedResult
-from .pixel_maps import PixelMaps, edge_weight, filled_maps
+from .pixel_maps import PixelMaps, edge_weight, pixel_maps
 from .region_diffusion import diffuse, diffusion_steps, edge_aware_adjacency
-from .region_features import node_features, pixel_terms
+from .region_features import node_features
 from .region_graph import region_adjacency
 from .shape_trend import (
     region_polarisation,
@@ -396,27 +396,22 @@ def prepare_regions(
     part in the features' statistics, the projection or the clustering; so the labels
     inside the region do not depend on anything outside it. ``progress`` is called with
     the share done after each step (it may raise to stop there). ``pixels``
-    (:func:`.pixel_maps.pixel_maps` of the same maps and ``valid``) saves making what does not
-    depend on the superpixels' size again; ``intensity``, ``dop``, ``phase`` and
-    ``valid`` are then not read.
+    (:func:`.pixel_maps.pixel_maps` of the same maps and ``valid``, made here when not
+    given) saves making what does not depend on the superpixels' size again;
+    ``intensity``, ``dop``, ``phase`` and ``valid`` are then not read.
     """
     step = progress or (lambda share: None)
     p = params or UnsupervisedParams()
     if pixels is None:
-        (i, d, ph), valid, nearest = filled_maps(intensity, dop, phase, valid)
-        step(0.05)
-        # the per-pixel maps of the node features do not depend on the superpixels: made
-        # in a second thread while they are drawn (numpy and the watershed release the GIL)
-        terms = in_background(lambda: pixel_terms(i, d, ph))
-        edges = None
-    else:
-        (i, d, ph), valid, nearest = pixels.maps, pixels.valid, pixels.nearest
-        edges = pixels.edges if pixels.edge_weight == edge_weight(p) else None
+        pixels = pixel_maps(intensity, dop, phase, p, valid)
+    step(0.05)
+    (i, d, ph), valid, nearest = pixels.maps, pixels.valid, pixels.nearest
+    edges = pixels.edges if pixels.edge_weight == edge_weight(p) else None
     regions, edges = _superpixels(i, d, ph, p, progress, edges)
     step(0.5)
     regions, n = _masked_regions(regions, valid)
     keep = slice(0, n)
-    maps = pixels.terms if pixels is not None else terms()
+    maps = pixels.terms
     stokes = (maps["s0"], maps["s1"], maps["s2"])
     z_region, count, centroid = region_polarisation(i, d, ph, regions, stokes)
     step(0.6)
