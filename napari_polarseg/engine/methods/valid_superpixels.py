@@ -34,7 +34,6 @@ The figures that chose it (and the variants not kept) are in ``docs/quality.md``
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -42,7 +41,7 @@ import numpy as np
 from ..params import SegmentParams
 from ..unsupervised.choose_k import K_RANGE, estimate_k
 from ..unsupervised.merge import closest_centroids, merged_clustering
-from ..unsupervised.params import UnsupervisedParams, UnsupervisedResult
+from ..unsupervised.params import UnsupervisedResult
 from ..unsupervised.segmenter import (
     RegionModel,
     cluster_regions,
@@ -105,28 +104,20 @@ class ValidSuperpixels(SuperpixelClustering):
     def region_models(
         self, scene: Scene, pol: PolarisationImage, run: MethodRun
     ) -> list[RegionModel]:
-        """The region models the labels are drawn from (here one, of ``self.params``),
-        kept in the scene's feature cache; ``run`` shows the progress and may stop it."""
-        return [self.region_model(scene, pol, self.params, run.within)]
-
-    def region_model(
-        self,
-        scene: Scene,
-        pol: PolarisationImage,
-        params: UnsupervisedParams,
-        progress: Callable[[float], None],
-    ) -> RegionModel:
-        """The superpixels and node features of ``params`` on the scene's clustered
-        pixels (:func:`clustered_pixels`), made once per image, region and parameters;
-        ``progress`` is called with the share done (it may raise to stop)."""
+        """The region models the labels are drawn from: here one, the superpixels and node
+        features of ``self.params`` on the scene's clustered pixels
+        (:func:`clustered_pixels`), made once per image and region and kept in the
+        scene's feature cache; ``run`` shows the progress and may stop it."""
 
         def prepare() -> RegionModel:
             valid = clustered_pixels(scene.region, pol.invalid)
-            return prepare_regions(pol.intensity, pol.dop, pol.phase, params, valid, progress)
+            return prepare_regions(
+                pol.intensity, pol.dop, pol.phase, self.params, valid, run.within
+            )
 
         # the clustered pixels follow from the image (its invalid pixels) and the
         # scene's region, fixed for the scene's life: the image's identity keys them
-        return scene.cached(self.name, (id(pol), params), prepare)
+        return [scene.cached(self.name, (id(pol), self.params), prepare)]
 
     def labels(self, models: list[RegionModel], k: int) -> UnsupervisedResult:
         """k segments of the region models: k + 1 clusters of the one model merged to k
