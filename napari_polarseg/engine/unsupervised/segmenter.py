@@ -209,8 +209,9 @@ def _region_features(
     terms: dict[str, np.ndarray] | None = None,
 ) -> tuple[np.ndarray, list[str]]:
     """Node features (n, c) of the superpixels, non-finite values 0, and their names: the
-    region features of :func:`node_features` (from ``terms``, :func:`pixel_terms`, when
-    made), then the region means of pixel features."""
+    region features of :func:`node_features` (from ``terms``,
+    :func:`.region_features.pixel_terms`, when made), then the region means of pixel
+    features."""
     names = list(p.features)
     trend = (p.trend_degree, p.trend_reach, p.trend_iterations)
     cols = [node_features(i, d, ph, regions, p.features, trend, terms)] if p.features else []
