@@ -132,3 +132,47 @@ def test_development_renders_get_means_by_number_of_materials(tmp_path, capsys):
     dev_line = next(line for line in verdicts.splitlines() if line.startswith(f"- {dev_title}"))
     two_line = next(line for line in verdicts.splitlines() if line.startswith(f"- {two_title}"))
     assert "target" not in dev_line and "target 0.5" in two_line
+
+
+def test_degenerate_cause_tells_a_segment_spent_on_the_sky_from_materials_joined():
+    """The sky (0) is 30 % of a frame of two materials (1, 2). A result spending one of
+    its two segments on the sky is degenerate over the scored pixels because of it; one
+    that puts the sky and nearly all of both materials together joins the materials."""
+    truth = np.ones((10, 10), int)
+    truth[:3] = 0
+    truth[3:, 5:] = 2
+    sky_segment = (truth == 0).astype(int)
+    assert materials.degenerate(sky_segment, truth)
+    assert materials.degenerate_cause(sky_segment, truth) == "the sky took a segment"
+    joined = np.zeros_like(truth)
+    joined[9, :3] = 1  # three pixels of material 1 apart; sky and the rest together
+    assert materials.degenerate(joined, truth)
+    assert materials.degenerate_cause(joined, truth) == "the materials share a segment"
+    right = (truth == 2).astype(int)
+    assert not materials.degenerate(right, truth)
+
+
+def test_sky_counted_asks_one_segment_more_only_where_a_sky_is_seen(tmp_path, capsys):
+    """A render whose truth leaves > 2 % unlabelled is also scored with k + 1 segments
+    (``default, sky counted``); one without a sky keeps the default's own figure there,
+    and the verdict says on how many frames the sky was counted."""
+    _rendered_folder(tmp_path)
+    with np.load(tmp_path / "scene_0.npz") as f:
+        labels = f["labels"].copy()
+        labels[:8] = 0  # the top rows unlabelled: a sky of 12 %
+        np.savez(tmp_path / "scene_1.npz", stack=f["stack"], angles=f["angles"], labels=labels)
+    rows = materials.rendered_rows([0, 1], "none", tmp_path)
+    no_sky, sky = rows
+    assert materials.SKY_COUNTED not in no_sky["seconds"]
+    assert no_sky[materials.SKY_COUNTED] == no_sky["auto (default)"]
+    assert materials.SKY_COUNTED in sky["seconds"]
+    verdict = materials.verdict_lines({"dev": rows})
+    assert "with the sky counted as a segment (k + 1 on the 1 of 2 frames" in verdict
+    assert materials.SKY_COUNTED in materials.table(rows, "t")
+    real = materials.score_frame("real", *_frame(tmp_path / "scene_1.npz"), 2, "none")
+    assert materials.SKY_COUNTED not in real  # hand-drawn truth: unlabelled is not a sky
+
+
+def _frame(path: Path):
+    with np.load(path) as f:
+        return f["stack"], np.deg2rad(f["angles"]), f["labels"].astype(np.int32)
