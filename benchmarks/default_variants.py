@@ -13,7 +13,8 @@ fewest k within that share of the best score), for the 7 % diffusion of
 ``valid_superpixels`` and the 20 % one of the default: exact and within ±1 of the true
 k. The test half (seeds 12–23) is only read with ``--test``: choose on the development
 half, report on the test half. ``--dev-renders`` adds the 72 development renders of
-``render_scenes.py`` (``materials.RENDER_SETS``): twelve development scenes give a
+``render_scenes.py`` and ``--dev-pool-2`` the second pool of 100 (``materials.RENDER_SETS``
+names both and the commands that make them): twelve development scenes give a
 mean with a standard error of about 0.07, seventy-two about 0.03. The rows named
 "default with …" change one thing of the default (its merge included); "default with
 superpixels × f the area" draws superpixels f times the default's area on each frame
@@ -35,7 +36,7 @@ from collections.abc import Callable
 
 import numpy as np
 from evaluate import REAL_DIR
-from materials import set_frames
+from materials import RENDER_SETS, set_frames
 from sklearn.metrics import adjusted_rand_score
 
 from napari_polarseg.engine import Pipeline
@@ -114,14 +115,14 @@ def area_times(factor: float) -> Callable[[tuple[int, int]], UnsupervisedParams]
     return lambda shape: W.replace(region_area=int(factor * W.area_of(shape)))
 
 
-def frames(test: bool, dev_renders: bool = False) -> list[tuple[str, str, tuple, np.ndarray, int]]:
+def frames(
+    test: bool, renders: tuple[str, ...] = ()
+) -> list[tuple[str, str, tuple, np.ndarray, int]]:
     """(set, name, (Î, ρ, φ, invalid), truth, k) of the development half, the real
-    frames, with ``test`` the test half and with ``dev_renders`` the development
-    renders (``materials.RENDER_SETS``); polarisation as preset ``auto`` fits it."""
+    frames, with ``test`` the test half and the development render sets named in
+    ``renders`` (``materials.RENDER_SETS``); polarisation as preset ``auto`` fits it."""
     out = []
-
-    groups = ["dev", *(["test"] if test else []), *(["dev-renders"] if dev_renders else [])]
-    for group in [*groups, "real"]:
+    for group in ["dev", *(["test"] if test else []), *renders, "real"]:
         for name, stack, angles, truth, k in set_frames(group, REAL_DIR):
             pol = Pipeline(stack, angles, PRESETS["auto"].replace(n_segments=k))
             pol = pol.get("polarisation")
@@ -153,15 +154,20 @@ def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--variants", help="names separated by ; (default: all)")
     parser.add_argument("--test", action="store_true", help="also score the test half")
-    parser.add_argument(
-        "--dev-renders",
-        action="store_true",
-        help="also score the development renders (render_scenes.py; materials.py names them)",
-    )
+    development = [n for n, s in RENDER_SETS.items() if s.role == "development"]
+    for name in development:
+        parser.add_argument(
+            f"--{name}",
+            action="store_true",
+            help=f"also score the {RENDER_SETS[name].title} (made by "
+            f"`{RENDER_SETS[name].command}`)",
+        )
     args = parser.parse_args(argv)
     t0 = time.perf_counter()
-    data = frames(args.test, args.dev_renders)
-    groups = [g for g in ("dev", "dev-renders", "test", "real") if any(f[0] == g for f in data)]
+    renders = tuple(n for n in development if getattr(args, n.replace("-", "_")))
+    data = frames(args.test, renders)
+    order = ("dev", *development, "test", "real")
+    groups = [g for g in order if any(f[0] == g for f in data)]
     real = [f[1] for f in data if f[0] == "real"]
     variants = _variants()
     names = args.variants.split(";") if args.variants else list(variants)

@@ -92,6 +92,12 @@ RENDER_SETS = {
         "render_scenes.py --seeds 1000-1059 --out benchmarks/renders_dev; "
         "render_scenes.py --seeds 200-519 --two-materials --out benchmarks/renders_dev",
     ),
+    "dev-pool-2": RenderSet(
+        HERE / "renders_dev2",
+        "second development pool (seeds 1060–1159; for choosing)",
+        "development",
+        "render_scenes.py --seeds 1060-1159 --out benchmarks/renders_dev2",
+    ),
     "unseen": RenderSet(
         HERE / "renders",
         "unseen renders (render_scenes.py, never chosen or tuned on)",
