@@ -34,7 +34,7 @@ from dataclasses import replace
 import numpy as np
 
 from ..degenerate import degenerate_result
-from .kmeans import squared_distances, weighted_kmeans
+from .kmeans import weighted_kmeans
 from .merge import Merge, closest_centroids, merged_clustering
 from .params import UnsupervisedResult
 from .segmenter import KMEANS_RESTARTS, RegionModel, pixel_labels, without_refinement
@@ -77,7 +77,7 @@ def consensus_clustering(
         axis=1,
     )
     fit = weighted_kmeans(x, k, fine.weight, n_init=KMEANS_RESTARTS, seed=seed)
-    labels, node_labels = pixel_labels(fine, np.argmin(squared_distances(x, fit.centres), axis=1))
+    labels, node_labels = pixel_labels(fine, fit.labels)
     return replace(
         runs[0],
         labels=labels,
