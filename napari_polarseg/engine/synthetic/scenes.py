@@ -2,8 +2,10 @@
 
 Renders the grey images a camera records through a linear polariser at several angles,
 from physics, for scenes modelled on the thesis experiments (chapter 5): natural against
-plastic leaves, a camouflage net in foliage, and a bruised fruit. Every scene comes with
-its ground truth: material labels, the noise-free polarisation image (Î, ρ, φ), the true
+plastic leaves, a camouflage net in foliage, and a bruised fruit; and for further layouts
+of the benchmark families (:data:`LAYOUTS`: leaves of 2-3 materials scattered over a
+board, blobs told apart by micro-texture only). Every scene comes with its ground truth:
+material labels, object instances, the noise-free polarisation image (Î, ρ, φ), the true
 surface normals (zenith, azimuth) and the refractive index of each pixel.
 
 Conventions
@@ -53,21 +55,32 @@ from numpy.typing import ArrayLike, NDArray
 from scipy import ndimage
 
 from ..errors import PolarsegError
-from .geometry import GEOMETRIES, Grid, unit_field
+from .geometry import THESIS_GEOMETRIES, GeometryFunction, Grid, pixel_instances, unit_field
+from .layouts import LAYOUT_GEOMETRIES
 from .optics import FloatArray, render_stack
 from .surface import Material, SurfaceRender, render_surface
 
 __all__ = [
     "DEFAULT_ANGLES_DEG",
     "DEFAULT_NOISE_SIGMA",
+    "GEOMETRIES",
+    "LAYOUTS",
     "SCENES",
     "SyntheticScene",
     "make_scene",
     "scribble_strokes",
 ]
 
-#: Names accepted by :func:`make_scene`.
+#: The thesis scenes (bundled as sample data; tests and benchmarks loop over them).
 SCENES: tuple[str, ...] = ("leaves", "camouflage", "fruit")
+
+#: Further layouts of the benchmark families (:mod:`.layouts`), also names for
+#: :func:`make_scene`.
+LAYOUTS: tuple[str, ...] = ("scattered_leaves", "texture_patches")
+
+#: Geometry function of every name :func:`make_scene` accepts (:data:`SCENES` and
+#: :data:`LAYOUTS`).
+GEOMETRIES: dict[str, GeometryFunction] = {**THESIS_GEOMETRIES, **LAYOUT_GEOMETRIES}
 
 #: Default polariser angles in degrees: 7 angles 0..180 in 30° steps (thesis section 5.1).
 DEFAULT_ANGLES_DEG: tuple[float, ...] = (0.0, 30.0, 60.0, 90.0, 120.0, 150.0, 180.0)
@@ -96,6 +109,10 @@ LABEL_NAMES = {
     "camouflage_net": "net",
     "fruit_skin": "fruit",
     "bruised_tissue": "bruise",
+    "silk_leaf": "silk",
+    "coated_board": "background",
+    "stippled_coating": "stippled",
+    "spatter_coating": "spatter",
 }
 
 
@@ -112,6 +129,11 @@ class SyntheticScene:
         Polariser angles in radians.
     labels : ndarray of int, shape (H, W)
         Ground-truth material of each pixel, 0..K−1 (majority of its sub-pixels).
+    instances : ndarray of int32, shape (H, W)
+        Object instance of each pixel: 0 = background (the label-0 material: board,
+        foliage, healthy fruit skin), 1..n = the objects (each leaf, the net, the
+        bruise, each blob); the majority instance of the sub-pixels of the pixel's
+        label, so each instance lies inside one label.
     material_names : list of str
         Name of each label.
     intensity, dop, phase : ndarray, shape (H, W)
@@ -125,8 +147,10 @@ class SyntheticScene:
         Refractive index of each pixel's material.
     params : dict
         Every parameter used: scene name, shape, angles in degrees, bit depth, noise,
-        seed, shifts, supersampling, light, ambient, target intensity, texture, and for
-        each material its refractive index, depolarisation, roughness and albedo.
+        seed, shifts, supersampling, light, ambient, target intensity, texture, object
+        size (px, None = the layout's default), the layout's own record (``"layout"``:
+        counts, sizes, micro-textures), and for each material its refractive index,
+        depolarisation, roughness and albedo.
     """
 
     stack: NDArray
@@ -139,6 +163,7 @@ class SyntheticScene:
     zenith: FloatArray
     azimuth: FloatArray
     refractive_index: FloatArray
+    instances: NDArray[np.int32]
     params: dict[str, Any] = field(default_factory=dict)
 
     @property
@@ -159,13 +184,14 @@ def make_scene(
     noise_sigma: float = DEFAULT_NOISE_SIGMA,
     seed: int = 0,
     shifts: ArrayLike | None = None,
+    object_size: float | None = None,
 ) -> SyntheticScene:
-    """Render one of the thesis-like test scenes with ground truth.
+    """Render one of the thesis-like test scenes or benchmark layouts with ground truth.
 
     Parameters
     ----------
     name : str
-        One of :data:`SCENES`:
+        One of :data:`SCENES`, the thesis scenes:
 
         - ``"leaves"``: natural (left) and plastic (right) leaves on a matte board
           (labels background, natural_leaf, plastic_leaf), thesis figure 5.1/5.5;
@@ -173,6 +199,10 @@ def make_scene(
           foliage (labels foliage, camouflage_net), thesis figure 5.7;
         - ``"fruit"``: close-up of a near-spherical fruit filling the frame, with a
           bruised, slightly dented patch (labels fruit, bruise), thesis section 5.3.
+
+        or one of :data:`LAYOUTS` (:mod:`.layouts`): ``"scattered_leaves"`` (2-3 kinds of
+        leaves all over a board), ``"texture_patches"`` (blobs that differ from the
+        board by their micro-texture only).
     shape : tuple of int, optional
         Image size (H, W) in pixels, each >= 32. Shapes scale with ``min(H, W) / 120``.
     angles_deg : sequence of float, optional
@@ -188,6 +218,10 @@ def make_scene(
     shifts : array_like, shape (N, 2), optional
         Per-frame translations (rows, cols) in pixels, see :func:`render_stack`; the
         ground truth stays in the unshifted frame.
+    object_size : float, optional
+        Object size in px (>= 4) of ``"leaves"`` and the :data:`LAYOUTS`: mean leaf length
+        or blob diameter; the number of objects scales to keep the covered share. None:
+        the default (thesis scenes unchanged); the other scenes reject a value.
 
     Returns
     -------
@@ -196,7 +230,8 @@ def make_scene(
     Raises
     ------
     PolarsegError
-        For an unknown ``name``, a bad ``shape`` or the errors of :func:`render_stack`.
+        For an unknown ``name``, a bad ``shape`` or ``object_size``, or the errors of
+        :func:`render_stack`.
 
     Examples
     --------
@@ -205,30 +240,39 @@ def make_scene(
     ((7, 64, 72), 'uint16', ['fruit', 'bruise'])
     """
     h, w, angles = _scene_grid(name, shape, angles_deg)
-
-    geo_rng, tex_rng, rough_rng, noise_rng = (
-        np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(4)
-    )
-    surf, materials = _scene_surface(name, (h, w), geo_rng, tex_rng, rough_rng)
+    # Geometry, texture, roughness and noise streams.
+    rngs = [np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(4)]
+    surf, materials, instances, layout = _scene_surface(name, (h, w), object_size, rngs[:3])
     sensor = {"noise_sigma": noise_sigma, "bit_depth": bit_depth, "full_scale": 1.0}
     stack = render_stack(
-        surf.intensity, surf.dop, surf.phase, angles, rng=noise_rng, shifts=shifts, **sensor
+        surf.intensity, surf.dop, surf.phase, angles, rng=rngs[3], shifts=shifts, **sensor
     )
-    names = [LABEL_NAMES.get(m.name, m.name) for m in materials]
     params = _scene_params(name, (h, w), angles_deg, bit_depth, noise_sigma, seed, shifts)
+    params.update(object_size=None if object_size is None else float(object_size), layout=layout)
+    return _scene(surf, stack, angles, materials, instances, params)
+
+
+def _scene(
+    surf: SurfaceRender,
+    stack: NDArray,
+    angles: FloatArray,
+    materials: list[Material],
+    instances: NDArray[np.int32],
+    params: dict[str, Any],
+) -> SyntheticScene:
+    """The :class:`SyntheticScene` of a rendered surface and its stack; adds the
+    materials' record to ``params``."""
+    names = [LABEL_NAMES.get(m.name, m.name) for m in materials]
     params["materials"] = _material_params(names, materials, surf.albedo)
+    truth = ("intensity", "dop", "phase", "zenith", "azimuth", "refractive_index")
     return SyntheticScene(
         stack=stack,
         angles=angles,
         labels=surf.labels,
         material_names=names,
-        intensity=surf.intensity,
-        dop=surf.dop,
-        phase=surf.phase,
-        zenith=surf.zenith,
-        azimuth=surf.azimuth,
-        refractive_index=surf.refractive_index,
+        instances=instances,
         params=params,
+        **{key: getattr(surf, key) for key in truth},
     )
 
 
@@ -270,7 +314,7 @@ def _scene_grid(
 ) -> tuple[int, int, FloatArray]:
     """(H, W, angles in radians) of :func:`make_scene`, after checking its arguments."""
     if name not in GEOMETRIES:
-        raise PolarsegError(f"name must be one of {', '.join(SCENES)}; got {name!r}")
+        raise PolarsegError(f"name must be one of {', '.join(GEOMETRIES)}; got {name!r}")
     try:
         h, w = (int(v) for v in shape)
     except (TypeError, ValueError) as exc:
@@ -286,14 +330,17 @@ def _scene_grid(
 def _scene_surface(
     name: str,
     shape: tuple[int, int],
-    geo_rng: np.random.Generator,
-    tex_rng: np.random.Generator,
-    rough_rng: np.random.Generator,
-) -> tuple[SurfaceRender, list[Material]]:
-    """The scene's geometry and albedo texture, rendered (:func:`.surface.render_surface`)."""
+    object_size: float | None,
+    rngs: Sequence[np.random.Generator],
+) -> tuple[SurfaceRender, list[Material], NDArray[np.int32], dict[str, Any]]:
+    """The scene's geometry and albedo texture, rendered (:func:`.surface.render_surface`),
+    with its materials, pixel instances and the layout's record; ``rngs``: the geometry,
+    texture and roughness streams."""
+    geo_rng, tex_rng, rough_rng = rngs
     h, w = shape
     grid = Grid((h, w), SUPERSAMPLE)
-    p, q, mat, materials, groups = GEOMETRIES[name](geo_rng, grid)
+    geo = GEOMETRIES[name](geo_rng, grid, object_size)
+    p, q, mat, materials, groups = geo
     texture = np.clip(1.0 + TEXTURE_STD * unit_field(tex_rng, grid, TEXTURE_SIGMA_PX), 0.5, None)
     surf = render_surface(
         p,
@@ -310,7 +357,8 @@ def _scene_surface(
         facets=FACETS,
         rng=rough_rng,
     )
-    return surf, materials
+    instances = pixel_instances(geo.instances, mat, surf.labels, SUPERSAMPLE)
+    return surf, materials, instances, geo.info
 
 
 def _scene_params(

@@ -115,6 +115,42 @@ MATERIALS: dict[str, Material] = {
             "the tissue under the cuticle, the skin loses turgor and wrinkles finely; "
             "direction and size of these changes are plausible guesses, not measurements",
         ),
+        Material(
+            "silk_leaf",
+            1.60,
+            0.45,
+            16.0,
+            "artificial 'silk' leaf of woven polyester fabric (fibre n ~ 1.57-1.65): the "
+            "weave and fibre bundles scatter in the volume and roughen the surface, so it "
+            "depolarises more than a moulded plastic leaf",
+        ),
+        Material(
+            "coated_board",
+            1.52,
+            0.10,
+            8.0,
+            "board under a roller-applied lacquer coat (acrylic/alkyd binder, n ~ 1.5, "
+            "little volume scattering): its micro-relief is an orange peel of rms slope "
+            "0.50 and correlation 3 px (layouts.MICRO_TEXTURES)",
+        ),
+        Material(
+            "stippled_coating",
+            1.52,
+            0.10,
+            8.0,
+            "the coated_board lacquer (same n, depolarisation and facet roughness) "
+            "applied with a stipple brush: a fine relief, correlation 1 px, rms slope "
+            "0.55 so that its mean degree of polarisation matches the board's; only the "
+            "polarisation texture tells them apart",
+        ),
+        Material(
+            "spatter_coating",
+            1.52,
+            0.10,
+            8.0,
+            "the coated_board lacquer as a spatter finish: relief of correlation 2 px, rms "
+            "slope 0.51 (mean degree of polarisation matched to the board's)",
+        ),
     )
 }
 
