@@ -7,6 +7,9 @@
                                       the angles in its JSON ImageDescription
     examples/data/leaves_strokes.tif  a few painted strokes on it (uint8, 0 = unpainted,
                                       k + 1 = true material k), for --scribbles
+    napari_polarseg/sample_data/<scene>_strokes.tif
+                                      the same kind of strokes on each bundled synthetic
+                                      scene, which `polarseg demo` trains on
 
 The raw polarisation-camera frame the README uses is the bundled
 napari_polarseg/sample_data/fruits_IMX250MZR_crop.png itself
@@ -33,7 +36,10 @@ if str(ROOT) not in sys.path:
 
 from napari_polarseg.io import write_stack_tiff  # noqa: E402
 
-SAMPLE = ROOT / "napari_polarseg" / "sample_data" / "leaves.npz"
+SAMPLES = ROOT / "napari_polarseg" / "sample_data"
+SAMPLE = SAMPLES / "leaves.npz"
+#: The sample scenes that get bundled strokes (``sample_data/<scene>_strokes.tif``).
+SAMPLE_SCENES = ("leaves", "camouflage", "fruit")
 DEFAULT_OUT = ROOT / "examples" / "data"
 #: Strokes: every STROKE_ROWS-th row, in runs of STROKE_LENGTH columns of every
 #: STROKE_PERIOD, inside each material eroded by ERODE pixels.
@@ -62,6 +68,11 @@ def main(argv: list[str] | None = None) -> int:
     written = [args.out / "leaves_stack.tif", args.out / "leaves_strokes.tif"]
     write_stack_tiff(written[0], stack.astype(np.uint16), angles)
     tifffile.imwrite(written[1], strokes(truth), compression="zlib")
+    # the demo's bundled strokes, one file per sample scene (polarseg demo trains on them)
+    for scene in SAMPLE_SCENES:
+        with np.load(SAMPLES / f"{scene}.npz") as data:
+            written.append(SAMPLES / f"{scene}_strokes.tif")
+            tifffile.imwrite(written[-1], strokes(data["labels"]), compression="zlib")
     for path in written:
         print(f"wrote {path} ({path.stat().st_size / 1024:.0f} KiB)")
     return 0
