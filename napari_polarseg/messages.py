@@ -71,6 +71,8 @@ def limit_lines(run: Run) -> list[str]:
     found = choice_text(record)
     if found:
         lines.append(f"{PROG}: {found} (k_scores in summary.json)")
+    if "object_size" in record:
+        lines.append(f"{PROG}: {object_size_text(record)}")
     if record.get("close_up"):
         lines.append(
             f"{PROG}: one smooth surface fills the frame (it explains "
@@ -149,4 +151,18 @@ def evaluation_message(evaluation: dict[str, Any]) -> Message:
         f"{evaluation['adjusted_rand_index']:.3f}, mean IoU {evaluation['mean_iou']:.3f}, "
         f"block accuracy {evaluation['block_accuracy_worst']:.3f} (worst) .. "
         f"{evaluation['block_accuracy_optimistic']:.3f} (optimistic)"
+    )
+
+
+def object_size_text(record: dict[str, Any]) -> str:
+    """What the superpixel methods did with the object size (their record): given and
+    applied, or estimated and (by default) only reported."""
+    size, area = record["object_size"], record["region_areas"][0]
+    if not record.get("object_size_found"):
+        return f"object size {size:.0f} px (given): superpixel area {area} px"
+    if record.get("object_size_applied"):
+        return f"object size {size:.0f} px (estimated from the scene): superpixel area {area} px"
+    return (
+        f"object size about {size:.0f} px (estimated from the scene; the superpixels keep "
+        f"their share of the frame, area {area} px; --object-size {size:.0f} applies it)"
     )

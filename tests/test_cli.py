@@ -175,6 +175,7 @@ def test_segment_all_parameter_flags_reach_params_json(tmp_path, capsys, scene_t
         *("--scale-mode", "median", "--spatial-radius", "1.5", "--spatial-sigma", "3"),
         *("--ncut-threshold", "0.8", "--min-segment-blocks", "2", "--fit", "robust"),
         *("--affinity-graph", "sparse", "--clustering", "kway", "--method", "thesis"),
+        *("--object-size", "30"),
     ]
     code, _, err = run(capsys, "segment", path, "--out", out, *flags)
     assert code == 0, err
@@ -194,6 +195,7 @@ def test_segment_all_parameter_flags_reach_params_json(tmp_path, capsys, scene_t
         "spatial_radius": 1.5,
         "spatial_sigma": 3.0,
         "n_segments": 3,
+        "object_size": 30.0,
         "ncut_threshold": 0.8,
         "min_segment_blocks": 2,
         "clustering": "kway",

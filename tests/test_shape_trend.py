@@ -119,7 +119,7 @@ def test_cli_says_when_it_took_the_frame_for_a_close_up(tmp_path, capsys):
 
     for scene, close in (("fruit", True), ("leaves", False)):
         out = tmp_path / scene
-        assert main(["demo", "--scene", scene, "--out", str(out)]) == 0
+        assert main(["demo", "--scene", scene, "--out", str(out), "--unsupervised"]) == 0
         stdout = capsys.readouterr().out
         record = json.loads((out / "summary.json").read_text())["superpixels"]
         assert record["close_up"] is close

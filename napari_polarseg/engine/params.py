@@ -243,6 +243,22 @@ class SegmentParams:
         maximum=256,
         words={"auto": 0},
     )
+    object_size: float = _param(
+        0.0,
+        help="Typical size (diameter) of one object in pixels, as cellpose's diameter. "
+        "The superpixel methods take superpixels of side size / 8 and a feature diffusion "
+        "reaching half a size, never coarser than their share of the frame; 0 (the CLI "
+        "also takes auto) keeps those frame-share scales and only estimates the size from "
+        "the scene and reports it",
+        flag="--object-size",
+        metavar="PX",
+        label="object size (px)",
+        minimum=0,
+        maximum=100_000,
+        step=1,
+        decimals=0,
+        words={"auto": 0},
+    )
     ncut_threshold: float | None = _param(
         None,
         help="Stop splitting earlier when the best cut's Ncut value exceeds this (none: never)",
@@ -340,6 +356,10 @@ class SegmentParams:
             raise PolarsegError(
                 f"number of segments must be a positive integer, got {self.n_segments!r}"
                 + ("" if finds_k else f" (0 = find it: not offered by {self.method!r})")
+            )
+        if not _is_number(self.object_size) or self.object_size < 0:
+            raise PolarsegError(
+                f"object size must be a number of pixels >= 0 (0 = auto), got {self.object_size!r}"
             )
         if self.ncut_threshold is not None and (
             not _is_number(self.ncut_threshold) or self.ncut_threshold <= 0

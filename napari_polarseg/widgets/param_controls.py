@@ -37,6 +37,7 @@ CONTROL_ORDER = (
     "clustering",
     "min_segment_blocks",
     "n_segments",
+    "object_size",
 )
 
 #: What each parameter control does to the result, in plain words: the first line of its
@@ -73,6 +74,8 @@ EFFECTS: dict[str, str] = {
     "specks becoming segments of their own",
     "n_segments": "How many segments (materials) the result has; 0 lets a method that can "
     "choose the number itself",
+    "object_size": "How large one object is, in pixels across; 0 estimates it from the "
+    "image. Smaller sizes give finer superpixels that do not blur small objects together",
 }
 
 #: The thesis default of every SegmentParams field (the dataclass defaults).

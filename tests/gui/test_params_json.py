@@ -34,6 +34,7 @@ CUSTOM = SegmentParams(
     spatial_radius=2.5,
     spatial_sigma=1.5,
     n_segments=5,
+    object_size=24.0,
     ncut_threshold=0.4,
     min_segment_blocks=3,
     clustering="kway",

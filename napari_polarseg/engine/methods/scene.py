@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from ..features.harmonics import top_left_block_labels
+from ..features.object_size import ObjectSize, estimate_object_size
 from ..params import SegmentParams
 from ..physics import polarimage
 from ..physics.pixel_mask import PixelMask
@@ -98,6 +99,22 @@ class Scene:
     def polarisation(self, params: SegmentParams) -> polarimage.PolarisationImage:
         """The shared polarisation image (Î, ρ, φ, invalid pixels) for ``params.fit``."""
         return self.pipeline.get("polarisation", params)
+
+    def object_size(self, params: SegmentParams) -> ObjectSize:
+        """The object size a run uses: ``params.object_size`` px when it is set (> 0),
+        else the scene's own estimate (:func:`estimate_object_size` on the valid pixels
+        of the region), made once per polarisation image and kept."""
+        if params.object_size > 0:
+            return ObjectSize.given(float(params.object_size))
+        pol = self.polarisation(params)
+
+        def estimate() -> ObjectSize:
+            valid = ~np.asarray(pol.invalid, dtype=bool)
+            if self.region is not None:
+                valid &= self.region
+            return estimate_object_size(pol.intensity, pol.dop, pol.phase, valid)
+
+        return self.cached("object_size", id(pol), estimate)
 
     def cached(self, name: str, key: Any, compute: Callable[[], Any]) -> Any:
         """The feature cache: the value kept under ``name`` if it was made for ``key``,

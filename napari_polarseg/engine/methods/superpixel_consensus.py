@@ -31,7 +31,7 @@ from typing import TYPE_CHECKING
 
 from ..chunks import in_background
 from ..unsupervised.consensus import consensus_clustering
-from ..unsupervised.params import UnsupervisedResult
+from ..unsupervised.params import UnsupervisedParams, UnsupervisedResult
 from ..unsupervised.pixel_maps import pixel_maps
 from ..unsupervised.segmenter import RegionModel, prepare_regions
 from .base import MethodRun
@@ -57,7 +57,7 @@ class SuperpixelConsensus(SurfaceSuperpixels):
     area_factors = AREA_FACTORS
 
     def region_models(
-        self, scene: Scene, pol: PolarisationImage, run: MethodRun
+        self, scene: Scene, pol: PolarisationImage, run: MethodRun, params: UnsupervisedParams
     ) -> list[RegionModel]:
         """One region model per size of :attr:`area_factors`, the finest first, kept
         together in the scene's feature cache. What does not depend on the size
@@ -65,9 +65,9 @@ class SuperpixelConsensus(SurfaceSuperpixels):
         their own while the finest is drawn here (the watershed and numpy release the
         GIL); the finest reports the stage's progress, and a stop asked for ends the
         wait at once."""
-        area = self.params.area_of(pol.intensity.shape)
+        area = params.area_of(pol.intensity.shape)
         sizes = [
-            self.params if f == 1 else self.params.replace(region_area=max(4, round(f * area)))
+            params if f == 1 else params.replace(region_area=max(4, round(f * area)))
             for f in self.area_factors
         ]
 
@@ -76,7 +76,7 @@ class SuperpixelConsensus(SurfaceSuperpixels):
             maps = (pol.intensity, pol.dop, pol.phase)
             # the maps filled outside the valid pixels, the node features' per-pixel
             # terms and the edge map do not depend on the size: made once
-            shared = pixel_maps(*maps, self.params, valid)
+            shared = pixel_maps(*maps, params, valid)
             run.within(0.1)
             later = [
                 in_background(partial(prepare_regions, *maps, p, pixels=shared)) for p in sizes[1:]
@@ -88,7 +88,7 @@ class SuperpixelConsensus(SurfaceSuperpixels):
             first = prepare_regions(*maps, sizes[0], progress=progress, pixels=shared)
             return [first, *(wait(run.check) for wait in later)]
 
-        return scene.cached(self.name, (id(pol), self.params), prepare)
+        return scene.cached(self.name, (id(pol), params), prepare)
 
     def labels(self, models: list[RegionModel], k: int) -> UnsupervisedResult:
         """k segments the sizes' runs agree on (:func:`consensus_clustering`, each run

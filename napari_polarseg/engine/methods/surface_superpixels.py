@@ -42,6 +42,9 @@ from .valid_superpixels import ValidSuperpixels
 
 #: Reach of the node features' diffusion, a share of the image side √(H·W).
 REACH = 0.20
+#: Reach of that diffusion in object sizes (``SegmentParams.object_size``), never beyond
+#: :data:`REACH` of the side (:meth:`~.valid_superpixels.ValidSuperpixels.scaled_params`).
+REACH_OBJECTS = 0.5
 #: τ of the diffusion's border weights, in units of the median border strength.
 BORDER_SCALE = 1.25
 #: With ``n_segments = 0``: the fewest k whose silhouette is within this share of the
@@ -56,6 +59,7 @@ class SurfaceSuperpixels(ValidSuperpixels):
     name = "surface_superpixels"
     title = "superpixels on valid pixels, features spread over surfaces (unsupervised)"
     k_tolerance = K_TOLERANCE
+    reach_objects = REACH_OBJECTS
     merge_rule = staticmethod(weakest_border)
 
     def __init__(self, params: UnsupervisedParams | None = None) -> None:

@@ -41,7 +41,7 @@ import numpy as np
 from ..params import SegmentParams
 from ..unsupervised.choose_k import K_RANGE, estimate_k
 from ..unsupervised.merge import closest_centroids, merged_clustering
-from ..unsupervised.params import UnsupervisedResult
+from ..unsupervised.params import REGIONS_PER_OBJECT_SIDE, UnsupervisedParams, UnsupervisedResult
 from ..unsupervised.segmenter import (
     RegionModel,
     cluster_regions,
@@ -50,6 +50,10 @@ from ..unsupervised.segmenter import (
 )
 from .base import MethodOutput, MethodRun
 from .superpixel_clustering import SuperpixelClustering
+
+#: Reach of the node features' diffusion in object sizes (``SegmentParams.object_size``),
+#: never beyond its ``diffusion_range`` of the image side (:meth:`ValidSuperpixels.scaled_params`)
+REACH_OBJECTS = 0.18
 
 if TYPE_CHECKING:
     from ..physics.polarimage import PolarisationImage
@@ -100,24 +104,56 @@ class ValidSuperpixels(SuperpixelClustering):
     k_tolerance = 0.0
     #: Which two of the k + 1 segments are merged (:mod:`..unsupervised.merge`)
     merge_rule = staticmethod(closest_centroids)
+    #: The superpixel area and the diffusion's reach follow the object size
+    #: (``SegmentParams.object_size``) when it is given
+    follows_object_size = True
+    #: ... and also when it is estimated (``object_size = 0``). Off: on the
+    #: development halves of the scene families the estimate gained on many small
+    #: objects and lost on camouflage and texture, whose grain it takes for the
+    #: objects (docs/quality.md, *Scene families*); the estimate is still made and
+    #: reported
+    follows_estimate = False
+    #: Reach of the node features' diffusion, in object sizes
+    reach_objects = REACH_OBJECTS
+    #: Superpixels across one object size (the superpixel side is the object size / this)
+    regions_per_side = REGIONS_PER_OBJECT_SIDE
+    #: The object size only makes the scales finer than the frame-share ones
+    #: (``self.params``' area and reach), never coarser
+    capped = True
+    reads = ("fit", "n_segments", "object_size")
+
+    def scaled_params(self, object_size: float, shape: tuple[int, int]) -> UnsupervisedParams:
+        """``self.params`` at an object size of D = ``object_size`` px on an image of
+        ``shape``: superpixels of side D / :attr:`regions_per_side` and a diffusion
+        reaching :attr:`reach_objects` · D (:meth:`UnsupervisedParams.at_object_size`),
+        each no coarser than ``self.params``' own share of the frame (:attr:`capped`):
+        small objects get finer superpixels and a shorter reach, large ones the
+        frame-share scales chosen on the large objects of the shared renders."""
+        scaled = self.params.at_object_size(
+            object_size, shape, self.reach_objects, self.regions_per_side
+        )
+        if not self.capped:
+            return scaled
+        return scaled.replace(
+            region_area=min(scaled.region_area, self.params.area_of(shape)),
+            diffusion_range=min(scaled.diffusion_range, self.params.diffusion_range),
+        )
 
     def region_models(
-        self, scene: Scene, pol: PolarisationImage, run: MethodRun
+        self, scene: Scene, pol: PolarisationImage, run: MethodRun, params: UnsupervisedParams
     ) -> list[RegionModel]:
         """The region models the labels are drawn from: here one, the superpixels and node
-        features of ``self.params`` on the scene's clustered pixels
-        (:func:`clustered_pixels`), made once per image and region and kept in the
-        scene's feature cache; ``run`` shows the progress and may stop it."""
+        features of ``params`` on the scene's clustered pixels
+        (:func:`clustered_pixels`), made once per image, region and parameters and kept
+        in the scene's feature cache; ``run`` shows the progress and may stop it."""
 
         def prepare() -> RegionModel:
             valid = clustered_pixels(scene.region, pol.invalid)
-            return prepare_regions(
-                pol.intensity, pol.dop, pol.phase, self.params, valid, run.within
-            )
+            return prepare_regions(pol.intensity, pol.dop, pol.phase, params, valid, run.within)
 
         # the clustered pixels follow from the image (its invalid pixels) and the
         # scene's region, fixed for the scene's life: the image's identity keys them
-        return [scene.cached(self.name, (id(pol), self.params), prepare)]
+        return [scene.cached(self.name, (id(pol), params), prepare)]
 
     def labels(self, models: list[RegionModel], k: int) -> UnsupervisedResult:
         """k segments of the region models: k + 1 clusters of the one model merged to k
@@ -129,14 +165,19 @@ class ValidSuperpixels(SuperpixelClustering):
     ) -> MethodOutput:
         run.begin("superpixels")
         pol = scene.polarisation(params)
-        models = self.region_models(scene, pol, run)
-        run.begin("clustering")
         shape = pol.intensity.shape
-        record: dict[str, Any] = {
-            "invalid_share": round(float(np.mean(pol.invalid)), 6),
-            "k_found": params.n_segments == 0,
-            "region_areas": [m.params.area_of(shape) for m in models],
-        }
+        record: dict[str, Any] = {"invalid_share": round(float(np.mean(pol.invalid)), 6)}
+        unsupervised = self.params
+        if self.follows_object_size:
+            size = scene.object_size(params)
+            record.update(object_size=round(size.size_px, 1), object_size_found=size.estimated)
+            if self.follows_estimate or not size.estimated:
+                unsupervised = self.scaled_params(size.size_px, shape)
+            record["object_size_applied"] = unsupervised is not self.params
+        models = self.region_models(scene, pol, run, unsupervised)
+        run.begin("clustering")
+        record["k_found"] = params.n_segments == 0
+        record["region_areas"] = [m.params.area_of(shape) for m in models]
         k = params.n_segments
         if k == 0:  # found on the first model's superpixels
             key = (id(pol), models[0].params)

@@ -16,6 +16,13 @@ REGIONS_PER_IMAGE = 3000
 MIN_REGION_AREA = 32
 MAX_REGION_AREA = 1024
 
+#: Superpixel side per object size: at an object size of D px the superpixel area is
+#: (D / :data:`REGIONS_PER_OBJECT_SIDE`)² px, within [:data:`MIN_OBJECT_REGION_AREA`,
+#: :data:`MAX_REGION_AREA`] (:meth:`UnsupervisedParams.at_object_size`).
+REGIONS_PER_OBJECT_SIDE = 8.0
+#: The smallest superpixel area the object size gives (a 3 × 3 patch).
+MIN_OBJECT_REGION_AREA = 9
+
 #: Projections of the standardised node features (:func:`maf_features`, PCA).
 PROJECTIONS = ("pca", "maf")
 
@@ -233,6 +240,23 @@ class UnsupervisedParams:
         if self.region_area:
             return self.region_area
         return auto_region_area(shape, REGIONS_PER_IMAGE, MIN_REGION_AREA, MAX_REGION_AREA)
+
+    def at_object_size(
+        self,
+        object_size: float,
+        shape: tuple[int, int],
+        reach_objects: float,
+        regions_per_side: float = REGIONS_PER_OBJECT_SIDE,
+    ) -> UnsupervisedParams:
+        """These parameters at an object size of D = ``object_size`` px on an image of
+        ``shape`` (H, W): superpixel area (D / ``regions_per_side``)² px within
+        [:data:`MIN_OBJECT_REGION_AREA`, :data:`MAX_REGION_AREA`], and the diffusion's
+        reach ``reach_objects`` · D px, as the share of the image side √(H·W) that
+        ``diffusion_range`` is (at most 1)."""
+        side = max(float(object_size), 1.0) / regions_per_side
+        area = int(round(min(max(side * side, MIN_OBJECT_REGION_AREA), MAX_REGION_AREA)))
+        reach = min(reach_objects * float(object_size) / math.sqrt(shape[0] * shape[1]), 1.0)
+        return self.replace(region_area=area, diffusion_range=reach)
 
     def close_up_params(self) -> UnsupervisedParams:
         """The parameters used on a close-up of one smooth surface

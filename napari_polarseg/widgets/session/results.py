@@ -17,7 +17,7 @@ import numpy as np
 
 from ...engine import SegmentationResult
 from .classify import ClassifierOutput, classifier_parts
-from .text import close_up_text, degenerate_text, k_choice_text, mask_text
+from .text import close_up_text, degenerate_text, k_choice_text, mask_text, object_size_text
 
 #: The inputs of a run without mask, scribbles or classifier file.
 NO_INPUTS: dict[str, Any] = {"mask": None, "scribbles": None, "classifier": None}
@@ -78,7 +78,8 @@ class ShownResult:
             parts = classifier_parts(self.out, self.confidence, self.inputs.get("classifier"))
         else:
             parts = [k_choice_text(summary) or f"{summary['n_segments']} segments"]
-            parts += [t for t in (close_up_text(summary), degenerate_text(summary)) if t]
+            notes = (object_size_text(summary), close_up_text(summary), degenerate_text(summary))
+            parts += [t for t in notes if t]
         if self.partial:
             busy = "refining the borders…" if self.out is not None and self.out.preview else None
             return " · ".join([*parts, f"{seconds:.2f} s", busy or "computing the error map…"])

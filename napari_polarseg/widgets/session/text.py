@@ -72,3 +72,16 @@ def k_choice_text(summary: dict[str, Any]) -> str:
     """The status line's note of the number of segments found by itself and how sure
     (``summary["superpixels"]``, ``n_segments = 0``); "" when k was given."""
     return choice_text(summary.get("superpixels") or {})
+
+
+def object_size_text(summary: dict[str, Any]) -> str:
+    """The status line's note of the object size the superpixels followed
+    (``summary["superpixels"]``): ``"objects 34 px (given)"``, ``"objects ~34 px
+    (estimated, not applied)"``; "" for a method that does not read it."""
+    record = summary.get("superpixels") or {}
+    if "object_size" not in record:
+        return ""
+    if not record.get("object_size_found"):
+        return f"objects {record['object_size']:.0f} px (given)"
+    applied = "" if record.get("object_size_applied") else ", not applied"
+    return f"objects ~{record['object_size']:.0f} px (estimated{applied})"
