@@ -1,0 +1,147 @@
+"""The scene families of the bench (issue 37): each a development and a test half.
+
+Every frame is a :class:`Frame`: the angle stack, its angles (radians), the truth
+(0 = not scored, 1..k the materials), k, the truth's median object size in pixels
+(``nan`` where the truth does not outline whole objects) and its family and half.
+
+Families (:data:`FAMILIES`):
+
+- ``objects`` (a): few large objects, the shared Mitsuba generator
+  (``render_scenes.py --layout objects``). Development: the 24 shared scenes' seeds
+  0–11. Test: the fresh seeds of :data:`RENDER_SETS` ``objects-test``; without them, the
+  shared seeds 12–23, marked as read before.
+- ``small`` (b): 20–60 small flat objects of 2–3 materials (``--layout small``).
+- ``textured`` (c): materials alike but for their surface texture (``--layout textured``).
+- ``diffuse`` (d): the engine's own diffuse-polarisation generator at several object
+  sizes (:mod:`diffuse_family`); its test half is drawn from ``--test-base``, so each
+  round draws new seeds.
+- ``real`` (e): the hand-labelled real polarisation-camera frames (all four are
+  development frames: none is kept aside on this machine).
+
+The truth's object size: the median equivalent diameter of the rendered ``instances``
+where a render has them, else of the connected components of the object materials
+(labels ≥ 2; label 1 is the floor), else of the synthetic scenes' instances.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from materials import RENDERED_DIR, folder_seeds, labelled_real_frames
+
+from napari_polarseg.engine.features.object_size import component_size, instance_size
+
+HERE = Path(__file__).resolve().parent
+REAL_DIR = Path(__file__).resolve().parents[2] / "shared" / "data" / "polanalyser"
+#: The families, in table order, with their titles.
+FAMILIES = {
+    "objects": "(a) few large objects (shared Mitsuba generator)",
+    "small": "(b) many small objects (Mitsuba, --layout small)",
+    "textured": "(c) texture-defined materials (Mitsuba, --layout textured)",
+    "diffuse": "(d) the diffuse regime (the engine's synthetic generator)",
+    "real": "(e) real polarisation-camera frames (hand-labelled)",
+}
+HALVES = ("dev", "test")
+
+#: Render folders (git-ignored) of the Mitsuba families → the command that makes them.
+RENDER_SETS = {
+    ("objects", "test"): (
+        HERE / "renders_objects_fresh",
+        "render_scenes.py --layout objects --seeds 4000-4011 "
+        "--out benchmarks/renders_objects_fresh",
+    ),
+    ("small", "dev"): (
+        HERE / "renders_small_dev",
+        "render_scenes.py --layout small --seeds 5000-5011 --out benchmarks/renders_small_dev",
+    ),
+    ("small", "test"): (
+        HERE / "renders_small_test",
+        "render_scenes.py --layout small --seeds 5100-5111 --out benchmarks/renders_small_test",
+    ),
+    ("textured", "dev"): (
+        HERE / "renders_textured_dev",
+        "render_scenes.py --layout textured --seeds 6000-6011 "
+        "--out benchmarks/renders_textured_dev",
+    ),
+    ("textured", "test"): (
+        HERE / "renders_textured_test",
+        "render_scenes.py --layout textured --seeds 6100-6111 "
+        "--out benchmarks/renders_textured_test",
+    ),
+}
+#: The shared renders' halves (family ``objects``).
+SHARED_HALVES = {"dev": tuple(range(12)), "test": tuple(range(12, 24))}
+
+
+@dataclass(frozen=True)
+class Frame:
+    """One scored frame of the bench (module docstring)."""
+
+    name: str
+    stack: np.ndarray
+    angles: np.ndarray
+    truth: np.ndarray
+    k: int
+    object_size: float
+    family: str
+    half: str
+    note: str = ""
+
+
+def render_frame(path: Path, family: str, half: str, note: str = "") -> Frame:
+    """A :class:`Frame` of a ``scene_<seed>.npz`` render (sky = 0, floor = 1, objects ≥ 2)."""
+    with np.load(path, allow_pickle=False) as f:
+        stack, angles = f["stack"], np.deg2rad(f["angles"])
+        truth = f["labels"].astype(np.int32)
+        instances = f["instances"] if "instances" in f.files else None
+    classes = [c for c in np.unique(truth) if c >= 2]
+    size = instance_size(instances) if instances is not None else component_size(truth, classes)
+    k = len(np.unique(truth[truth > 0]))
+    return Frame(path.stem, stack, angles, truth, k, float(size), family, half, note)
+
+
+def render_frames(family: str, half: str) -> Iterator[Frame]:
+    """The frames of a Mitsuba family's half (missing folders are reported, not fatal)."""
+    if family == "objects" and half == "dev":
+        for seed in SHARED_HALVES["dev"]:
+            yield render_frame(RENDERED_DIR / f"scene_{seed}.npz", family, half)
+        return
+    folder, command = RENDER_SETS[(family, half)]
+    seeds = folder_seeds(folder) if folder.is_dir() else []
+    if not seeds and family == "objects":
+        print(f"{folder} is empty: the shared test seeds 12–23 (read before) instead")
+        for seed in SHARED_HALVES["test"]:
+            path = RENDERED_DIR / f"scene_{seed}.npz"
+            yield render_frame(path, family, half, "read before")
+        return
+    if not seeds:
+        print(f"{family} {half}: no renders in {folder} (make them: {command})")
+    for seed in seeds:
+        yield render_frame(folder / f"scene_{seed}.npz", family, half)
+
+
+def diffuse_frames(half: str, test_base: int) -> Iterator[Frame]:
+    """The engine-generated diffuse-regime frames (:mod:`diffuse_family`)."""
+    from diffuse_family import family_scenes
+
+    for s in family_scenes(half, test_base=test_base):
+        yield Frame(s.name, s.stack, s.angles, s.labels, s.k, float(s.object_size), "diffuse", half)
+
+
+def real_frames() -> Iterator[Frame]:
+    """The hand-labelled real frames (development; their truth polygons lie inside the
+    objects, so no object size is read from them)."""
+    for name, stack, angles, truth, k in labelled_real_frames(REAL_DIR):
+        yield Frame(Path(name).stem, stack, angles, truth, k, float("nan"), "real", "dev")
+
+
+def frames(family: str, half: str, test_base: int = 0) -> Iterator[Frame]:
+    """Every frame of one family's half."""
+    if family == "diffuse":
+        return diffuse_frames(half, test_base)
+    if family == "real":
+        return real_frames() if half == "dev" else iter(())
+    return render_frames(family, half)

@@ -1,0 +1,158 @@
+"""Variants of the default method on the development halves of every scene family
+(:mod:`families`), for choosing: the mean ARI of each variant by family, over all
+families together, and its paired difference to the default, with the scenes that moved
+most.
+
+A variant is the default method's class with some attributes changed (its node-feature
+parameters, how far its diffusion reaches in object sizes, how many superpixels span one
+object, whether it follows the estimated object size) or the default with the object
+size set to the truth's (``truth size``: what a perfect estimate would give). Only the
+development halves are read: the test halves are for reporting.
+
+Usage::
+
+    cd benchmarks && OMP_NUM_THREADS=1 PYTHONPATH=.. python family_variants.py \\
+        [--families objects,small,textured,diffuse,real] [--variants NAME,NAME]
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from families import FAMILIES, Frame, frames
+from sklearn.metrics import adjusted_rand_score
+
+from napari_polarseg.engine import Pipeline, Scene
+from napari_polarseg.engine.methods import register_method
+from napari_polarseg.engine.methods.surface_superpixels import SurfaceSuperpixels
+from napari_polarseg.engine.params import PRESETS
+
+
+@dataclass(frozen=True)
+class Variant:
+    """Attributes of the default's class to change, node-parameter changes, and whether
+    the truth's object size is given."""
+
+    attrs: dict[str, Any] = field(default_factory=dict)
+    params: dict[str, Any] = field(default_factory=dict)
+    truth_size: bool = False
+
+
+#: The variants tried; ``default`` is the default as it is (its superpixels at their
+#: share of the frame whatever the estimated object size).
+VARIANTS: dict[str, Variant] = {
+    "default": Variant(),
+    "estimated size": Variant({"follows_estimate": True}),
+    "truth size": Variant(truth_size=True),
+    "reach 0.25": Variant({"follows_estimate": True, "reach_objects": 0.25}),
+    "side 12": Variant({"follows_estimate": True, "regions_per_side": 12.0}),
+    "texture": Variant(
+        params={
+            "features": (
+                "log_intensity",
+                "dop",
+                "dop_spread",
+                "dop_vs_log_intensity_slope",
+                "aolp_coherence",
+                "dolp_over_dop",
+            )
+        }
+    ),
+    "no intensity": Variant(
+        params={"features": ("dop", "dop_spread", "dop_vs_log_intensity_slope")}
+    ),
+}
+
+
+def register(name: str, variant: Variant) -> str:
+    """Register the variant as a method of its own; its method name."""
+    cls = type(
+        "Variant",
+        (SurfaceSuperpixels,),
+        {"name": f"variant:{name}", "title": name, **variant.attrs},
+    )
+    method = cls()
+    if variant.params:
+        method.params = method.params.replace(**variant.params)
+    register_method(method)
+    return method.name
+
+
+def score(frame: Frame, scene: Scene, params, method: str, variant: Variant) -> float:
+    run = params.replace(method=method)
+    if variant.truth_size and np.isfinite(frame.object_size):
+        run = run.replace(object_size=float(frame.object_size))
+    labels = scene.segment(run).labels
+    scored = frame.truth > 0
+    return float(adjusted_rand_score(frame.truth[scored], labels[scored]))
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--families", default=",".join(FAMILIES))
+    ap.add_argument("--variants", default=",".join(VARIANTS))
+    ap.add_argument(
+        "--grid",
+        action="append",
+        default=[],
+        metavar="NAME=ATTR:VALUE[;ATTR:VALUE]",
+        help="an extra variant: class attributes (numbers; follows_estimate:1 follows the "
+        "estimate) and 'truth:1' for the truth's size",
+    )
+    args = ap.parse_args(argv)
+    chosen = {n: VARIANTS[n] for n in args.variants.split(",") if n}
+    for text in args.grid:
+        name, spec = text.split("=", 1)
+        attrs = dict(part.split(":", 1) for part in spec.split(";") if part)
+        truth = attrs.pop("truth", "0") == "1"
+        chosen[name] = Variant({a: float(v) for a, v in attrs.items()}, truth_size=truth)
+    methods = {n: register(n, v) for n, v in chosen.items()}
+    results: dict[str, dict[str, list[float]]] = {n: {} for n in chosen}
+    names: dict[str, list[str]] = {}
+    t0 = time.perf_counter()
+    for family in args.families.split(","):
+        for frame in frames(family, "dev"):
+            pipe = Pipeline(frame.stack, frame.angles, PRESETS["auto"].replace(n_segments=frame.k))
+            scene = Scene(pipeline=pipe)
+            names.setdefault(family, []).append(frame.name)
+            line = []
+            for n, v in chosen.items():
+                value = score(frame, scene, pipe.params, methods[n], v)
+                results[n].setdefault(family, []).append(value)
+                line.append(f"{n} {value:.3f}")
+            print(f"{family} {frame.name}: " + ", ".join(line), flush=True)
+    print(f"\n{time.perf_counter() - t0:.0f} s")
+    families = list(names)
+    head = ["variant", *families, "all (mean of families)", "paired vs default (all frames)"]
+    print("| " + " | ".join(head) + " |\n|" + "---|" * len(head))
+    base = results.get("default")
+    for n in chosen:
+        means = [float(np.mean(results[n][f])) for f in families]
+        cells = [n, *(f"{m:.3f}" for m in means), f"{np.mean(means):.3f}"]
+        if base is not None:
+            d = np.concatenate([np.subtract(results[n][f], base[f]) for f in families])
+            se = d.std(ddof=1) / np.sqrt(d.size) if d.size > 1 else float("nan")
+            cells.append(f"{d.mean():+.3f} ± {se:.3f}")
+        print("| " + " | ".join(cells) + " |")
+    if base is not None:
+        for n in chosen:
+            if n == "default":
+                continue
+            moved = [
+                (results[n][f][i] - base[f][i], f"{f}/{names[f][i]}")
+                for f in families
+                for i in range(len(names[f]))
+            ]
+            moved.sort()
+            worst = ", ".join(f"{s} {d:+.2f}" for d, s in moved[:3])
+            best = ", ".join(f"{s} {d:+.2f}" for d, s in moved[::-1][:3])
+            print(f"- {n}: most down {worst}; most up {best}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
