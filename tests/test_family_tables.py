@@ -1,0 +1,76 @@
+"""The family bench (benchmarks/evaluate_families.py, benchmarks/families.py): a tiny
+render of each Mitsuba layout's format in a temporary folder stands in for a family's
+half, so one row is scored end to end and the markdown block of a copy of
+``docs/quality.md`` is rewritten with the summary, the floors and the per-frame table."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO / "benchmarks"))
+import evaluate_families  # noqa: E402
+import families  # noqa: E402
+
+from napari_polarseg.engine.synthetic.scenes import make_scene  # noqa: E402
+
+
+@pytest.fixture
+def small_family(tmp_path, monkeypatch):
+    """A ``small`` test half of one render: a synthetic leaves scene in the rendered
+    files' format (labels + 1, with the instances of its leaves)."""
+    sc = make_scene("leaves", shape=(64, 80), seed=0)
+    folder = tmp_path / "renders_small_test"
+    folder.mkdir()
+    np.savez(
+        folder / "scene_5100.npz",
+        stack=sc.stack,
+        angles=np.rad2deg(sc.angles),
+        labels=(sc.labels + 1).astype(np.uint8),
+        instances=sc.instances.astype(np.uint16),
+    )
+    sets = dict(families.RENDER_SETS)
+    sets[("small", "test")] = (folder, "made by the test")
+    monkeypatch.setattr(families, "RENDER_SETS", sets)
+    return sc
+
+
+def test_a_render_frame_reads_its_truth_and_object_size(small_family):
+    (frame,) = families.frames("small", "test")
+    assert frame.k == 3 and frame.family == "small" and frame.half == "test"
+    assert frame.truth.min() == 1  # every pixel of the synthetic scene is a material
+    # the truth's object size: the median equivalent diameter of the leaves' instances
+    ids, areas = np.unique(small_family.instances[small_family.instances > 0], return_counts=True)
+    areas = areas[areas >= 9]
+    assert frame.object_size == pytest.approx(np.median(np.sqrt(4 * areas / np.pi)))
+
+
+def test_missing_renders_are_reported_not_fatal(tmp_path, monkeypatch, capsys):
+    sets = dict(families.RENDER_SETS)
+    sets[("textured", "dev")] = (tmp_path / "none", "render_scenes.py ...")
+    monkeypatch.setattr(families, "RENDER_SETS", sets)
+    assert list(families.frames("textured", "dev")) == []
+    assert "no renders in" in capsys.readouterr().out
+
+
+def test_one_command_scores_and_writes_the_block(small_family, tmp_path):
+    page = tmp_path / "quality.md"
+    page.write_text(
+        f"before\n{evaluate_families.BEGIN}\nold\n{evaluate_families.END}\nafter\n",
+        encoding="utf-8",
+    )
+    argv = ["--families", "small", "--halves", "test", "--rounds", "1", "--markdown", str(page)]
+    assert evaluate_families.main(argv) == 0
+    text = page.read_text(encoding="utf-8")
+    assert text.startswith("before\n") and text.endswith("after\n") and "old" not in text
+    assert "| small | test | 1 |" in text  # the summary line of the family's half
+    assert "- small (test): default " in text  # the floors and targets
+    assert "scene_5100" in text  # the per-frame table of a test half
+    rows = [line for line in text.splitlines() if line.startswith("| scene_5100")]
+    cells = rows[0].split(" | ")
+    values = [float(c.rstrip("‡†")) for c in cells[2:-1] if c not in ("–",)]
+    assert all(-1.0 <= v <= 1.0 for v in values)  # ARIs
