@@ -65,6 +65,7 @@ import numpy as np
 from scipy import ndimage
 
 from ..errors import PolarsegError
+from ..physics.pixel_mask import fill_from_nearest
 
 __all__ = [
     "MIN_INSTANCE_AREA",
@@ -282,14 +283,6 @@ def _block_mean(x: np.ndarray, weight: np.ndarray, f: int) -> tuple[np.ndarray, 
     return mean, ww / (f * f)
 
 
-def _fill_nearest(x: np.ndarray, valid: np.ndarray) -> np.ndarray:
-    """``x`` with every invalid pixel set to the value of the nearest valid pixel."""
-    if valid.all():
-        return x
-    idx = ndimage.distance_transform_edt(~valid, return_distances=False, return_indices=True)
-    return x[tuple(idx)]
-
-
 def _scale_grid(max_sigma: float) -> np.ndarray:
     n = int(math.floor(SCALES_PER_OCTAVE * math.log2(max(max_sigma, 1.0)))) + 1
     return 2.0 ** (np.arange(max(n, 1)) / SCALES_PER_OCTAVE)
@@ -466,13 +459,15 @@ def _work_channels(
         work_valid = reduced[0][1] >= 0.5
     if min(work_valid.shape) < MIN_SIDE or work_valid.sum() < MIN_SIDE * MIN_SIDE:
         return "too few usable pixels for a scale space"
+    # invalid pixels take the nearest usable pixel's value (one distance transform for
+    # the three channels); the noise and spread below read the usable pixels only
+    raw = fill_from_nearest(work_valid, *raw)
     channels, names = [], []
     for name, c in zip(CHANNELS, raw, strict=True):
         sd = noise_sd(c, work_valid)
         spread = float(np.ptp(c[work_valid]))
         if not (sd > 0.0 and spread > 0.0 and math.isfinite(sd)):
             continue  # a constant channel (e.g. ρ = 0 everywhere) carries no edge
-        c = _fill_nearest(c, work_valid)
         channels.append(remove_plane(c, work_valid) / sd)
         names.append(name)
     if not channels:
