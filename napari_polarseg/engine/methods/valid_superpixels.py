@@ -105,9 +105,8 @@ class ValidSuperpixels(SuperpixelClustering):
     #: Which two of the k + 1 segments are merged (:mod:`..unsupervised.merge`)
     merge_rule = staticmethod(closest_centroids)
     #: The superpixel area and the diffusion's reach follow the object size
-    #: (``SegmentParams.object_size``) when it is given
-    follows_object_size = True
-    #: ... and also when it is estimated (``object_size = 0``). Off: on the
+    #: (``SegmentParams.object_size``) when it is given, and also when it is estimated
+    #: (``object_size = 0``) if this is set. Off: on the
     #: development halves of the scene families the estimate gained on many small
     #: objects and lost on camouflage and texture, whose grain it takes for the
     #: objects (docs/quality.md, *Scene families*); the estimate is still made and
@@ -117,23 +116,18 @@ class ValidSuperpixels(SuperpixelClustering):
     reach_objects = REACH_OBJECTS
     #: Superpixels across one object size (the superpixel side is the object size / this)
     regions_per_side = REGIONS_PER_OBJECT_SIDE
-    #: The object size only makes the scales finer than the frame-share ones
-    #: (``self.params``' area and reach), never coarser
-    capped = True
     reads = ("fit", "n_segments", "object_size")
 
     def scaled_params(self, object_size: float, shape: tuple[int, int]) -> UnsupervisedParams:
         """``self.params`` at an object size of D = ``object_size`` px on an image of
         ``shape``: superpixels of side D / :attr:`regions_per_side` and a diffusion
         reaching :attr:`reach_objects` · D (:meth:`UnsupervisedParams.at_object_size`),
-        each no coarser than ``self.params``' own share of the frame (:attr:`capped`):
-        small objects get finer superpixels and a shorter reach, large ones the
-        frame-share scales chosen on the large objects of the shared renders."""
+        each no coarser than ``self.params``' own share of the frame: small objects get
+        finer superpixels and a shorter reach, large ones the frame-share scales chosen
+        on the large objects of the shared renders."""
         scaled = self.params.at_object_size(
             object_size, shape, self.reach_objects, self.regions_per_side
         )
-        if not self.capped:
-            return scaled
         return scaled.replace(
             region_area=min(scaled.region_area, self.params.area_of(shape)),
             diffusion_range=min(scaled.diffusion_range, self.params.diffusion_range),
@@ -167,13 +161,14 @@ class ValidSuperpixels(SuperpixelClustering):
         pol = scene.polarisation(params)
         shape = pol.intensity.shape
         record: dict[str, Any] = {"invalid_share": round(float(np.mean(pol.invalid)), 6)}
-        unsupervised = self.params
-        if self.follows_object_size:
-            size = scene.object_size(params)
-            record.update(object_size=round(size.size_px, 1), object_size_found=size.estimated)
-            if self.follows_estimate or not size.estimated:
-                unsupervised = self.scaled_params(size.size_px, shape)
-            record["object_size_applied"] = unsupervised is not self.params
+        size = scene.object_size(params)
+        applied = self.follows_estimate or not size.estimated
+        unsupervised = self.scaled_params(size.size_px, shape) if applied else self.params
+        record.update(
+            object_size=round(size.size_px, 1),
+            object_size_found=size.estimated,
+            object_size_applied=applied,
+        )
         models = self.region_models(scene, pol, run, unsupervised)
         run.begin("clustering")
         record["k_found"] = params.n_segments == 0
