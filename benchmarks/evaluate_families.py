@@ -274,7 +274,13 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--families", default=",".join(FAMILIES), help="comma-separated")
     ap.add_argument("--halves", default=",".join(HALVES), help="dev, test or both")
-    ap.add_argument("--test-base", type=int, default=0, help="seed base of the diffuse test half")
+    ap.add_argument(
+        "--test-base",
+        type=int,
+        default=0,
+        help="round of the test halves: the diffuse seeds' base and the Mitsuba renders' "
+        "round (families.render_set); a new base reads scenes nobody has read",
+    )
     ap.add_argument("--rounds", type=int, default=ROUNDS)
     ap.add_argument("--no-bound", action="store_true")
     ap.add_argument("--json", help="also write every row to this file")

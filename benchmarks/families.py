@@ -8,13 +8,17 @@ Families (:data:`FAMILIES`):
 
 - ``objects`` (a): few large objects, the shared Mitsuba generator
   (``render_scenes.py --layout objects``). Development: the 24 shared scenes' seeds
-  0–11. Test: the fresh seeds of :data:`RENDER_SETS` ``objects-test``; without them, the
+  0–11. Test: fresh seeds (:func:`render_set`); without the first draw's renders, the
   shared seeds 12–23, marked as read before.
 - ``small`` (b): 20–60 small flat objects of 2–3 materials (``--layout small``).
 - ``textured`` (c): materials alike but for their surface texture (``--layout textured``).
 - ``diffuse`` (d): the engine's own diffuse-polarisation generator at several object
-  sizes (:mod:`diffuse_family`); its test half is drawn from ``--test-base``, so each
-  round draws new seeds.
+  sizes (:mod:`diffuse_family`).
+
+Each round reads a test half nobody has read: ``--test-base B`` draws the diffuse test
+half from seeds 10 000 + 6 · B + j and the Mitsuba test halves from their first test
+seed + 100 · B (:func:`render_set`: 4000, 5100 and 6100 for B = 0; 4100, 5200 and 6200
+for B = 1).
 - ``real`` (e): the hand-labelled real polarisation-camera frames (all four are
   development frames: none is kept aside on this machine).
 
@@ -46,32 +50,54 @@ FAMILIES = {
 }
 HALVES = ("dev", "test")
 
-#: Render folders (git-ignored) of the Mitsuba families → the command that makes them.
-RENDER_SETS = {
-    ("objects", "test"): (
-        HERE / "renders_objects_fresh",
-        "render_scenes.py --layout objects --seeds 4000-4011 "
-        "--out benchmarks/renders_objects_fresh",
-    ),
-    ("small", "dev"): (
-        HERE / "renders_small_dev",
-        "render_scenes.py --layout small --seeds 5000-5011 --out benchmarks/renders_small_dev",
-    ),
-    ("small", "test"): (
-        HERE / "renders_small_test",
-        "render_scenes.py --layout small --seeds 5100-5111 --out benchmarks/renders_small_test",
-    ),
-    ("textured", "dev"): (
-        HERE / "renders_textured_dev",
-        "render_scenes.py --layout textured --seeds 6000-6011 "
-        "--out benchmarks/renders_textured_dev",
-    ),
-    ("textured", "test"): (
-        HERE / "renders_textured_test",
-        "render_scenes.py --layout textured --seeds 6100-6111 "
-        "--out benchmarks/renders_textured_test",
-    ),
+#: First seed of each Mitsuba family's halves; test round b (``test_base``) of a family
+#: is the 12 seeds from its test start + 100 · b, so each round reads fresh scenes.
+SEED_STARTS = {
+    "objects": {"test": 4000},
+    "small": {"dev": 5000, "test": 5100},
+    "textured": {"dev": 6000, "test": 6100},
 }
+#: Seeds per Mitsuba half, and the stride between test rounds.
+SEEDS_PER_HALF = 12
+ROUND_STRIDE = 100
+#: Folders of the first draw (round 0) under their historical names.
+FIRST_FOLDERS = {
+    ("objects", "test"): "renders_objects_fresh",
+    ("small", "dev"): "renders_small_dev",
+    ("small", "test"): "renders_small_test",
+    ("textured", "dev"): "renders_textured_dev",
+    ("textured", "test"): "renders_textured_test",
+}
+
+
+def seed_range(family: str, half: str, test_base: int = 0) -> str:
+    """The seeds of a Mitsuba family's half, test round ``test_base``, as ``"A-B"``."""
+    base = int(test_base) if half == "test" else 0
+    first = SEED_STARTS[family][half] + ROUND_STRIDE * base
+    return f"{first}-{first + SEEDS_PER_HALF - 1}"
+
+
+def make_command(family: str, half: str, name: str, test_base: int = 0) -> str:
+    """The ``render_scenes.py`` command that renders one half into ``benchmarks/name``."""
+    seeds = seed_range(family, half, test_base)
+    return f"render_scenes.py --layout {family} --seeds {seeds} --out benchmarks/{name}"
+
+
+#: Render folders (git-ignored) of the Mitsuba families' first draw (round 0) → the
+#: command that makes them.
+RENDER_SETS = {key: (HERE / name, make_command(*key, name)) for key, name in FIRST_FOLDERS.items()}
+
+
+def render_set(family: str, half: str, test_base: int = 0) -> tuple[Path, str]:
+    """(folder, the command that makes it) of a Mitsuba family's half: the first draw's
+    (:data:`RENDER_SETS`) or, for the test half of round ``test_base`` >= 1,
+    ``renders_<family>_test_b<base>``."""
+    if half != "test" or int(test_base) == 0:
+        return RENDER_SETS[(family, half)]
+    name = f"renders_{family}_test_b{int(test_base)}"
+    return HERE / name, make_command(family, half, name, test_base)
+
+
 #: The shared renders' halves (family ``objects``).
 SHARED_HALVES = {"dev": tuple(range(12)), "test": tuple(range(12, 24))}
 
@@ -103,15 +129,16 @@ def render_frame(path: Path, family: str, half: str, note: str = "") -> Frame:
     return Frame(path.stem, stack, angles, truth, k, float(size), family, half, note)
 
 
-def render_frames(family: str, half: str) -> Iterator[Frame]:
-    """The frames of a Mitsuba family's half (missing folders are reported, not fatal)."""
+def render_frames(family: str, half: str, test_base: int = 0) -> Iterator[Frame]:
+    """The frames of a Mitsuba family's half, test round ``test_base`` (missing folders
+    are reported, not fatal)."""
     if family == "objects" and half == "dev":
         for seed in SHARED_HALVES["dev"]:
             yield render_frame(RENDERED_DIR / f"scene_{seed}.npz", family, half)
         return
-    folder, command = RENDER_SETS[(family, half)]
+    folder, command = render_set(family, half, test_base)
     seeds = folder_seeds(folder) if folder.is_dir() else []
-    if not seeds and family == "objects":
+    if not seeds and family == "objects" and int(test_base) == 0:
         print(f"{folder} is empty: the shared test seeds 12–23 (read before) instead")
         for seed in SHARED_HALVES["test"]:
             path = RENDERED_DIR / f"scene_{seed}.npz"
@@ -144,4 +171,4 @@ def frames(family: str, half: str, test_base: int = 0) -> Iterator[Frame]:
         return diffuse_frames(half, test_base)
     if family == "real":
         return real_frames() if half == "dev" else iter(())
-    return render_frames(family, half)
+    return render_frames(family, half, test_base)

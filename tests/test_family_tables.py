@@ -49,6 +49,26 @@ def test_a_render_frame_reads_its_truth_and_object_size(small_family):
     assert frame.object_size == pytest.approx(np.median(np.sqrt(4 * areas / np.pi)))
 
 
+def test_each_test_round_reads_fresh_seeds():
+    """Round 0 is the first draw's folders; round b >= 1 a folder and seeds of its own,
+    disjoint from every other round and from the development seeds."""
+    assert families.render_set("small", "test", 0) == families.RENDER_SETS[("small", "test")]
+    folder, command = families.render_set("small", "test", 1)
+    assert folder.name == "renders_small_test_b1"
+    assert "--layout small --seeds 5200-5211 --out benchmarks/renders_small_test_b1" in command
+    assert families.render_set("small", "dev", 3) == families.RENDER_SETS[("small", "dev")]
+    seen: set[int] = set()
+    for base in range(4):
+        for family in ("objects", "small", "textured"):
+            first, last = map(int, families.seed_range(family, "test", base).split("-"))
+            seeds = set(range(first, last + 1))
+            assert len(seeds) == families.SEEDS_PER_HALF and not seeds & seen
+            seen |= seeds
+    for family in ("small", "textured"):
+        first, last = map(int, families.seed_range(family, "dev").split("-"))
+        assert not set(range(first, last + 1)) & seen
+
+
 def test_missing_renders_are_reported_not_fatal(tmp_path, monkeypatch, capsys):
     sets = dict(families.RENDER_SETS)
     sets[("textured", "dev")] = (tmp_path / "none", "render_scenes.py ...")
