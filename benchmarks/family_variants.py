@@ -30,6 +30,7 @@ from napari_polarseg.engine import Pipeline, Scene
 from napari_polarseg.engine.methods import register_method
 from napari_polarseg.engine.methods.surface_superpixels import SurfaceSuperpixels
 from napari_polarseg.engine.params import PRESETS
+from napari_polarseg.engine.unsupervised.merge import closest_centroids
 
 
 @dataclass(frozen=True)
@@ -40,12 +41,15 @@ class Variant:
     attrs: dict[str, Any] = field(default_factory=dict)
     params: dict[str, Any] = field(default_factory=dict)
     truth_size: bool = False
+    #: a registered method read as it is instead of the default's class (a baseline)
+    method: str = ""
 
 
 #: The variants tried; ``default`` is the default as it is (its superpixels at their
 #: share of the frame whatever the estimated object size).
 VARIANTS: dict[str, Variant] = {
     "default": Variant(),
+    "superpixels": Variant(method="superpixels"),
     "estimated size": Variant({"follows_estimate": True}),
     "truth size": Variant(truth_size=True),
     "reach 0.25": Variant({"follows_estimate": True, "reach_objects": 0.25}),
@@ -65,11 +69,24 @@ VARIANTS: dict[str, Variant] = {
     "no intensity": Variant(
         params={"features": ("dop", "dop_spread", "dop_vs_log_intensity_slope")}
     ),
+    # the diffusion and the merge of the superpixel methods before the surface one
+    "reach 0.07": Variant(params={"diffusion_range": 0.07}),
+    "reach 0.07 tau 0.75": Variant(params={"diffusion_range": 0.07, "diffusion_tau": 0.75}),
+    "closest centroids": Variant({"merge_rule": staticmethod(closest_centroids)}),
+    "reach 0.07 closest centroids": Variant(
+        {"merge_rule": staticmethod(closest_centroids)}, params={"diffusion_range": 0.07}
+    ),
+    "reach 0.12 closest centroids": Variant(
+        {"merge_rule": staticmethod(closest_centroids)}, params={"diffusion_range": 0.12}
+    ),
+    "maf": Variant(params={"projection": "maf"}),
 }
 
 
 def register(name: str, variant: Variant) -> str:
     """Register the variant as a method of its own; its method name."""
+    if variant.method:
+        return variant.method
     cls = type(
         "Variant",
         (SurfaceSuperpixels,),
