@@ -27,6 +27,7 @@ from .engine.errors import PolarsegError
 from .engine.limits import check_pipeline_memory
 from .engine.params import SegmentParams
 from .engine.physics.pixel_mask import PixelMask, validity_mask
+from .engine.registered import computes_block_maps
 from .engine.timing import timed
 from .io.read_options import ReadOptions
 from .job_options import OutputOptions
@@ -162,12 +163,14 @@ def segment_data(
 ) -> Run:
     """Register (optionally) and segment an angle stack in memory; seconds per step.
 
-    ``maps``: also the thesis maps and the reconstruction-error map (the thesis method
-    computes them in any case)."""
+    ``maps``: also the thesis maps and the reconstruction-error map (a method that
+    declares ``block_maps``, the thesis method, computes them in any case; the memory
+    check counts the blocks only then)."""
     status = status or StatusLine(False, PROG)
     seconds: dict[str, float] = {}
     stack, shifts = data.stack, None
-    check_pipeline_memory(stack.shape, params, max_bytes)
+    maps = maps or computes_block_maps(params.method) and labels_by is None
+    check_pipeline_memory(stack.shape, params, max_bytes, blocks=maps)
     if mask is None:
         mask = validity_mask(
             stack, saturation=data.metadata.get("saturation_level"), saturated=data.saturated
@@ -188,7 +191,6 @@ def segment_data(
         run = Run(data, params, stack, None, shifts, seconds, mask, scene.pipeline)  # type: ignore[arg-type]
         run.colour_stack = colour_stack
         run.scene = scene
-        maps = maps or params.method == "thesis" and labels_by is None
         if labels_by is None:
             total = len(scene.stages(params, maps=maps, reconstruction=maps))
             status.stage("polarisation", 1, total, "segmenting:")

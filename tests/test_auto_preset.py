@@ -115,5 +115,9 @@ def test_block_graph_commands_do_not_offer_auto():
     with pytest.raises(cli.UsageError, match="invalid choice: 'auto'"):
         parser.parse_args(["sweep", "x.tif", "--preset", "auto"])
     stack, _ = planted_stack(2)
-    with pytest.raises(PolarsegError, match="the method must be thesis"):
-        segment_timeseries([stack, stack], ANGLES, SegmentParams(method="superpixels"))
+    # the time series runs the superpixel methods on day 1's own labels, not a joint cut
+    superpixels = SegmentParams(method="superpixels")
+    with pytest.raises(PolarsegError, match="joint time series cuts one block graph"):
+        segment_timeseries([stack, stack], ANGLES, superpixels, method="joint")
+    with pytest.raises(PolarsegError, match="give day_labels"):
+        segment_timeseries([stack, stack], ANGLES, superpixels)

@@ -448,3 +448,54 @@ def change_map(before: np.ndarray, after: np.ndarray) -> np.ndarray:
     if a.shape != b.shape:
         raise PolarsegError(f"labels of {a.shape} and {b.shape} cannot be compared")
     return a != b
+
+
+def _non_block_methods() -> list[str]:
+    """The registered methods chosen by name that do not cut the block graph."""
+    from napari_polarseg.engine.methods.registry import unsupervised_names
+    from napari_polarseg.engine.registered import computes_block_maps
+
+    return [m for m in unsupervised_names() if not computes_block_maps(m)]
+
+
+@pytest.mark.parametrize("name", _non_block_methods())
+def test_every_method_runs_the_time_series_from_its_own_day_1_labels(name) -> None:
+    """A method that does not cut blocks labels day 1 itself (the plugin's and the CLI's
+    ``day_labels``); "tracked" carries exactly those labels and moves only changed
+    blocks, "reference" gives every block a segment of them; no affinity is cut."""
+    from napari_polarseg.engine import Scene
+    from napari_polarseg.engine.methods.scene import pipeline_labels
+
+    angles, stacks, _ = render_fruit_days((64, 72), seed=1, grow_px=(0.0, 8.0))
+    params = PARAMS.replace(method=name, window=8)
+    own = Scene(stacks[0], angles).segment(params).labels
+    seen: list[str] = []
+    res = segment_timeseries(
+        stacks, angles, params, day_labels=pipeline_labels, progress=lambda s, i, n: seen.append(s)
+    )
+    np.testing.assert_array_equal(res.labels[0], own)
+    assert res.n_base_segments == int(own.max()) + 1 and res.ncut_values == []
+    assert "day 1 labels" in seen and "affinity" not in seen and "cut" not in seen
+    moved = res.labels[1] != res.labels[0]
+    assert not np.any(moved & (res.change_score[0] <= res.change_statistics[0].threshold))
+    ref = segment_timeseries(stacks, angles, params, method="reference", day_labels=pipeline_labels)
+    assert ref.labels.shape == (2, 64, 72) and ref.block_labels.shape == (2, 8, 9)
+    assert set(np.unique(ref.labels)) <= set(range(res.n_base_segments))
+
+
+def test_cli_timeseries_runs_the_method_of_a_params_file(tmp_path, capsys) -> None:
+    """polarseg timeseries --params with the default method (from a segment run's
+    params.json): day 1 is that method's labels."""
+    from napari_polarseg.engine.params import AUTO
+
+    inputs, _ = _fruit_day_files(tmp_path)
+    params_file = tmp_path / "params.json"
+    params_file.write_text(AUTO.replace(n_segments=2, window=8).to_json())
+    out = tmp_path / "series"
+    code = cli.main(["timeseries", *inputs, "--out", str(out), "--params", str(params_file)])
+    assert code == 0, capsys.readouterr().err
+    seg = tmp_path / "seg"
+    argv = ["segment", inputs[0], "--out", str(seg), "--params", str(params_file)]
+    assert cli.main(argv) == 0
+    day1 = tifffile.imread(out / "labels_01.tif")
+    np.testing.assert_array_equal(day1, tifffile.imread(seg / "labels.tif"))

@@ -105,7 +105,8 @@ def _read_days(args: argparse.Namespace, params: SegmentParams) -> _Days:
     days = _Days([], [], [], 0.0)
     for path in paths:
         data = read_input(path, args)
-        check_pipeline_memory(data.stack.shape, params, max_bytes(args))
+        # every day's block coefficients, whatever the method
+        check_pipeline_memory(data.stack.shape, params, max_bytes(args), blocks=True)
         stack = data.stack
         mask = validity_mask(
             stack, saturation=data.metadata.get("saturation_level"), saturated=data.saturated
@@ -197,6 +198,7 @@ def _report(
 def run(args: argparse.Namespace) -> int:
     """Run ``polarseg timeseries``; return the exit code (0)."""
     from ..engine.analysis.timeseries import segment_timeseries
+    from ..engine.methods.scene import pipeline_labels
     from ..outputs.timeseries_folder import write_timeseries_folder
 
     params = params_from_args(args)
@@ -211,6 +213,7 @@ def run(args: argparse.Namespace) -> int:
         change_from=args.change_from,
         masks=days.masks,
         progress=progress_report(args.verbose),
+        day_labels=pipeline_labels,  # a method that does not cut blocks labels day 1
     )
     if args.classifier:
         result = _classify_days(result, days, params, args.classifier)

@@ -22,8 +22,9 @@ from __future__ import annotations
 import importlib
 from typing import Any
 
-# the methods register themselves on import: the choices of SegmentParams.method (and
-# so of --method and the plugin's menu) are there as soon as the engine is
+# the registry (light: no method module) hands over its loader, so the first read of
+# the choices of SegmentParams.method (--method, the plugin's menu) or the first lookup
+# of a method registers the built-in ones
 from . import methods as methods
 from .errors import Cancelled, PolarsegError
 from .params import PRESETS, SegmentParams
@@ -82,12 +83,12 @@ PUBLIC: dict[str, str] = {
     "estimate_pipeline_bytes": ".limits",
     # methods
     "MethodOutput": ".methods",
-    "Scene": ".methods",
+    "Scene": ".methods.scene",
     "Segmenter": ".methods",
     "get_method": ".methods",
     "method_names": ".methods",
     "register_method": ".methods",
-    "segment": ".methods",
+    "segment": ".methods.scene",
     # params
     "PRESETS": ".params",
     "SegmentParams": ".params",

@@ -19,6 +19,7 @@ import re
 from .chunks import CHUNK_BYTES
 from .errors import PolarsegError
 from .params import SegmentParams
+from .registered import computes_block_maps
 
 #: Default largest memory (bytes) a read or a run may need.
 DEFAULT_MAX_BYTES = 8 * 2**30
@@ -103,48 +104,61 @@ def _graph_kind(blocks: int, params: SegmentParams) -> str:
     return affinity_graph_kind(blocks, params)
 
 
-def estimate_pipeline_bytes(shape: tuple[int, int, int], params: SegmentParams) -> int:
-    """Rough peak memory (bytes) of one pipeline run on a stack of ``shape`` (N, H, W).
+def estimate_pipeline_bytes(
+    shape: tuple[int, int, int], params: SegmentParams, blocks: bool | None = None
+) -> int:
+    """Rough peak memory (bytes) of one run on a stack of ``shape`` (N, H, W).
 
-    Counts the float64 copy of the stack and the temporaries of the sinusoid fit (about
-    6 N × H × W values), about 24 float64 maps of H × W (Î, ρ, φ, residual, θ, azimuth,
-    masks, labels, reconstruction, error and their temporaries), the block coefficients
-    and features ((L + 1)² per block, a few copies), one chunk of harmonic evaluations,
-    and the block graph: for a dense affinity its distance matrix and eigen-solver
+    Every method: the float64 copy of the stack and the temporaries of the sinusoid fit
+    (about 6 N × H × W values) and about 8 float64 maps of H × W (Î, ρ, φ, residual, θ,
+    azimuth, masks, labels); a method's own working memory is not counted (measured: the
+    default method peaks at about 220 bytes a pixel on a 4 × 1024 × 1224 stack, under
+    the 256 counted here).
+    With ``blocks`` (default: when the method declares ``block_maps``, the thesis
+    method; a run that asks for the thesis maps too) about 24 maps instead (with the
+    reconstruction, its error and their temporaries), the block coefficients and
+    features ((L + 1)² per block, a few copies), one chunk of harmonic evaluations, and
+    the block graph: for a dense affinity its distance matrix and eigen-solver
     workspace (about 5 n_blocks² values); for a sparse one (k nearest neighbours or the
     spatial neighbourhood) a few copies of its non-zeros and the Lanczos vectors.
     """
     n, h, w = (int(v) for v in shape)
     pixels = h * w
+    if not (computes_block_maps(params.method) if blocks is None else blocks):
+        return int(8 * (6 * n * pixels + 8 * pixels))
     win = max(int(params.window), 1)
-    blocks = (h // win) * (w // win)
+    blocks_n = (h // win) * (w // win)
     k = (int(params.degree) + 1) ** 2
-    kind = _graph_kind(blocks, params)
+    kind = _graph_kind(blocks_n, params)
     if kind == "dense":
-        graph = 5 * blocks * blocks
+        graph = 5 * blocks_n * blocks_n
     else:
         radius = float(params.spatial_radius)
         neighbours = 30 if kind == "knn" else int(3.2 * (radius + 1) ** 2)
-        graph = 6 * blocks * neighbours + 40 * blocks
-    total = 8 * (6 * n * pixels + 24 * pixels + 4 * blocks * k + graph)
+        graph = 6 * blocks_n * neighbours + 40 * blocks_n
+    total = 8 * (6 * n * pixels + 24 * pixels + 4 * blocks_n * k + graph)
     return int(total + 2 * CHUNK_BYTES)
 
 
 def check_pipeline_memory(
-    shape: tuple[int, int, int], params: SegmentParams, limit: int | float | None = None
+    shape: tuple[int, int, int],
+    params: SegmentParams,
+    limit: int | float | None = None,
+    blocks: bool | None = None,
 ) -> int:
     """Refuse a run whose :func:`estimate_pipeline_bytes` exceeds the limit.
 
-    Returns the estimate (bytes). Raises :class:`PolarsegError` naming the stack size, the
-    window and the memory it would need.
+    ``blocks``: whether the run computes the block maps (default: when the method
+    declares ``block_maps``). Returns the estimate (bytes). Raises
+    :class:`PolarsegError` naming the stack size (and, for a run on blocks, the window,
+    the number of blocks and the degree) and the memory it would need.
     """
-    needed = estimate_pipeline_bytes(shape, params)
+    blocks = computes_block_maps(params.method) if blocks is None else blocks
+    needed = estimate_pipeline_bytes(shape, params, blocks)
     n, h, w = shape
-    blocks = (h // params.window) * (w // params.window)
-    check_bytes(
-        needed,
-        f"segmenting {n} frames of {h} x {w} pixels with window {params.window} "
-        f"({blocks} blocks) and degree {params.degree}",
-        limit,
-    )
+    what = f"segmenting {n} frames of {h} x {w} pixels"
+    if blocks:
+        n_blocks = (h // params.window) * (w // params.window)
+        what += f" with window {params.window} ({n_blocks} blocks) and degree {params.degree}"
+    check_bytes(needed, what, limit)
     return needed

@@ -8,12 +8,14 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field, fields
 from typing import Any
 
 import numpy as np
 
 from .errors import PolarsegError
+from .registered import FINDS_K_METHODS, METHOD_CHOICES
 
 MODELS = ("diffuse", "specular")
 SPECULAR_BRANCHES = ("below-brewster", "above-brewster")
@@ -25,13 +27,10 @@ FIT_METHODS = ("lsq", "robust")
 AFFINITY_GRAPHS = ("auto", "dense", "sparse")
 MAX_DEGREE = 60
 
-#: The registered segmentation methods, name → menu text, in registration order: the
-#: choices of ``method``. Filled by :func:`napari_polarseg.engine.methods.register_method`
-#: (this module cannot import the methods, which read these parameters).
-METHOD_CHOICES: dict[str, str] = {}
-#: The registered methods that find the number of segments themselves when
-#: ``n_segments`` is 0 (their ``finds_k`` is True); filled as :data:`METHOD_CHOICES`.
-FINDS_K_METHODS: set[str] = set()
+# METHOD_CHOICES (the choices of ``method``) and FINDS_K_METHODS are filled by
+# napari_polarseg.engine.methods.register_method (this module cannot import the methods,
+# which read these parameters); the built-in methods register on the first read of
+# either (.registered).
 
 
 @dataclass(frozen=True)
@@ -63,7 +62,7 @@ class ParamSpec:
         Text shown in the menu for some of the choices.
     optional : bool
         The value may be None (the CLI takes ``none``).
-    registry : dict or None
+    registry : Mapping or None
         A live mapping name → menu text whose names are the choices (the registered
         segmentation methods); None: :attr:`choices`.
     words : dict or None
@@ -81,7 +80,7 @@ class ParamSpec:
     choices: tuple[str, ...] | None = None
     choice_names: dict[str, str] | None = None
     optional: bool = False
-    registry: dict[str, str] | None = None
+    registry: Mapping[str, str] | None = None
     words: dict[str, int] | None = None
 
     def options(self) -> tuple[str, ...] | None:
@@ -351,12 +350,14 @@ class SegmentParams:
             )
         if not _is_number(self.spatial_sigma) or self.spatial_sigma <= 0:
             raise PolarsegError(f"spatial_sigma must be a number > 0, got {self.spatial_sigma!r}")
-        finds_k = self.method in FINDS_K_METHODS
-        if not _is_int(self.n_segments) or self.n_segments < (0 if finds_k else 1):
-            raise PolarsegError(
-                f"number of segments must be a positive integer, got {self.n_segments!r}"
-                + ("" if finds_k else f" (0 = find it: not offered by {self.method!r})")
-            )
+        if not _is_int(self.n_segments) or self.n_segments < 1:
+            # only then are the registered methods read (0: a method that finds k)
+            finds_k = self.method in FINDS_K_METHODS
+            if not _is_int(self.n_segments) or self.n_segments < (0 if finds_k else 1):
+                raise PolarsegError(
+                    f"number of segments must be a positive integer, got {self.n_segments!r}"
+                    + ("" if finds_k else f" (0 = find it: not offered by {self.method!r})")
+                )
         if not _is_number(self.object_size) or self.object_size < 0:
             raise PolarsegError(
                 f"object size must be a number of pixels >= 0 (0 = auto), got {self.object_size!r}"

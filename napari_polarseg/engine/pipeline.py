@@ -33,6 +33,7 @@ from .matrix_pool import DenseDistances, MatrixPool
 from .params import SegmentParams
 from .physics import pixel_mask, polarimage
 from .physics.pixel_mask import PixelMask
+from .registered import computes_block_maps
 from .result import SegmentationResult
 from .stages import (
     STAGE_FUNCTIONS,
@@ -415,14 +416,16 @@ class Pipeline:
             cut_limits=dict(cut_limits or {}),
             superpixels=dict(superpixels or {}),
             method=run.params.method,
+            on_blocks=maps,
         )
 
 
 def thesis_only(params: SegmentParams) -> None:
-    """Raise :class:`PolarsegError` unless ``params`` name the thesis method: a
-    :class:`Pipeline` runs the thesis block graph; every method (the superpixel default
-    too) runs through :class:`napari_polarseg.engine.Scene`."""
-    if params.method != "thesis":
+    """Raise :class:`PolarsegError` unless ``params`` name a method that cuts the block
+    graph (declares ``block_maps``: the thesis method): a :class:`Pipeline` runs the
+    thesis block graph; every method (the superpixel default too) runs through
+    :class:`napari_polarseg.engine.Scene`."""
+    if not computes_block_maps(params.method):
         raise PolarsegError(
             f"a Pipeline cuts the thesis block graph; method {params.method!r} runs "
             "through napari_polarseg.engine.Scene(stack, angles).segment(params)"

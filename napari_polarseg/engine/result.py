@@ -65,6 +65,9 @@ class SegmentationResult:
     the run did not compute them (other methods, unless asked for). ``materials``: the
     scribble value and name of every label when a scribble classifier made them
     (:class:`~napari_polarseg.engine.materials.Materials`; None for the other methods).
+    ``on_blocks``: the run worked on the w × w block grid (the method cuts blocks or the
+    thesis maps were computed); only then does :meth:`summary` name the grid
+    (``n_blocks``, ``block_grid``).
     """
 
     params: SegmentParams
@@ -93,6 +96,7 @@ class SegmentationResult:
     method: str = "thesis"
     method_record: dict[str, Any] = field(default_factory=dict)
     materials: Materials | None = None
+    on_blocks: bool = True
 
     @property
     def n_segments(self) -> int:
@@ -124,10 +128,15 @@ class SegmentationResult:
         """JSON-ready figures of the run (stage seconds, segments, variance, error).
 
         ``degenerate`` (with ``largest_segment_share`` and ``degenerate_reason``): see
-        :meth:`degenerate`; ``cut_limits``, ``superpixels``: see the class docstring.
+        :meth:`degenerate`; ``cut_limits``, ``superpixels``: see the class docstring;
+        ``n_blocks`` and ``block_grid`` only for a run on blocks (:attr:`on_blocks`).
         """
         check = self.degenerate()
         evr = self.explained_variance_ratio
+        blocks = {
+            "n_blocks": int(self.block_labels.size),
+            "block_grid": list(self.block_labels.shape),
+        }
         return {
             "method": self.method,
             # which maps of the thesis method this run computed (others: when asked)
@@ -142,8 +151,7 @@ class SegmentationResult:
             "degenerate": check.degenerate,
             "largest_segment_share": round(check.largest_share, 6),
             "degenerate_reason": check.reason,
-            "n_blocks": int(self.block_labels.size),
-            "block_grid": list(self.block_labels.shape),
+            **(blocks if self.on_blocks else {}),  # a method that never saw blocks: none
             "n_components": None if self.features is None else int(self.features.shape[1]),
             "explained_variance": None if evr is None else float(np.sum(evr)),
             "explained_variance_ratio": None if evr is None else [float(v) for v in evr],

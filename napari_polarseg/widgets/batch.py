@@ -41,6 +41,7 @@ from ..engine import PolarsegError, SegmentParams
 from ..engine.analysis.change_test import DEFAULT_FALSE_ALARM
 from ..engine.analysis.timeseries import METHODS, segment_timeseries
 from ..engine.analysis.timeseries_result import TimeSeriesResult
+from ..engine.methods.scene import pipeline_labels
 from ..io import parse_angles
 from ..io.read_options import ReadOptions
 from ._base import ScrollingContainer, is_angle_stack
@@ -470,6 +471,7 @@ def timeseries_job(
         method=method,
         false_alarm=false_alarm,
         progress=lambda *s: steps.append(s),
+        day_labels=pipeline_labels,  # a method that does not cut blocks labels day 1
     )
     yield from steps
     return result

@@ -19,6 +19,7 @@ from ..engine.params import (
     PRESETS,
     ParamSpec,
 )
+from ..engine.registered import computes_block_maps
 from ..io import read_params_file
 from ._base import ask_file
 from .param_controls import control_label, controlled_names, param_controls
@@ -127,15 +128,16 @@ class ParameterControls:
         return wants_maps(params, self._maps_choice)
 
     def _on_method_changed(self, method: Any) -> None:
-        """The thesis method always computes the maps: the option shows them ticked and
-        cannot be changed; another method gets the user's choice back. The segments box
+        """A method that declares ``block_maps`` (the thesis method) always computes the
+        maps: the option shows them ticked and cannot be changed; another method gets
+        the user's choice back. The segments box
         says "0 = auto" only under a method that finds the number itself."""
         if "n_segments" in self.controls:
             finds_k = str(method) in FINDS_K_METHODS
             spec = self.param_specs["n_segments"]
             self.controls["n_segments"].label = control_label("n_segments", spec, finds_k)
         box = self.thesis_maps
-        if str(method) == "thesis":
+        if computes_block_maps(str(method)):
             if box.enabled:
                 self._maps_choice = bool(box.value)
             box.enabled, box.value = False, True  # disabled first: not the user's choice

@@ -22,14 +22,17 @@ them, so every day is described in the same basis and Mahalanobis metric. Then:
    noise such as interpolated demosaicing makes block means vary more than their pixel
    scatter says; λ is fitted so that the blocks below the threshold follow the
    truncated χ² of no change, which changed blocks cannot inflate).
-2. **Segments**, by ``method``:
+2. **Segments**, by ``method``; day 1 is cut alone as below under a method that cuts
+   the block graph (declares ``block_maps``: the thesis method), any other method
+   labels day 1's pixels itself (``day_labels``) and ``"reference"`` takes each block's
+   most frequent label of them:
 
    - ``"tracked"`` (default): day 1 is cut alone (the usual affinity and cut on its
      blocks, in the shared basis); each later day starts as a copy of the day before
      and only the change blocks flagged by the test move, to the segment of the
-     material they changed into (:func:`track_labels`): a changed segment is a kind of
-     change, described by the signs of the components significant over its blocks
-     (the fruit's bruise: Î down, ρ down); a flagged block joins the changed segment
+     material they changed into (:func:`.tracking.track_labels`): a changed segment is
+     a kind of change, described by the signs of the components significant over its
+     blocks (the fruit's bruise: Î down, ρ down); a flagged block joins the changed segment
      whose signs it does not contradict, stays in it when its change goes on the same
      way, goes back to its former segment when it undoes the change, or starts a new
      changed segment. Unchanged blocks keep their segment by construction.
@@ -38,7 +41,8 @@ them, so every day is described in the same basis and Mahalanobis metric. Then:
    - ``"joint"``: one affinity over the blocks of all days and one cut of that graph
      (a material that day 1 does not show can get a segment of its own; the dense
      affinity over T × the blocks of one day is limited to
-     :data:`~napari_polarseg.engine.stages.MAX_DENSE_BLOCKS`);
+     :data:`~napari_polarseg.engine.stages.MAX_DENSE_BLOCKS`; a method that cuts blocks
+     only);
 
    either way segment k means the same material on every day.
 3. **Maps** per pair of consecutive days: the change map (pixels, block-shaped, whose
@@ -92,7 +96,6 @@ Angles are radians here.
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -103,6 +106,7 @@ from ..features import pca as feat
 from ..graph import affinity, ncut, spectral
 from ..params import SegmentParams
 from ..pipeline import Pipeline
+from ..registered import computes_block_maps
 from ..stages import MAX_DENSE_BLOCKS, POLSTATS_KINDS
 from ..timing import timed
 from .change_test import (
@@ -113,10 +117,17 @@ from .change_test import (
     default_change_window,
 )
 from .timeseries_result import TimeSeriesResult
-from .tracking import block_majority, track_labels
+from .timeseries_segments import DaySegments, day_segments
+from .tracking import block_majority
 
 #: Ways to segment the days (see the module docstring); the first is the default.
 METHODS = ("tracked", "reference", "joint")
+
+#: Day 1's pixel labels (H, W) under a method that does not cut the block graph, from
+#: day 1's pipeline and the parameters:
+#: :func:`napari_polarseg.engine.methods.scene.pipeline_labels` (the analysis cannot
+#: import the methods, which import it).
+DayLabels = Callable[[Pipeline, SegmentParams], np.ndarray]
 
 
 def _as_list(angles: Sequence[np.ndarray] | np.ndarray, n: int) -> list[np.ndarray]:
@@ -141,6 +152,7 @@ def segment_timeseries(
     masks: Sequence[Any] | None = None,
     progress: Callable[[str, int, int], None] | None = None,
     cancel: Callable[[], bool] | None = None,
+    day_labels: DayLabels | None = None,
 ) -> TimeSeriesResult:
     """Segment several days of the same view consistently and map what changed.
 
@@ -172,6 +184,8 @@ def segment_timeseries(
         Called after each step.
     cancel : callable() -> bool, optional
         Checked between steps; returning True raises :class:`Cancelled`.
+    day_labels : callable(pipeline, params) -> labels, optional
+        Day 1's labels under a method that does not cut blocks (:data:`DayLabels`).
 
     Returns
     -------
@@ -181,8 +195,8 @@ def segment_timeseries(
     ------
     PolarsegError
         Fewer than 2 days, days of different sizes, a bad method or change option, too
-        many blocks for the dense joint affinity, or any error of the per-day pipeline
-        (prefixed with the day).
+        many blocks for the joint affinity, a joint cut or no ``day_labels`` for a method
+        that does not cut blocks, or an error of a day's pipeline (prefixed with the day).
 
     Examples
     --------
@@ -190,9 +204,9 @@ def segment_timeseries(
     >>> res.labels.shape, res.changes.shape, res.change_score.shape  # doctest: +SKIP
     ((2, 120, 130), (1, 120, 130), (1, 120, 130))
     """
-    opt = _check_options(params, method, change_window, false_alarm, change_from)
+    opt = _check_options(params, method, change_window, false_alarm, change_from, day_labels)
     stacks, angle_list, mask_list = _inputs(stacks, angles, masks)
-    steps = _Steps(len(stacks) + 5, progress, cancel)
+    steps = _Steps(len(stacks) + 4 + int(computes_block_maps(opt.params.method)), progress, cancel)
     # 1. per-day pipelines up to the block coefficients
     pipelines, vectors, shape, grid = _day_pipelines(stacks, angle_list, mask_list, opt, steps)
     # 2. one PCA over the blocks of all days
@@ -200,11 +214,12 @@ def segment_timeseries(
     # 3. the change test between consecutive days, from the polarisation images
     pols = [pipe.get("polarisation") for pipe in pipelines]
     change_stats = steps.run("change test", _change_tests, pols, opt)
-    # 4. segments: the affinity, the cut and every day's labels
-    tree, segs = _cut_days(pca.features, grid, shape, opt, change_stats, steps)
+    # 4. segments: the affinity and the cut (or day 1's labels) and every day's labels
+    days = (pipelines[0], pca.features, grid, shape, opt, change_stats, steps, day_labels)
+    ncut_values, segs = _segment_days(*days)
     # 5. change maps
     maps = steps.run("labels", _change_maps, segs, change_stats, shape, opt)
-    return _result(opt, segs, maps, change_stats, pca, tree, pipelines, steps.timings)
+    return _result(opt, segs, maps, change_stats, pca, ncut_values, pipelines, steps.timings)
 
 
 class _Options(NamedTuple):
@@ -217,6 +232,25 @@ class _Options(NamedTuple):
     change_from: str
 
 
+def _segment_days(
+    pipe: Pipeline,
+    scores: np.ndarray,
+    grid: tuple[int, ...],
+    shape: tuple[int, ...],
+    opt: _Options,
+    change_stats: list[ChangeStatistics],
+    steps: _Steps,
+    day_labels: DayLabels | None,
+) -> tuple[list[float], DaySegments]:
+    """Every day's segments: from the block cut under a method that cuts blocks (steps
+    "affinity" and "cut"), else from the method's labels of day 1 (step "day 1
+    labels"); (Ncut values, segments)."""
+    if computes_block_maps(opt.params.method):
+        return _cut_days(scores, grid, shape, opt, change_stats, steps)
+    day1 = (pipe, scores, grid, shape, opt, change_stats, day_labels)
+    return steps.run("day 1 labels", _labelled_days, *day1)
+
+
 def _cut_days(
     scores: np.ndarray,
     grid: tuple[int, ...],
@@ -224,17 +258,58 @@ def _cut_days(
     opt: _Options,
     change_stats: list[ChangeStatistics],
     steps: _Steps,
-) -> tuple[Any, _Segments]:
-    """Steps "affinity" and "cut": the block graph, its cut and the labels of every day."""
+) -> tuple[list[float], DaySegments]:
+    """Steps "affinity" and "cut": the block graph, its cut and the labels of every day;
+    (Ncut values, segments)."""
     n_days = scores.shape[0] // int(np.prod(grid))
     W, min_size = steps.run("affinity", _block_graph, scores, grid, n_days, opt.params, opt.method)
     with timed(steps.timings, "cut"):
         tree = _cut_tree(W, min_size, opt.params)
-        segs = _segments(
-            opt.method, tree, scores, grid, shape, opt.params, change_stats, opt.change_window
+        graph_labels = tree.labels(opt.params.n_segments).astype(np.int32)
+        segs = day_segments(
+            opt.method,
+            graph_labels,
+            None,
+            scores,
+            grid,
+            shape,
+            opt.params,
+            change_stats,
+            opt.change_window,
         )
     steps.done("cut")
-    return tree, segs
+    return list(tree.ncut_values), segs
+
+
+def _labelled_days(
+    pipe: Pipeline,
+    scores: np.ndarray,
+    grid: tuple[int, ...],
+    shape: tuple[int, ...],
+    opt: _Options,
+    change_stats: list[ChangeStatistics],
+    day_labels: DayLabels | None,
+) -> tuple[list[float], DaySegments]:
+    """Step "day 1 labels" of a method that does not cut blocks: its labels of day 1
+    carried ("tracked") or, as each block's most frequent one, the segments whose means
+    every day's blocks take ("reference"); (no Ncut values, segments)."""
+    assert day_labels is not None  # refused without them (_check_options)
+    base = np.asarray(day_labels(pipe, opt.params)).astype(np.int32)
+    majority = block_majority(base, opt.params.window).ravel()
+    graph_labels = np.unique(majority, return_inverse=True)[1].astype(np.int32)  # 0..k-1
+    tracked = base if opt.method == "tracked" else None
+    segs = day_segments(
+        opt.method,
+        graph_labels,
+        tracked,
+        scores,
+        grid,
+        shape,
+        opt.params,
+        change_stats,
+        opt.change_window,
+    )
+    return [], segs
 
 
 def _inputs(
@@ -266,11 +341,11 @@ def _change_tests(pols: list[Any], opt: _Options) -> list[ChangeStatistics]:
 
 def _result(
     opt: _Options,
-    segs: _Segments,
+    segs: DaySegments,
     maps: dict[str, np.ndarray],
     change_stats: list[ChangeStatistics],
     pca: feat.PCAResult,
-    tree: Any,
+    ncut_values: list[float],
     pipelines: list[Pipeline],
     timings: dict[str, float],
 ) -> TimeSeriesResult:
@@ -293,7 +368,7 @@ def _result(
         explained_variance_ratio=pca.explained_variance_ratio,
         components=pca.components,
         segment_means=segs.segment_means,
-        ncut_values=list(tree.ncut_values),
+        ncut_values=ncut_values,
         n_base_segments=segs.k,
         changed_segments=segs.changed_segments,
         label_window=segs.label_window,
@@ -319,18 +394,25 @@ def _check_options(
     change_window: int | None,
     false_alarm: float,
     change_from: str,
+    day_labels: DayLabels | None,
 ) -> _Options:
     """Refuse bad options of :func:`segment_timeseries` (default parameters: the thesis's)."""
     params = SegmentParams() if params is None else params
     if not isinstance(params, SegmentParams):
         raise PolarsegError("params must be a SegmentParams")
-    if params.method != "thesis":
-        raise PolarsegError(
-            "the time series cuts one block graph of all days; the method must be "
-            f"thesis, not {params.method}"
-        )
     if method not in METHODS:
         raise PolarsegError(f"method must be one of {', '.join(METHODS)}; got {method!r}")
+    if not computes_block_maps(params.method):
+        if method == "joint":
+            raise PolarsegError(
+                "the joint time series cuts one block graph of all days: a method that "
+                f"cuts blocks (thesis), not {params.method}; use tracked or reference"
+            )
+        if day_labels is None:
+            raise PolarsegError(
+                f"method {params.method} labels day 1 itself: give day_labels "
+                "(napari_polarseg.engine.methods.scene.pipeline_labels)"
+            )
     if change_from not in CHANGE_SOURCES:
         raise PolarsegError(
             f"change_from must be one of {', '.join(CHANGE_SOURCES)}; got {change_from!r}"
@@ -450,70 +532,8 @@ def _cut_tree(W: np.ndarray, min_size: int, params: SegmentParams) -> Any:
     return ncut.CutTree(W, min_size=min_size, threshold=params.ncut_threshold)
 
 
-@dataclass
-class _Segments:
-    """Labels of every day from the cut (:func:`_segments`)."""
-
-    labels: np.ndarray
-    block_labels: np.ndarray
-    segment_means: np.ndarray
-    changed_segments: list[dict[str, Any]]
-    label_window: int
-    k: int
-    distance: np.ndarray
-
-
-def _segments(
-    method: str,
-    tree: Any,
-    scores: np.ndarray,
-    grid: tuple[int, ...],
-    shape: tuple[int, ...],
-    params: SegmentParams,
-    change_stats: list[ChangeStatistics],
-    change_window: int,
-) -> _Segments:
-    """Pixel and block labels of every day by ``method`` (module docstring), the segment
-    means and the feature distance of every block between consecutive days."""
-    graph_labels = tree.labels(params.n_segments).astype(np.int32)
-    k = int(graph_labels.max()) + 1
-    n_blocks = int(np.prod(grid))
-    n_days = scores.shape[0] // n_blocks
-    # Mahalanobis distance under the covariance of all days' blocks = Euclidean on z
-    z = feat.whiten(scores)
-    changed_segments: list[dict[str, Any]] = []
-    if method == "tracked":
-        base = harmonics.upsample_block_labels(graph_labels.reshape(grid), shape, params.window)
-        labels, changed_segments = track_labels(base, change_stats)
-        segment_means = _pixel_segment_means(labels, scores, grid, params.window)
-        label_window = change_window
-        block_labels = np.stack([block_majority(day, label_window) for day in labels])
-    else:
-        if method == "joint":
-            flat = graph_labels
-            segment_means = _segment_means(scores, flat, k)
-        else:
-            # every block of every day, day 1 included, takes its nearest segment mean, so
-            # that identical blocks on two days always get the same segment
-            means_z = _segment_means(z[:n_blocks], graph_labels, k)
-            d2 = np.einsum("ij,ij->i", z, z)[:, None] - 2.0 * z @ means_z.T
-            d2 += np.einsum("ij,ij->i", means_z, means_z)[None, :]
-            flat = np.argmin(d2, axis=1).astype(np.int32)
-            segment_means = _segment_means(scores[:n_blocks], graph_labels, k)
-        label_window = params.window
-        block_labels = flat.reshape(n_days, *grid).astype(np.int32)
-        labels = np.stack(
-            [harmonics.upsample_block_labels(b, shape, params.window) for b in block_labels]
-        ).astype(np.int32)
-    zd = z.reshape(n_days, n_blocks, -1)
-    distance = np.sqrt(((zd[1:] - zd[:-1]) ** 2).sum(-1)).reshape(n_days - 1, *grid)
-    return _Segments(
-        labels, block_labels, segment_means, changed_segments, label_window, k, distance
-    )
-
-
 def _change_maps(
-    segs: _Segments, change_stats: list[ChangeStatistics], shape: tuple[int, ...], opt: _Options
+    segs: DaySegments, change_stats: list[ChangeStatistics], shape: tuple[int, ...], opt: _Options
 ) -> dict[str, np.ndarray]:
     """What changed between consecutive days: labels, blocks, scores and distances as maps."""
     method, window, change_window = opt.method, opt.params.window, opt.change_window
@@ -547,32 +567,3 @@ def _block_any(mask: np.ndarray, window: int) -> np.ndarray:
     block = (rows[:, None] * grid[1] + cols[None, :]).ravel()
     hits = np.bincount(block, weights=mask.ravel().astype(float), minlength=grid[0] * grid[1])
     return (hits > 0).reshape(grid)
-
-
-def _segment_means(x: np.ndarray, labels: np.ndarray, k: int) -> np.ndarray:
-    """Mean row of ``x`` per label 0..k−1 (vectorised with bincount-style sums)."""
-    counts = np.bincount(labels, minlength=k).astype(float)
-    sums = np.zeros((k, x.shape[1]))
-    np.add.at(sums, labels, x)
-    return sums / np.maximum(counts, 1.0)[:, None]
-
-
-def _pixel_segment_means(
-    labels: np.ndarray, scores: np.ndarray, grid: tuple[int, ...], window: int
-) -> np.ndarray:
-    """Mean feature per segment over the pixels of all days (each pixel with its
-    segmentation block's features)."""
-    n_days, h, w = labels.shape
-    k = int(labels.max()) + 1
-    n_blocks = int(np.prod(grid))
-    rows, cols = harmonics.pixel_block_index((h, w), window)
-    block = (rows[:, None] * grid[1] + cols[None, :]).ravel()
-    x = scores.reshape(n_days, n_blocks, -1)
-    sums = np.zeros((k, x.shape[-1]))
-    counts = np.zeros(k)
-    for t in range(n_days):
-        m = np.bincount(labels[t].ravel() * n_blocks + block, minlength=k * n_blocks)
-        m = m.reshape(k, n_blocks).astype(float)
-        sums += m @ x[t]
-        counts += m.sum(axis=1)
-    return sums / np.maximum(counts, 1.0)[:, None]

@@ -4,20 +4,25 @@
 ``Scene.segment(params)`` runs the method ``params.method`` names (or the one that
 takes the given inputs, e.g. scribbles). Every method follows :class:`Segmenter`;
 :func:`register_method` adds one (the CLI's ``--method`` and the plugin's menu offer
-it at once).
+it at once). The method modules, and :class:`Scene` with the pipeline it holds, are
+imported on first use: the built-in methods register on the first lookup.
 """
+
+from __future__ import annotations
+
+import importlib
+from typing import Any
 
 from .base import MethodOutput, MethodRun, Segmenter
 from .registry import (
     get_method,
     method_names,
-    register_built_in,
     register_method,
     unregister_method,
 )
-from .scene import Scene, segment
 
-register_built_in()
+#: Names imported on first use (PEP 562), and their module in this package.
+LAZY: dict[str, str] = {"Scene": ".scene", "segment": ".scene"}
 
 __all__ = [
     "MethodOutput",
@@ -30,3 +35,16 @@ __all__ = [
     "segment",
     "unregister_method",
 ]
+
+
+def __getattr__(name: str) -> Any:
+    module = LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(module, __name__), name)
+    globals()[name] = value  # later lookups skip this function
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(LAZY))

@@ -72,6 +72,13 @@ class Segmenter(Protocol):
     inputs : tuple of str
         Inputs besides the image it needs, any one of which selects it (e.g.
         ``("scribbles", "classifier")``); empty for an unsupervised method.
+
+    Optional attributes, False when a method has none (read at registration):
+    ``finds_k`` (``n_segments`` = 0 lets it find the number of segments) and
+    ``block_maps`` (it cuts the w × w block grid and computes the harmonic coefficients,
+    the PCA features and the reconstruction-error map in any case, as the thesis method
+    does: its runs show those maps, summaries name the block grid, the time series cuts
+    its blocks and the memory estimate counts them).
     """
 
     name: str

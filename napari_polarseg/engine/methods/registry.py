@@ -4,6 +4,11 @@ Adding a method is one module with a class that follows
 :class:`~.base.Segmenter` and one line in :data:`BUILT_IN` (or, from outside the
 package, one call of :func:`register_method`): the CLI's ``--method``, the plugin's method
 menu and ``params.json`` then offer it.
+
+The built-in methods register on the first lookup (:func:`get_method`,
+:func:`method_names`, a read of the method choices; :mod:`..registered`), so
+``import napari_polarseg.engine`` imports none of them. A method registered from outside
+before that comes after them, as if registered later.
 """
 
 from __future__ import annotations
@@ -11,7 +16,13 @@ from __future__ import annotations
 import importlib
 
 from ..errors import PolarsegError
-from ..params import FINDS_K_METHODS, METHOD_CHOICES
+from ..registered import (
+    BLOCK_MAP_METHODS,
+    FINDS_K_METHODS,
+    METHOD_CHOICES,
+    load_methods,
+    set_loader,
+)
 from .base import Segmenter
 
 #: The methods that come with the package: module (in this package) and class.
@@ -30,27 +41,35 @@ _METHODS: dict[str, Segmenter] = {}
 def register_method(method: Segmenter) -> Segmenter:
     """Register ``method`` under its ``name`` (a later registration replaces it) and
     return it; a method that needs no inputs besides the image becomes a choice of
-    ``SegmentParams.method`` (``--method``, the plugin's menu)."""
+    ``SegmentParams.method`` (``--method``, the plugin's menu). Its optional
+    ``finds_k`` and ``block_maps`` (False when absent) are read here."""
     for attr in ("name", "title", "reads", "inputs", "stages", "segment"):
         if not hasattr(method, attr):
             raise PolarsegError(f"a segmentation method needs {attr!r}: {method!r}")
+    load_methods()  # the built-in methods first (nothing while they register)
     _METHODS[method.name] = method
     if not method.inputs:  # a method chosen by its inputs (scribbles) is no menu choice
         METHOD_CHOICES[method.name] = method.title
-    if getattr(method, "finds_k", False):  # n_segments = 0: the method finds k
-        FINDS_K_METHODS.add(method.name)
+    for names, attr in ((FINDS_K_METHODS, "finds_k"), (BLOCK_MAP_METHODS, "block_maps")):
+        if getattr(method, attr, False):  # finds_k: n_segments = 0 lets it find k
+            names.add(method.name)
+        else:
+            names.discard(method.name)
     return method
 
 
 def unregister_method(name: str) -> None:
     """Forget the method registered as ``name`` (nothing if there is none)."""
+    load_methods()
     _METHODS.pop(name, None)
     METHOD_CHOICES.pop(name, None)
     FINDS_K_METHODS.discard(name)
+    BLOCK_MAP_METHODS.discard(name)
 
 
 def get_method(name: str) -> Segmenter:
     """The method registered as ``name``; PolarsegError naming the known ones else."""
+    load_methods()
     method = _METHODS.get(name)
     if method is None:
         known = ", ".join(_METHODS)
@@ -60,15 +79,20 @@ def get_method(name: str) -> Segmenter:
 
 def method_names() -> tuple[str, ...]:
     """Names of the registered methods, in registration order."""
+    load_methods()
     return tuple(_METHODS)
 
 
 def unsupervised_names() -> tuple[str, ...]:
     """The methods that need no input besides the image (the plugin's method menu)."""
+    load_methods()
     return tuple(name for name, m in _METHODS.items() if not m.inputs)
 
 
 def register_built_in() -> None:
-    """Register the methods of :data:`BUILT_IN`."""
+    """Register the methods of :data:`BUILT_IN` (importing their modules)."""
     for module, cls in BUILT_IN:
         register_method(getattr(importlib.import_module(f"{__package__}.{module}"), cls)())
+
+
+set_loader(register_built_in)  # run on the first lookup (..registered.load_methods)

@@ -179,8 +179,9 @@ class Scene:
             pixel classifier), and ``colour_stack`` of a colour-polarisation frame.
         maps, reconstruction : bool, optional
             Also the thesis maps (harmonic coefficients and PCA features) and the
-            reconstruction-error map. Default: True for the thesis method (they are
-            its stages), False for the others.
+            reconstruction-error map. Default: True for a method that declares
+            ``block_maps`` (the thesis method: they are its stages), False for the
+            others.
         cancel : callable() -> bool, optional
             Checked before every stage and inside the long ones; True raises
             :class:`~napari_polarseg.engine.errors.Cancelled`.
@@ -190,9 +191,9 @@ class Scene:
         p = params or SegmentParams()
         inputs = {k: v for k, v in (inputs or {}).items() if v is not None}
         method = self.method_for(p, inputs)
-        thesis = method.name == "thesis"
-        maps = thesis if maps is None else maps
-        reconstruction = thesis if reconstruction is None else reconstruction
+        blocks = bool(getattr(method, "block_maps", False))  # the thesis method's maps
+        maps = blocks if maps is None else maps
+        reconstruction = blocks if reconstruction is None else reconstruction
         run = MethodRun(self.stages(p, inputs, maps, reconstruction), cancel, progress)
         timings: dict[str, float] = {}  # the stages computed in this call
         with self._lock:
@@ -297,6 +298,7 @@ class Scene:
             method=method.name,
             method_record=dict(out.record),
             materials=out.extra.get("materials"),  # a classifier's classes: value and name
+            on_blocks=maps or bool(getattr(method, "block_maps", False)),
         )
 
 
@@ -313,3 +315,10 @@ def segment(
     if changes:
         params = params.replace(**changes)
     return Scene(stack, angles, mask).segment(params)
+
+
+def pipeline_labels(pipeline: Pipeline, params: SegmentParams) -> np.ndarray:
+    """Pixel labels of ``params.method`` on a pipeline's stack (a :class:`Scene` on it,
+    no thesis maps): the ``day_labels`` of
+    :func:`~napari_polarseg.engine.analysis.timeseries.segment_timeseries`."""
+    return Scene(pipeline=pipeline).segment(params, maps=False, reconstruction=False).labels

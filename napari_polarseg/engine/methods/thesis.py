@@ -47,6 +47,8 @@ class ThesisBlocks:
     title = "thesis blocks (normalized cuts)"
     reads = THESIS_READS
     inputs: tuple[str, ...] = ()
+    #: it cuts the block grid and computes the block maps (harmonics, PCA, error map)
+    block_maps = True
 
     def stages(self, params: SegmentParams) -> tuple[str, ...]:
         return ("harmonics", "pca", "affinity", "cut", "labels")

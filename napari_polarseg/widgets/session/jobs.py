@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ...engine import PolarsegError, SegmentParams, get_method
+from ...engine.registered import computes_block_maps
 from .classify import CLASSIFIER_STAGES, PIPELINE_STAGES, ClassifierOutput, classifier_stages
 from .results import ExportRecord
 from .runs import Job, Partial, Result, Stage
@@ -29,9 +30,10 @@ if TYPE_CHECKING:
 
 def wants_maps(params: SegmentParams, thesis_maps: bool = False) -> bool:
     """Whether a run computes the thesis maps (harmonic coefficients, PCA features) and
-    the reconstruction-error map: always for the thesis method (its window, degree and
-    refractive index are tuned with the error map), else when ``thesis_maps`` asks."""
-    return params.method == "thesis" or bool(thesis_maps)
+    the reconstruction-error map: always for a method that declares ``block_maps`` (the
+    thesis method: its window, degree and refractive index are tuned with the error
+    map), else when ``thesis_maps`` asks."""
+    return computes_block_maps(params.method) or bool(thesis_maps)
 
 
 def segment_job(
@@ -62,9 +64,10 @@ def segment_job(
     while the last stage runs. Without ``maps`` the result has no coefficients, features
     or error map (``None``).
 
-    With ``prefetch`` (the thesis method), the result is yielded as a
-    :class:`~napari_polarseg.widgets.session.Result` and the job goes on in idle time
-    with :meth:`Pipeline.prefetch <napari_polarseg.engine.Pipeline.prefetch>` (the
+    With ``prefetch`` (a method that cuts the block graph: the thesis method), the
+    result is yielded as a :class:`~napari_polarseg.widgets.session.Result` and the job
+    goes on in idle time with
+    :meth:`Pipeline.prefetch <napari_polarseg.engine.Pipeline.prefetch>` (the
     eigensolves one more segment needs), stopping at the next request.
 
     ``cancel`` (the runner's stop request) is checked by the scene before every stage and
@@ -90,7 +93,7 @@ def segment_job(
     if not pipe.is_fresh("reconstruction", params):
         yield Partial(result)  # the segments are shown while the error map is computed
     result = scene.segment(params, maps=True, reconstruction=True, cancel=cancel, progress=within)
-    if prefetch and params.method == "thesis":
+    if prefetch and computes_block_maps(params.method):
         yield Result(result)
         for _ in pipe.prefetch(params, cancel):
             yield "prefetch", total, total

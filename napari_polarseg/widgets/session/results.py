@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from ...engine import SegmentationResult
+from ...engine.registered import computes_block_maps
 from .classify import ClassifierOutput, classifier_parts
 from .text import close_up_text, degenerate_text, k_choice_text, mask_text, object_size_text
 
@@ -160,8 +161,9 @@ class ExportRecord:
     def incomplete(self) -> bool:
         """True when the folder needs what the result lacks (computed by
         :meth:`complete`): the maps of parameters changed since (that the method does not
-        read), or the thesis maps of a thesis-method result — as ``polarseg segment``
-        writes them for the thesis method only (or with ``--thesis-maps``, ``--plots``)."""
+        read), or the thesis maps of a result of a method that declares ``block_maps``
+        (the thesis method) — as ``polarseg segment`` writes them for such a method only
+        (or with ``--thesis-maps``, ``--plots``)."""
         return self.needs(plots=False)
 
     def needs(self, plots: bool) -> bool:
@@ -170,7 +172,7 @@ class ExportRecord:
         result = self.result
         stale = self.params is not None and self.params != result.params
         lacking = result.features is None or result.reconstruction_error is None
-        wanted = plots or result.method == "thesis"
+        wanted = plots or computes_block_maps(result.method)
         return self.scene is not None and (stale or (lacking and wanted))
 
     def complete(self, plots: bool = False) -> ExportRecord:
@@ -179,7 +181,7 @@ class ExportRecord:
         if not self.needs(plots):
             return self
         params = self.params if self.params is not None else self.result.params
-        maps = plots or self.result.features is not None or params.method == "thesis"
+        maps = plots or self.result.features is not None or computes_block_maps(params.method)
         result = self.scene.segment(params, maps=maps, reconstruction=maps)
         return replace(self, result=result)
 
