@@ -43,6 +43,23 @@ class Variant:
     truth_size: bool = False
     #: a registered method read as it is instead of the default's class (a baseline)
     method: str = ""
+    #: follow the estimated object size only where it is at least this share of the
+    #: frame's short side (0: wherever the class's ``follows_estimate`` says)
+    gate: float = 0.0
+
+
+class GatedSurface(SurfaceSuperpixels):
+    """The default's class following the estimated object size only at or above
+    :attr:`gate` of the short side; below it (a texture's grain, a camouflage net's
+    mesh) the frame-share scales."""
+
+    gate = 0.0
+    follows_estimate = True
+
+    def scaled_params(self, object_size: float, shape: tuple[int, int]):
+        if object_size < self.gate * min(shape):
+            return self.params
+        return super().scaled_params(object_size, shape)
 
 
 #: The variants tried; ``default`` is the default as it is (its superpixels at their
@@ -80,6 +97,11 @@ VARIANTS: dict[str, Variant] = {
         {"merge_rule": staticmethod(closest_centroids)}, params={"diffusion_range": 0.12}
     ),
     "maf": Variant(params={"projection": "maf"}),
+    "estimated size above 10 %": Variant(gate=0.10),
+    "estimated size above 10 % reach 1": Variant({"reach_objects": 1.0}, gate=0.10),
+    "estimated size above 10 % reach 1.5 side 4": Variant(
+        {"reach_objects": 1.5, "regions_per_side": 4.0}, gate=0.10
+    ),
 }
 
 
@@ -87,11 +109,10 @@ def register(name: str, variant: Variant) -> str:
     """Register the variant as a method of its own; its method name."""
     if variant.method:
         return variant.method
-    cls = type(
-        "Variant",
-        (SurfaceSuperpixels,),
-        {"name": f"variant:{name}", "title": name, **variant.attrs},
-    )
+    base, attrs = SurfaceSuperpixels, dict(variant.attrs)
+    if variant.gate:
+        base, attrs["gate"] = GatedSurface, variant.gate
+    cls = type("Variant", (base,), {"name": f"variant:{name}", "title": name, **attrs})
     method = cls()
     if variant.params:
         method.params = method.params.replace(**variant.params)
