@@ -722,3 +722,33 @@ def test_a_text_file_named_png_is_refused_in_one_clean_line(tmp_path):
         f"{path}: cannot read the image (its content is not a PNG image that any reader recognises)"
     )
     assert "`" not in message and message.count(str(path)) == 1
+
+
+@pytest.mark.parametrize("n", [3, 4])
+def test_planar_stack_from_tifffile_imwrite_is_an_angle_stack(tmp_path, n):
+    """``tifffile.imwrite(path, stack)`` stores a (3|4, H, W) array as one planar RGB(A)
+    page (axes SYX): each sample is read as one angle's frame, in order."""
+    rng = np.random.default_rng(n)
+    stack = rng.integers(0, 4000, (n, 9, 11), dtype=np.uint16)
+    angles = [0.0, 60.0, 120.0] if n == 3 else [0.0, 45.0, 90.0, 135.0]
+    path = tmp_path / "planar.tif"
+    tifffile.imwrite(path, stack, metadata={"angles": angles})
+    with tifffile.TiffFile(path) as tif:  # the layout this test is about
+        assert len(tif.pages) == 1 and tif.series[0].axes == "SYX"
+    data = pio.read_stack(path)
+    np.testing.assert_array_equal(data.stack, stack)
+    assert data.angles_deg.tolist() == angles
+    bare = tmp_path / "bare.tif"
+    tifffile.imwrite(bare, stack)
+    with pytest.raises(PolarsegError, match="no polariser angles"):
+        pio.read_stack(bare)
+    np.testing.assert_array_equal(pio.read_stack(bare, angles_deg=angles).stack, stack)
+
+
+def test_colour_image_with_samples_last_is_still_one_image(tmp_path):
+    """A colour image stored the usual way (samples last, YXS) stays one image."""
+    rgb = np.random.default_rng(0).integers(0, 255, (9, 11, 3), dtype=np.uint8)
+    path = tmp_path / "photo.tif"
+    tifffile.imwrite(path, rgb, photometric="rgb")
+    with pytest.raises(PolarsegError, match="single image, not an angle stack"):
+        pio.read_stack(path)

@@ -37,7 +37,7 @@ from .frames import grey_frames, load_frame
 from .mosaic_checks import check_mosaic_channels, periodicity_warning
 from .read_options import ReadOptions
 from .stack_data import BlackLevel, StackData
-from .tiff import colour_last, read_tiff
+from .tiff import colour_last, frame_axes, read_tiff
 
 
 def _metadata_angles(path: Path, angles: Any) -> np.ndarray | None:
@@ -56,7 +56,7 @@ def _metadata_angles(path: Path, angles: Any) -> np.ndarray | None:
 def read_tiff_stack(path: Path, opts: ReadOptions, black: BlackLevel) -> StackData:
     """A multi-page TIFF, its angles from its metadata (if any)."""
     data, axes, meta = read_tiff(path, opts.max_bytes())
-    data, colour = colour_last(data, axes)
+    data, colour = colour_last(data, frame_axes(axes))
     if data.ndim == (3 if colour else 2):
         raise input_error(
             path,

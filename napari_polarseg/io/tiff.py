@@ -52,9 +52,23 @@ def _tifffile_messages() -> Iterator[list[str]]:
         logger.propagate = propagate
 
 
-def _angle_metadata(tif: tifffile.TiffFile, series: Any) -> dict[str, Any]:
+#: Axes of one planar page of 3 or 4 samples, as ``tifffile.imwrite(path, stack)`` stores
+#: a (3, H, W) or (4, H, W) array (planar RGB or RGBA): read as that many frames.
+PLANAR_SAMPLES = "SYX"
+#: The axes such a page is read with: one frame per sample.
+PLANAR_AS_FRAMES = "QYX"
+
+
+def frame_axes(axes: str) -> str:
+    """``axes`` with a planar page's samples read as frames (:data:`PLANAR_SAMPLES`):
+    ``tifffile.imwrite`` stores a 3- or 4-angle stack that way, while a colour image is
+    stored with its samples last (``YXS``); every other ``axes`` unchanged."""
+    return PLANAR_AS_FRAMES if axes == PLANAR_SAMPLES else axes
+
+
+def _angle_metadata(tif: tifffile.TiffFile, shape: tuple[int, ...], axes: str) -> dict[str, Any]:
     """``{"angles": ..., "angles_from": ...}`` from the file's metadata, or ``{}``."""
-    frames = [n for n, ax in zip(series.shape, series.axes, strict=False) if ax not in "YXS"]
+    frames = [n for n, ax in zip(shape, axes, strict=False) if ax not in "YXS"]
     found = tiff_angles(tif, int(np.prod(frames)) if frames else 1)
     if found is None:
         return {}
@@ -104,7 +118,7 @@ def read_tiff(path: Path, limit: int = 0) -> tuple[np.ndarray, str, dict[str, An
                     bits = int(series.keyframe.bitspersample)
                 data = series.asarray()
                 axes = series.axes
-                meta = _angle_metadata(tif, series)
+                meta = _angle_metadata(tif, series.shape, frame_axes(axes))
         except PolarsegError:
             raise
         except Exception as exc:
