@@ -1015,6 +1015,11 @@ BAD_REAL_INPUTS = {
         "segmenting 4 frames of 30 x 32 pixels would need 240.0 KiB of memory, more than "
         "the limit of 104.9 KiB",
     ),
+    "memory limit given with a unit": (
+        lambda t: [_tif(t, _good()), "--max-memory", "100K"],
+        "segmenting 4 frames of 30 x 32 pixels would need 240.0 KiB of memory, more than "
+        "the limit of 100.0 KiB",
+    ),
     "mask of another size": (
         _mask_of_another_size,
         "the mask is 10 x 10 pixels but the frames are 30 x 32",

@@ -7,7 +7,7 @@
                          [--dark-frame FILE] [--offset V] [--saturation LEVEL]
                          [--dark-level LEVEL] [--mask FILE] [--register] [--fit robust]
                          [--window W] [--degree L] [--refractive-index N]
-                         [--segments K] [--params FILE.json] [--max-memory GIB]
+                         [--segments K] [--params FILE.json] [--max-memory SIZE]
                          [--scribbles FILE [--save-classifier FILE.polarseg-clf]
                           | --classifier FILE.polarseg-clf] [--ground-truth FILE] [...]
     polarseg demo [--out DIR] [--scene leaves] [--plots]

@@ -72,11 +72,29 @@ def number_arg(text: str) -> float:
     return value
 
 
+#: Binary units of ``--max-memory``, in GiB (``G``, ``GB`` and ``GiB`` all mean 2³⁰ bytes,
+#: as in ``free -h``); a bare number is GiB.
+MEMORY_UNITS = {"k": 2.0**-20, "m": 2.0**-10, "g": 1.0, "t": 2.0**10}
+
+
 def gib_arg(text: str) -> float:
-    """A positive number of GiB."""
-    value = number_arg(text)
-    if value <= 0:
-        raise argparse.ArgumentTypeError(f"expected a positive number of GiB, got {text!r}")
+    """A positive amount of memory in GiB: a number of GiB, or a number with a unit of
+    :data:`MEMORY_UNITS` (``20G``, ``512M``, ``1.5GiB``)."""
+    number, unit = text.strip(), 1.0
+    for suffix in ("ib", "b"):
+        if number.lower().endswith(suffix) and number[: -len(suffix)][-1:].lower() in "kmgt":
+            number = number[: -len(suffix)]
+            break
+    if number[-1:].lower() in MEMORY_UNITS:
+        number, unit = number[:-1], MEMORY_UNITS[number[-1].lower()]
+    try:
+        value = number_arg(number) * unit
+    except argparse.ArgumentTypeError:
+        value = float("nan")
+    if not value > 0:
+        raise argparse.ArgumentTypeError(
+            f"expected a positive amount of memory (GiB, or with a unit: 20G, 512M), got {text!r}"
+        )
     return value
 
 

@@ -164,10 +164,10 @@ class ReadOptions:
         None,
         flag="--max-memory",
         kind="gib",
-        metavar="GIB",
+        metavar="SIZE",
         stack=True,
-        help="refuse inputs and runs that would need more memory than this many GiB "
-        "[$POLARSEG_MAX_BYTES or 8]",
+        help="refuse inputs and runs that would need more memory than this: GiB, or with "
+        "a unit (20G, 512M) [$POLARSEG_MAX_BYTES or 8G]",
     )
     classifier: str | None = _option(
         None,
