@@ -113,7 +113,7 @@ RENDER_SETS = {
     ),
     "second-held-out": RenderSet(
         HERE / "renders_held_out",
-        "second held-out renders (render_scenes.py, rendered on 2026-12-04 and read once, "
+        "second held-out renders (render_scenes.py, read once, "
         "for the consensus over superpixel sizes)",
         "held-out",
         "render_scenes.py --seeds 3000-3079 --out benchmarks/renders_held_out",
