@@ -752,3 +752,21 @@ def test_colour_image_with_samples_last_is_still_one_image(tmp_path):
     tifffile.imwrite(path, rgb, photometric="rgb")
     with pytest.raises(PolarsegError, match="single image, not an angle stack"):
         pio.read_stack(path)
+
+
+def test_a_damaged_tiff_leaves_no_raw_library_line(tmp_path, caplog, capsys):
+    """tifffile logs a damaged file's offsets; every opening of a user's TIFF keeps those
+    lines to itself and says what is wrong once, in one line naming the file."""
+    import logging
+
+    from napari_polarseg.io.frames import single_frame_file
+
+    bad = tmp_path / "bad.tif"
+    bad.write_bytes(b"II*\x00" + b"\xff" * 60)
+    with caplog.at_level(logging.DEBUG):
+        assert not single_frame_file(bad)
+        with pytest.raises(PolarsegError, match=r"bad\.tif: "):
+            pio.read_stack(bad)
+    assert not [r for r in caplog.records if r.name.startswith("tifffile")]
+    captured = capsys.readouterr()
+    assert "TiffPages" not in captured.out + captured.err

@@ -19,7 +19,7 @@ import tifffile
 from ..engine.errors import PolarsegError
 from ..engine.limits import memory_limit
 from .common import PathLike, check_read_size, first_line, input_error
-from .tiff import colour_last, read_tiff
+from .tiff import colour_last, frame_axes, read_tiff, tifffile_messages
 
 #: File types read as single frames (in a folder, or as a raw mosaic).
 FRAME_SUFFIXES = (".png", ".tif", ".tiff", ".jpg", ".jpeg")
@@ -35,8 +35,9 @@ def single_frame_file(path: Path) -> bool:
     if suffix not in (".tif", ".tiff"):
         return True
     try:
-        with tifffile.TiffFile(path) as tif:
-            return len(tif.pages) == 1
+        with tifffile_messages(), tifffile.TiffFile(path) as tif:
+            axes = tif.series[0].axes if tif.series else ""
+            return len(tif.pages) == 1 and frame_axes(axes) == axes
     except Exception:
         return False
 

@@ -37,7 +37,7 @@ from .frames import grey_frames, load_frame
 from .mosaic_checks import check_mosaic_channels, periodicity_warning
 from .read_options import ReadOptions
 from .stack_data import BlackLevel, StackData
-from .tiff import colour_last, frame_axes, read_tiff
+from .tiff import colour_last, frame_axes, read_tiff, tifffile_messages
 
 
 def _metadata_angles(path: Path, angles: Any) -> np.ndarray | None:
@@ -239,7 +239,7 @@ def _tiff_json_angles(path: Path) -> Any:
     """The ``angles`` entry of a TIFF's JSON metadata (tifffile's shaped metadata, else
     the first page's JSON description), or None (never raises)."""
     try:
-        with tifffile.TiffFile(path) as tif:
+        with tifffile_messages(), tifffile.TiffFile(path) as tif:
             if len(tif.pages) < 1:
                 return None
             shaped = tif.shaped_metadata

@@ -38,8 +38,10 @@ class _Collect(logging.Handler):
 
 
 @contextlib.contextmanager
-def _tifffile_messages() -> Iterator[list[str]]:
-    """Collect tifffile's log warnings instead of letting them reach stderr."""
+def tifffile_messages() -> Iterator[list[str]]:
+    """Collect tifffile's log warnings instead of letting them reach stderr: every
+    opening of a user's TIFF goes through it, so a damaged file is said once, in our
+    words, not as a raw library line."""
     logger = logging.getLogger("tifffile")
     handler = _Collect()
     propagate = logger.propagate
@@ -106,7 +108,7 @@ def read_tiff(path: Path, limit: int = 0) -> tuple[np.ndarray, str, dict[str, An
     PolarsegError
         If the file holds no image, is too large, unreadable, truncated or corrupt.
     """
-    with _tifffile_messages() as messages:
+    with tifffile_messages() as messages:
         try:
             with tifffile.TiffFile(path) as tif:
                 if not tif.series:
