@@ -162,6 +162,8 @@ def test_cli_batch_on_local_cluster(
     captured = capsys.readouterr()
     assert "[3/3]" in captured.err and "local cluster (2 worker" in captured.err
     assert "3 done, 0 skipped, 0 failed" in captured.out
+    # the rate says what time it is counted over (not the wall time, which has start-up)
+    assert "scenes/s over the " in captured.out and "after the cluster started" in captured.out
     for name in ("leaves", "camouflage", "fruit"):
         check_scene_folder(out / name)
     # the same result as `polarseg segment` with the same parameters

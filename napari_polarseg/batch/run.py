@@ -78,6 +78,15 @@ class BatchResult:
         done = self.count("done")
         return round(done / self.run_seconds, 6) if done and self.run_seconds > 0 else None
 
+    def rate_text(self) -> str:
+        """``", 6.14 scenes/s over the 1.3 s after the cluster started"``: the rate and
+        the time it is counted over (the wall time also counts the cluster's start-up);
+        ``""`` when no scene was segmented."""
+        rate = self.scenes_per_second
+        if rate is None:
+            return ""
+        return f", {rate:.3g} scenes/s over the {self.run_seconds:.1f} s after the cluster started"
+
     def to_dict(self) -> dict[str, Any]:
         """The JSON summary."""
         return {

@@ -149,12 +149,10 @@ def run(args: argparse.Namespace) -> int:
         progress=_scene_report(args),
         on_start=started,
     )
-    rate = result.scenes_per_second
-    rate_text = "" if rate is None else f", {rate:.3g} scenes/s"
     print(
         f"{PROG}: {result.count('done')} done, {result.count('skipped')} skipped, "
         f"{result.count('failed')} failed, {result.count('cancelled')} cancelled in "
-        f"{time.perf_counter() - t0:.1f} s{rate_text}; summary in "
+        f"{time.perf_counter() - t0:.1f} s{result.rate_text()}; summary in "
         f"{Path(args.out) / batch.SUMMARY_CSV}"
     )
     return 0 if result.ok else 3

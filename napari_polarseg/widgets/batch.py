@@ -325,12 +325,11 @@ class BatchWidget(ScrollingContainer):
     def _show(self, result: batch_engine.BatchResult) -> None:
         self.result = result
         self.table.value = summary_table(result.records)
-        rate = result.scenes_per_second
         self._set_status(
             f"{result.count('done')} done, {result.count('skipped')} skipped, "
             f"{result.count('failed')} failed, {result.count('cancelled')} cancelled"
-            + ("" if rate is None else f" · {rate:.2g} scenes/s")
-            + f" · {result.out / batch_engine.SUMMARY_CSV}"
+            f" in {result.wall_seconds:.1f} s{result.rate_text()}"
+            f" · {result.out / batch_engine.SUMMARY_CSV}"
         )
 
     def _set_status(self, text: str) -> None:
