@@ -11,8 +11,9 @@ headless machine)::
 
     xvfb-run -a python examples/segment_in_napari.py                      # bundled sample
     xvfb-run -a python examples/segment_in_napari.py examples/data/leaves_stack.tif \\
-        --out labels.tif --preset recommended --window 10 --degree 12 --segments 4
-    xvfb-run -a python examples/segment_in_napari.py frames/ --angles 0,45,90,135
+        --out out/leaves_labels.tif --preset recommended --window 10 --degree 12 --segments 4
+    xvfb-run -a python examples/segment_in_napari.py examples/data/leaves_stack.tif \\
+        --angles 0,30,60,90,120,150,180 --preset recommended
 
 The same steps work in a notebook or a script with a visible viewer
 (``napari.Viewer()`` instead of ``napari.Viewer(show=False)``).
@@ -22,6 +23,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 
 from napari_polarseg.engine.params import DEFAULT_PRESET, PRESETS
 
@@ -31,7 +33,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("stack", nargs="?", help="TIFF with angles, .npz or folder of frames")
     parser.add_argument("--angles", help="polariser angles in degrees, e.g. 0,45,90,135")
-    parser.add_argument("--out", default="labels.tif", help="labels TIFF to write")
+    parser.add_argument(
+        "--out", default="out/labels.tif", help="labels TIFF to write [out/labels.tif]"
+    )
     parser.add_argument(
         "--preset",
         choices=list(PRESETS),
@@ -77,6 +81,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"error: {widget.last_error}", file=sys.stderr)
             return 1
         segments = widget.output("segments")
+        Path(args.out).parent.mkdir(parents=True, exist_ok=True)
         (written,) = segments.save(args.out, plugin="napari-polarseg")
         summary = segments.metadata["polarseg_summary"]
         print(f"{stack.name}: {widget.status.value}")
