@@ -18,6 +18,7 @@ from ..io import parse_angles
 from ._layers import ANGLES_KEY, find_output, layer_tag, source_key
 from ._runner import PROGRESS_STEPS, WorkerSlot
 from .angle_axis import AngleLabel
+from .dims_guard import guard_viewer
 from .layer_queue import LayerQueue
 from .session import format_angles
 from .view_fit import FitKeeper
@@ -267,6 +268,7 @@ class StackWidget(ScrollingContainer):
             on_progress=self._set_progress,
         )
 
+        guard_viewer(viewer)  # deleting the stack after a Run must not crash napari
         self.stack_layer.changed.connect(self._on_stack_changed)
         self.run_button.changed.connect(self.run)
         self.cancel_button.changed.connect(self.cancel)
@@ -423,7 +425,8 @@ class StackWidget(ScrollingContainer):
         ``_runner.REPORT_INTERVAL`` later: one that ends sooner repaints nothing before
         its result. A ``cancellable`` job gets a ``cancel`` callable
         (:meth:`~napari_polarseg.widgets._runner.WorkerSlot.submit`), a job that
-        ``reports`` a ``report`` callable for progress within its stages."""
+        ``reports`` a ``report`` callable for progress within its stages (and, given
+        ``on_partial``, a ``partial`` one for results handed over from inside them)."""
         if not live:
             self.cancel_button.enabled = True
         self._slot.submit(job, args, total, on_result, on_partial, live, cancellable, reports)
