@@ -86,6 +86,38 @@ def test_plan_names_globs_and_outputs(tmp_path: Path, scenes: Path) -> None:
     ]
 
 
+def test_a_folder_of_raw_camera_frames_is_a_folder_of_scenes(tmp_path: Path) -> None:
+    """Raw frames named after their sensor are scenes of a folder, read as mosaics, as
+    the Batch dock and ``polarseg batch DIR`` find them; another picture is not."""
+    import shutil
+
+    raw = Path(__file__).resolve().parents[1] / "napari_polarseg" / "sample_data"
+    frame = raw / "fruits_IMX250MZR_crop.png"
+    folder = tmp_path / "raw"
+    folder.mkdir()
+    for name in ("day1_IMX250MZR.png", "day2_imx250mzr.png", "holiday.png"):
+        shutil.copy(frame, folder / name)
+    found = [p.name for p in batch.folder_inputs(folder)]
+    assert found == ["day1_IMX250MZR.png", "day2_imx250mzr.png"]
+    assert [p.name for p in batch.folder_inputs(folder, mosaic=True)] == [
+        "day1_IMX250MZR.png",
+        "day2_imx250mzr.png",
+        "holiday.png",
+    ]
+    out = tmp_path / "out"
+    result = batch.run_batch(batch.folder_inputs(folder), out, PARAMS, scheduler="inline")
+    assert result.ok and result.count("done") == 2
+    labels = tifffile.imread(out / "day1_IMX250MZR" / "labels.tif")
+    assert labels.shape == tuple(s // 2 for s in iio_shape(frame))  # demosaiced: half size
+
+
+def iio_shape(path: Path) -> tuple[int, int]:
+    """Height and width of a picture file."""
+    from napari_polarseg.io import read_frame
+
+    return read_frame(path).shape
+
+
 def test_inline_batch_resume_and_parameter_change(tmp_path: Path, scenes: Path) -> None:
     out = tmp_path / "out"
     first = batch.run_batch([scenes / "fruit.npz"], out, PARAMS, scheduler="inline")

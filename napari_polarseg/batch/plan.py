@@ -113,7 +113,10 @@ def expand_inputs(inputs: Iterable[str | os.PathLike[str]]) -> list[Path]:
 
 
 def folder_inputs(folder: str | os.PathLike[str], mosaic: bool = False) -> list[Path]:
-    """The scenes in a folder: stack files and sub-folders (raw frames with ``mosaic``).
+    """The scenes in a folder: stack files, sub-folders and the raw frames of a
+    polarisation camera named after its sensor (``…_IMX250MZR.png``: read as mosaics,
+    :func:`~napari_polarseg.io.sensor_from_name`); with ``mosaic``, every image file
+    (each a raw frame of the given layout).
 
     Hidden entries are left out; natural sort order.
     """
@@ -121,11 +124,17 @@ def folder_inputs(folder: str | os.PathLike[str], mosaic: bool = False) -> list[
     if not root.is_dir():
         raise PolarsegError(f"{root}: not a folder")
     suffixes = pio.FRAME_SUFFIXES if mosaic else pio.STACK_SUFFIXES
+
+    def is_scene_file(p: Path) -> bool:
+        suffix = p.suffix.lower()
+        raw = suffix in pio.FRAME_SUFFIXES and pio.sensor_from_name(p) is not None
+        return suffix in suffixes or raw
+
     entries = [
         p
         for p in root.iterdir()
         if not p.name.startswith(".")
-        and (p.is_dir() or (p.is_file() and p.suffix.lower() in suffixes))
+        and (p.is_dir() or (p.is_file() and is_scene_file(p)))
         and not (p.is_file() and p.name in (SUMMARY_CSV, SUMMARY_JSON, PARAMS_FILE))
     ]
     return sorted(entries, key=lambda p: pio.natural_key(p.name))

@@ -189,8 +189,9 @@ class BatchWidget(ScrollingContainer):
         self.folder = FileEdit(
             label="input folder",
             mode="d",
-            tooltip="The folder of scenes: each stack file (.tif, .npz, …) or sub-folder of "
-            "frames in it is one scene",
+            tooltip="The folder of scenes: each stack file (.tif, .npz, …), sub-folder of "
+            "frames or raw camera frame named after its sensor (…_IMX250MZR.png) in it is "
+            "one scene",
         )
         self.pattern = LineEdit(
             label="pattern",
@@ -255,7 +256,11 @@ class BatchWidget(ScrollingContainer):
         inputs = [str(folder / pattern)] if pattern else batch_engine.folder_inputs(folder)
         scenes = batch_engine.plan(inputs, out)
         if not scenes:
-            raise PolarsegError(f"{folder}: no scenes (stack files or sub-folders) found")
+            raise PolarsegError(
+                f"{folder}: no scenes found (stack files, sub-folders of frames, or raw "
+                "camera frames named after their sensor, e.g. …_IMX250MZR.png; for other "
+                "raw frames give a pattern such as *.png)"
+            )
         return scenes
 
     @staticmethod
