@@ -30,7 +30,7 @@ from bench_speed import median_time
 from scipy import ndimage
 
 from napari_polarseg.engine import polarisation_image
-from napari_polarseg.engine.analysis.pixel_classifier import (
+from napari_polarseg.engine.classifier.pixel_classifier import (
     ClassifierParams,
     predict_pixels,
     train_pixel_classifier,

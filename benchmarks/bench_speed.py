@@ -425,7 +425,7 @@ def thesis_frame_child(task: str, path: Path) -> dict:
         stack, angles = load(path)
         stack = planted_isolated(stack)
     t0 = time.perf_counter()
-    res = Pipeline(stack, angles, SegmentParams(n_segments=3)).run()
+    res = Pipeline(stack, angles, SegmentParams(method="thesis", n_segments=3)).run()
     seconds = time.perf_counter() - t0
     check = res.degenerate()
     return {
@@ -558,9 +558,9 @@ def child(task: str, path: Path) -> dict:
         return auto_child(task, path)
     stack, angles = load(path)
     params = {
-        "cold": SegmentParams(window=10, degree=12, n_segments=3),
-        "l30": SegmentParams(window=10, degree=30, n_segments=3),
-        "camera": SegmentParams(window=8, degree=12, n_segments=3),
+        "cold": SegmentParams(method="thesis", window=10, degree=12, n_segments=3),
+        "l30": SegmentParams(method="thesis", window=10, degree=30, n_segments=3),
+        "camera": SegmentParams(method="thesis", window=8, degree=12, n_segments=3),
     }[task]
     t0 = time.perf_counter()
     res = Pipeline(stack, angles, params).run()
@@ -629,7 +629,7 @@ def main(argv: list[str] | None = None) -> int:
     reps = max(1, args.repeats)
     paths = build_inputs(args.cache)
     stack, angles = load(paths["ref"])
-    params = SegmentParams(window=10, degree=12, n_segments=3)
+    params = SegmentParams(method="thesis", window=10, degree=12, n_segments=3)
     rows: list[Row] = []
 
     # ---- ours: the whole pipeline and its interactive changes -----------------------------

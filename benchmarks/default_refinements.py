@@ -34,7 +34,7 @@ from sklearn.metrics import adjusted_rand_score
 from sklearn.model_selection import cross_val_score
 
 from napari_polarseg.engine import ScribbleSession
-from napari_polarseg.engine.analysis.pixel_classifier import ClassifierParams
+from napari_polarseg.engine.classifier.pixel_classifier import ClassifierParams
 from napari_polarseg.engine.features.pixel_features import PixelFeatureParams, pixel_features
 from napari_polarseg.engine.methods.valid_superpixels import clustered_pixels
 from napari_polarseg.engine.params import PRESETS

@@ -6,8 +6,8 @@ the ARI against ground truth of every option the "Segmentation quality" table
 
 - ``intensity only``: the intensity baseline (block mean and std of Î, the same
   Mahalanobis affinity and recursive normalized cuts, no polarisation);
-- ``thesis defaults``: the pipeline with ``SegmentParams()`` (w 10, L 12, n 1.45, 95 %
-  variance, s = 1);
+- ``thesis defaults``: the pipeline with ``SegmentParams(method="thesis")`` (w 10, L 12,
+  n 1.45, 95 % variance, s = 1);
 - the other columns start from ``RECOMMENDED`` (w 12, L 8, zonal features, s = 2 ×
   median distance, min 4 blocks) and change one thing: the feature kind (thesis,
   energy, ridge coefficients, polarisation statistics, zonal + statistics), the spatial
@@ -18,7 +18,7 @@ the ARI against ground truth of every option the "Segmentation quality" table
 - ``plain baseline``: a random forest on 20 Gaussian-smoothed polarisation features
   (``baselines.plain_baseline``) trained on the same strokes — the floor every method
   is read against;
-- ``pixel classifier``: the product's scribble classifier (``engine.analysis.pixel_classifier``
+- ``pixel classifier``: the product's scribble classifier (``engine.classifier.pixel_classifier``
   with its default features and parameters) on the same strokes;
 - then, per scene, the pixel classifier against its target (0.8) and the plain
   baseline, beside a bound: the best classifier we train on the richest pixel features
@@ -61,9 +61,9 @@ from baselines import intensity_kmeans, plain_baseline, real_frames
 from sklearn.metrics import adjusted_rand_score
 
 from napari_polarseg.engine import Pipeline, Scene, SegmentParams, intensity_baseline
-from napari_polarseg.engine.analysis.pixel_classifier import ClassifierParams, make_model
-from napari_polarseg.engine.analysis.pixel_segmentation import PixelSegmenter
-from napari_polarseg.engine.analysis.scribbles import scribble_result
+from napari_polarseg.engine.classifier.pixel_classifier import ClassifierParams, make_model
+from napari_polarseg.engine.classifier.pixel_segmentation import PixelSegmenter
+from napari_polarseg.engine.classifier.scribbles import scribble_result
 from napari_polarseg.engine.features.pixel_features import (
     GROUPS,
     PixelFeatureParams,
@@ -79,7 +79,7 @@ BEGIN, END = "<!-- evaluate.py table: begin -->", "<!-- evaluate.py table: end -
 #: Column name -> parameters (None: a special column computed in ``evaluate``).
 OPTIONS: dict[str, SegmentParams | None] = {
     "intensity only": None,
-    "thesis defaults": SegmentParams(),
+    "thesis defaults": SegmentParams(method="thesis"),
     "thesis features": RECOMMENDED.replace(features="thesis"),
     "zonal (recommended)": RECOMMENDED,
     "energy": RECOMMENDED.replace(features="energy"),
@@ -139,7 +139,7 @@ def evaluate(name: str, seed: int, sweep: bool) -> dict:
     row = {"scene": name, "seed": seed, "k": k}
     intensity = stack.astype(float).mean(axis=0)
     row["intensity only"] = ari(truth, intensity_baseline(intensity, 10, k))
-    pipe = Pipeline(stack, angles, SegmentParams(n_segments=k))
+    pipe = Pipeline(stack, angles, SegmentParams(method="thesis", n_segments=k))
     for column, params in OPTIONS.items():
         if params is not None:
             row[column] = ari(
@@ -158,7 +158,7 @@ def evaluate(name: str, seed: int, sweep: bool) -> dict:
         row["grid"] = {}
         for values in itertools.product(*GRID.values()):
             change = dict(zip(GRID, values, strict=True))
-            params = SegmentParams(n_segments=k, **change)
+            params = SegmentParams(method="thesis", n_segments=k, **change)
             row["grid"][values] = ari(
                 truth, Scene(pipeline=pipe).segment(params, reconstruction=False).labels
             )
@@ -230,11 +230,11 @@ def evaluate_real(folder: Path) -> list[dict]:
         where = truth > 0
         k = len(truth_file.classes)
         row: dict = {"scene": truth_file.frame, "k": k, "degenerate": []}
-        pipe = Pipeline(data.stack, data.angles_rad, SegmentParams(n_segments=k))
+        pipe = Pipeline(data.stack, data.angles_rad, SegmentParams(method="thesis", n_segments=k))
         pol = pipe.get("polarisation")
         row["intensity k-means"] = ari_where(truth, intensity_kmeans(pol.intensity, k), where)
         presets = (
-            ("thesis defaults", SegmentParams()),
+            ("thesis defaults", SegmentParams(method="thesis")),
             ("recommended", RECOMMENDED),
             ("auto (default)", AUTO),
         )
@@ -281,7 +281,7 @@ def synthetic_bounds(seeds: list[int]) -> dict[str, float]:
         scenes = {}
         for seed in seeds:
             stack, angles, truth = load(name, seed)
-            pol = Pipeline(stack, angles, SegmentParams()).get("polarisation")
+            pol = Pipeline(stack, angles, SegmentParams(method="thesis")).get("polarisation")
             scenes[seed] = (pol.intensity, pol.dop, pol.phase, truth, None)
         values = [truth_bound([scenes[o] for o in seeds if o != s], scenes[s]) for s in seeds]
         out[name] = float(np.mean(values))

@@ -138,7 +138,7 @@ def synthetic_inputs(seeds: list[int]) -> list[tuple]:
     for name in SCENES:
         for seed in seeds:
             stack, angles, truth = load(name, seed)
-            pol = Pipeline(stack, angles, SegmentParams()).get("polarisation")
+            pol = Pipeline(stack, angles, SegmentParams(method="thesis")).get("polarisation")
             out.append((name, seed, pol, truth, int(truth.max()) + 1, stack, angles))
     return out
 
@@ -149,7 +149,7 @@ def real_inputs(folder: Path) -> list[tuple]:
     out = []
     for tf, data in real_frames(folder):
         k = len(tf.classes)
-        pipe = Pipeline(data.stack, data.angles_rad, SegmentParams(n_segments=k))
+        pipe = Pipeline(data.stack, data.angles_rad, SegmentParams(method="thesis", n_segments=k))
         out.append((tf.frame, pipe, pipe.get("polarisation"), tf.truth, k, tf.strokes))
     return out
 
@@ -259,7 +259,7 @@ def verdicts(row: dict, km: dict, synthetic: list[str], real: list[str]) -> list
 def speed(params: UnsupervisedParams, real: list) -> list[str]:
     """Seconds of ``params`` on a 720 × 660 rendering (cold: first call) and real frames."""
     sc = make_scene("leaves", shape=(720, 660), seed=0)
-    pol = Pipeline(sc.stack, sc.angles, SegmentParams()).get("polarisation")
+    pol = Pipeline(sc.stack, sc.angles, SegmentParams(method="thesis")).get("polarisation")
     times = [segment_unsupervised(pol.intensity, pol.dop, pol.phase, 3, params).seconds]
     times += [segment_unsupervised(pol.intensity, pol.dop, pol.phase, 3, params).seconds]
     lines = [

@@ -14,14 +14,14 @@ the command line.
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from . import io as pio
-from .engine import Pipeline, Scene, SegmentationResult
+from .engine import Scene
 from .engine.analysis.evaluation import adjusted_rand_index, evaluate
 from .engine.errors import PolarsegError
 from .engine.limits import check_pipeline_memory
@@ -31,6 +31,7 @@ from .engine.registered import computes_block_maps
 from .engine.timing import timed
 from .io.read_options import ReadOptions
 from .job_options import OutputOptions
+from .job_run import Run
 from .messages import (
     PROG,
     Message,
@@ -39,27 +40,11 @@ from .messages import (
     evaluation_message,
     report_messages,
 )
-from .outputs import classifier_summary, write_result_folder
+from .outputs import classifier_summary, result_files, write_result_folder
 from .status_line import StatusLine
 
 #: Progress callback of a run: (stage, stages done, total), as a stage starts and within.
 Progress = Callable[[str, float, int], None]
-
-
-@dataclass
-class Run:
-    """One segmentation job, everything computed in memory."""
-
-    data: pio.StackData
-    params: SegmentParams
-    stack: np.ndarray
-    result: SegmentationResult
-    shifts: np.ndarray | None
-    seconds: dict[str, float] = field(default_factory=dict)
-    mask: PixelMask | None = None
-    pipeline: Pipeline | None = None
-    colour_stack: np.ndarray | None = None
-    scene: Scene | None = None
 
 
 @dataclass
@@ -122,7 +107,7 @@ class LabelSource:
     def label(self, run: Run, progress: Progress | None = None, maps: bool = True) -> None:
         """Label ``run`` with the pixel classifier (sets ``run.result``)."""
         from .classifier_file import load_pixel_classifier
-        from .engine.analysis.pixel_segmentation import PixelSegmentation
+        from .engine.classifier.pixel_segmentation import PixelSegmentation
 
         classifier = None
         if self.classifier_file:
@@ -344,6 +329,7 @@ def data_to_folder(
         }
     out = Path(out)
     status.show(f"writing the results to {out}")
+    before = result_files(out) if out.is_dir() else []
     written = write_result_folder(
         out,
         stack=run.stack,
@@ -363,13 +349,15 @@ def data_to_folder(
         truth=truth if truth is not None else data.ground_truth,
     )
     status.clear()
-    messages = report_messages(out, run, written, note_repeated)
+    removed = [name for name in before if name not in written]  # an earlier run's
+    messages = report_messages(out, run, written, note_repeated, removed)
     if source is not None:
         if outputs.save_classifier:
             from .classifier_file import save_pixel_classifier
 
             save_pixel_classifier(outputs.save_classifier, source.segmentation.classifier)
-        messages += classifier_messages(source, outputs.save_classifier)
+        clf = source.segmentation.classifier
+        messages += classifier_messages(clf, source.classifier_file, outputs.save_classifier)
     if evaluation is not None:
         messages.append(evaluation_message(evaluation))
     return FolderResult(out, written, run, summary, messages, degenerate_warning(run), evaluation)

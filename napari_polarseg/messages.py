@@ -9,6 +9,7 @@ each scene's log; nothing is printed here. Every line starts with :data:`PROG`.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -20,7 +21,8 @@ from .engine.physics.pixel_mask import mask_reasons
 from .engine.unsupervised.choose_k import choice_text
 
 if TYPE_CHECKING:
-    from .jobs import LabelSource, Run
+    from .engine.classifier.pixel_classifier import PixelClassifier
+    from .job_run import Run
 
 #: Prefix of every message line (the command's name).
 PROG = "polarseg"
@@ -89,21 +91,29 @@ def limit_lines(run: Run) -> list[str]:
 
 
 def report_messages(
-    out: Path, run: Run, written: list[str], note_repeated: bool = True
+    out: Path,
+    run: Run,
+    written: list[str],
+    note_repeated: bool = True,
+    removed: Sequence[str] = (),
 ) -> list[Message]:
     """The run's lines; ``note_repeated=False`` leaves out the information that frames at
     a repeated angle were averaged (the bundled samples, made that way; it stays in
-    params.json and summary.json)."""
+    params.json and summary.json); ``removed``: an earlier run's files the writing
+    removed from ``out``. The reconstruction error is said where the method computed it."""
     result = run.result
     err = result.mean_reconstruction_error
-    err_text = "n/a" if err is None else f"{err:.4g}"
+    err_text = "" if err is None else f", mean reconstruction error {err:.4g}"
     h, w = result.labels.shape
-    messages = [
-        Message(
-            f"{PROG}: {result.n_segments} segments over {h} x {w} pixels, "
-            f"mean reconstruction error {err_text}"
+    messages = [Message(f"{PROG}: {result.n_segments} segments over {h} x {w} pixels{err_text}")]
+    if removed:
+        messages.append(
+            Message(
+                f"{PROG}: removed {len(removed)} file(s) of an earlier run from {out}: "
+                + ", ".join(removed),
+                "stderr",
+            )
         )
-    ]
     warning = degenerate_warning(run)
     if warning is not None:
         messages.append(Message(warning, "stderr"))
@@ -129,11 +139,13 @@ def report_messages(
     return messages + [Message(line) for line in lines]
 
 
-def classifier_messages(source: LabelSource, save_file: str | None) -> list[Message]:
-    """Say what the classifier did (and that it was written to ``save_file``, if asked)."""
-    clf = source.segmentation.classifier
-    if source.classifier_file:
-        lines = [f"{PROG}: applied the classifier {source.classifier_file} (not retrained)"]
+def classifier_messages(
+    clf: PixelClassifier, classifier_file: str | None, save_file: str | None
+) -> list[Message]:
+    """Say what the classifier ``clf`` did: trained, or read from ``classifier_file`` and
+    applied (and that it was written to ``save_file``, if asked)."""
+    if classifier_file:
+        lines = [f"{PROG}: applied the classifier {classifier_file} (not retrained)"]
     else:
         lines = [
             f"{PROG}: pixel classifier trained on {clf.n_training_pixels} scribbled "

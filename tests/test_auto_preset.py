@@ -113,7 +113,10 @@ def test_segment_and_demo_default_to_auto(tmp_path, capsys):
 def test_block_graph_commands_do_not_offer_auto():
     parser = cli.build_parser()
     with pytest.raises(cli.UsageError, match="invalid choice: 'auto'"):
-        parser.parse_args(["sweep", "x.tif", "--preset", "auto"])
+        parser.parse_args(["timeseries", "x.tif", "y.tif", "-o", "o", "--preset", "auto"])
+    # the sweep offers auto: its --vary sweeps the chosen method's own parameters, and
+    # the window/degree grid stays the thesis method's (tests/test_method_own_params.py)
+    assert parser.parse_args(["sweep", "x.tif", "-o", "o", "--preset", "auto"]).preset == "auto"
     stack, _ = planted_stack(2)
     # the time series runs the superpixel methods on day 1's own labels, not a joint cut
     superpixels = SegmentParams(method="superpixels")

@@ -5,14 +5,14 @@ from __future__ import annotations
 
 import pytest
 
-from napari_polarseg.engine.analysis.classifier_settings import (
+from napari_polarseg.engine.classifier.classifier_settings import (
     SETTINGS,
     ClassifierSettings,
     format_scales,
     parse_scales,
     setting_help,
 )
-from napari_polarseg.engine.analysis.pixel_classifier import ClassifierParams
+from napari_polarseg.engine.classifier.pixel_classifier import ClassifierParams
 from napari_polarseg.engine.errors import PolarsegError
 from napari_polarseg.engine.features.pixel_features import PixelFeatureParams
 

@@ -20,6 +20,7 @@ import napari_polarseg
 from napari_polarseg import cli
 from napari_polarseg import io as pio
 from napari_polarseg.cli import demo as cli_demo
+from napari_polarseg.cli.options import method_options
 from napari_polarseg.engine import SegmentParams, diffuse_dop
 from napari_polarseg.engine.physics.mosaic import mosaic_superpixel
 
@@ -30,6 +31,9 @@ H, W = 57, 63  # not multiples of the window
 #: What a run with the thesis maps (``--method thesis``, ``--thesis-maps``) adds.
 THESIS_MAPS = {"reconstruction_error.tif"}
 FAST = ["--preset", "thesis", "--window", "10", "--degree", "4", "--segments", "2"]
+#: FAST for a run whose labels come from scribbles or a classifier, which reads no block
+#: parameter (a block flag would be named in a warning); the evaluation's window is 10.
+FAST_INPUTS = ["--preset", "thesis", "--segments", "2"]
 #: What every result folder holds (the default method computes no thesis maps).
 CONTRACT = {
     "labels.tif",
@@ -131,7 +135,8 @@ def test_segment_writes_the_contract_for_a_size_not_multiple_of_w(tmp_path, caps
     assert params["input"] == str(path.resolve())
     assert params["angles_deg"] == ANGLES.tolist()
     assert params["registration"] == {"ran": False, "reference_frame": None, "shifts_px": None}
-    assert params["params"]["window"] == 10 and params["params"]["degree"] == 4
+    assert params["params"]["method_params"]["thesis"]["window"] == 10
+    assert params["params"]["method_params"]["thesis"]["degree"] == 4
     assert params["params"]["n_segments"] == 2 and params["params"]["refractive_index"] == 1.45
     assert params["output_shape"] == [H, W]
 
@@ -154,8 +159,9 @@ def test_segment_flags_override_params_file_and_params_json_reruns(tmp_path, cap
     code, _, err = run(capsys, "segment", path, "--out", out, "--params", pfile, "--degree", "4")
     assert code == 0, err
     params = json.loads((out / "params.json").read_text())["params"]
-    assert (params["window"], params["degree"], params["n_segments"]) == (10, 4, 3)
-    assert params["variance"] == 0.9
+    thesis = params["method_params"]["thesis"]  # block fields at the top level: the thesis's
+    assert (thesis["window"], thesis["degree"], params["n_segments"]) == (10, 4, 3)
+    assert thesis["variance"] == 0.9 and params["method"] == "thesis"
     # a params.json written by polarseg is accepted as --params and reproduces the run
     again = tmp_path / "b"
     code, _, err = run(capsys, "segment", path, "--out", again, "--params", out / "params.json")
@@ -181,33 +187,40 @@ def test_segment_all_parameter_flags_reach_params_json(tmp_path, capsys, scene_t
     assert code == 0, err
     assert json.loads((out / "params.json").read_text())["params"] == {
         "method": "thesis",
-        "window": 9,
-        "degree": 5,
         "refractive_index": 1.6,
         "model": "specular",
         "specular_branch": "above-brewster",
-        "coefficients": "ridge",
-        "ridge": 0.01,
-        "features": "zonal",
-        "variance": 0.9,
-        "scale": 2.0,
-        "scale_mode": "median",
-        "spatial_radius": 1.5,
-        "spatial_sigma": 3.0,
         "n_segments": 3,
         "object_size": 30.0,
-        "ncut_threshold": 0.8,
-        "min_segment_blocks": 2,
-        "clustering": "kway",
         "fit": "robust",
-        "affinity_graph": "sparse",
+        "method_params": {
+            "thesis": {
+                "window": 9,
+                "degree": 5,
+                "coefficients": "ridge",
+                "ridge": 0.01,
+                "features": "zonal",
+                "variance": 0.9,
+                "scale": 2.0,
+                "scale_mode": "median",
+                "spatial_radius": 1.5,
+                "spatial_sigma": 3.0,
+                "ncut_threshold": 0.8,
+                "min_segment_blocks": 2,
+                "clustering": "kway",
+                "affinity_graph": "sparse",
+            }
+        },
     }
 
 
 def test_every_segment_parameter_has_a_named_option():
-    names = {f.name for f in dataclasses.fields(SegmentParams)}
+    names = {f.name for f in dataclasses.fields(SegmentParams)} - {"method_params"}
     assert set(cli.param_options()) == names
+    thesis = {f.name for f in dataclasses.fields(SegmentParams(method="thesis").params_of())}
+    assert set(method_options()["thesis"]) == thesis
     flags = [flag for flag, _ in cli.param_options().values()]
+    flags += [flag for flag, _ in method_options()["thesis"].values()]
     help_text = cli.build_parser()._subparsers._group_actions[0].choices["segment"].format_help()
     assert all(flag in help_text for flag in flags)
 
@@ -255,6 +268,41 @@ def test_segment_overwrites_previous_results(tmp_path, capsys, scene_tif):
     assert code == 0, err
     assert read_tif(out / "labels.tif").shape == (H, W)
     assert set(os.listdir(out)) == CONTRACT | THESIS_MAPS | {"overview.png"}
+
+
+def test_a_rerun_removes_the_earlier_runs_files_and_no_other(tmp_path, capsys, scene_tif):
+    """A folder describes one run: a run with --overview and plots, then a plain run into
+    the same folder, leaves no overview, plots or thesis maps of the first; a user's own
+    file stays, and summary.json and a stderr line name what was removed."""
+    path, _, _ = scene_tif
+    out = tmp_path / "out"
+    code, _, err = run(capsys, "segment", path, "--out", out, *FAST, "--overview", "--plots")
+    assert code == 0, err
+    first = set(os.listdir(out))
+    assert {"overview.png", "plots", "reconstruction_error.tif"} <= first
+    (out / "notes.txt").write_text("mine", encoding="utf-8")
+    (out / "plots" / "mine.png").write_bytes(b"mine")
+    code, out_text, err = run(capsys, "segment", path, "--out", out, "--preset", "auto")
+    assert code == 0, err
+    left = set(os.listdir(out))
+    assert "overview.png" not in left and "reconstruction_error.tif" not in left
+    assert "notes.txt" in left and os.listdir(out / "plots") == ["mine.png"]
+    summary = json.loads((out / "summary.json").read_text(encoding="utf-8"))
+    removed = summary["removed_from_earlier_run"]
+    assert "overview.png" in removed and "reconstruction_error.tif" in removed
+    assert not any(name.endswith("mine.png") or name == "notes.txt" for name in removed)
+    assert f"removed {len(removed)} file(s) of an earlier run" in err
+    # the default computes no reconstruction error, and its first line does not say "n/a"
+    assert "n/a" not in out_text.splitlines()[0]
+
+
+def test_out_naming_a_file_is_bad_input(tmp_path, capsys, scene_tif):
+    path, _, _ = scene_tif
+    taken = tmp_path / "taken"
+    taken.write_text("a file", encoding="utf-8")
+    code, _, err = run(capsys, "segment", path, "--out", taken)
+    assert code == 2 and "is a file, not a folder" in err
+    assert taken.read_text(encoding="utf-8") == "a file"
 
 
 def test_console_script_in_a_subprocess(tmp_path, scene_tif):
@@ -342,7 +390,7 @@ def test_demo_unknown_scene_lists_the_available_ones(tmp_path, capsys, toy_sampl
 )
 def test_demo_on_the_bundled_leaves_scene(tmp_path, capsys):
     out = tmp_path / "demo"
-    code, stdout, err = run(capsys, "demo", "--out", out, "--degree", "4", "--unsupervised")
+    code, stdout, err = run(capsys, "demo", "--out", out, "--unsupervised")
     assert code == 0, err
     assert set(os.listdir(out)) == CONTRACT | {"overview.png"}
     assert "bundled strokes" not in stdout
@@ -482,7 +530,7 @@ BAD_INPUTS = {
         "f_150.png: frame is 20 x 31 pixels but f_0.png is 20 x 30",
     ),
     "window larger than the image": (
-        lambda t: [_stack_file(t), "--window", "80"],
+        lambda t: [_stack_file(t), "--method", "thesis", "--window", "80"],
         "window size 80 is larger than the image (57 x 63 pixels)",
     ),
     "window leaving one block": (
@@ -588,9 +636,10 @@ def test_unwritable_output_is_exit_code_1(tmp_path, capsys, scene_tif):
     path, _, _ = scene_tif
     blocker = tmp_path / "file"
     blocker.write_text("not a folder")
-    code, _, err = run(capsys, "segment", path, "--out", blocker, *FAST)
+    inside = blocker / "out"  # a folder that cannot be made: its parent is a file
+    code, _, err = run(capsys, "segment", path, "--out", inside, *FAST)
     assert code == 1
-    assert len(err.splitlines()) == 1 and err.startswith(f"polarseg: error: cannot write {blocker}")
+    assert len(err.splitlines()) == 1 and err.startswith(f"polarseg: error: cannot write {inside}")
     assert blocker.read_text() == "not a folder"
 
 
@@ -614,7 +663,16 @@ def test_segment_with_scribbles_and_ground_truth(tmp_path, capsys, scene_tif):
     skio.imsave(gt, truth.astype(np.uint8), check_contrast=False)
     out = tmp_path / "out"
     code, stdout, err = run(
-        capsys, "segment", path, "--out", out, *FAST, "--scribbles", scribbles, "--ground-truth", gt
+        capsys,
+        "segment",
+        path,
+        "--out",
+        out,
+        *FAST_INPUTS,
+        "--scribbles",
+        scribbles,
+        "--ground-truth",
+        gt,
     )
     assert code == 0, err
     assert set(os.listdir(out)) == CONTRACT | {
@@ -667,7 +725,7 @@ def test_saved_classifier_applies_to_another_stack_without_retraining(tmp_path, 
         path,
         "--out",
         tmp_path / "a",
-        *FAST,
+        *FAST_INPUTS,
         "--scribbles",
         scribbles,
         "--save-classifier",
@@ -679,7 +737,7 @@ def test_saved_classifier_applies_to_another_stack_without_retraining(tmp_path, 
     # the strokes the walk started from (issue 23: a loaded classifier walks from its
     # probabilities alone), so they agree on nearly every pixel
     code, stdout, err = run(
-        capsys, "segment", path, "--out", tmp_path / "b", *FAST, "--classifier", clf
+        capsys, "segment", path, "--out", tmp_path / "b", *FAST_INPUTS, "--classifier", clf
     )
     assert code == 0, err and "not retrained" in stdout
     trained, applied = (read_tif(tmp_path / d / "labels.tif") for d in ("a", "b"))
@@ -693,7 +751,7 @@ def test_saved_classifier_applies_to_another_stack_without_retraining(tmp_path, 
     other = tmp_path / "mirrored.tif"
     pio.write_stack_tiff(other, read_tif(path)[..., ::-1].copy(), ANGLES)
     code, _, err = run(
-        capsys, "segment", other, "--out", tmp_path / "c", *FAST, "--classifier", clf
+        capsys, "segment", other, "--out", tmp_path / "c", *FAST_INPUTS, "--classifier", clf
     )
     assert code == 0, err
     labels = read_tif(tmp_path / "c" / "labels.tif")
@@ -703,11 +761,13 @@ def test_saved_classifier_applies_to_another_stack_without_retraining(tmp_path, 
     data = bytearray(clf.read_bytes())
     data[len(data) // 2] ^= 0xFF
     bad.write_bytes(bytes(data))
-    code, _, err = run(capsys, "segment", path, "--out", tmp_path / "d", *FAST, "--classifier", bad)
+    code, _, err = run(
+        capsys, "segment", path, "--out", tmp_path / "d", *FAST_INPUTS, "--classifier", bad
+    )
     assert code == 2 and len(err.strip().splitlines()) == 1 and "bad.polarseg-clf" in err
     assert not (tmp_path / "d").exists()
     code, _, err = run(
-        capsys, "segment", path, "--out", tmp_path / "e", *FAST, "--save-classifier", clf
+        capsys, "segment", path, "--out", tmp_path / "e", *FAST_INPUTS, "--save-classifier", clf
     )
     assert code == 2 and "--save-classifier needs --scribbles" in err
 
@@ -802,7 +862,7 @@ def test_bad_scribbles_or_ground_truth_one_line_error(tmp_path, capsys, case, sc
     out.mkdir()
     good = b"a good labels.tif from an earlier run"
     (out / "labels.tif").write_bytes(good)
-    code, stdout, err = run(capsys, "segment", path, "--out", out, *FAST, *extra)
+    code, stdout, err = run(capsys, "segment", path, "--out", out, *FAST_INPUTS, *extra)
     assert code == 2, err
     lines = err.splitlines()
     assert len(lines) == 1, err

@@ -5,34 +5,44 @@ from __future__ import annotations
 import pytest
 
 from napari_polarseg import cli
-from napari_polarseg.engine.params import PARAM_SPECS, PRESETS
+from napari_polarseg.engine.params import PARAM_SPECS, PRESETS, all_param_specs
 
 
 def _subparser(name):
     return cli.build_parser()._subparsers._group_actions[0].choices[name]
 
 
+def _table() -> dict[str, tuple[str | None, object]]:
+    """flag -> (method or None for a shared parameter, spec) of every parameter flag."""
+    table = {spec.flag: (None, spec) for spec in PARAM_SPECS.values()}
+    for method, specs in all_param_specs().items():
+        table.update({spec.flag: (method, spec) for spec in specs.values()})
+    return table
+
+
 def _flag_helps(name):
     """flag -> help text of the parameter flags of subcommand ``name``."""
     actions = _subparser(name)._actions
-    flags = {spec.flag for spec in PARAM_SPECS.values()}
-    return {s: a.help for a in actions for s in a.option_strings[:1] if s in flags}
+    flags = _table()
+    return {s: (a.dest, a.help) for a in actions for s in a.option_strings[:1] if s in flags}
 
 
 @pytest.mark.parametrize("command", ["segment", "demo", "batch", "sweep", "timeseries"])
 def test_every_parameter_flag_shows_the_value_a_run_without_it_uses(command):
     preset = _subparser(command).get_default("preset")
-    used = PRESETS[preset].to_dict()
+    params = PRESETS[preset]
     helps = _flag_helps(command)
-    # the block-graph commands (sweep, timeseries) run the thesis method: no --method
-    block = command in ("sweep", "timeseries")
-    specs = {k: v for k, v in PARAM_SPECS.items() if not (block and k == "method")}
+    # the time series cuts the block graph of the days itself: no --method
+    block = command == "timeseries"
+    table = {f: v for f, v in _table().items() if not (block and f == "--method")}
     if command == "timeseries":
         del helps["--method"]  # its own option: how the days are compared
-    assert set(helps) == {spec.flag for spec in specs.values()}
-    for name, spec in specs.items():
-        value = "none" if used[name] is None else str(used[name])
-        assert helps[spec.flag].endswith(f"[default: preset {preset}'s {value}]"), spec.flag
+    assert set(helps) == set(table)
+    for flag, (method, _) in table.items():
+        name, text = helps[flag]
+        value = getattr(params if method is None else params.params_of(method), name)
+        value = "none" if value is None else str(value)
+        assert text.endswith(f"[default: preset {preset}'s {value}]"), flag
 
 
 def test_segment_help_shows_preset_auto_not_the_thesis():

@@ -9,7 +9,8 @@ import pytest
 
 from napari_polarseg import cli
 from napari_polarseg.cli.arguments import UsageError
-from napari_polarseg.engine.params import PARAM_SPECS, ParamSpec
+from napari_polarseg.cli.options import method_options
+from napari_polarseg.engine.params import PARAM_SPECS, ParamSpec, all_param_specs
 
 # today's option list of `polarseg segment` (recorded before the flags came from the table)
 SEGMENT_FLAGS = (
@@ -44,11 +45,16 @@ def test_todays_segment_flags_all_exist() -> None:
 
 def test_flags_take_the_field_types_and_help_from_the_table() -> None:
     options = cli.param_options()
-    assert options["window"][1]["type"] is int and options["scale"][1]["type"] is float
-    assert options["ncut_threshold"][1]["type"]("none") == "none"
+    assert options["n_segments"][1]["type"]("4") == 4
+    assert options["refractive_index"][1]["type"] is float
     assert options["model"][1]["choices"] == PARAM_SPECS["model"].choices
-    assert options["window"][1]["help"] == PARAM_SPECS["window"].help
     assert json.dumps(list(options)) == json.dumps(list(PARAM_SPECS))
+    # a method's own flags come from its own table (the thesis method's ThesisParams)
+    thesis, specs = method_options()["thesis"], all_param_specs()["thesis"]
+    assert thesis["window"][1]["type"] is int and thesis["scale"][1]["type"] is float
+    assert thesis["ncut_threshold"][1]["type"]("none") == "none"
+    assert thesis["window"][1]["help"] == specs["window"].help
+    assert list(thesis) == list(specs)
     assert Path(cli.__file__).is_file()
 
 

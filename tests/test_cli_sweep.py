@@ -179,7 +179,8 @@ def test_sweep_without_ground_truth_has_no_ari(scene, tmp_path, capsys):
     assert summary["windows"] == [7, 10]
     assert all(c["ari"] is None for c in summary["cells"])
     assert summary["best"]["by"] == "combined"
-    assert summary["base_params"]["features"] == "zonal"  # sweep starts from 'recommended'
+    thesis = summary["base_params"]["method_params"]["thesis"]
+    assert thesis["features"] == "zonal"  # sweep starts from 'recommended'
     assert "ARI" not in stdout.splitlines()[0]
 
 

@@ -16,8 +16,8 @@ from skimage import io as skio
 from napari_polarseg import cli
 from napari_polarseg import io as pio
 from napari_polarseg.engine import SegmentParams
-from napari_polarseg.engine.analysis.pixel_classifier import ClassifierParams
-from napari_polarseg.engine.analysis.pixel_segmentation import PixelSegmenter
+from napari_polarseg.engine.classifier.pixel_classifier import ClassifierParams
+from napari_polarseg.engine.classifier.pixel_segmentation import PixelSegmenter
 from napari_polarseg.engine.errors import PolarsegError
 from napari_polarseg.engine.physics.colour_mosaic import (
     BAYER_ORDERS,

@@ -18,7 +18,7 @@ from napari_polarseg import cli
 from napari_polarseg import io as pio
 from napari_polarseg.engine import Pipeline, PolarsegError, SegmentParams
 from napari_polarseg.engine.analysis.evaluation import evaluate
-from napari_polarseg.engine.analysis.scribbles import scribble_result
+from napari_polarseg.engine.classifier.scribbles import scribble_result
 from napari_polarseg.engine.synthetic.scenes import make_scene
 from napari_polarseg.io import read_params_dict
 from napari_polarseg.outputs import OutputError, write_result_folder

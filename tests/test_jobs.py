@@ -42,7 +42,7 @@ def test_segment_to_folder_writes_the_contract_files(tmp_path: Path) -> None:
 
 def test_a_degenerate_input_returns_the_message_as_data(tmp_path: Path, capsys) -> None:
     done = jobs.segment_to_folder(
-        SAMPLES / "camouflage.npz", tmp_path / "out", SegmentParams(n_segments=2)
+        SAMPLES / "camouflage.npz", tmp_path / "out", SegmentParams(method="thesis", n_segments=2)
     )
     assert done.degenerate is not None
     assert done.degenerate.startswith("polarseg: warning: degenerate result: one segment holds")
@@ -113,7 +113,7 @@ def test_batch_scene_log_is_the_jobs_messages(tmp_path: Path) -> None:
     result = batch.run_batch(
         [SAMPLES / "camouflage.npz"],
         tmp_path / "out",
-        SegmentParams(n_segments=2),
+        SegmentParams(method="thesis", n_segments=2),  # the thesis cut: degenerate here
         scheduler="inline",
     )
     (row,) = result.records

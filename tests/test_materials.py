@@ -19,7 +19,7 @@ from test_pixel_classifier import ANGLES, NO_SMOOTHING, PIXEL_ONLY, planted_scen
 from napari_polarseg.classifier_file import load_pixel_classifier, save_pixel_classifier
 from napari_polarseg.engine import Pipeline, PolarsegError, SegmentParams
 from napari_polarseg.engine.analysis import plots
-from napari_polarseg.engine.analysis.pixel_segmentation import PixelSegmenter
+from napari_polarseg.engine.classifier.pixel_segmentation import PixelSegmenter
 from napari_polarseg.engine.materials import Materials, display_values, file_values
 from napari_polarseg.outputs import overview_figure, write_result_folder
 from napari_polarseg.outputs.figures import scatter_figure

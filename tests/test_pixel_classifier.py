@@ -6,7 +6,7 @@ from scipy import ndimage
 from sklearn.metrics import adjusted_rand_score
 
 from napari_polarseg.engine import Pipeline, SegmentParams
-from napari_polarseg.engine.analysis.pixel_classifier import (
+from napari_polarseg.engine.classifier.pixel_classifier import (
     ClassifierParams,
     PixelClassifier,
     guided_filter,
@@ -15,7 +15,7 @@ from napari_polarseg.engine.analysis.pixel_classifier import (
     train_pixel_classifier,
     training_pixels,
 )
-from napari_polarseg.engine.analysis.pixel_segmentation import PixelSegmenter
+from napari_polarseg.engine.classifier.pixel_segmentation import PixelSegmenter
 from napari_polarseg.engine.errors import Cancelled, PolarsegError
 from napari_polarseg.engine.features.pixel_features import PixelFeatureParams, pixel_features
 

@@ -128,7 +128,8 @@ def test_error_table_decreases_with_degree(result):
 
 
 def test_save_plots_writes_non_empty_pngs(result, tmp_path):
-    from napari_polarseg.outputs.figures import PLOT_FILES, save_plots
+    from napari_polarseg.outputs import PLOT_FILES
+    from napari_polarseg.outputs.figures import save_plots
 
     paths = save_plots(result, tmp_path / "plots", degrees=(2, 6), windows=[10], dpi=50)
     assert set(paths) == set(PLOT_FILES)

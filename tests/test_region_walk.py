@@ -14,8 +14,8 @@ from sklearn.metrics import adjusted_rand_score
 
 from napari_polarseg import io as pio
 from napari_polarseg.engine import Pipeline, ScribbleSession
-from napari_polarseg.engine.analysis.pixel_classifier import ClassifierParams
-from napari_polarseg.engine.analysis.region_walk import node_seeds, region_graph, walk
+from napari_polarseg.engine.classifier.pixel_classifier import ClassifierParams
+from napari_polarseg.engine.classifier.region_walk import node_seeds, region_graph, walk
 from napari_polarseg.engine.features.superpixels import polarisation_superpixels, superpixel_edges
 from napari_polarseg.truth import TRUTH_DIR, read_truth_file, real_frame_path
 

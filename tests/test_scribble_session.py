@@ -12,7 +12,7 @@ from napari_polarseg.engine import (
     PolarsegError,
     ScribbleSession,
 )
-from napari_polarseg.engine.analysis.refined_prediction import (
+from napari_polarseg.engine.classifier.refined_prediction import (
     border_cells,
     grid_probabilities,
     refined_probabilities,
@@ -76,10 +76,11 @@ def test_probabilities_and_uncertainty(session):
 
 
 def test_save_load_predicts_the_same(scene, session, tmp_path):
-    from napari_polarseg.classifier_file import load_pixel_classifier
+    from napari_polarseg.classifier_file import load_pixel_classifier, save_pixel_classifier
 
     s, _ = scene
-    path = session.save(tmp_path / "loop.polarseg-clf")
+    path = tmp_path / "loop.polarseg-clf"
+    save_pixel_classifier(path, session.classifier)
     loaded = load_pixel_classifier(path)
     other = ScribbleSession(s.stack, ANGLES)
     other.use(loaded)
@@ -94,11 +95,12 @@ def test_save_load_predicts_the_same(scene, session, tmp_path):
     assert np.mean(other.labels == session.labels) > 0.9
 
 
-def test_nothing_to_save_or_show_before_an_update(scene, tmp_path):
+def test_nothing_to_save_or_show_before_an_update(scene):
     s, _ = scene
     session = ScribbleSession(s.stack, ANGLES)
+    assert session.classifier is None
     with pytest.raises(PolarsegError, match="no classifier yet"):
-        session.save(tmp_path / "x.polarseg-clf")
+        session.preview()
     with pytest.raises(PolarsegError, match="nothing predicted"):
         session.labels  # noqa: B018
 
@@ -145,7 +147,7 @@ def test_sampled_training_pixels_are_said(scene):
 
 
 def test_plane_by_plane_reductions_match_numpy():
-    from napari_polarseg.engine.analysis.pixel_classifier import (
+    from napari_polarseg.engine.classifier.pixel_classifier import (
         margin_uncertainty,
         most_probable,
     )

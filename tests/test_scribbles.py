@@ -9,7 +9,7 @@ import pytest
 
 from napari_polarseg.engine import Pipeline
 from napari_polarseg.engine.analysis.evaluation import adjusted_rand_index
-from napari_polarseg.engine.analysis.scribbles import (
+from napari_polarseg.engine.classifier.scribbles import (
     classify_blocks,
     scribble_result,
     scribble_segmentation,

@@ -6,8 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from napari_polarseg.engine.analysis.scribbles_from_labels import scribbles_from_labels
-from napari_polarseg.engine.analysis.suggestion import (
+from napari_polarseg.engine.classifier.scribbles_from_labels import scribbles_from_labels
+from napari_polarseg.engine.classifier.suggestion import (
     SuggestionParams,
     paint_here_next,
 )

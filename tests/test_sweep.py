@@ -33,7 +33,7 @@ from napari_polarseg.engine.params import RECOMMENDED
 from napari_polarseg.engine.synthetic.scenes import make_scene
 
 ANGLES = np.deg2rad(np.arange(0.0, 180.0, 30.0))
-BASE = SegmentParams(n_segments=2)
+BASE = SegmentParams(method="thesis", n_segments=2)
 WINDOWS = (7, 10, 64)  # 10 matches the domes; 64 is wider than the image
 DEGREES = (2, 4)
 

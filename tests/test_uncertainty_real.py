@@ -17,7 +17,7 @@ from sklearn.metrics import roc_auc_score
 
 from napari_polarseg import io as pio
 from napari_polarseg.engine import Pipeline
-from napari_polarseg.engine.analysis.pixel_segmentation import PixelSegmenter
+from napari_polarseg.engine.classifier.pixel_segmentation import PixelSegmenter
 from napari_polarseg.truth import read_truth_file, real_frame_path, truth_files
 
 REAL_DIR = (

@@ -5,7 +5,7 @@ static checks loading makes; :func:`load_classifier` and :func:`describe_classif
 read one through :func:`~napari_polarseg.classifier_file.reader.read_classifier_file`
 (never any code from the file); :func:`save_pixel_classifier` and
 :func:`load_pixel_classifier` do the same for a
-:class:`~napari_polarseg.engine.analysis.pixel_classifier.PixelClassifier`.
+:class:`~napari_polarseg.engine.classifier.pixel_classifier.PixelClassifier`.
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ import skops.io as sio
 from sklearn.ensemble import ExtraTreesClassifier, RandomForestClassifier
 
 from .. import __version__
-from ..engine.analysis.pixel_classifier import PixelClassifier
+from ..engine.classifier.pixel_classifier import PixelClassifier
 from ..engine.errors import PolarsegError
 from ..io import atomic_output
 from .format import (
@@ -176,9 +176,9 @@ def describe_classifier(path: PathLike) -> str:
 
 
 def save_pixel_classifier(path: PathLike, classifier: PixelClassifier) -> None:
-    """Write a trained :class:`~napari_polarseg.engine.analysis.pixel_classifier.PixelClassifier`.
+    """Write a trained :class:`~napari_polarseg.engine.classifier.pixel_classifier.PixelClassifier`.
 
-    Its :meth:`~napari_polarseg.engine.analysis.pixel_classifier.PixelClassifier.metadata`
+    Its :meth:`~napari_polarseg.engine.classifier.pixel_classifier.PixelClassifier.metadata`
     (classes, feature names and parameters, training summary) is the file's metadata,
     with the package and format versions of :func:`classifier_metadata`.
     """

@@ -7,6 +7,7 @@ The argument types turn one command-line word into a value or raise
 from __future__ import annotations
 
 import argparse
+import os
 from collections.abc import Callable
 from typing import Any
 
@@ -96,6 +97,14 @@ def gib_arg(text: str) -> float:
             f"expected a positive amount of memory (GiB, or with a unit: 20G, 512M), got {text!r}"
         )
     return value
+
+
+def out_folder_arg(text: str) -> str:
+    """An output folder: a path that is a folder or does not exist yet (an existing file
+    is bad input, exit 2, before anything is computed)."""
+    if os.path.exists(text) and not os.path.isdir(text):
+        raise argparse.ArgumentTypeError(f"{text!r} is a file, not a folder")
+    return text
 
 
 def threshold_arg(text: str) -> float | str:

@@ -12,7 +12,7 @@ import numpy as np
 from .. import io as pio
 from ..engine.errors import PolarsegError
 from ..engine.params import DEFAULT_PRESET, ParamSpec
-from .arguments import PROG
+from .arguments import PROG, out_folder_arg
 from .options import add_param_options, add_plots_option
 from .running import params_from_args, segment_data, status_line
 
@@ -34,7 +34,12 @@ def add_parser(sub: Any, specs: dict[str, ParamSpec] | None = None) -> None:
         "truth. The number of segments defaults to the ground truth's.",
     )
     demo.add_argument(
-        "-o", "--out", default=DEFAULT_DEMO_OUT, metavar="DIR", help=f"[./{DEFAULT_DEMO_OUT}]"
+        "-o",
+        "--out",
+        default=DEFAULT_DEMO_OUT,
+        metavar="DIR",
+        type=out_folder_arg,
+        help=f"[./{DEFAULT_DEMO_OUT}]",
     )
     demo.add_argument("--scene", default=DEFAULT_SCENE, help=f"bundled scene [{DEFAULT_SCENE}]")
     demo.add_argument(

@@ -1,7 +1,8 @@
 """Options that several ``polarseg`` subcommands share.
 
-The segmentation flags are made from the parameter table
-(:data:`napari_polarseg.engine.params.PARAM_SPECS`), the reading flags from the reading
+The segmentation flags are made from the parameter tables: the shared one
+(:data:`napari_polarseg.engine.params.PARAM_SPECS`) and each registered method's own, in
+one ``--help`` group per method (:func:`add_method_options`); the reading flags from the reading
 options' specs (:func:`napari_polarseg.io.read_specs`, :func:`add_read_options`); the
 plots and INPUT/--out options are added by one function each, so every subcommand spells
 them alike.
@@ -10,10 +11,12 @@ them alike.
 from __future__ import annotations
 
 import argparse
-import typing
 from collections.abc import Callable, Sequence
 from typing import Any
 
+from ..engine.method_params import params_class
+from ..engine.methods import get_method
+from ..engine.param_spec import types_of
 from ..engine.params import (
     DEFAULT_PRESET,
     PARAM_SPECS,
@@ -21,7 +24,9 @@ from ..engine.params import (
     PRESETS,
     ParamSpec,
     SegmentParams,
+    all_param_specs,
 )
+from ..engine.registered import METHOD_CHOICES, computes_block_maps
 from ..io import ReadOptions, read_specs
 from .arguments import (
     angles_arg,
@@ -30,6 +35,7 @@ from .arguments import (
     gib_arg,
     level_arg,
     number_arg,
+    out_folder_arg,
     threshold_arg,
     worded_arg,
 )
@@ -41,22 +47,19 @@ BLOCK_PRESETS = ("thesis", "recommended")
 STACK_INPUT_HELP = "TIFF, .npz/.npy, folder, raw frame, or several frame files (one per angle)"
 
 
-def _field_types() -> dict[str, Any]:
-    """The resolved type of every SegmentParams field."""
-    return typing.get_type_hints(SegmentParams)
-
-
 def param_options(
     specs: dict[str, ParamSpec] | None = None,
+    types: dict[str, Any] | None = None,
 ) -> dict[str, tuple[str, dict[str, Any]]]:
-    """SegmentParams field -> (flag, argparse keywords), made from the parameter table.
+    """Parameter name -> (flag, argparse keywords), made from a parameter table.
 
-    The type comes from the field's type (int, float; str for a field the table has but
-    SegmentParams has not); an ``optional`` spec takes the ``none``-accepting threshold
-    parser; a spec with choices gets them instead of a type; the help is the spec's.
+    The type comes from ``types`` (default: the shared SegmentParams fields' types; int,
+    float; str for a name it lacks); an ``optional`` spec takes the ``none``-accepting
+    threshold parser; a spec with choices gets them instead of a type; the help is the
+    spec's.
     """
     specs = PARAM_SPECS if specs is None else specs
-    types = _field_types()
+    types = types_of(SegmentParams) if types is None else types
     options: dict[str, tuple[str, dict[str, Any]]] = {}
     for name, spec in specs.items():
         kwargs: dict[str, Any] = {}
@@ -75,6 +78,20 @@ def param_options(
     return options
 
 
+def method_options() -> dict[str, dict[str, tuple[str, dict[str, Any]]]]:
+    """Each registered method's own flags (:func:`param_options` of its parameter
+    table), by method name, in registration order; a flag two methods declare is listed
+    under the first."""
+    seen: set[str] = set()
+    out: dict[str, dict[str, tuple[str, dict[str, Any]]]] = {}
+    for method, specs in all_param_specs().items():
+        types = types_of(params_class(method))
+        options = param_options(specs, types)
+        out[method] = {name: opt for name, opt in options.items() if opt[0] not in seen}
+        seen |= {flag for flag, _ in options.values()}
+    return out
+
+
 def _preset_help(presets: Sequence[str]) -> str:
     """What each of ``presets`` is, for --help."""
     return "; ".join(f"{name}: {PRESET_HELP[name]}" for name in presets)
@@ -90,8 +107,10 @@ def add_param_options(
     preset: str = DEFAULT_PRESET,
     presets: tuple[str, ...] = tuple(PRESETS),
     specs: dict[str, ParamSpec] | None = None,
+    method_flag: bool | None = None,
 ) -> None:
-    """Add --preset, --params, the flags of ``specs``, --overview and -v/-q to ``parser``.
+    """Add --preset, --params, the flags of ``specs`` and of every method's own
+    parameters, --overview and -v/-q to ``parser``.
 
     Parameters
     ----------
@@ -103,9 +122,13 @@ def add_param_options(
         The choices of --preset.
     specs
         The parameter table (default: :data:`PARAM_SPECS`).
+    method_flag
+        Offer --method (default: unless ``presets`` are :data:`BLOCK_PRESETS`).
     """
     defaults = PRESETS[preset].to_dict()
-    if presets == BLOCK_PRESETS:  # the block-graph commands run the thesis method only
+    if method_flag is None:
+        method_flag = presets != BLOCK_PRESETS
+    if not method_flag:  # a block-graph command that runs the thesis method only
         specs = {
             k: v for k, v in (PARAM_SPECS if specs is None else specs).items() if k != "method"
         }
@@ -130,6 +153,7 @@ def add_param_options(
         used = _flag_value(defaults.get(name))
         kwargs["help"] = f"{kwargs['help']} [default: preset {preset}'s {used}]".replace("%", "%%")
         group.add_argument(flag, dest=name, default=None, **kwargs)
+    add_method_options(parser, preset)
     parser.add_argument(
         "--overview", action="store_true", help="also write overview.png (matplotlib figure)"
     )
@@ -146,11 +170,39 @@ def add_param_options(
     )
 
 
+def add_method_options(parser: argparse.ArgumentParser, preset: str = DEFAULT_PRESET) -> None:
+    """Add one argument group per registered method to ``parser``: its own flags
+    (:func:`method_options`), with the value preset ``preset`` gives each, or the shared
+    flags it reads when it has none of its own."""
+    base = PRESETS[preset]
+    options_by_method = method_options()
+    for method in dict.fromkeys([*METHOD_CHOICES, *options_by_method]):
+        options = options_by_method.get(method, {})
+        if options:
+            also = " and by the thesis maps of any method" if computes_block_maps(method) else ""
+            what = f"read by --method {method}{also}; another method warns it does not read them"
+        else:
+            reads = [PARAM_SPECS[n].flag for n in get_method(method).reads if n in PARAM_SPECS]
+            what = "no parameters of its own; it reads " + (", ".join(reads) or "none")
+        group = parser.add_argument_group(
+            f"method {method} ({METHOD_CHOICES.get(method, method)})", what
+        )
+        values = base.params_of(method)
+        for name, (flag, kwargs) in options.items():
+            kwargs = dict(kwargs)
+            used = _flag_value(getattr(values, name))
+            help_text = f"{kwargs['help']} [default: preset {preset}'s {used}]"
+            kwargs["help"] = help_text.replace("%", "%%")
+            group.add_argument(flag, dest=name, default=None, **kwargs)
+
+
 def add_inputs_and_out(parser: argparse.ArgumentParser, inputs_help: str) -> None:
     """Add the positional INPUT (one or more, help ``inputs_help``) and the required
     -o/--out folder, the first two arguments of every command that writes a folder."""
     parser.add_argument("input", metavar="INPUT", nargs="+", help=inputs_help)
-    parser.add_argument("-o", "--out", required=True, metavar="DIR", help="output folder")
+    parser.add_argument(
+        "-o", "--out", required=True, metavar="DIR", type=out_folder_arg, help="output folder"
+    )
 
 
 #: The reading options of the commands that read one INPUT per stack, scene or day

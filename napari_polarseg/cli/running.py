@@ -15,28 +15,74 @@ from typing import Any
 from .. import io as pio
 from .. import jobs
 from ..engine.errors import PolarsegError
-from ..engine.params import PARAM_SPECS, PRESETS, SegmentParams
+from ..engine.method_params import owner_of
+from ..engine.methods import get_method, method_names
+from ..engine.params import PARAM_SPECS, PRESETS, SegmentParams, method_param_specs
+from ..engine.registered import computes_block_maps
 from ..status_line import StatusLine
 from .arguments import PROG
+from .options import method_options
 
 
-def params_from_args(args: argparse.Namespace, base: dict[str, Any] | None = None) -> SegmentParams:
-    """SegmentParams from ``base``, then ``--params``, then explicit flags (validated)."""
-    values: dict[str, Any] = PRESETS[getattr(args, "preset", "auto")].to_dict()
-    values.update(base or {})
+def params_from_args(
+    args: argparse.Namespace, base: dict[str, Any] | None = None, maps: bool | None = None
+) -> SegmentParams:
+    """SegmentParams from ``base``, then ``--params``, then explicit flags (validated).
+
+    A method's own flag given while another method runs is set all the same (the thesis
+    maps read the thesis method's) and named in a one-line warning on stderr
+    (:func:`unread_flags`; ``maps``: the run computes the thesis maps, default: as
+    ``--thesis-maps`` and ``--plots`` say).
+    """
+    params = PRESETS[getattr(args, "preset", "auto")]
     source = "parameters"
-    if args.params:
-        source = args.params
-        values.update(pio.read_params_dict(args.params))
     try:
-        params = SegmentParams.from_dict(values)
+        params = params.updated(base or {})
+        if args.params:
+            source = args.params
+            params = params.updated(pio.read_params_dict(args.params))
     except PolarsegError as exc:
         raise PolarsegError(f"{source}: {exc}") from None
     except TypeError as exc:
         raise PolarsegError(f"{source}: a parameter has the wrong type ({exc})") from None
-    changes = {name: getattr(args, name, None) for name in PARAM_SPECS}
+    names = [*PARAM_SPECS, *(n for options in method_options().values() for n in options)]
+    changes = {name: getattr(args, name, None) for name in names}
     changes = {k: (None if v == "none" else v) for k, v in changes.items() if v is not None}
-    return params.replace(**changes)
+    params = params.replace(**changes)
+    if maps is None:
+        maps = bool(getattr(args, "thesis_maps", False) or getattr(args, "plots", False))
+    for line in unread_flags(params, [n for n in changes if n not in PARAM_SPECS], args, maps):
+        print(f"{PROG}: warning: {line}", file=sys.stderr)
+    return params
+
+
+def running_method(params: SegmentParams, args: argparse.Namespace) -> str:
+    """The method a run of ``args`` uses: the one that takes the given inputs (--scribbles,
+    --classifier), else ``params.method``."""
+    given = {k for k in ("scribbles", "classifier") if getattr(args, k, None)}
+    for name in method_names():
+        if given & set(get_method(name).inputs):
+            return name
+    return params.method
+
+
+def unread_flags(
+    params: SegmentParams, names: Sequence[str], args: argparse.Namespace, maps: bool
+) -> list[str]:
+    """One line for each method flag of ``names`` that the running method does not read
+    (a flag of a method that computes the thesis maps is read when ``maps``)."""
+    method = running_method(params, args)
+    lines = []
+    for name in names:
+        owner = owner_of(name, method)
+        if owner == method or owner is None or (maps and computes_block_maps(owner)):
+            continue
+        flag = method_param_specs(owner)[name].flag
+        lines.append(
+            f"method {method} does not read {flag} (a parameter of method {owner}); "
+            "its labels are the same without it"
+        )
+    return lines
 
 
 def progress_report(verbose: bool, status: StatusLine | None = None) -> jobs.Progress | None:

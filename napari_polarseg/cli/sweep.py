@@ -1,5 +1,7 @@
-"""``polarseg sweep``: segment one stack over a grid of w, L and n, score every cell and
-write the sweep folder (:mod:`napari_polarseg.outputs.sweep_folder`)."""
+"""``polarseg sweep``: segment one stack over a grid of w, L and n (the thesis method's
+block grid) or, with ``--vary``, of the chosen method's own parameters
+(:mod:`.method_sweep`), score every cell and write the sweep folder
+(:mod:`napari_polarseg.outputs.sweep_folder`)."""
 
 from __future__ import annotations
 
@@ -18,10 +20,11 @@ from .. import io as pio
 from ..engine.errors import PolarsegError
 from ..engine.params import ParamSpec
 from ..engine.physics.pixel_mask import PixelMask
+from ..engine.registered import computes_block_maps
 from ..status_line import StatusLine
 from .arguments import PROG, number_list_arg
+from .method_sweep import run_param_sweep, vary_arg
 from .options import (
-    BLOCK_PRESETS,
     STACK_INPUT_HELP,
     add_input_options,
     add_inputs_and_out,
@@ -44,7 +47,8 @@ def add_parser(sub: Any, specs: dict[str, ParamSpec] | None = None) -> None:
 
     sw = sub.add_parser(
         "sweep",
-        help="segment one stack over a grid of window sizes, degrees and refractive indices",
+        help="segment one stack over a grid of window sizes, degrees and refractive "
+        "indices, or of the chosen method's own parameters (--vary)",
         description="Run the segmentation for every window size w, harmonic degree L and "
         "refractive index n of a grid (one cached pipeline), score every cell without "
         "ground truth (stability: mean adjusted Rand index with the neighbouring w and L "
@@ -52,7 +56,8 @@ def add_parser(sub: Any, specs: dict[str, ParamSpec] | None = None) -> None:
         "cuts; a combined score) and, with a ground truth, by its adjusted Rand index. "
         "Writes sweep.csv, sweep.json, sweep_heatmap.png and best_params.json (give it to "
         "'polarseg segment --params') into --out; --apply-best also segments with the best "
-        "parameters into OUT/best/.",
+        "parameters into OUT/best/. The window/degree grid is the thesis method's; "
+        "--vary NAME=V,V,... sweeps the chosen method's own parameters instead.",
     )
     add_inputs_and_out(sw, STACK_INPUT_HELP)
     sw.add_argument(
@@ -94,9 +99,20 @@ def add_parser(sub: Any, specs: dict[str, ParamSpec] | None = None) -> None:
         action="store_true",
         help="also segment with the best parameters into OUT/best/ (as 'polarseg segment')",
     )
+    sw.add_argument(
+        "--vary",
+        action="append",
+        type=vary_arg,
+        metavar="NAME=V,V,...",
+        help="sweep the chosen method's own parameters instead (repeat for more axes): "
+        "NAME is a parameter of --method (its group below) or a shared one it reads "
+        "(e.g. n_segments); every combination is scored by its stability and, with a "
+        "ground truth, its adjusted Rand index; writes sweep.csv, sweep.json and "
+        "best_params.json",
+    )
     add_input_options(sw, "stack")
     add_plots_option(sw)
-    add_param_options(sw, preset="recommended", presets=BLOCK_PRESETS, specs=specs)
+    add_param_options(sw, preset="recommended", specs=specs)
     sw.set_defaults(func=run)
 
 
@@ -138,7 +154,7 @@ def sweep_table(result: Any, best: Any = None) -> list[str]:
 
 
 @dataclass
-class _Scene:
+class SweptStack:
     """The stack a sweep runs on, read, masked and (with --register) aligned."""
 
     data: pio.StackData
@@ -150,7 +166,7 @@ class _Scene:
     truth_from: str | None
 
 
-def _read_scene(args: argparse.Namespace, status: StatusLine) -> _Scene:
+def _read_scene(args: argparse.Namespace, status: StatusLine) -> SweptStack:
     """Read INPUT and its ground truth, make the pixel mask, register if asked."""
     status.show(f"reading {Path(args.input[0]).name}")
     t0 = time.perf_counter()
@@ -173,7 +189,7 @@ def _read_scene(args: argparse.Namespace, status: StatusLine) -> _Scene:
         status.show("registering the frames")
         stack, shifts = register_stack(stack)
         mask = mask.shifted(shifts)
-    return _Scene(data, read_seconds, stack, mask, shifts, truth, truth_from)
+    return SweptStack(data, read_seconds, stack, mask, shifts, truth, truth_from)
 
 
 def _cell_progress(
@@ -193,7 +209,7 @@ def _cell_progress(
     return progress if args.verbose or status.enabled else None
 
 
-def _summary(scene: _Scene, result: Any) -> dict[str, Any]:
+def _summary(scene: SweptStack, result: Any) -> dict[str, Any]:
     """The content of ``sweep.json``."""
     return {
         "polarseg_version": __version__,
@@ -227,15 +243,23 @@ def _report(result: Any, best_cell: Any, best: Any, n_failed: int, out: Path) ->
 
 def run(args: argparse.Namespace) -> int:
     """Run ``polarseg sweep``; return the exit code (0)."""
+    from ..engine.analysis.param_sweep import sweepable
     from ..engine.analysis.sweep import sweep
     from ..outputs.sweep_folder import write_sweep_folder
 
-    params = params_from_args(args)
+    params = params_from_args(args, maps=False)
     for flag, value in (("--plots", args.plots), ("--overview", args.overview)):
         if value and not args.apply_best:
             raise PolarsegError(f"{flag} draws the best cell's segmentation: give --apply-best")
+    if not args.vary and not computes_block_maps(params.method):
+        raise PolarsegError(
+            f"the window/degree grid is the thesis method's; to sweep method {params.method}, "
+            "give --vary NAME=V,V,... (its parameters: " + ", ".join(sweepable(params)) + ")"
+        )
     status = status_line(args)
     scene = _read_scene(args, status)
+    if args.vary:
+        return run_param_sweep(args, params, scene, status)
     status.show("sweep: first cell")
     result = sweep(
         scene.stack,

@@ -130,7 +130,7 @@ def _classify_days(result: Any, days: _Days, params: SegmentParams, path: str) -
     (the same classes every day, so a label means the same material on every day; each
     labelled with its scribble value, as ``segment`` writes ``labels.tif``)."""
     from ..classifier_file import load_pixel_classifier
-    from ..engine.analysis.pixel_segmentation import PixelSegmenter
+    from ..engine.classifier.pixel_segmentation import PixelSegmenter
 
     classifier = load_pixel_classifier(path)
     labels = np.stack(

@@ -27,25 +27,26 @@ from typing import Any
 # of a method registers the built-in ones
 from . import methods as methods
 from .errors import Cancelled, PolarsegError
-from .params import PRESETS, SegmentParams
+from .params import SegmentParams
 
 #: Every public name of the engine and the module that defines it; imported on first use
 #: (PEP 562, as scikit-image does), so ``import napari_polarseg.engine`` stays light.
 PUBLIC: dict[str, str] = {
-    # analysis.pixel_classifier
-    "ClassifierParams": ".analysis.pixel_classifier",
-    "PixelClassifier": ".analysis.pixel_classifier",
-    "PixelPrediction": ".analysis.pixel_classifier",
-    "predict_pixels": ".analysis.pixel_classifier",
-    "train_pixel_classifier": ".analysis.pixel_classifier",
-    # analysis.scribble_session
-    "PredictionParams": ".analysis.scribble_session",
-    "ScribbleSession": ".analysis.scribble_session",
-    # analysis.pixel_segmentation
-    "PixelSegmentation": ".analysis.pixel_segmentation",
-    "PixelSegmenter": ".analysis.pixel_segmentation",
+    # classifier.pixel_classifier
+    "ClassifierParams": ".classifier.pixel_classifier",
+    "PixelClassifier": ".classifier.pixel_classifier",
+    "PixelPrediction": ".classifier.pixel_classifier",
+    "predict_pixels": ".classifier.pixel_classifier",
+    "train_pixel_classifier": ".classifier.pixel_classifier",
+    # classifier.scribble_session
+    "PredictionParams": ".classifier.scribble_session",
+    "ScribbleSession": ".classifier.scribble_session",
+    # classifier.pixel_segmentation
+    "PixelSegmentation": ".classifier.pixel_segmentation",
+    "PixelSegmenter": ".classifier.pixel_segmentation",
     # errors
     "Cancelled": ".errors",
+    "ClassifierInputError": ".errors",
     "PolarsegError": ".errors",
     # features.harmonics
     "block_coefficients": ".features.harmonics",
@@ -90,7 +91,7 @@ PUBLIC: dict[str, str] = {
     "register_method": ".methods",
     "segment": ".methods.scene",
     # params
-    "PRESETS": ".params",
+    "PRESETS": ".presets",
     "SegmentParams": ".params",
     # physics.colour_mosaic
     "demosaic_colour": ".physics.colour_mosaic",

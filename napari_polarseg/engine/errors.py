@@ -15,3 +15,9 @@ class PolarsegError(ValueError):
 class Cancelled(Exception):
     """A run was cancelled, between stages or inside a normalized cut (not an error of the
     input)."""
+
+
+class ClassifierInputError(PolarsegError):
+    """The scribbles cannot train the pixel classifier (e.g. fewer than two materials
+    among the valid pixels), or a given classifier does not fit the image: the user's
+    strokes or file to change, which a front end shows beside them (not as a failure)."""

@@ -1,21 +1,38 @@
-"""Parameters of the segmentation pipeline, with the thesis defaults.
+"""Parameters of a segmentation: what every method shares (:class:`SegmentParams`) and
+each method's own (:attr:`SegmentParams.method_params`, :mod:`.method_params`).
 
-Angles inside the engine are radians; the refractive index is dimensionless; window sizes
-are pixels and minimum segment sizes are blocks.
+Angles inside the engine are radians; the refractive index is dimensionless; object sizes
+are pixels. The presets (:data:`PRESETS`) are in :mod:`.presets`.
 """
 
 from __future__ import annotations
 
+import importlib
 import json
-import math
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field, fields
 from typing import Any
 
-import numpy as np
-
 from .errors import PolarsegError
-from .registered import FINDS_K_METHODS, METHOD_CHOICES
+from .method_params import (
+    MISSING_VALUE,
+    MethodParams,
+    from_values,
+    method_value,
+    owner_of,
+    params_class,
+    route,
+)
+from .param_spec import (
+    ParamSpec,
+    attribute_docs,
+    check_choice,
+    is_int,
+    is_number,
+    param_field,
+    specs_of,
+)
+from .registered import FINDS_K_METHODS, METHOD_CHOICES, METHOD_PARAMS
 
 MODELS = ("diffuse", "specular")
 SPECULAR_BRANCHES = ("below-brewster", "above-brewster")
@@ -26,117 +43,64 @@ CLUSTERING_METHODS = ("recursive", "kway")
 FIT_METHODS = ("lsq", "robust")
 AFFINITY_GRAPHS = ("auto", "dense", "sparse")
 MAX_DEGREE = 60
+#: The method of the default preset (``PRESETS["auto"]``), also ``SegmentParams().method``:
+#: the engine's default is the CLI's and the plugin's.
+DEFAULT_METHOD = "surface_superpixels"
 
-# METHOD_CHOICES (the choices of ``method``) and FINDS_K_METHODS are filled by
-# napari_polarseg.engine.methods.register_method (this module cannot import the methods,
-# which read these parameters); the built-in methods register on the first read of
-# either (.registered).
+# METHOD_CHOICES (the choices of ``method``), FINDS_K_METHODS and METHOD_PARAMS (each
+# method's parameter class) are filled by napari_polarseg.engine.methods.register_method
+# (this module cannot import the methods, which read these parameters); the built-in
+# methods register on the first read of any (.registered).
 
-
-@dataclass(frozen=True)
-class ParamSpec:
-    """How one :class:`SegmentParams` field is described, asked for and shown.
-
-    The one description of each parameter: the CLI flags (``--help``), the plugin's
-    controls (label, range, tooltip) and the class docstring are all made from it.
-
-    Attributes
-    ----------
-    help : str
-        What the parameter is, with its unit (one or more sentences).
-    flag : str
-        The CLI option, e.g. ``"--window"``.
-    metavar : str or None
-        The CLI metavar of a numeric option.
-    label : str or None
-        The plugin control's label; None: no control (the preset sets it).
-    minimum, maximum : float or None
-        The control's range (the engine's own checks are :meth:`SegmentParams.validate`).
-    step : float or None
-        The float control's step.
-    decimals : int or None
-        Decimals a float control shows.
-    choices : tuple of str or None
-        The values a menu offers.
-    choice_names : dict or None
-        Text shown in the menu for some of the choices.
-    optional : bool
-        The value may be None (the CLI takes ``none``).
-    registry : Mapping or None
-        A live mapping name → menu text whose names are the choices (the registered
-        segmentation methods); None: :attr:`choices`.
-    words : dict or None
-        Words the CLI takes for a number (``auto`` for 0 segments: find the number).
-    """
-
-    help: str
-    flag: str
-    metavar: str | None = None
-    label: str | None = None
-    minimum: float | None = None
-    maximum: float | None = None
-    step: float | None = None
-    decimals: int | None = None
-    choices: tuple[str, ...] | None = None
-    choice_names: dict[str, str] | None = None
-    optional: bool = False
-    registry: Mapping[str, str] | None = None
-    words: dict[str, int] | None = None
-
-    def options(self) -> tuple[str, ...] | None:
-        """The values a menu offers now: :attr:`choices`, or the names in
-        :attr:`registry` (a live mapping name → text, e.g. :data:`METHOD_CHOICES`)."""
-        if self.registry is not None:
-            return tuple(self.registry)
-        return self.choices
-
-    def menu(self) -> list[tuple[str, str]]:
-        """(text, value) pairs of a menu parameter, in the order of :meth:`options`."""
-        names = {**(self.choice_names or {}), **(self.registry or {})}
-        return [(names.get(c, c), c) for c in self.options() or ()]
+__all__ = [
+    "MethodParams",
+    "PARAM_SPECS",
+    "ParamSpec",
+    "SegmentParams",
+    "all_param_specs",
+    "method_param_specs",
+    "param_field",
+]
 
 
-def _param(default: Any, **spec: Any) -> Any:
-    """A dataclass field whose metadata holds its :class:`ParamSpec`."""
-    return field(default=default, metadata={"spec": ParamSpec(**spec)})
-
-
-@dataclass(frozen=True)
+@dataclass(frozen=True, init=False)
 class SegmentParams:
-    """Every tunable of the pipeline (thesis section 4.5 defaults).
+    """The parameters every segmentation method shares, and each method's own.
 
-    Each field's description, CLI flag and plugin control come from its
+    The shared fields are listed below: the method, the per-pixel polarisation fit and
+    the Fresnel normals every method's run computes (:meth:`Scene.polarisation`), the
+    number of segments and the object size. A method's own parameters (its
+    ``params_class``, e.g. the thesis method's window and degree:
+    :class:`~napari_polarseg.engine.methods.thesis.ThesisParams`) are kept by method name
+    in :attr:`method_params`; :meth:`params_of` returns them.
+
+    A method parameter may also be given and read by its name alone, as before the
+    methods had their own: ``SegmentParams(window=10)``, ``params.replace(degree=8)``,
+    ``params.window`` and a ``params.json`` with ``window`` at the top level name the
+    parameter of the chosen method when it declares it, else of the first registered
+    method that does (the thesis method for the block parameters, which the thesis maps
+    of any run read). A name no method declares raises :class:`PolarsegError`. Given
+    without ``method``, parameters that are all one method's own choose that method
+    (``SegmentParams(window=10)`` is the thesis method's, as before; a ``params.json``
+    without ``method`` likewise); without any, the method is the default one
+    (:data:`DEFAULT_METHOD`, that of preset ``auto``).
+
+    Each shared field's description, CLI flag and plugin control come from its
     :class:`ParamSpec` (:data:`PARAM_SPECS`); the attribute list below is made from them.
     """
 
-    method: str = _param(
-        "thesis",
+    method: str = param_field(
+        DEFAULT_METHOD,
         help="Segmentation method: the thesis block pipeline (thesis), edge-following "
         "superpixels clustered by their polarisation (superpixels), or any registered "
         "method (a pixel classifier runs when scribbles or a classifier are given)",
         flag="--method",
         label="method",
         registry=METHOD_CHOICES,
+        effect="Which algorithm splits the image into materials: the superpixel methods follow "
+        "object edges and are fastest; thesis works on a grid of square blocks",
     )
-    window: int = _param(
-        10,
-        help="Side w of the non-overlapping w x w pixel blocks, in pixels",
-        flag="--window",
-        metavar="W",
-        label="window size",
-        minimum=2,
-        maximum=4096,
-    )
-    degree: int = _param(
-        12,
-        help="Highest spherical-harmonic degree L; the block vector has (L+1)² entries",
-        flag="--degree",
-        metavar="L",
-        label="harmonic degree",
-        minimum=0,
-        maximum=MAX_DEGREE,
-    )
-    refractive_index: float = _param(
+    refractive_index: float = param_field(
         1.45,
         help="Assumed refractive index n > 1 for the zenith from the degree of "
         "polarisation ρ (dimensionless)",
@@ -147,93 +111,32 @@ class SegmentParams:
         maximum=3.0,
         step=0.01,
         decimals=3,
+        effect="The material's assumed refractive index (glass and most plastics about 1.5), "
+        "used to turn polarisation into surface angle; moves the segments little",
     )
-    model: str = _param(
+    model: str = param_field(
         "diffuse",
         help="Fresnel model for the zenith: diffuse (eq. 3.13, corrected) or specular (eq. 3.11)",
         flag="--model",
         label="model",
         choices=MODELS,
+        effect="Whether surfaces are taken as matte (diffuse) or shiny (specular) when "
+        "polarisation is turned into surface angle",
     )
-    specular_branch: str = _param(
+    specular_branch: str = param_field(
         "below-brewster",
         help="Which zenith solution of the specular model to take: specular ρ takes each "
         "value twice, peaking at 1 at Brewster's angle",
         flag="--specular-branch",
         label="specular branch",
         choices=SPECULAR_BRANCHES,
+        effect="Shiny surfaces only: which of the two surface angles that give the same "
+        "polarisation to take",
     )
-    coefficients: str = _param(
-        "thesis",
-        help="Block coefficient estimator: the thesis mean estimator (eq. 4.21) or a "
-        "per-block ridge least-squares fit",
-        flag="--coefficients",
-        label="coefficients",
-        choices=COEFFICIENT_METHODS,
-    )
-    ridge: float = _param(
-        1e-3,
-        help="Ridge penalty of the 'ridge' estimator, relative to the mean diagonal of the "
-        "block Gram matrix",
-        flag="--ridge",
-    )
-    features: str = _param(
-        "thesis",
-        help="Block features for the PCA: every coefficient (thesis), the "
-        "azimuth-invariant m = 0 coefficients (zonal), the energy per degree (energy), "
-        "polarisation statistics of the block: the distributions of ρ, θ and Î and "
-        "their relation (polstats), or the zonal coefficients and the statistics "
-        "together (zonal+polstats)",
-        flag="--features",
-        label="features",
-        choices=FEATURE_KINDS,
-    )
-    variance: float = _param(
-        0.95,
-        help="Share of the variance the PCA keeps, in (0, 1]",
-        flag="--variance",
-        label="PCA variance",
-        minimum=0.05,
-        maximum=1.0,
-        step=0.01,
-        decimals=3,
-    )
-    scale: float = _param(
-        1.0,
-        help="Affinity scale s in S = exp(-D / s)",
-        flag="--scale",
-        label="affinity scale",
-        minimum=0.001,
-        maximum=1e6,
-        step=0.1,
-        decimals=3,
-    )
-    scale_mode: str = _param(
-        "absolute",
-        help="absolute: s as given (thesis); median: s relative to the median squared "
-        "Mahalanobis distance between blocks, which keeps the graph connected whatever "
-        "the number of PCA components",
-        flag="--scale-mode",
-        label="scale mode",
-        choices=SCALE_MODES,
-    )
-    spatial_radius: float = _param(
-        0.0,
-        help="Radius, in blocks, of Shi & Malik's spatial term in the affinity; 0 switches "
-        "it off and connects every pair of blocks",
-        flag="--spatial-radius",
-        metavar="R",
-    )
-    spatial_sigma: float = _param(
-        2.0,
-        help="Width σ_X, in blocks, of the spatial term exp(−‖X_i − X_j‖² / σ_X²)",
-        flag="--spatial-sigma",
-        metavar="S",
-    )
-    n_segments: int = _param(
+    n_segments: int = param_field(
         3,
-        help="Number of segments the normalized cut stops at (k of the k-way clustering "
-        "and of the superpixel clustering); 0 (the CLI also takes auto) = found by the "
+        help="Number of segments k the method makes (the clusters of the superpixel "
+        "methods, where the thesis cut stops); 0 (the CLI also takes auto) = found by the "
         "method itself (only a method that can, such as valid_superpixels)",
         flag="--segments",
         metavar="K",
@@ -241,8 +144,10 @@ class SegmentParams:
         minimum=0,
         maximum=256,
         words={"auto": 0},
+        effect="How many segments (materials) the result has; 0 lets a method that can choose "
+        "the number itself",
     )
-    object_size: float = _param(
+    object_size: float = param_field(
         0.0,
         help="Typical size (diameter) of one object in pixels, as cellpose's diameter. "
         "The superpixel methods take superpixels of side size / 8 and a feature diffusion "
@@ -257,38 +162,10 @@ class SegmentParams:
         step=1,
         decimals=0,
         words={"auto": 0},
+        effect="How large one object is, in pixels across; 0 estimates it from the image. "
+        "Smaller sizes give finer superpixels that do not blur small objects together",
     )
-    ncut_threshold: float | None = _param(
-        None,
-        help="Stop splitting earlier when the best cut's Ncut value exceeds this (none: never)",
-        flag="--ncut-threshold",
-        metavar="T",
-        optional=True,
-    )
-    min_segment_blocks: int = _param(
-        1,
-        help="Smallest segment, in blocks, a cut may produce",
-        flag="--min-segment-blocks",
-        metavar="B",
-        label="min segment (blocks)",
-        minimum=1,
-        maximum=100_000,
-    )
-    clustering: str = _param(
-        "recursive",
-        help="How the thesis method splits the block graph into segments: recursive "
-        "two-way normalized cuts (thesis section 4.4.1) or k-way spectral clustering "
-        "(the first k generalized eigenvectors, rows normalised, k-means; Ng, Jordan & "
-        "Weiss 2002)",
-        flag="--clustering",
-        label="clustering",
-        choices=CLUSTERING_METHODS,
-        choice_names={
-            "recursive": "recursive two-way",
-            "kway": "k-way spectral",
-        },
-    )
-    fit: str = _param(
+    fit: str = param_field(
         "lsq",
         help="Per-pixel sinusoid fit of the polarisation image: exact linear least squares "
         "(optimal for Gaussian noise), or robust IRLS (Tukey's biweight from a trimmed "
@@ -298,22 +175,50 @@ class SegmentParams:
         label="fit",
         choices=FIT_METHODS,
         choice_names={"lsq": "least squares", "robust": "robust"},
+        effect="How each pixel's polarisation is measured from the frames: robust ignores a "
+        "frame that is off at a pixel (a glint, a moving edge) and takes longer",
     )
-    affinity_graph: str = _param(
-        "auto",
-        help="How the block affinity is stored: every pair of blocks (dense, the thesis); "
-        "the pairs within spatial_radius, or without a spatial term each block's k "
-        "nearest neighbours in feature space (sparse); sparse with a spatial term or "
-        "above 6000 blocks, else dense (auto)",
-        flag="--affinity-graph",
-        choices=AFFINITY_GRAPHS,
-    )
+    #: Each method's own parameters, by method name (:class:`MethodParams`).
+    method_params: MethodParams = field(default_factory=MethodParams)
 
-    def __post_init__(self) -> None:
+    def __init__(self, method_params: Mapping[str, Any] | None = None, **values: Any) -> None:
+        """Shared fields by name (missing: their defaults), ``method_params`` (method name
+        → its parameters: an instance of its class or a mapping) and method parameters
+        by name alone (routed to the method that declares them, see the class)."""
+        if "method" not in values and values.keys() - set(PARAM_SPECS):
+            owners = {owner_of(name, DEFAULT_METHOD) for name in values} - {None}
+            if len(owners) == 1:  # a method's own parameters and no method: that method
+                values["method"] = owners.pop()
+        shared = {}
+        for f in fields(SegmentParams):
+            if f.name != "method_params":
+                shared[f.name] = values.pop(f.name) if f.name in values else f.default
+                object.__setattr__(self, f.name, shared[f.name])
+        stored = method_params if isinstance(method_params, MethodParams) else None
+        if stored is None:
+            stored = MethodParams(method_params or {})
+        if values:
+            stored = route(str(shared["method"]), stored, values)
+        object.__setattr__(self, "method_params", stored)
         self.validate()
 
+    def __getattr__(self, name: str) -> Any:
+        """A method parameter read by its name alone (see the class)."""
+        if name.startswith("_") or name in ("method", "method_params"):
+            raise AttributeError(name)
+        value = method_value(self.method, self.method_params, name)
+        if value is MISSING_VALUE:
+            raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
+        return value
+
+    def params_of(self, method: str | None = None) -> Any:
+        """The parameters of ``method`` (default: the chosen one), an instance of its
+        ``params_class`` (its defaults unless set); None for a method without any."""
+        return self.method_params.of(self.method if method is None else method)
+
     def validate(self) -> None:
-        """Raise :class:`PolarsegError` naming the first parameter that is out of range.
+        """Raise :class:`PolarsegError` naming the first shared parameter that is out of
+        range (a method's own parameters are checked by their class).
 
         ``method`` is checked against the registered methods where it is looked up
         (:func:`napari_polarseg.engine.methods.get_method`), so that a method
@@ -321,82 +226,92 @@ class SegmentParams:
         """
         if not isinstance(self.method, str) or not self.method:
             raise PolarsegError(f"method must be a method's name, got {self.method!r}")
-        if not _is_int(self.window) or self.window < 1:
-            raise PolarsegError(f"window must be a positive integer, got {self.window!r}")
-        if not _is_int(self.degree) or not 0 <= self.degree <= MAX_DEGREE:
-            raise PolarsegError(
-                f"degree must be an integer in 0..{MAX_DEGREE}, got {self.degree!r}"
-            )
         n = self.refractive_index
-        if not _is_number(n) or n <= 1.0:
+        if not is_number(n) or n <= 1.0:
             raise PolarsegError(f"refractive index must be a finite number > 1, got {n!r}")
-        _check_choice("model", self.model, MODELS)
-        _check_choice("specular_branch", self.specular_branch, SPECULAR_BRANCHES)
-        _check_choice("coefficients", self.coefficients, COEFFICIENT_METHODS)
-        _check_choice("scale_mode", self.scale_mode, SCALE_MODES)
-        _check_choice("features", self.features, FEATURE_KINDS)
-        _check_choice("fit", self.fit, FIT_METHODS)
-        _check_choice("clustering", self.clustering, CLUSTERING_METHODS)
-        _check_choice("affinity_graph", self.affinity_graph, AFFINITY_GRAPHS)
-        if not _is_number(self.ridge) or self.ridge <= 0:
-            raise PolarsegError(f"ridge must be a positive number, got {self.ridge!r}")
-        if not _is_number(self.variance) or not 0 < self.variance <= 1:
-            raise PolarsegError(f"variance share must be in (0, 1], got {self.variance!r}")
-        if not _is_number(self.scale) or self.scale <= 0:
-            raise PolarsegError(f"affinity scale must be a positive number, got {self.scale!r}")
-        if not _is_number(self.spatial_radius) or self.spatial_radius < 0:
-            raise PolarsegError(
-                f"spatial_radius must be a number >= 0, got {self.spatial_radius!r}"
-            )
-        if not _is_number(self.spatial_sigma) or self.spatial_sigma <= 0:
-            raise PolarsegError(f"spatial_sigma must be a number > 0, got {self.spatial_sigma!r}")
-        if not _is_int(self.n_segments) or self.n_segments < 1:
+        check_choice("model", self.model, MODELS)
+        check_choice("specular_branch", self.specular_branch, SPECULAR_BRANCHES)
+        check_choice("fit", self.fit, FIT_METHODS)
+        if not is_int(self.n_segments) or self.n_segments < 1:
             # only then are the registered methods read (0: a method that finds k)
             finds_k = self.method in FINDS_K_METHODS
-            if not _is_int(self.n_segments) or self.n_segments < (0 if finds_k else 1):
+            if not is_int(self.n_segments) or self.n_segments < (0 if finds_k else 1):
                 raise PolarsegError(
                     f"number of segments must be a positive integer, got {self.n_segments!r}"
                     + ("" if finds_k else f" (0 = find it: not offered by {self.method!r})")
                 )
-        if not _is_number(self.object_size) or self.object_size < 0:
+        if not is_number(self.object_size) or self.object_size < 0:
             raise PolarsegError(
                 f"object size must be a number of pixels >= 0 (0 = auto), got {self.object_size!r}"
             )
-        if self.ncut_threshold is not None and (
-            not _is_number(self.ncut_threshold) or self.ncut_threshold <= 0
-        ):
-            raise PolarsegError(
-                f"ncut_threshold must be positive or None, got {self.ncut_threshold!r}"
-            )
-        if not _is_int(self.min_segment_blocks) or self.min_segment_blocks < 1:
-            raise PolarsegError(
-                f"min_segment_blocks must be a positive integer, got {self.min_segment_blocks!r}"
-            )
+
+    def shared_values(self) -> dict[str, Any]:
+        """The shared fields by name (without :attr:`method_params`)."""
+        return {f.name: getattr(self, f.name) for f in fields(self) if f.name != "method_params"}
+
+    def changed_names(self, other: SegmentParams) -> tuple[str, ...]:
+        """The parameters whose values differ from ``other``'s: shared field names, then
+        method parameter names (each method's own that differ, by name alone)."""
+        names = [n for n, v in self.shared_values().items() if getattr(other, n) != v]
+        for method in dict.fromkeys([*self.method_params, *other.method_params]):
+            mine, theirs = asdict(self.params_of(method)), asdict(other.params_of(method))
+            names += [n for n, v in mine.items() if theirs[n] != v and n not in names]
+        return tuple(names)
 
     def replace(self, **changes: Any) -> SegmentParams:
-        """Return a copy with some fields changed (validated)."""
-        unknown = set(changes) - {f.name for f in fields(self)}
-        if unknown:
-            raise PolarsegError(f"unknown parameter(s): {', '.join(sorted(unknown))}")
-        return SegmentParams(**{**asdict(self), **changes})
+        """Return a copy with some fields changed (validated); a method parameter may be
+        named alone (see the class)."""
+        return SegmentParams(
+            **{**self.shared_values(), "method_params": self.method_params, **changes}
+        )
 
     def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
+        """JSON-ready: the shared fields, then ``method_params``: every parameter of the
+        chosen method, and those of any other method set to other than its defaults
+        (e.g. the block parameters of the thesis maps), by method name."""
+        own: dict[str, Any] = {}
+        chosen = self.params_of()
+        if chosen is not None:
+            own[self.method] = asdict(chosen)
+        for name, values in self.method_params.items():
+            own.setdefault(name, asdict(values))
+        return {**self.shared_values(), "method_params": own}
 
-    @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> SegmentParams:
-        """Parameters from a mapping (``params.json``). A file written before the
-        methods were peers says ``clustering: "superpixels"`` for the superpixel
-        method: read as ``method: "superpixels"``."""
+    def updated(self, data: Mapping[str, Any]) -> SegmentParams:
+        """These parameters with the fields a mapping (``params.json``) gives: shared
+        fields replaced, each method's entry of ``method_params`` merged into that
+        method's parameters, and method parameters named at the top level (files written
+        before the methods had their own) routed as in the class. A file written before
+        the methods were peers says ``clustering: "superpixels"`` for the superpixel
+        method: read as ``method: "superpixels"``; one without ``method`` whose
+        parameters belong to one method is that method's."""
+        data = dict(data)
         if data.get("clustering") == "superpixels" and "method" not in data:
             data = {**data, "clustering": "recursive", "method": "superpixels"}
-        unknown = set(data) - {f.name for f in fields(cls)}
-        if unknown:
-            raise PolarsegError(f"unknown parameter(s): {', '.join(sorted(unknown))}")
-        return cls(**data)
+        given = data.pop("method_params", None) or {}
+        if not isinstance(given, Mapping):
+            raise PolarsegError("method_params must be an object (method name → parameters)")
+        shared_names = set(self.shared_values())
+        loose = {k: v for k, v in data.items() if k not in shared_names}
+        if loose and "method" not in data:
+            owners = {owner_of(name, self.method) for name in loose} - {None}
+            if len(owners) == 1 and self.method not in owners:
+                data["method"] = owners.pop()
+        items = dict(self.method_params.items())
+        for method, values in given.items():
+            if isinstance(values, Mapping) and method in items:
+                values = {**asdict(items[method]), **values}
+            items[method] = from_values(str(method), values)
+        return self.replace(method_params=MethodParams(items), **data)
 
     def to_json(self) -> str:
         return json.dumps(self.to_dict(), indent=2, sort_keys=True)
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> SegmentParams:
+        """Parameters from a mapping (``params.json``): the defaults, :meth:`updated`
+        with ``data``."""
+        return cls().updated(data)
 
     @classmethod
     def from_json(cls, text: str) -> SegmentParams:
@@ -409,56 +324,19 @@ class SegmentParams:
         return cls.from_dict(data)
 
 
-def _is_int(v: Any) -> bool:
-    return isinstance(v, (int, np.integer)) and not isinstance(v, (bool, np.bool_))
+#: The presets defined in :mod:`.presets` (they hold the thesis method's parameters, so
+#: they are made on first use: importing this module imports no method).
+LAZY_PRESETS = ("RECOMMENDED", "AUTO", "PRESETS")
 
 
-def _is_number(v: Any) -> bool:
-    return (
-        isinstance(v, (int, float, np.integer, np.floating))
-        and not isinstance(v, (bool, np.bool_))
-        and math.isfinite(float(v))
-    )
-
-
-def _check_choice(name: str, value: Any, choices: tuple[str, ...]) -> None:
-    if not isinstance(value, str) or value not in choices:
-        raise PolarsegError(f"{name} must be one of {', '.join(choices)}; got {value!r}")
-
-
-#: Parameters that beat the thesis defaults on the bundled synthetic scenes (chosen with
-#: ``benchmarks/evaluate.py --sweep``; docs/quality.md has the table).
-#: The thesis's absolute affinity scale s = 1 with 10-20 PCA components gives affinities
-#: near e^-30: the graph falls apart and the cut peels off single blocks, so the scale is
-#: relative to the median distance here; the azimuth-invariant zonal coefficients drop
-#: the surface-azimuth variation that dominates the raw coefficients; a minimum segment
-#: size stops the cut from isolating a few odd blocks.
-RECOMMENDED = SegmentParams(
-    window=12,
-    degree=8,
-    features="zonal",
-    scale=2.0,
-    scale_mode="median",
-    min_segment_blocks=4,
-)
-
-
-#: The default of ``segment``, ``demo`` and the plugin (preset ``auto``): the superpixel
-#: method on the valid pixels, k + 1 clusters merged to k across the weakest border,
-#: the node features diffused over whole surfaces (``method="surface_superpixels"``),
-#: the best unsupervised method measured on the rendered development scenes and the
-#: hand-labelled real frames together (``benchmarks/evaluate_unsupervised.py``, figures
-#: in ``docs/quality.md``; it replaced ``"valid_superpixels"``, which replaced
-#: ``"superpixels"``); the recommended block parameters give the thesis maps when
-#: asked for.
-AUTO = RECOMMENDED.replace(method="surface_superpixels")
-
-#: The named starting points of the CLI's ``--preset`` and the plugin's preset menu.
-PRESETS: dict[str, SegmentParams] = {
-    "auto": AUTO,
-    "thesis": SegmentParams(),
-    "recommended": RECOMMENDED,
-}
+def __getattr__(name: str) -> Any:
+    if name not in LAZY_PRESETS:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    # by name, on first use (PEP 562): .presets imports the thesis method, which
+    # imports this module
+    value = getattr(importlib.import_module(".presets", __package__), name)
+    globals()[name] = value  # later lookups skip this function
+    return value
 
 
 #: The preset a run starts from when none is chosen: ``segment``, ``demo``, ``batch``, the
@@ -479,23 +357,22 @@ PRESET_HELP: dict[str, str] = {
     "synthetic scenes (docs/quality.md)",
 }
 
-#: The description of every SegmentParams field, by name, in field order.
-PARAM_SPECS: dict[str, ParamSpec] = {f.name: f.metadata["spec"] for f in fields(SegmentParams)}
+#: The description of every shared SegmentParams field, by name, in field order (a
+#: method's own: :func:`method_param_specs`).
+PARAM_SPECS: dict[str, ParamSpec] = specs_of(SegmentParams)
 
 
-def _attribute_docs() -> str:
-    """The numpydoc *Attributes* section of :class:`SegmentParams`, from its specs."""
-    lines = ["", "    Attributes", "    ----------"]
-    for f in fields(SegmentParams):
-        spec = PARAM_SPECS[f.name]
-        kind = (
-            "{" + ", ".join(f'"{c}"' for c in spec.choices) + "}"
-            if spec.choices
-            else (f.type if isinstance(f.type, str) else f.type.__name__)
-        )
-        lines.append(f"    {f.name} : {kind}")
-        lines.append(f"        {spec.help} (``{spec.flag}``; thesis: {f.default!r}).")
-    return "\n".join(lines) + "\n"
+def method_param_specs(method: str) -> dict[str, ParamSpec]:
+    """The description of every parameter of the method registered as ``method``, by
+    name, in field order (empty for a method without parameters of its own)."""
+    cls = params_class(method)
+    return {} if cls is None else specs_of(cls)
 
 
-SegmentParams.__doc__ = (SegmentParams.__doc__ or "") + _attribute_docs()
+def all_param_specs() -> dict[str, dict[str, ParamSpec]]:
+    """The parameter table of every registered method that has parameters of its own,
+    by method name, in registration order."""
+    return {name: specs_of(cls) for name, cls in METHOD_PARAMS.items()}
+
+
+SegmentParams.__doc__ = (SegmentParams.__doc__ or "") + attribute_docs(SegmentParams)

@@ -57,7 +57,7 @@ class Pipeline:
     angles : array (N,)
         Polariser angles in radians.
     params : SegmentParams, optional
-        Parameters of the calls that are given none (default ``SegmentParams()``); each
+        Parameters of the calls that are given none (default ``PRESETS["thesis"]``); each
         :meth:`run`, :meth:`get`, :meth:`result`, … takes the parameters of its own run,
         and :attr:`params` is then the last run's.
     mask : array (H, W) or PixelMask, optional
@@ -94,7 +94,10 @@ class Pipeline:
     ) -> None:
         raw = stack
         self.stack, self.angles = polarimage.check_stack(stack, angles)
-        params = SegmentParams() if params is None else params
+        if params is None:  # the thesis block graph, as published
+            from .params import PRESETS
+
+            params = PRESETS["thesis"]
         if not isinstance(params, SegmentParams):
             raise PolarsegError("params must be a SegmentParams")
         self._params = params
@@ -373,17 +376,25 @@ class Pipeline:
         params: SegmentParams | None = None,
         superpixels: dict[str, Any] | None = None,
         maps: bool = True,
+        *,
+        method: str | None = None,
+        method_record: dict[str, Any] | None = None,
+        materials: Any = None,
+        on_blocks: bool | None = None,
     ) -> SegmentationResult:
         """A :class:`SegmentationResult` of the cached stages for ``params`` and the
-        given labels.
+        given labels: the one place a result is put together (the thesis runs, every
+        method's run in a :class:`~napari_polarseg.engine.Scene`, the classifiers).
 
-        Used by the runs whose labels do not come from the cut (block and pixel
-        classifiers): ``block`` (R, C) and ``labels`` (H, W) are theirs. ``maps``: with
-        the thesis's harmonic coefficients and PCA features (always with the
-        reconstruction, which is made from them).
+        ``block`` (R, C) and ``labels`` (H, W) are the run's. ``maps``: with the thesis's
+        harmonic coefficients and PCA features; ``reconstruction``: with the
+        reconstruction and its error map. ``method`` (default ``params.method``),
+        ``method_record`` and ``materials`` (a classifier's classes) name what made the
+        labels; ``on_blocks`` (default: ``maps`` or ``reconstruction``) says the run
+        worked on the block grid.
         """
         run = StageRun(self.snapshot(params))
-        maps = maps or reconstruction
+        on_blocks = (maps or reconstruction) if on_blocks is None else on_blocks
         with self._lock:
             pol = self.stage_value("polarisation", run)
             nrm = self.stage_value("normals", run)
@@ -415,8 +426,10 @@ class Pipeline:
             duplicate_angle_frames=polarimage.duplicate_angle_frames(self.angles),
             cut_limits=dict(cut_limits or {}),
             superpixels=dict(superpixels or {}),
-            method=run.params.method,
-            on_blocks=maps,
+            method=run.params.method if method is None else method,
+            method_record=dict(method_record or {}),
+            materials=materials,
+            on_blocks=on_blocks,
         )
 
 

@@ -3,8 +3,9 @@
 :mod:`.params`, :mod:`.limits`, :mod:`.pipeline` and :mod:`.analysis` cannot import the
 methods (the methods import them), yet they need what the methods declare: the menu
 choices of ``SegmentParams.method`` (:data:`METHOD_CHOICES`), the methods that find the
-number of segments (:data:`FINDS_K_METHODS`) and those that compute the thesis block
-maps (:data:`BLOCK_MAP_METHODS`). :func:`napari_polarseg.engine.methods.register_method`
+number of segments (:data:`FINDS_K_METHODS`), those that compute the thesis block
+maps (:data:`BLOCK_MAP_METHODS`) and each method's own parameter dataclass
+(:data:`METHOD_PARAMS`). :func:`napari_polarseg.engine.methods.register_method`
 fills them. The built-in methods register on the first read of any of them (or the
 first lookup in the registry), not on ``import napari_polarseg.engine``: the registry
 hands its loader to :func:`set_loader` when it is imported, and :func:`load_methods`
@@ -15,6 +16,7 @@ from __future__ import annotations
 
 import threading
 from collections.abc import Callable, Iterator, MutableMapping, MutableSet
+from typing import Any
 
 _lock = threading.RLock()
 #: The registry's loader of the built-in methods, and whether it ran (or is running)
@@ -45,18 +47,19 @@ def load_methods() -> None:
             _state["loading"] = False
 
 
-class MethodChoices(MutableMapping[str, str]):
-    """Method name → menu text, in registration order; reading it registers the
-    built-in methods first (:func:`load_methods`), writing does not."""
+class MethodChoices(MutableMapping[str, Any]):
+    """Method name → what it declares (menu text, parameter class), in registration
+    order; reading it registers the built-in methods first (:func:`load_methods`),
+    writing does not."""
 
     def __init__(self) -> None:
-        self._items: dict[str, str] = {}
+        self._items: dict[str, Any] = {}
 
-    def __getitem__(self, name: str) -> str:
+    def __getitem__(self, name: str) -> Any:
         load_methods()
         return self._items[name]
 
-    def __setitem__(self, name: str, text: str) -> None:
+    def __setitem__(self, name: str, text: Any) -> None:
         self._items[name] = text
 
     def __delitem__(self, name: str) -> None:
@@ -118,6 +121,9 @@ FINDS_K_METHODS = MethodNames()
 #: PCA features and the reconstruction-error map (their ``block_maps`` is True): the
 #: thesis method.
 BLOCK_MAP_METHODS = MethodNames()
+#: The parameter dataclass each registered method declares (its ``params_class``),
+#: name → class, in registration order; a method without one is not listed.
+METHOD_PARAMS = MethodChoices()
 
 
 def computes_block_maps(method: str) -> bool:

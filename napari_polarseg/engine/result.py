@@ -3,7 +3,7 @@
 :class:`Normals` and :class:`Reconstruction` are the values of the ``normals`` and
 ``reconstruction`` stages (:mod:`.stages`); :class:`SegmentationResult` is everything one
 run produced (:meth:`.pipeline.Pipeline.result`); :class:`ScribbleSegmentation` what
-:func:`.analysis.scribbles.scribble_segmentation` returns.
+:func:`.classifier.scribbles.scribble_segmentation` returns.
 """
 
 from __future__ import annotations
@@ -167,7 +167,7 @@ class SegmentationResult:
 
 
 class ScribbleSegmentation(NamedTuple):
-    """What :func:`~napari_polarseg.engine.analysis.scribbles.scribble_segmentation` returns."""
+    """What :func:`~napari_polarseg.engine.classifier.scribbles.scribble_segmentation` returns."""
 
     result: SegmentationResult
     probabilities: np.ndarray

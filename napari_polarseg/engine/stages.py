@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 import numpy as np
 from scipy import ndimage
@@ -21,13 +21,11 @@ from .errors import PolarsegError
 from .features import harmonics, polstats
 from .features import pca as feat
 from .graph import affinity, dense_graph, ncut, spectral
-from .matrix_pool import DenseDistances
+from .matrix_pool import DenseDistances, MatrixPool
 from .params import SegmentParams
 from .physics import fresnel, polarimage
+from .physics.pixel_mask import PixelMask
 from .result import Normals, Reconstruction
-
-if TYPE_CHECKING:
-    from .pipeline import Pipeline
 
 #: Stage names in execution order.
 STAGES = (
@@ -92,6 +90,30 @@ class StageRun:
         return within[1] if within is not None and within[0] == stage else None
 
 
+class StageHost(Protocol):
+    """What a stage function reads of the pipeline it runs in (the
+    :class:`~.pipeline.Pipeline`, which imports this module: the stages name it by this
+    protocol, so the two modules form no import cycle)."""
+
+    stack: np.ndarray
+    angles: np.ndarray
+    mask: PixelMask
+    matrices: MatrixPool
+    distances: DenseDistances | None
+
+    def key(self, stage: str, params: SegmentParams | None = None) -> tuple:
+        """Cache key of ``stage`` for ``params``."""
+        ...
+
+    def cached(self, stage: str) -> Any | None:
+        """The value cached for ``stage``, or None."""
+        ...
+
+    def stage_value(self, stage: str, run: StageRun) -> Any:
+        """Value of ``stage`` for ``run.params``, computed if stale."""
+        ...
+
+
 def valid_blocks(valid: np.ndarray, window: int) -> np.ndarray:
     """Blocks (flat, row-major over the w × w block grid) of which at least
     :data:`MIN_VALID_BLOCK_FRACTION` of the pixels are ``valid`` (H, W bool, e.g.
@@ -145,14 +167,14 @@ def own_key(stage: str, p: SegmentParams) -> tuple:
     return ()
 
 
-def block_valid(pipe: Pipeline, run: StageRun) -> np.ndarray:
+def block_valid(pipe: StageHost, run: StageRun) -> np.ndarray:
     """The blocks of the run's window that enter the graph (:func:`valid_blocks`)."""
     pol = pipe.stage_value("polarisation", run)
     return valid_blocks(~pol.invalid, run.params.window)
 
 
 def block_vectors(
-    pipe: Pipeline, run: StageRun, coef: np.ndarray, standardise: bool = True
+    pipe: StageHost, run: StageRun, coef: np.ndarray, standardise: bool = True
 ) -> np.ndarray:
     """Feature vector of every block (rows·cols, F) for ``features``.
 
@@ -179,7 +201,7 @@ def block_vectors(
 FIT_BAND_ROWS = 128
 
 
-def polarisation_stage(pipe: Pipeline, run: StageRun) -> polarimage.PolarisationImage:
+def polarisation_stage(pipe: StageHost, run: StageRun) -> polarimage.PolarisationImage:
     """Î, ρ, φ of the sinusoid fit (thesis eq. 3.14), masked samples down-weighted.
 
     The plain least-squares fit (no sample weights, every sample finite) runs in bands
@@ -215,7 +237,7 @@ def _stacked_rows(
     return replace(bands[0], **rows)
 
 
-def normals_stage(pipe: Pipeline, run: StageRun) -> Normals:
+def normals_stage(pipe: StageHost, run: StageRun) -> Normals:
     """Zenith from ρ (Fresnel model, refractive index) and azimuth from φ."""
     p = run.params
     pol = pipe.stage_value("polarisation", run)
@@ -224,7 +246,7 @@ def normals_stage(pipe: Pipeline, run: StageRun) -> Normals:
     return Normals(est.zenith, azimuth, est.clamped)
 
 
-def harmonics_stage(pipe: Pipeline, run: StageRun) -> np.ndarray:
+def harmonics_stage(pipe: StageHost, run: StageRun) -> np.ndarray:
     """Block spherical-harmonic coefficients a_lm (R, C, n_coef)."""
     p = run.params
     pol, nrm = pipe.stage_value("polarisation", run), pipe.stage_value("normals", run)
@@ -242,7 +264,7 @@ def harmonics_stage(pipe: Pipeline, run: StageRun) -> np.ndarray:
     )
 
 
-def pca_stage(pipe: Pipeline, run: StageRun) -> feat.PCAResult:
+def pca_stage(pipe: StageHost, run: StageRun) -> feat.PCAResult:
     """Block features reduced by PCA to the share ``variance`` of the variance."""
     p = run.params
     coef = pipe.stage_value("harmonics", run)
@@ -268,7 +290,7 @@ def pca_stage(pipe: Pipeline, run: StageRun) -> feat.PCAResult:
     return replace(pca, features=full)
 
 
-def affinity_stage(pipe: Pipeline, run: StageRun) -> Any:
+def affinity_stage(pipe: StageHost, run: StageRun) -> Any:
     """The affinity S = exp(−D / s) of the valid blocks: dense, kNN or spatial."""
     p = run.params
     pca = pipe.stage_value("pca", run)
@@ -297,7 +319,7 @@ def affinity_stage(pipe: Pipeline, run: StageRun) -> Any:
     return W
 
 
-def dense_affinity(pipe: Pipeline, run: StageRun, features: np.ndarray) -> np.ndarray:
+def dense_affinity(pipe: StageHost, run: StageRun, features: np.ndarray) -> np.ndarray:
     """exp(−D / s) of the dense graph (thesis section 4.5), D kept between runs.
 
     The squared Mahalanobis distances D (eq. 4.27) and their median depend only on
@@ -325,7 +347,7 @@ def dense_affinity(pipe: Pipeline, run: StageRun, features: np.ndarray) -> np.nd
     return affinity.affinity_from_distances(D, scale, out=pipe.matrices.take(D.shape, D.dtype))
 
 
-def cut_stage(pipe: Pipeline, run: StageRun) -> Any:
+def cut_stage(pipe: StageHost, run: StageRun) -> Any:
     """The recursive normalized-cut tree, or the k-way spectral clustering."""
     p = run.params
     W = pipe.stage_value("affinity", run)
@@ -342,7 +364,7 @@ def cut_stage(pipe: Pipeline, run: StageRun) -> Any:
     return ncut.CutTree(W, min_size=p.min_segment_blocks, threshold=p.ncut_threshold, warm=warm)
 
 
-def labels_stage(pipe: Pipeline, run: StageRun) -> tuple:
+def labels_stage(pipe: StageHost, run: StageRun) -> tuple:
     """(block labels, pixel labels, Ncut values, cut limits, {}) for ``n_segments``."""
     p = run.params
     tree = pipe.stage_value("cut", run)
@@ -360,7 +382,7 @@ def labels_stage(pipe: Pipeline, run: StageRun) -> tuple:
     return block, labels, tree.ncut_values, limits, {}
 
 
-def reconstruction_stage(pipe: Pipeline, run: StageRun) -> Reconstruction:
+def reconstruction_stage(pipe: StageHost, run: StageRun) -> Reconstruction:
     """Î rebuilt from the block harmonics and its absolute error."""
     p = run.params
     pol, nrm = pipe.stage_value("polarisation", run), pipe.stage_value("normals", run)
@@ -378,7 +400,7 @@ def reconstruction_stage(pipe: Pipeline, run: StageRun) -> Reconstruction:
 
 
 #: The function computing each stage.
-STAGE_FUNCTIONS: dict[str, Callable[[Pipeline, StageRun], Any]] = {
+STAGE_FUNCTIONS: dict[str, Callable[[StageHost, StageRun], Any]] = {
     "polarisation": polarisation_stage,
     "normals": normals_stage,
     "harmonics": harmonics_stage,

@@ -22,14 +22,16 @@ from .contract import (
     EVALUATION_SUMMARY_KEYS,
     FLOAT_OUTPUTS,
     MASK_META,
+    PLOT_FILES,
     PROBABILITY_META,
     STOKES_FILE,
     UNCERTAINTY_META,
     OutputError,
     labels_image,
+    result_files,
     used_pixels,
 )
-from .figures import PLOT_FILES, png_bytes, render_plots, save_plots, sweep_heatmap_figure
+from .figures import png_bytes, render_plots, save_plots, sweep_heatmap_figure
 from .overview import overview_figure, render_overview, segment_colours_for
 from .result_folder import (
     classifier_summary,
@@ -64,6 +66,7 @@ __all__ = [
     "segment_rows",
     "sweep_heatmap_figure",
     "used_pixels",
+    "result_files",
     "write_outputs",
     "write_result_folder",
     "write_segments_csv",

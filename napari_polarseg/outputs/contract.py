@@ -10,6 +10,8 @@ The file names and the TIFF metadata every result folder's images carry
 
 from __future__ import annotations
 
+from collections.abc import Iterable
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -23,6 +25,16 @@ if TYPE_CHECKING:
 #: The polarisation views every result folder holds beside the contract files.
 STOKES_FILE = "stokes.tif"
 COMPOSITE_FILE = "aolp_dolp.png"
+#: Files :func:`~napari_polarseg.outputs.figures.save_plots` writes (into ``plots/`` of a
+#: result folder).
+PLOT_FILES = (
+    "scatter.png",
+    "explained_variance.png",
+    "coefficients.png",
+    "components.png",
+    "histograms.png",
+    "error_table.png",
+)
 
 #: Output images: file name -> (result attribute, TIFF metadata).
 FLOAT_OUTPUTS = {
@@ -110,3 +122,35 @@ def used_pixels(result: SegmentationResult) -> np.ndarray:
     if valid is None:
         return np.ones(result.labels.shape, np.uint8)
     return np.asarray(valid, dtype=np.uint8)
+
+
+#: Every file a result folder may hold, relative to it. A run into a folder that holds
+#: an earlier run's results removes those of these files it did not write itself
+#: (:func:`stale_files`), so the folder describes one run; no other file is touched.
+RESULT_FILES: tuple[str, ...] = (
+    "labels.tif",
+    *FLOAT_OUTPUTS,
+    "mask.tif",
+    STOKES_FILE,
+    COMPOSITE_FILE,
+    "segments.csv",
+    "probabilities.tif",
+    "uncertainty.tif",
+    "evaluation.json",
+    "overview.png",
+    *(f"plots/{name}" for name in PLOT_FILES),
+    "params.json",
+    "summary.json",
+)
+
+
+def result_files(out: Path) -> list[str]:
+    """The files of :data:`RESULT_FILES` that the folder ``out`` holds, relative to it."""
+    return [name for name in RESULT_FILES if (out / name).is_file()]
+
+
+def stale_files(out: Path, written: Iterable[str]) -> list[str]:
+    """The files of :data:`RESULT_FILES` in ``out`` that ``written`` does not name: an
+    earlier run's results, which a new run into ``out`` removes."""
+    keep = set(written)
+    return [name for name in result_files(out) if name not in keep]

@@ -35,16 +35,6 @@ LIGHT = {"background": "#ffffff", "foreground": "#000000", "accent": "#1f77b4"}
 #: A dark theme like napari's default one.
 DARK = {"background": "#262930", "foreground": "#f0f1f2", "accent": "#50a0ff"}
 
-#: Files :func:`save_plots` writes.
-PLOT_FILES = (
-    "scatter.png",
-    "explained_variance.png",
-    "coefficients.png",
-    "components.png",
-    "histograms.png",
-    "error_table.png",
-)
-
 
 def _figure(fig: Figure | None, size: tuple[float, float], theme: dict[str, str]) -> Figure:
     if fig is None:
@@ -286,7 +276,8 @@ def _plot_makers(
     seed: int,
     theme: dict[str, str],
 ) -> dict[str, Any]:
-    """File name → function drawing that plot of ``result`` (:data:`PLOT_FILES`)."""
+    """File name → function drawing that plot of ``result``
+    (:data:`~napari_polarseg.outputs.contract.PLOT_FILES`)."""
     degree = result.params.degree
     if pairs is None:
         pairs = [(l, m) for l, m in plots.DEFAULT_PAIRS if l <= degree]  # noqa: E741
@@ -325,7 +316,7 @@ def save_plots(result: SegmentationResult, out_dir: str | Path, **options: Any) 
 
     ``options`` are those of :func:`render_plots` (degrees, windows and table degrees of
     the error table, coefficient pairs, components, points, seed, dpi, theme). Returns
-    the path of each file by its name (:data:`PLOT_FILES`).
+    the path of each file by its name (:data:`~napari_polarseg.outputs.contract.PLOT_FILES`).
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)

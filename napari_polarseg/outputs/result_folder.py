@@ -21,6 +21,7 @@ napari, no Qt: usable from scripts.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import os
 import time
@@ -51,6 +52,7 @@ from .contract import (
     OutputError,
     labels_image,
     labels_meta,
+    stale_files,
     used_pixels,
 )
 from .overview import render_overview
@@ -185,7 +187,7 @@ def classifier_summary(segmentation: Any, labels_from: str) -> dict[str, Any]:
     """What ``summary.json`` says of labels from the pixel classifier.
 
     ``segmentation`` is a
-    :class:`~napari_polarseg.engine.analysis.pixel_segmentation.PixelSegmentation`;
+    :class:`~napari_polarseg.engine.classifier.pixel_segmentation.PixelSegmentation`;
     ``labels_from`` is ``"scribbles"`` (trained on them) or ``"classifier"`` (a saved
     classifier applied). Shared by ``polarseg segment`` and the plugin's export.
     """
@@ -331,8 +333,16 @@ def write_outputs(
         if plots is not None:
             _write_plots(folder, plots)
         folder.json("params.json", info)
+        stale = stale_files(out, [*folder.written, "summary.json"])
+        if stale:  # an earlier run's results: the folder is to describe this run only
+            summary["removed_from_earlier_run"] = stale
         summary["io_seconds"]["write"] = round(time.perf_counter() - t0, 6)
         folder.json("summary.json", summary)
+        for name in stale:
+            folder.path(name).unlink(missing_ok=True)
+        if any(name.startswith("plots/") for name in stale):
+            with contextlib.suppress(OSError):  # only when no file is left in it
+                folder.path("plots").rmdir()
     except OSError as exc:
         reason = exc.strerror or str(exc)
         raise OutputError(f"cannot write {folder.current}: {reason}") from exc

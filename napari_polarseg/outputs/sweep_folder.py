@@ -1,5 +1,5 @@
 """The folder ``polarseg sweep`` writes: ``sweep.csv``, ``sweep_heatmap.png``,
-``best_params.json`` and ``sweep.json``."""
+``best_params.json`` and ``sweep.json`` (with ``--vary``: no heatmap)."""
 
 from __future__ import annotations
 
@@ -11,6 +11,7 @@ from . import figures
 from .contract import OutputError
 
 if TYPE_CHECKING:
+    from ..engine.analysis.param_sweep import ParamSweepResult
     from ..engine.analysis.sweep_result import SweepResult
     from ..engine.params import SegmentParams
 
@@ -56,3 +57,23 @@ def write_sweep_folder(
         pio.write_json(out / "sweep.json", summary)
     except OSError as exc:
         raise OutputError(f"cannot write {name}: {exc.strerror or exc}") from exc
+
+
+def write_param_sweep_folder(
+    folder: str | Path, result: ParamSweepResult, best: SegmentParams, summary: dict[str, Any]
+) -> None:
+    """Write a sweep of a method's parameters into ``folder`` (created if needed), each
+    file atomically: ``sweep.csv`` (one row per cell), ``best_params.json`` (for
+    ``segment --params``) and ``sweep.json`` (``summary``); OutputError naming a file
+    that could not be written."""
+    out = Path(folder)
+    name = str(out)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        for name, text in (("sweep.csv", result.to_csv()), ("best_params.json", best.to_json())):
+            with pio.atomic_output(out / name) as tmp:
+                tmp.write_text(text if name.endswith(".csv") else text + "\n", encoding="utf-8")
+        name = "sweep.json"
+        pio.write_json(out / "sweep.json", summary)
+    except OSError as exc:
+        raise OutputError(f"cannot write {out / name}: {exc.strerror or exc}") from exc

@@ -102,6 +102,8 @@ class Run:
         kwargs: dict[str, Any] = {"cancel": self.stop} if request.cancellable else {}
         if request.reports:
             kwargs["report"] = self.report_within
+            if request.on_partial is not None:
+                kwargs["partial"] = self.partial_within
         worker = create_worker(
             guarded, request.job, *request.args, _start_thread=False, _ignore_errors=True, **kwargs
         )
@@ -140,6 +142,12 @@ class Run:
         # the worker's thread: its yielded signal is queued to the GUI thread
         if self.worker is not None:
             self.worker.yielded.emit((stage, index, total))
+
+    def partial_within(self, value: Any) -> None:
+        """A result to show before the end, handed over from inside an engine call (the
+        ``partial`` callable of the job): handled as a yielded :class:`Partial`."""
+        if self.worker is not None:
+            self.worker.yielded.emit(Partial(value))
 
     @property
     def current(self) -> bool:
@@ -346,7 +354,10 @@ class WorkerSlot:
         (``index`` a float between the stage boundaries, e.g. 2.4 of 8 while the third
         stage is 40 % done; the engine's :meth:`Pipeline.run_iter
         <napari_polarseg.engine.Pipeline.run_iter>` ``progress``): called from the
-        worker's thread, it is handled like a yielded stage (throttled the same way).
+        worker's thread, it is handled like a yielded stage (throttled the same way);
+        given ``on_partial`` too, it is called with ``partial=callable(value)`` as well,
+        for results the engine hands over while a stage runs (the pixel classifier's
+        preview): handled like a yielded :class:`Partial`.
         """
 
         request = Request(job, args, total, on_result, on_partial, live, cancellable, reports)

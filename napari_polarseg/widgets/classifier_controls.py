@@ -2,9 +2,9 @@
 model, trees and region walk of the scribble classifier.
 
 Each control's tooltip is its parameter's one description
-(:func:`~napari_polarseg.engine.analysis.classifier_settings.setting_help`, from the
+(:func:`~napari_polarseg.engine.classifier.classifier_settings.setting_help`, from the
 parameter dataclasses' docstrings); :meth:`ClassifierControls.settings` gives the
-:class:`~napari_polarseg.engine.analysis.classifier_settings.ClassifierSettings` a
+:class:`~napari_polarseg.engine.classifier.classifier_settings.ClassifierSettings` a
 training uses.
 """
 
@@ -15,7 +15,7 @@ from typing import Any
 from magicgui.widgets import ComboBox, Container, FloatSpinBox, LineEdit, Select, SpinBox
 
 from ..engine import PolarsegError
-from ..engine.analysis.classifier_settings import (
+from ..engine.classifier.classifier_settings import (
     CHOICES,
     ClassifierSettings,
     format_scales,

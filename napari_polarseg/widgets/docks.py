@@ -12,8 +12,6 @@ from typing import TYPE_CHECKING, Any, TypeVar
 if TYPE_CHECKING:
     import napari
 
-    from .segment import SegmentWidget
-
 T = TypeVar("T")
 
 
@@ -31,7 +29,9 @@ def docked(viewer: napari.viewer.Viewer, kind: type[T]) -> list[T]:
     return [w for w in widgets if isinstance(w, kind)]
 
 
-def segment_dock(viewer: napari.viewer.Viewer) -> SegmentWidget | None:
-    """The first docked *Segment by material* widget of ``viewer``, if any."""
+def segment_dock(viewer: napari.viewer.Viewer) -> Any:
+    """The first docked *Segment by material* widget of ``viewer`` (a
+    :class:`~napari_polarseg.widgets.segment.SegmentWidget`, which imports this module:
+    not named in the annotation, so no import cycle), or None."""
     found: list[Any] = docked(viewer, SegmentDock)
     return found[0] if found else None

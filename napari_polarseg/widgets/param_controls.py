@@ -1,23 +1,26 @@
-"""Plugin controls made from the parameter table
-(:data:`~napari_polarseg.engine.params.PARAM_SPECS`).
+"""Plugin controls made from the parameter tables: the shared one
+(:data:`~napari_polarseg.engine.params.PARAM_SPECS`) and each registered method's own
+(:func:`method_controls`).
 
 Every :class:`~napari_polarseg.engine.params.ParamSpec` with a ``label`` becomes one
 control: a menu (its ``choices``, or the registered methods, shown with
 :meth:`ParamSpec.menu` names), a float box (the spec has ``decimals``) or an integer
 box, with the spec's range and step; the tooltip says what the control does to the
-result (:data:`EFFECTS`), then the spec's help and the thesis default.
+result (the spec's ``effect``), then the spec's help and the default.
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import MISSING, fields
+from dataclasses import MISSING, asdict
 from typing import Any
 
 from magicgui.widgets import ComboBox, FloatSpinBox, SpinBox
 from magicgui.widgets.bases import ValueWidget
 
-from ..engine.params import PARAM_SPECS, ParamSpec, SegmentParams
+from ..engine.method_params import params_class
+from ..engine.param_spec import defaults_of
+from ..engine.params import PARAM_SPECS, ParamSpec, SegmentParams, all_param_specs
 
 #: Order of the controls in the Segment widget; labelled specs not listed follow, in
 #: table order (layout only: what each control is comes from the table).
@@ -40,48 +43,9 @@ CONTROL_ORDER = (
     "object_size",
 )
 
-#: What each parameter control does to the result, in plain words: the first line of its
-#: tooltip (the spec's technical help follows it). One entry per labelled spec.
-EFFECTS: dict[str, str] = {
-    "method": "Which algorithm splits the image into materials: the superpixel methods "
-    "follow object edges and are fastest; thesis works on a grid of square blocks",
-    "window": "Size of the square blocks the image is cut into: larger gives smoother, "
-    "blockier segments and a faster run; smaller follows finer detail but is noisier",
-    "degree": "How much detail of each block's shading is compared: higher tells similar "
-    "materials apart better, but runs slower and can pick up noise",
-    "refractive_index": "The material's assumed refractive index (glass and most plastics "
-    "about 1.5), used to turn polarisation into surface angle; moves the segments little",
-    "fit": "How each pixel's polarisation is measured from the frames: robust ignores a "
-    "frame that is off at a pixel (a glint, a moving edge) and takes longer",
-    "model": "Whether surfaces are taken as matte (diffuse) or shiny (specular) when "
-    "polarisation is turned into surface angle",
-    "specular_branch": "Shiny surfaces only: which of the two surface angles that give the "
-    "same polarisation to take",
-    "coefficients": "How each block's shading is summarised: the thesis estimate, or a "
-    "fit that is steadier on small or partly masked blocks",
-    "features": "What is compared between blocks: the whole shading description, the part "
-    "that does not change when the object turns, or polarisation statistics; changes "
-    "which materials look alike",
-    "variance": "How much of the block description is kept: lower runs faster and merges "
-    "materials that differ only slightly",
-    "scale": "How different two blocks must be to end up apart: smaller splits more "
-    "readily, larger groups more",
-    "scale_mode": "absolute: the scale as given; median: the scale adapts to the image, "
-    "steadier from one image to the next",
-    "clustering": "How the segments are cut apart: one split at a time (thesis) or all at "
-    "once (k-way, often more even segments)",
-    "min_segment_blocks": "The smallest segment allowed, in blocks: raise it to stop tiny "
-    "specks becoming segments of their own",
-    "n_segments": "How many segments (materials) the result has; 0 lets a method that can "
-    "choose the number itself",
-    "object_size": "How large one object is, in pixels across; 0 estimates it from the "
-    "image. Smaller sizes give finer superpixels that do not blur small objects together",
-}
-
-#: The thesis default of every SegmentParams field (the dataclass defaults).
-THESIS_DEFAULTS: dict[str, Any] = {
-    f.name: f.default for f in fields(SegmentParams) if f.default is not MISSING
-}
+#: The default of every shared SegmentParams field (the dataclass defaults; a method's
+#: own parameters: the defaults of its ``params_class``).
+SHARED_DEFAULTS: dict[str, Any] = defaults_of(SegmentParams)
 
 
 def float_box(decimals: int, **kwargs: Any) -> FloatSpinBox:
@@ -95,16 +59,16 @@ def float_box(decimals: int, **kwargs: Any) -> FloatSpinBox:
     return box
 
 
-def control_tooltip(name: str, spec: ParamSpec) -> str:
-    """What the control does to the result (:data:`EFFECTS`), then the spec's help and,
-    for a SegmentParams field, its thesis default."""
+def control_tooltip(name: str, spec: ParamSpec, default: Any = MISSING) -> str:
+    """What the control does to the result (the spec's ``effect``), then the spec's help
+    and the parameter's default (``default``; missing: a shared field's, from
+    :data:`SHARED_DEFAULTS`)."""
     details = spec.help
-    if name in THESIS_DEFAULTS:
-        default = THESIS_DEFAULTS[name]
+    default = SHARED_DEFAULTS.get(name, MISSING) if default is MISSING else default
+    if default is not MISSING:
         shown = f"{default:g}" if isinstance(default, float) else str(default)
-        details = f"{details} (thesis: {shown})"
-    effect = EFFECTS.get(name)
-    return details if effect is None else f"{effect}.\n\nDetails: {details}"
+        details = f"{details} (default: {shown})"
+    return details if spec.effect is None else f"{spec.effect}.\n\nDetails: {details}"
 
 
 def control_label(name: str, spec: ParamSpec, words: bool = True) -> str:
@@ -118,16 +82,19 @@ def control_label(name: str, spec: ParamSpec, words: bool = True) -> str:
     return f"{label} ({', '.join(f'{v} = {w}' for w, v in spec.words.items())})"
 
 
-def param_control(name: str, spec: ParamSpec, value: Any, **kwargs: Any) -> ValueWidget:
+def param_control(
+    name: str, spec: ParamSpec, value: Any, default: Any = MISSING, **kwargs: Any
+) -> ValueWidget:
     """The control of parameter ``name`` described by ``spec``, showing ``value``.
 
     A menu when the spec has ``choices``, a float box with ``decimals`` when it has
-    them, else an integer box; ``kwargs`` go to the widget (e.g. ``visible``).
+    them, else an integer box; the tooltip names ``default`` (see
+    :func:`control_tooltip`); ``kwargs`` go to the widget (e.g. ``visible``).
     """
     common: dict[str, Any] = {
         "label": control_label(name, spec),
         "value": value,
-        "tooltip": control_tooltip(name, spec),
+        "tooltip": control_tooltip(name, spec, default),
         **kwargs,
     }
     if spec.options() is not None:
@@ -153,15 +120,43 @@ def param_controls(
     values: Mapping[str, Any],
     specs: Mapping[str, ParamSpec] = PARAM_SPECS,
     names: tuple[str, ...] | None = None,
+    defaults: Mapping[str, Any] | None = None,
 ) -> dict[str, ValueWidget]:
     """One control per labelled spec (or per name of ``names``), by name, in
     :func:`controlled_names` order, each showing ``values[name]`` (e.g.
     ``SegmentParams.to_dict()``), or the spec's minimum or first choice for a name
-    ``values`` lacks."""
+    ``values`` lacks; the tooltips name ``defaults[name]`` (default: the shared
+    fields' defaults)."""
     controls = {}
     for name in controlled_names(specs) if names is None else names:
         spec = specs[name]
         options = spec.options()
         fallback = options[0] if options else spec.minimum
-        controls[name] = param_control(name, spec, values.get(name, fallback))
+        default = MISSING if defaults is None else defaults.get(name, MISSING)
+        controls[name] = param_control(name, spec, values.get(name, fallback), default)
     return controls
+
+
+def every_param_spec() -> dict[str, ParamSpec]:
+    """The shared parameter table, then each registered method's own (a name two
+    tables hold: the first's), by parameter name."""
+    specs = dict(PARAM_SPECS)
+    for method_specs in all_param_specs().values():
+        specs.update({n: s for n, s in method_specs.items() if n not in specs})
+    return specs
+
+
+def method_controls(params: SegmentParams) -> dict[str, tuple[str, ValueWidget]]:
+    """One control per labelled parameter of every registered method's own table
+    (:func:`~napari_polarseg.engine.params.all_param_specs`), by name: (the method,
+    the control showing ``params.params_of(method)``'s value); a name two methods
+    declare has one control, the first's. The plugin shows a method's controls only
+    while it is chosen (:class:`~napari_polarseg.widgets.segment_params.ParameterControls`)."""
+    out: dict[str, tuple[str, ValueWidget]] = {}
+    for method, specs in all_param_specs().items():
+        values = asdict(params.params_of(method))
+        defaults = defaults_of(params_class(method))
+        names = tuple(n for n in controlled_names(specs) if n not in out)
+        for name, control in param_controls(values, specs, names, defaults).items():
+            out[name] = (method, control)
+    return out

@@ -6,7 +6,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any
 
 from ..engine import PolarsegError, SegmentParams
-from ..engine.params import AUTO, RECOMMENDED
+from ..engine.params import PRESETS
 from ..io import read_params_file
 from .docks import segment_dock
 
@@ -23,12 +23,8 @@ def params_from(viewer: napari.viewer.Viewer, source: str, path: Any = None) -> 
     ``"Segment by material widget"``: the values of the first such widget docked in
     ``viewer``; a preset; or a SegmentParams JSON file at ``path``.
     """
-    if source == "auto":
-        return AUTO
-    if source == "recommended":
-        return RECOMMENDED
-    if source == "thesis":
-        return SegmentParams()
+    if source in PRESETS:
+        return PRESETS[source]
     if source == "JSON file":
         if path is None:
             raise PolarsegError("None: cannot read the parameters file (no file chosen)")

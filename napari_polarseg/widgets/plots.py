@@ -13,27 +13,21 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from magicgui.widgets import ComboBox, PushButton
 
-from ..engine import STAGES, PolarsegError, Scene, SegmentParams
+from ..engine import PolarsegError, Scene, SegmentParams
 from ..engine.analysis import plots
 from ..outputs import figures
 from ._base import StackWidget
 from ._layers import TAG, below_labels, find_output, fitted_limits, source_key
 from .canvas import figure_canvas, napari_theme, show_message
 from .docks import SegmentDock, docked
-from .session import (
-    CLASSIFIER_STAGES,
-    ClassifierOutput,
-    classifier_stages,
-    content_digest,
-    stack_pipeline,
-)
+from .session import ClassifierOutput, classify_scene, content_digest, stack_pipeline
 
 if TYPE_CHECKING:
     import napari
     from napari.layers import Layer
 
     from ..engine import SegmentationResult
-    from ..engine.analysis.pixel_classifier import PixelClassifier
+    from ..engine.classifier.pixel_classifier import PixelClassifier
 
 #: Plot menu: text shown → key.
 PLOTS = (
@@ -78,37 +72,37 @@ def segment_job(
     classifier_file: str | None = None,
     report: Callable[[str, float, int], None] | None = None,
 ) -> Generator[Any, None, SegmentationResult | ClassifierOutput]:
-    """Worker job: the segmentation of a stack with ``params`` (as the Segment widget).
+    """Worker job: the segmentation of a stack with ``params`` (as the Segment widget),
+    on a :class:`~napari_polarseg.engine.Scene` of it.
 
     ``region`` (H, W bool, True = use) is the user's mask; with ``scribbles`` (H, W
-    labels) the pixel classifier trained on them replaces the normalized cut, with
+    labels) the pixel classifier trained on them replaces the method, with
     ``classifier_file`` the classifier saved there (read again, checked, not retrained).
     Returns the result (of the method ``params.method``, with the thesis maps and the
     error map; ``report`` receives its stages as they start), or for the classifier the
     :class:`~napari_polarseg.widgets.session.ClassifierOutput` (result and classifier).
     """
-    from ..engine.analysis.scribble_session import ScribbleSession
+    scene = Scene(pipeline=stack_pipeline(data, angles_rad, params, region))
+    inputs: dict[str, Any] = {"scribbles": scribbles}
+    if classifier_file is not None:
+        from ..classifier_file import load_pixel_classifier
 
-    pipe = stack_pipeline(data, angles_rad, params, region)
-    if scribbles is not None or classifier_file is not None:
-        classifier = None
-        if classifier_file is not None:
-            from ..classifier_file import load_pixel_classifier
-
-            classifier, scribbles = load_pixel_classifier(classifier_file), None
-        session = ScribbleSession.on_pipeline(pipe)
-        out = yield from classifier_stages(pipe, session, params, scribbles, classifier)
-        if out.problem is not None:
-            where = "scribbles" if out.trained else "classifier"
-            raise PolarsegError(f"{where}: {out.problem}")
-        return out
+        inputs = {"classifier": load_pixel_classifier(classifier_file)}
+    total = len(Scene.stages(params, inputs, maps=True, reconstruction=True))
+    yield "polarisation", 0, total
 
     def progress(stage: str, index: float, total: int) -> None:
         if report is not None and stage != "done":
             report(stage, index, total)
 
-    # the method the segments came from (params.method), with the maps the plots draw
-    return Scene(pipeline=pipe).segment(params, maps=True, reconstruction=True, progress=progress)
+    if scribbles is None and classifier_file is None:
+        # the method the segments came from (params.method), with the maps the plots draw
+        return scene.segment(params, maps=True, reconstruction=True, progress=progress)
+    out = classify_scene(scene, params, inputs, True, progress=progress)
+    if out.problem is not None:
+        where = "scribbles" if out.trained else "classifier"
+        raise PolarsegError(f"{where}: {out.problem}")
+    return out
 
 
 def histogram_job(
@@ -279,10 +273,9 @@ class PlotsWidget(StackWidget):
                     self.set_result(layer, value, notes)
 
         args = (layer.data, np.deg2rad(angles_deg), params, region, scribbles, classifier_file)
-        classify = scribbles is not None or classifier_file is not None
-        # the scene reports its own stage count of an unsupervised run
-        total = len(CLASSIFIER_STAGES) if classify else len(STAGES)
-        self._submit(segment_job, args, total, on_result, reports=not classify)
+        inputs = {"scribbles": scribbles, "classifier": classifier_file}
+        total = len(Scene.stages(params, inputs, maps=True, reconstruction=True))
+        self._submit(segment_job, args, total, on_result, reports=True)
 
     def set_result(
         self,

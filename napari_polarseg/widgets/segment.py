@@ -21,11 +21,11 @@ from magicgui.widgets import CheckBox, Container
 from qtpy.QtCore import QTimer
 
 from ..engine import Pipeline, PolarsegError, SegmentationResult, SegmentParams
-from ..engine.params import PARAM_SPECS, PRESETS, ParamSpec
+from ..engine.params import PRESETS, ParamSpec
 from ._base import SEGMENT_DOCK_NAME, StackWidget
 from ._layers import find_output, source_key
 from .docks import SegmentDock
-from .param_controls import controlled_names
+from .param_controls import controlled_names, every_param_spec
 from .segment_assist import ScribbleAssist
 from .segment_files import ClassifierFiles, ResultExport
 from .segment_inputs import CUT_ONLY, NO_MASK, NO_SCRIBBLES, SegmentInputs, Snapshot
@@ -48,7 +48,7 @@ if TYPE_CHECKING:
     import napari
     from napari.layers import Labels, Layer
 
-    from ..engine.analysis.pixel_classifier import PixelClassifier
+    from ..engine.classifier.pixel_classifier import PixelClassifier
 
 # Names importers take from this module (tests, benchmarks): defined beside the parts.
 __all__ = [
@@ -66,10 +66,9 @@ __all__ = [
 #: Milliseconds the live update waits after the last change before it reruns.
 LIVE_DELAY_MS = 150
 
-#: SegmentParams fields that have a control in the widget (the labelled specs of the
-#: table, :func:`~napari_polarseg.widgets.param_controls.controlled_names`); the others
-#: come from the preset.
-CONTROLLED = controlled_names(PARAM_SPECS)
+#: Parameters with a control in the widget (labelled specs of the shared table and of
+#: the methods registered when this module is imported); the others: from the preset.
+CONTROLLED = controlled_names(every_param_spec())
 
 #: Parameter controls shown above the collapsed *advanced settings* section.
 FIRST_CONTROLS = ("n_segments",)

@@ -2,11 +2,11 @@
 
 *Use as scribbles* turns the chosen stack's segments (e.g. an unsupervised result) into
 an editable scribbles layer: each segment's interior, a band of
-:data:`~napari_polarseg.engine.analysis.scribbles_from_labels.DEFAULT_MARGIN` pixels
+:data:`~napari_polarseg.engine.classifier.scribbles_from_labels.DEFAULT_MARGIN` pixels
 along every border left unlabelled for the classifier to decide
-(:func:`~napari_polarseg.engine.analysis.scribbles_from_labels.scribbles_from_labels`).
+(:func:`~napari_polarseg.engine.classifier.scribbles_from_labels.scribbles_from_labels`).
 *Paint here next* outlines the largest region the classifier is least sure of
-(:func:`~napari_polarseg.engine.analysis.suggestion.paint_here_next`) as a Shapes layer
+(:func:`~napari_polarseg.engine.classifier.suggestion.paint_here_next`) as a Shapes layer
 and centres the view on it. Both compute in well under a second on a camera frame, so
 they run in the GUI thread.
 """
@@ -20,8 +20,8 @@ import numpy as np
 from magicgui.widgets import Container, PushButton
 
 from ..engine import PolarsegError
-from ..engine.analysis.scribbles_from_labels import DEFAULT_MARGIN, scribbles_from_labels
-from ..engine.analysis.suggestion import Suggestion, paint_here_next
+from ..engine.classifier.scribbles_from_labels import DEFAULT_MARGIN, scribbles_from_labels
+from ..engine.classifier.suggestion import Suggestion, paint_here_next
 from ._layers import find_output
 
 if TYPE_CHECKING:

@@ -39,7 +39,7 @@ if TYPE_CHECKING:
     from qtpy.QtWidgets import QWidget
 
     from ..engine import SegmentationResult
-    from ..engine.analysis.pixel_classifier import PixelClassifier
+    from ..engine.classifier.pixel_classifier import PixelClassifier
 
 
 class SegmentHost(Protocol):

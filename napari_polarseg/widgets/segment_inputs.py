@@ -70,7 +70,8 @@ class Snapshot:
     classifier_settings: Any = None
 
     def differs_only_in_params(self, other: Snapshot) -> tuple[str, ...] | None:
-        """The SegmentParams fields that differ when nothing else does (None otherwise)."""
+        """The parameters that differ (shared fields and methods' own, by name) when
+        nothing else does (None otherwise)."""
         same = all(
             getattr(self, f.name) == getattr(other, f.name)
             for f in fields(self)
@@ -78,11 +79,7 @@ class Snapshot:
         )
         if not same:
             return None
-        return tuple(
-            f.name
-            for f in fields(self.params)
-            if getattr(self.params, f.name) != getattr(other.params, f.name)
-        )
+        return self.params.changed_names(other.params)
 
 
 class SegmentInputs:

@@ -5,6 +5,7 @@ parameter table, the thesis-maps option and the parameter files (*Load parameter
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -18,11 +19,12 @@ from ..engine.params import (
     PRESET_HELP,
     PRESETS,
     ParamSpec,
+    method_param_specs,
 )
 from ..engine.registered import computes_block_maps
 from ..io import read_params_file
 from ._base import ask_file
-from .param_controls import control_label, controlled_names, param_controls
+from .param_controls import control_label, controlled_names, method_controls, param_controls
 from .session import wants_maps, write_params_json
 
 if TYPE_CHECKING:
@@ -43,11 +45,13 @@ THESIS_MAPS_TEXT = "thesis maps and error map"
 class ParameterControls:
     """The parameters of :class:`~napari_polarseg.widgets.segment.SegmentWidget`.
 
-    The preset menu, the parameter-file buttons, one control per labelled spec
-    (:attr:`controls`, by SegmentParams field name; also attributes of that name) and
-    the *thesis maps and error map* option (:attr:`thesis_maps`). :meth:`params` reads
-    them, :meth:`set_params` sets them; :meth:`maps` says whether a run computes the
-    thesis maps.
+    The preset menu, the parameter-file buttons, one control per labelled spec of the
+    shared table and of every registered method's own (:attr:`controls`, by parameter
+    name; also attributes of that name; :attr:`owners`: the method of each method
+    control) and the *thesis maps and error map* option (:attr:`thesis_maps`). Only
+    the chosen method's own controls show (:meth:`show_method_controls`). :meth:`params`
+    reads them, :meth:`set_params` sets them; :meth:`maps` says whether a run computes
+    the thesis maps.
 
     Parameters
     ----------
@@ -92,11 +96,18 @@ class ParameterControls:
             label="",
         )
         self.params_file.margins = (0, 0, 0, 0)
-        #: The parameter table the controls are made from (one control per labelled spec).
+        #: The shared parameter table the controls are made from (one control per
+        #: labelled spec), then each method's own (:attr:`owners`).
         self.param_specs = dict(specs or PARAM_SPECS)
-        self.controlled = controlled_names(self.param_specs)
-        #: One control per labelled spec, by SegmentParams field name.
+        #: One control per labelled spec, by parameter name.
         self.controls: dict[str, ValueWidget] = param_controls(d.to_dict(), self.param_specs)
+        #: The method whose own parameter each method control sets, by name.
+        self.owners: dict[str, str] = {}
+        for name, (method, control) in method_controls(d).items():
+            if name not in self.controls:
+                self.owners[name], self.controls[name] = method, control
+                self.param_specs[name] = method_param_specs(method)[name]
+        self.controlled = controlled_names(self.param_specs)
         for name, control in self.controls.items():
             setattr(self, name, control)
         self.specular_branch.visible = False
@@ -116,6 +127,8 @@ class ParameterControls:
         if "method" in self.controls:
             self.controls["method"].changed.connect(self._on_method_changed)
             self._on_method_changed(self.controls["method"].value)
+        else:
+            self.show_method_controls(str(d.method))
         self.thesis_maps.changed.connect(self.on_maps_toggled)
         self.load_button.changed.connect(self._on_load_clicked)
         self.save_button.changed.connect(self._on_save_clicked)
@@ -143,34 +156,67 @@ class ParameterControls:
             box.enabled, box.value = False, True  # disabled first: not the user's choice
         elif not box.enabled:
             box.enabled, box.value = True, self._maps_choice
+        self.show_method_controls(str(method))
 
     def on_maps_toggled(self, value: bool) -> None:
         """The option was ticked or unticked (under a method other than the thesis one)."""
         if self.thesis_maps.enabled:
             self._maps_choice = bool(value)
+        method = self.controls["method"].value if "method" in self.controls else self._base.method
+        self.show_method_controls(str(method))
+
+    def show_method_controls(self, method: str) -> None:
+        """Show the controls of ``method``'s own parameters and hide the other methods'
+        (those of a method that computes the thesis maps stay while the maps are on:
+        they set the maps)."""
+        maps = bool(self.thesis_maps.value)
+        for name, owner in self.owners.items():
+            shown = owner == method or name in method_param_specs(method)
+            self.controls[name].visible = shown or (maps and computes_block_maps(owner))
+
+    def shown_method_controls(self) -> tuple[str, ...]:
+        """Names of the method controls shown now (in the layout, whether or not the
+        *advanced settings* are open)."""
+        return tuple(n for n in self.owners if not self.controls[n].native.isHidden())
 
     # -- parameters -------------------------------------------------------------------
     def params(self) -> SegmentParams:
         """The engine parameters the widget's values describe (raises PolarsegError).
 
-        Fields without a control (``ridge``, ``spatial_radius``, ``spatial_sigma``,
+        Each method control sets its method's own parameter (whether shown or not:
+        another method's values are kept for when it is chosen again). Parameters
+        without a control (``ridge``, ``spatial_radius``, ``spatial_sigma``,
         ``ncut_threshold``, ``affinity_graph``) come from the chosen preset or the last
         :meth:`set_params`. A float set with more decimals than its control shows (e.g.
-        ``refractive_index`` 1.4537 from a file, shown as 1.454) is kept exactly until the
-        control is changed.
+        ``refractive_index`` 1.4537 from a file, shown as 1.454) is kept exactly until
+        the control is changed.
         """
         values: dict[str, Any] = {}
+        own: dict[str, dict[str, Any]] = {}
         for name in self.controlled:
             spec, shown = self.param_specs[name], getattr(self, name).value
+            owner = self.owners.get(name)
             if spec.options() is not None:
-                values[name] = str(shown)
+                value: Any = str(shown)
             elif spec.decimals is None:
-                values[name] = int(shown)
+                value = int(shown)
             else:  # the control shows spec.decimals decimals of the exact value
-                exact = float(getattr(self._base, name))
+                exact = float(self._value(self._base, name))
                 tolerance = 0.5 * 10.0**-spec.decimals + 1e-12
-                values[name] = exact if abs(exact - float(shown)) <= tolerance else float(shown)
-        return self._base.replace(**values)
+                value = exact if abs(exact - float(shown)) <= tolerance else float(shown)
+            if owner is None:
+                values[name] = value
+            else:
+                own.setdefault(owner, {})[name] = value
+        stored = {m: replace(self._base.params_of(m), **v) for m, v in own.items()}
+        merged = {**self._base.method_params, **stored}
+        return self._base.replace(method_params=merged, **values)
+
+    def _value(self, params: SegmentParams, name: str) -> Any:
+        """The value of the control ``name`` in ``params`` (a method control: its
+        method's own parameter)."""
+        owner = self.owners.get(name)
+        return getattr(params if owner is None else params.params_of(owner), name)
 
     def set_params(self, params: SegmentParams | None = None, **changes: Any) -> None:
         """Set the controls from ``params`` and/or keyword changes (SegmentParams names).
@@ -182,12 +228,12 @@ class ParameterControls:
         self._check_controls(values)
         self._base = values
         for name in self.controlled:
-            getattr(self, name).value = getattr(values, name)
+            getattr(self, name).value = self._value(values, name)
 
     def _check_controls(self, values: SegmentParams) -> None:
         """Raise PolarsegError if a value does not fit its control (range, menu)."""
         for name in self.controlled:
-            control, value = getattr(self, name), getattr(values, name)
+            control, value = getattr(self, name), self._value(values, name)
             if isinstance(control, ComboBox):
                 if value not in control.choices:
                     raise PolarsegError(f"{name} {value!r} is not offered by the widget")
@@ -226,7 +272,7 @@ class ParameterControls:
     def load_params(self, path: str | Path) -> bool:
         """Set every control from a parameters JSON file (see :func:`read_params_file`).
 
-        Missing fields take the thesis defaults, as with ``polarseg segment --params``.
+        Missing fields take their defaults (:meth:`SegmentParams.from_dict`).
         Invalid JSON, an unknown field or a value out of range leave every control as it
         was and are reported in the status line (and a notification); returns whether
         the parameters were loaded. With live update on, loading triggers one run.

@@ -13,7 +13,7 @@ from _gui_helpers import click
 from napari_polarseg import batch
 from napari_polarseg.classifier_file import load_pixel_classifier, save_pixel_classifier
 from napari_polarseg.engine import Pipeline, SegmentParams
-from napari_polarseg.engine.analysis.pixel_segmentation import PixelSegmenter
+from napari_polarseg.engine.classifier.pixel_segmentation import PixelSegmenter
 from napari_polarseg.engine.synthetic.scenes import make_scene, scribble_strokes
 from napari_polarseg.io import read_stack
 

@@ -54,7 +54,7 @@ def test_batch_widget_applies_segment_widget_params_to_a_folder(
     for name in ("fruit", "leaves"):
         assert batch.is_complete(out / name)
         assert tifffile.imread(out / name / "labels.tif").shape == SHAPE
-    assert batch.read_summary(out)["params"]["window"] == 8
+    assert batch.read_summary(out)["params"]["method_params"]["thesis"]["window"] == 8
     # again: the complete scenes are skipped; the table can be reloaded from disk
     click(qtbot, widget.run_button)
     assert widget.wait(120)

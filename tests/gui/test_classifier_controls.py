@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from _gui_helpers import error_messages, run_and_wait
 
-from napari_polarseg.engine.analysis.classifier_settings import setting_help
+from napari_polarseg.engine.classifier.classifier_settings import setting_help
 from napari_polarseg.engine.synthetic.scenes import scribble_strokes
 
 pytestmark = pytest.mark.gui

@@ -179,7 +179,8 @@ def test_loading_with_live_update_runs_once(viewer, open_sample, add_widget, qtb
     assert widget.load_params(path)
     wait_idle(qtbot, widget)
     assert widget._slot.run_id == first + 1  # one run for the whole burst of changes
-    assert widget.output("segments").metadata["polarseg_params"]["features"] == "zonal"
+    shown = widget.output("segments").metadata["polarseg_params"]
+    assert shown["method_params"]["thesis"]["features"] == "zonal"
     assert error_messages() == []
 
 

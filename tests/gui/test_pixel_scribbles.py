@@ -12,10 +12,10 @@ from _gui_helpers import Gate, click, error_messages, run_and_wait, wait_idle
 from napari.layers import Image
 from napari.utils.notifications import notification_manager
 
-import napari_polarseg.engine.analysis.scribble_session as scribble_session_module
+import napari_polarseg.engine.classifier.scribble_session as scribble_session_module
 from napari_polarseg.classifier_file import SUFFIX, load_pixel_classifier
 from napari_polarseg.engine import Pipeline, validity_mask
-from napari_polarseg.engine.analysis.pixel_segmentation import PixelSegmenter
+from napari_polarseg.engine.classifier.pixel_segmentation import PixelSegmenter
 from napari_polarseg.engine.errors import Cancelled
 from napari_polarseg.engine.synthetic.scenes import scribble_strokes
 from napari_polarseg.widgets._layers import source_key
@@ -98,8 +98,9 @@ def test_painting_retrains_live_on_the_kept_features(viewer, open_sample, add_wi
     assert segmenter.cached_features is features
     assert widget.pipeline is pipe and pipe.calls["harmonics"] == harmonics
     result = widget.shown_result(stack)
-    assert "pixel features" not in result.recomputed
-    assert "pixel classifier" in result.recomputed and "harmonics" not in result.recomputed
+    # the scene's run of the classifier method: its stages "features" and "classifier"
+    assert result.method == "classifier" and "features" not in result.recomputed
+    assert "classifier" in result.recomputed and "harmonics" not in result.recomputed
 
     # a brush stroke (the paint event) also retrains
     scribbles.brush_size = 3

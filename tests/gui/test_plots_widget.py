@@ -7,7 +7,7 @@ from _gui_helpers import click, engine_result, error_messages, run_and_wait, wai
 from napari.layers import Image
 
 from napari_polarseg.engine import Pipeline, SegmentParams, validity_mask
-from napari_polarseg.engine.analysis.pixel_segmentation import PixelSegmenter
+from napari_polarseg.engine.classifier.pixel_segmentation import PixelSegmenter
 from napari_polarseg.widgets._layers import TAG
 from napari_polarseg.widgets.plots import N_COMPONENTS, PlotsWidget
 

@@ -9,11 +9,11 @@ from napari.layers import Labels, Shapes
 from napari.utils.notifications import notification_manager
 from skimage.draw import polygon2mask
 
-from napari_polarseg.engine.analysis.scribbles_from_labels import (
+from napari_polarseg.engine.classifier.scribbles_from_labels import (
     DEFAULT_MARGIN,
     scribbles_from_labels,
 )
-from napari_polarseg.engine.analysis.suggestion import paint_here_next
+from napari_polarseg.engine.classifier.suggestion import paint_here_next
 from napari_polarseg.widgets.segment_assist import view_camera
 
 pytestmark = pytest.mark.gui

@@ -10,7 +10,7 @@ from napari.layers import Image, Labels
 
 from napari_polarseg.engine import Pipeline, validity_mask
 from napari_polarseg.engine.analysis.evaluation import adjusted_rand_index
-from napari_polarseg.engine.analysis.pixel_segmentation import PixelSegmenter
+from napari_polarseg.engine.classifier.pixel_segmentation import PixelSegmenter
 from napari_polarseg.engine.params import RECOMMENDED
 from napari_polarseg.engine.synthetic.scenes import scribble_strokes
 from napari_polarseg.widgets._layers import TAG, source_key
@@ -182,7 +182,7 @@ def test_scribbles_beat_the_unsupervised_cut(viewer, open_sample, add_widget, qt
     assert meta["polarseg_inputs"]["classifier"] is None
     assert meta["polarseg_summary"]["classifier"]["classes"] == [1, 2, 3]
     assert meta["polarseg_summary"]["classifier"]["training_pixels"] == n_train
-    assert meta["polarseg_params"]["window"] == SCRIBBLE_WINDOW
+    assert meta["polarseg_params"]["method_params"]["thesis"]["window"] == SCRIBBLE_WINDOW
     # the cut's stages were not computed for the scribble run (w = 8)
     pipe = widget.pipeline
     assert pipe.calls["cut"] == 1 and pipe.calls["pca"] == 2

@@ -67,7 +67,7 @@ def test_sweep_widget_runs_draws_and_uses_the_best_cell(
     # Save best…: SegmentParams JSON, as polarseg segment --params reads it
     path = widget.save_best(tmp_path / "best_params.json")
     assert SegmentParams.from_json(path.read_text()) == result.best()
-    assert json.loads(path.read_text())["window"] == result.best().window
+    assert json.loads(path.read_text())["method_params"]["thesis"]["window"] == result.best().window
 
     # Use best: docks the Segment widget, sets it and runs it
     assert not any(isinstance(w, SegmentWidget) for w in viewer.window.dock_widgets.values())
@@ -79,7 +79,8 @@ def test_sweep_widget_runs_draws_and_uses_the_best_cell(
     assert seg.params() == result.best()
     segments = seg.output("segments", stack)
     assert segments is not None
-    assert segments.metadata["polarseg_params"]["window"] == result.best().window
+    thesis = segments.metadata["polarseg_params"]["method_params"]["thesis"]
+    assert thesis["window"] == result.best().window
     # a second click reuses the docked widget
     n_docks = len(viewer.window.dock_widgets)
     click(qtbot, widget.use_button)

@@ -136,12 +136,13 @@ def test_a_parameter_the_method_does_not_read_only_reshows(
     assert widget.output("segments") is segments and segments.data is data
     assert "unchanged" in widget.status.value and "refractive_index" in widget.status.value
     meta = segments.metadata["polarseg_params"]
-    assert meta["refractive_index"] == 1.6 and meta["window"] == 12
+    assert meta["refractive_index"] == 1.6 and meta["method_params"]["thesis"]["window"] == 12
     # the export records the parameters shown, its maps (θ) computed for them
     assert widget.export_results(tmp_path / "out")
     wait_idle(qtbot, widget)
     params = json.loads((tmp_path / "out" / "params.json").read_text())["params"]
-    assert params["refractive_index"] == 1.6 and params["window"] == 12
+    assert params["refractive_index"] == 1.6
+    assert params["method_params"]["thesis"]["window"] == 12
     widget.set_params(n_segments=4)  # read: it runs
     wait_idle(qtbot, widget)
     assert widget._slot.run_id == runs + 1

@@ -107,7 +107,8 @@ def test_both_widgets_match_the_engine(viewer, open_sample, add_widget, qtbot, k
     np.testing.assert_allclose(error.data, ref.reconstruction_error, rtol=1e-9, atol=1e-9)
     assert error.data.min() >= 0
     assert segments.metadata["polarseg_summary"]["n_segments"] == ref.n_segments
-    assert segments.metadata["polarseg_params"]["degree"] == FAST["degree"]
+    thesis = segments.metadata["polarseg_params"]["method_params"]["thesis"]
+    assert thesis["degree"] == FAST["degree"]
     assert "segments" in seg_widget.status.value
 
 
@@ -126,7 +127,8 @@ def test_thesis_defaults_run_off_the_gui_thread(
         scene.stack, name="big leaves", metadata={"angles_deg": list(scene.angles_deg)}
     )
     widget = add_widget("Segment by material")
-    assert widget.params() == SegmentParams()  # the widget starts at the thesis defaults
+    # the widget starts at the thesis defaults (add_widget chooses the preset)
+    assert widget.params() == SegmentParams(method="thesis")
     delivered: list[float] = []
     show = SegmentWidget._show
 
@@ -164,7 +166,7 @@ def test_thesis_defaults_run_off_the_gui_thread(
     # showing the results (napari creating the layers) is the only GUI-thread work
     assert len(delivered) == 4  # the segments, then everything
     assert max(np.diff(delivered)[::2]) < 1.5
-    ref = engine_result(stack, SegmentParams())
+    ref = engine_result(stack, SegmentParams(method="thesis"))
     np.testing.assert_array_equal(viewer.layers[f"segments ({stack.name})"].data, ref.labels + 1)
     np.testing.assert_allclose(
         viewer.layers[f"reconstruction error ({stack.name})"].data,
@@ -435,7 +437,7 @@ def test_presets_and_controls_describe_the_engine_parameters(viewer, add_widget)
     from napari_polarseg.engine.params import RECOMMENDED
 
     widget = add_widget("Segment by material")
-    assert widget.params() == SegmentParams()
+    assert widget.params() == SegmentParams(method="thesis")
     widget.preset.value = "recommended"
     assert widget.params() == RECOMMENDED
     widget.n_segments.value = 5
@@ -446,5 +448,5 @@ def test_presets_and_controls_describe_the_engine_parameters(viewer, add_widget)
         n_segments=5, model="specular", specular_branch="above-brewster"
     )
     widget.preset.value = "thesis"
-    assert widget.params() == SegmentParams()
+    assert widget.params() == SegmentParams(method="thesis")
     assert widget.specular_branch.native.isHidden()

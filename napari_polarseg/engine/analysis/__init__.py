@@ -1,8 +1,8 @@
-"""Analyses around the cut: scoring, scribbles, pixel classification, sweeps, time series.
+"""Analyses around a segmentation: scoring, sweeps, time series, plots and views.
 
-Evaluation against a truth (:mod:`.evaluation`), scribble training of blocks
-(:mod:`.scribbles`) and of pixels (:mod:`.pixel_classifier`, :mod:`.pixel_segmentation`),
-the parameter sweep (:mod:`.sweep`), time series (:mod:`.timeseries`), plot data
-(:mod:`.plots`), display views (:mod:`.views`) and degenerate-input checks
-(:mod:`.degenerate`).
+Evaluation against a truth (:mod:`.evaluation`), the parameter sweep (:mod:`.sweep`,
+:mod:`.sweep_result`), time series (:mod:`.timeseries` with :mod:`.change_test`,
+:mod:`.tracking`, :mod:`.timeseries_segments`, :mod:`.timeseries_result`), plot data
+(:mod:`.plots`) and display views (:mod:`.views`). The pixel classifier has its own
+package, :mod:`napari_polarseg.engine.classifier`.
 """

@@ -177,7 +177,7 @@ def explained_variance(result: SegmentationResult) -> ExplainedVariance:
 def feature_importances(importances: dict[str, float], top: int = 15) -> FeatureImportances:
     """The ``top`` largest of ``importances`` (feature name → importance, e.g.
     :meth:`PixelClassifier.importances
-    <napari_polarseg.engine.analysis.pixel_classifier.PixelClassifier.importances>`), largest
+    <napari_polarseg.engine.classifier.pixel_classifier.PixelClassifier.importances>`), largest
     first; ties keep the given order. Empty for a model without importances."""
     if top < 1:
         raise PolarsegError(f"top must be >= 1, got {top}")

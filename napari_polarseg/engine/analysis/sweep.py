@@ -65,6 +65,7 @@ from ..features.pca import whiten
 from ..limits import check_pipeline_memory
 from ..params import SegmentParams
 from ..pipeline import Pipeline
+from ..registered import computes_block_maps
 from .evaluation import adjusted_rand_index
 from .sweep_result import DEFAULT_SCORE, SCORES, SweepCell, SweepResult
 
@@ -217,6 +218,11 @@ def check_grid(
     """
     if not isinstance(base, SegmentParams):
         raise PolarsegError("base must be a SegmentParams")
+    if not computes_block_maps(base.method):
+        raise PolarsegError(
+            f"the w x L x n grid cuts the thesis block graph, not method {base.method}; "
+            "sweep its own parameters with analysis.param_sweep (polarseg sweep --vary)"
+        )
     if base.n_segments < 2:
         raise PolarsegError(
             f"a sweep compares segmentations: the number of segments must be at least 2, "

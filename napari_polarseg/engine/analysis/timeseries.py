@@ -104,7 +104,7 @@ from ..errors import Cancelled, PolarsegError
 from ..features import harmonics, polstats
 from ..features import pca as feat
 from ..graph import affinity, ncut, spectral
-from ..params import SegmentParams
+from ..params import PRESETS, SegmentParams
 from ..pipeline import Pipeline
 from ..registered import computes_block_maps
 from ..stages import MAX_DENSE_BLOCKS, POLSTATS_KINDS
@@ -397,7 +397,7 @@ def _check_options(
     day_labels: DayLabels | None,
 ) -> _Options:
     """Refuse bad options of :func:`segment_timeseries` (default parameters: the thesis's)."""
-    params = SegmentParams() if params is None else params
+    params = PRESETS["thesis"] if params is None else params
     if not isinstance(params, SegmentParams):
         raise PolarsegError("params must be a SegmentParams")
     if method not in METHODS:

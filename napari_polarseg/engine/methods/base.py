@@ -1,10 +1,11 @@
 """What a segmentation method is: the :class:`Segmenter` protocol, its output and its run.
 
 A method reads the shared polarisation image of a :class:`~.scene.Scene` (and whatever
-inputs it needs, e.g. scribbles), names the :class:`~napari_polarseg.engine.SegmentParams`
-fields its labels depend on (:attr:`Segmenter.reads`: the scene reruns it only when one
-of them changes), lists its own stages (progress and status come from that list) and
-returns pixel labels. Registering one is one line (:mod:`.registry`).
+inputs it needs, e.g. scribbles), names the shared
+:class:`~napari_polarseg.engine.SegmentParams` fields its labels depend on
+(:attr:`Segmenter.reads`), declares its own parameters (``params_class``; the scene
+reruns it only when one of these changes), lists its own stages (progress and status
+come from that list) and returns pixel labels. Registering one is one line (:mod:`.registry`).
 """
 
 from __future__ import annotations
@@ -18,12 +19,18 @@ import numpy as np
 from ..errors import Cancelled
 from ..params import SegmentParams
 
-if TYPE_CHECKING:
-    from .scene import Scene
+if TYPE_CHECKING:  # annotations only: importing the methods stays light
+    from ..features.object_size import ObjectSize
+    from ..physics.pixel_mask import PixelMask
+    from ..physics.polarimage import PolarisationImage
+    from ..pipeline import Pipeline
 
 #: Progress callback of a run: (stage, index, total); ``index`` counts the stages done
 #: (a float inside a stage that reports its share), so the status can say what runs.
 Progress = Callable[[str, float, int], None]
+#: Receiver of a method's partial results (:meth:`MethodRun.partial`): the output so far
+#: and whether its labels are final.
+PartialOutput = Callable[["MethodOutput", bool], None]
 
 
 @dataclass(frozen=True)
@@ -57,6 +64,41 @@ class MethodOutput:
     extra: dict[str, Any] = field(default_factory=dict)
 
 
+class SceneView(Protocol):
+    """What a method reads of the :class:`~.scene.Scene` it segments (the scene module
+    imports this one: the protocol names the scene here, so no import cycle)."""
+
+    pipeline: Pipeline
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """(H, W) of the stack."""
+        ...
+
+    @property
+    def mask(self) -> PixelMask:
+        """The pixel mask of the scene's pipeline."""
+        ...
+
+    @property
+    def region(self) -> np.ndarray | None:
+        """The user's region (H, W bool) or None (every pixel)."""
+        ...
+
+    def polarisation(self, params: SegmentParams) -> PolarisationImage:
+        """The shared polarisation image for ``params.fit``."""
+        ...
+
+    def object_size(self, params: SegmentParams) -> ObjectSize:
+        """The object size a run uses (given, or the scene's estimate)."""
+        ...
+
+    def cached(self, name: str, key: Any, compute: Callable[[], Any]) -> Any:
+        """The scene's feature cache: the value kept under ``name`` for ``key``, else
+        ``compute()`` (kept)."""
+        ...
+
+
 class Segmenter(Protocol):
     """A segmentation method (a peer of the others; see the module docstring).
 
@@ -68,13 +110,17 @@ class Segmenter(Protocol):
     title : str
         Text of the plugin's method menu.
     reads : tuple of str
-        The SegmentParams fields the labels depend on.
+        The shared SegmentParams fields the labels depend on (its own parameters are
+        part of its cache key in any case).
     inputs : tuple of str
         Inputs besides the image it needs, any one of which selects it (e.g.
         ``("scribbles", "classifier")``); empty for an unsupervised method.
 
-    Optional attributes, False when a method has none (read at registration):
-    ``finds_k`` (``n_segments`` = 0 lets it find the number of segments) and
+    Optional attributes, False or None when a method has none (read at registration):
+    ``params_class`` (its own parameters: a frozen dataclass whose fields carry a
+    :class:`~napari_polarseg.engine.param_spec.ParamSpec`; ``params.params_of()`` in
+    :meth:`segment` is its instance), ``finds_k`` (``n_segments`` = 0 lets it find the
+    number of segments) and
     ``block_maps`` (it cuts the w × w block grid and computes the harmonic coefficients,
     the PCA features and the reconstruction-error map in any case, as the thesis method
     does: its runs show those maps, summaries name the block grid, the time series cuts
@@ -91,28 +137,33 @@ class Segmenter(Protocol):
         ...
 
     def segment(
-        self, scene: Scene, params: SegmentParams, inputs: dict[str, Any], run: MethodRun
+        self, scene: SceneView, params: SegmentParams, inputs: dict[str, Any], run: MethodRun
     ) -> MethodOutput:
         """Labels of the scene's image. Calls ``run.begin(stage)`` before each of its
         stages (which also raises :class:`~napari_polarseg.engine.errors.Cancelled` on a
         stop request) and honours ``scene.region`` (nothing outside it may move a
-        label inside it)."""
+        label inside it). It may hand labels over before it returns with
+        ``run.partial(output, final)`` (a coarse preview, then its final labels)."""
         ...
 
 
 @dataclass
 class MethodRun:
-    """Progress and cancellation of one run over a list of stages.
+    """Progress, cancellation and partial results of one run over a list of stages.
 
     :meth:`begin` reports ``(stage, stages done, total)`` *before* the stage runs, so a
     status line names the stage that is running; :meth:`within` reports the share of it
     done (chunked loops); both raise :class:`Cancelled` when ``cancel()`` is True.
+    :meth:`partial` hands labels over before the run ends (``on_partial``, see there).
     """
 
     names: list[str]
     cancel: Callable[[], bool] | None = None
     progress: Progress | None = None
     current: str = ""
+    #: Receives ``(output, final)`` of every :meth:`partial` (in the running thread), or
+    #: None: nobody looks before the end.
+    on_partial: PartialOutput | None = None
 
     @property
     def total(self) -> int:
@@ -136,6 +187,21 @@ class MethodRun:
         if self.progress is not None and self.current:
             i = self.index(self.current)
             self.progress(self.current, i + min(max(share, 0.0), 1.0), self.total)
+
+    @property
+    def wants_partials(self) -> bool:
+        """True when someone receives partial results: a method may skip the work it
+        does only for them (a coarse preview)."""
+        return self.on_partial is not None
+
+    def partial(self, out: MethodOutput, final: bool = False) -> None:
+        """Hand ``out`` over before the run ends: a coarse preview of the labels
+        (``final`` False), or the method's final labels (``final`` True; the scene's
+        stages after the method's may still run, e.g. the thesis maps). Raises
+        :class:`Cancelled` first when a stop was asked for."""
+        self.check()
+        if self.on_partial is not None:
+            self.on_partial(out, final)
 
     def finish(self) -> None:
         """Every stage is done."""

@@ -5,8 +5,9 @@ pixel mask and one :class:`~napari_polarseg.engine.Pipeline` whose ``polarisatio
 stage (Î, ρ, φ of thesis eq. 3.14, the invalid pixels) every method reads, and whose
 block stages are the thesis method's and the thesis maps' (harmonic coefficients, PCA,
 reconstruction error) when they are asked for. Each method's output is cached with the
-values of the parameters it reads (:attr:`~.base.Segmenter.reads`) and its inputs, so
-a change of any other parameter does not rerun it.
+values of the shared parameters it reads (:attr:`~.base.Segmenter.reads`), its own
+parameters (all of them) and its inputs, so a change of any other parameter does not
+rerun it.
 """
 
 from __future__ import annotations
@@ -20,12 +21,12 @@ import numpy as np
 
 from ..features.harmonics import top_left_block_labels
 from ..features.object_size import ObjectSize, estimate_object_size
-from ..params import SegmentParams
+from ..params import DEFAULT_PRESET, PRESETS, SegmentParams
 from ..physics import polarimage
 from ..physics.pixel_mask import PixelMask
 from ..pipeline import Pipeline
 from ..result import SegmentationResult
-from .base import MethodOutput, MethodRun, Progress, Segmenter
+from .base import MethodOutput, MethodRun, PartialOutput, Progress, Segmenter
 from .registry import get_method, method_names
 
 #: The thesis stages that give the maps of the result-folder contract beyond Î, ρ, φ, θ.
@@ -128,7 +129,8 @@ class Scene:
             return value
 
     # -- running ------------------------------------------------------------------------
-    def method_for(self, params: SegmentParams, inputs: dict[str, Any] | None) -> Segmenter:
+    @staticmethod
+    def method_for(params: SegmentParams, inputs: dict[str, Any] | None) -> Segmenter:
         """The method of a run: the one that takes the given inputs (scribbles, a
         classifier), else ``params.method``."""
         given = {k for k, v in (inputs or {}).items() if v is not None and k != "colour_stack"}
@@ -139,15 +141,16 @@ class Scene:
                     return method
         return get_method(params.method)
 
+    @staticmethod
     def stages(
-        self,
         params: SegmentParams,
         inputs: dict[str, Any] | None = None,
         maps: bool = False,
         reconstruction: bool = False,
     ) -> list[str]:
-        """The stages a run goes through, in order (the progress bar's total)."""
-        method = self.method_for(params, inputs)
+        """The stages a run goes through, in order (the progress bar's total; no scene
+        needed: ``Scene.stages(params, ...)`` before a stack's scene exists)."""
+        method = Scene.method_for(params, inputs)
         names = ["polarisation", "normals", *method.stages(params)]
         if maps:
             names += [s for s in MAP_STAGES if s not in names]
@@ -156,8 +159,11 @@ class Scene:
         return names
 
     def method_key(self, method: Segmenter, params: SegmentParams, inputs: dict) -> tuple:
-        """What a method's labels depend on: the parameters it reads and its inputs."""
-        return (method.name, tuple(getattr(params, f) for f in method.reads), _input_key(inputs))
+        """What a method's labels depend on: the shared parameters it reads, all of its
+        own parameters (its ``params_class``; whether it names them in ``reads`` or not)
+        and its inputs."""
+        shared = tuple(getattr(params, f) for f in method.reads)
+        return (method.name, shared, params.params_of(method.name), _input_key(inputs))
 
     def segment(
         self,
@@ -167,13 +173,16 @@ class Scene:
         reconstruction: bool | None = None,
         cancel: Callable[[], bool] | None = None,
         progress: Progress | None = None,
+        on_partial: Callable[[SegmentationResult, MethodOutput, bool], None] | None = None,
     ) -> SegmentationResult:
         """Segment with ``params.method`` (or the method that takes ``inputs``).
 
         Parameters
         ----------
         params : SegmentParams, optional
-            Default ``SegmentParams()`` (the thesis method).
+            Default ``PRESETS["auto"]`` (the default preset of the CLI and the
+            plugin: ``SegmentParams().method``, with the recommended block parameters of
+            the thesis maps).
         inputs : dict, optional
             ``scribbles`` (H, W int, 0 = unlabelled) or ``classifier`` (a trained
             pixel classifier), and ``colour_stack`` of a colour-polarisation frame.
@@ -187,8 +196,14 @@ class Scene:
             :class:`~napari_polarseg.engine.errors.Cancelled`.
         progress : callable(stage, index, total), optional
             Called when a stage starts (``index`` = stages done) and within it.
+        on_partial : callable(result, output, final), optional
+            Called (in the running thread) with what the method hands over before the
+            run ends (:meth:`~.base.MethodRun.partial`): the result around its output,
+            without the maps, and the output itself; ``final`` False for a preview
+            (the pixel classifier's coarse labels), True for the method's final labels
+            while the maps are computed (only when some are left to compute).
         """
-        p = params or SegmentParams()
+        p = params or PRESETS[DEFAULT_PRESET]
         inputs = {k: v for k, v in (inputs or {}).items() if v is not None}
         method = self.method_for(p, inputs)
         blocks = bool(getattr(method, "block_maps", False))  # the thesis method's maps
@@ -196,6 +211,8 @@ class Scene:
         reconstruction = blocks if reconstruction is None else reconstruction
         run = MethodRun(self.stages(p, inputs, maps, reconstruction), cancel, progress)
         timings: dict[str, float] = {}  # the stages computed in this call
+        if on_partial is not None:
+            run.on_partial = self._forward(p, method, run, timings, on_partial)
         with self._lock:
             self.pipeline.snapshot(p)
             for stage in ("polarisation", "normals"):
@@ -251,6 +268,27 @@ class Scene:
         self._cache[name] = (key, out)
         return out
 
+    def _forward(
+        self,
+        p: SegmentParams,
+        method: Segmenter,
+        run: MethodRun,
+        timings: dict[str, float],
+        on_partial: Callable[[SegmentationResult, MethodOutput, bool], None],
+    ) -> PartialOutput:
+        """The receiver of the method's partial outputs in :meth:`segment`: each goes to
+        ``on_partial`` with the result around it (no maps); the final labels only when
+        stages are left after the method's (else the whole result follows at once)."""
+        last = max((run.names.index(s) for s in method.stages(p)), default=1)  # normals
+        done, left = run.names[: last + 1], run.names[last + 1 :]
+
+        def forward(out: MethodOutput, final: bool) -> None:
+            if final and all(self.pipeline.is_fresh(s, p) for s in left):
+                return
+            on_partial(self._result(p, out, False, False, timings, method, done), out, final)
+
+        return forward
+
     def _result(
         self,
         p: SegmentParams,
@@ -261,40 +299,22 @@ class Scene:
         method: Segmenter,
         names: list[str],
     ) -> SegmentationResult:
-        pipe = self.pipeline
-        pol, nrm = pipe.get("polarisation", p), pipe.get("normals", p)
-        coef = pca = rec = None
-        if maps:
-            coef, pca = pipe.get("harmonics", p), pipe.get("pca", p)
-        if reconstruction:
-            rec = pipe.get("reconstruction", p)
+        """The result of a run (:meth:`Pipeline.assemble_result
+        <napari_polarseg.engine.Pipeline.assemble_result>` around the method's output)."""
         labels = np.asarray(out.labels).astype(np.int64)
-        return SegmentationResult(
-            params=p,
-            intensity=pol.intensity,
-            dop=pol.dop,
-            phase=pol.phase,
-            residual=pol.residual,
-            zenith=nrm.zenith,
-            azimuth=nrm.azimuth,
-            clamped=nrm.clamped,
-            coefficients=coef,
-            features=None if pca is None else pca.features,
-            explained_variance_ratio=None if pca is None else pca.explained_variance_ratio,
-            block_labels=top_left_block_labels(labels, p.window).astype(np.int32),
-            labels=labels,
-            ncut_values=list(out.ncut_values),
-            timings={
-                s: self._seconds.get(s, 0.0) for s in [*names, method.name] if s in self._seconds
-            },
-            recomputed=list(dict.fromkeys(s for s in [*names, method.name] if s in timings)),
-            reconstruction=None if rec is None else rec.intensity,
-            reconstruction_error=None if rec is None else rec.error,
-            valid=~pol.invalid,
-            mask_counts=self.mask.counts(),
-            duplicate_angle_frames=polarimage.duplicate_angle_frames(pipe.angles),
+        stages = [*names, method.name]
+        seconds = {**self._seconds, **timings}  # this call's too (a partial result's)
+        return self.pipeline.assemble_result(
+            top_left_block_labels(labels, p.window).astype(np.int32),
+            labels,
+            list(out.ncut_values),
+            reconstruction,
+            timings={s: seconds[s] for s in stages if s in seconds},
+            recomputed=list(dict.fromkeys(s for s in stages if s in timings)),
             cut_limits=dict(out.cut_limits),
+            params=p,
             superpixels=dict(out.record) if "close_up" in out.record else {},
+            maps=maps,
             method=method.name,
             method_record=dict(out.record),
             materials=out.extra.get("materials"),  # a classifier's classes: value and name
@@ -310,8 +330,9 @@ def segment(
     **changes: Any,
 ) -> SegmentationResult:
     """One-shot convenience: segment a stack (angles in radians) with ``params.method``
-    (default: the thesis method), ``changes`` applied to ``params``."""
-    params = params or SegmentParams()
+    (default: ``PRESETS["auto"]``, as the CLI and the plugin), ``changes`` applied to
+    ``params``."""
+    params = params or PRESETS[DEFAULT_PRESET]
     if changes:
         params = params.replace(**changes)
     return Scene(stack, angles, mask).segment(params)

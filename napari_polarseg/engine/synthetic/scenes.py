@@ -282,7 +282,7 @@ def scribble_strokes(
     """Short straight strokes (1 px wide) inside each material, as a user would paint.
 
     The fixed, small set of strokes used to evaluate scribble-guided segmentation
-    (``analysis.scribbles.scribble_result``) on the synthetic scenes: ``per_material`` strokes of
+    (``classifier.scribbles.scribble_result``) on the synthetic scenes: ``per_material`` strokes of
     ``length`` pixels at random positions and angles (seeded), each at least 2 px
     inside its material of ``truth``; stroke value = material index + 1, 0 elsewhere.
     About 1-2 % of the pixels of a 120 × 130 scene.

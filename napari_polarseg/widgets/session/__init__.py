@@ -9,10 +9,11 @@ and the widgets show what they return.
   :class:`Partial`, :class:`Result`) and how it runs (:func:`guarded`).
 - :mod:`~napari_polarseg.widgets.session.store`: :class:`PipelineStore`, one cached
   pipeline per angle-stack layer.
-- :mod:`~napari_polarseg.widgets.session.classify`: the scribble mode
-  (:func:`classifier_stages`, :class:`ClassifierOutput`).
+- :mod:`~napari_polarseg.widgets.session.classify`: the scribble mode on a stack's
+  scene (:func:`classify_scene`, :class:`ClassifierOutput`).
 - :mod:`~napari_polarseg.widgets.session.jobs`: the Segment widget's worker jobs
-  (:func:`segment_job`, :func:`classifier_job`, the classifier and export files).
+  (:func:`segment_job` for every method and the classifier, the classifier and export
+  files).
 - :mod:`~napari_polarseg.widgets.session.results`: what is shown and exported of a
   result (:func:`shown_result`, :class:`ExportRecord`).
 - :mod:`~napari_polarseg.widgets.session.inputs` and
@@ -22,13 +23,12 @@ and the widgets show what they return.
 """
 
 from .classify import (
-    CLASSIFIER_STAGES,
-    PIPELINE_STAGES,
     ClassifierOutput,
     LoadedClassifier,
     classifier_parts,
-    classifier_stages,
+    classifier_segmentation,
     classifier_text,
+    classify_scene,
     named_output,
     scribble_problem,
 )
@@ -37,7 +37,6 @@ from .inputs import colour_stack_of, content_digest, input_info, region_digest
 from .jobs import (
     FEATURES_JOB_STAGES,
     SegmentRequest,
-    classifier_job,
     export_job,
     features_job,
     read_classifier_job,
@@ -58,9 +57,7 @@ from .text import (
 )
 
 __all__ = [
-    "CLASSIFIER_STAGES",
     "NO_INPUTS",
-    "PIPELINE_STAGES",
     "ClassifierOutput",
     "Delivery",
     "ExportRecord",
@@ -74,12 +71,12 @@ __all__ = [
     "Stage",
     "StageFailed",
     "blas_share",
-    "classifier_job",
     "FEATURES_JOB_STAGES",
     "features_job",
     "classifier_parts",
-    "classifier_stages",
+    "classifier_segmentation",
     "classifier_text",
+    "classify_scene",
     "named_output",
     "colour_stack_of",
     "content_digest",

@@ -1,51 +1,34 @@
-"""The scribble mode without Qt: the stages it runs, the pixel classifier trained on the
-user's strokes (or a loaded one) in place of affinity and cut, and its texts.
+"""The scribble mode without Qt: the pixel classifier on a stack's
+:class:`~napari_polarseg.engine.Scene`, trained on the user's strokes (or a loaded one
+applied) in place of the unsupervised method, and its texts.
 
-:func:`classifier_stages` is the scribble mode's job body: the pipeline's stages up to
-the block features, the pixel feature stack (kept by a
-:class:`~napari_polarseg.engine.ScribbleSession` per pipeline), then the pixel
-classifier (its grid preview first, then every pixel), assembled into a
-:class:`~napari_polarseg.engine.SegmentationResult` like the cut's. A ``cancel``
-callable that turns True when a newer request or Cancel stops the run makes the
-prediction stop between chunks instead of at the next stage boundary.
+:func:`classify_scene` is the scribble mode's run: the scene runs the
+``PixelClassification`` method (:mod:`napari_polarseg.engine.methods.pixel_classification`)
+on its kept :class:`~napari_polarseg.engine.ScribbleSession` (the pixel features survive
+new strokes), hands the labels of the classifier's coarser grid and then its final
+labels over before the thesis maps and the error map (``on_partial``), and its result
+comes wrapped as a :class:`ClassifierOutput`. A ``cancel`` callable that turns True when
+a newer request or Cancel stops the run makes the prediction stop between chunks.
 """
 
 from __future__ import annotations
 
-import time
-from collections.abc import Callable, Generator
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ...engine import Pipeline, PolarsegError, SegmentationResult, SegmentParams
-from ...engine.analysis.classifier_settings import ClassifierSettings
+from ...engine import SegmentationResult, SegmentParams
+from ...engine.classifier.pixel_segmentation import PixelSegmentation
+from ...engine.errors import ClassifierInputError
 from ...engine.materials import default_name
-from .runs import Partial
 
 if TYPE_CHECKING:
-    from ...engine.analysis.pixel_classifier import PixelClassifier, PixelPrediction
-    from ...engine.analysis.pixel_segmentation import PixelSegmentation
-    from ...engine.analysis.scribble_session import ScribbleSession
-
-#: Stages of the scribble mode: the polarisation image, the pixel features, the normals
-#: (the result's zenith map), the classifier (training and prediction, or prediction
-#: only for a loaded classifier), then the thesis's block features (for the result's
-#: plots) and the error map, after the labels are shown. The cut's own stages
-#: (affinity, cut, labels) are neither computed nor invalidated.
-PIPELINE_STAGES = ("polarisation",)
-MAP_STAGES = ("harmonics", "pca", "reconstruction")
-CLASSIFIER_STAGES = (
-    *PIPELINE_STAGES,
-    "pixel features",
-    "normals",
-    "pixel classifier",
-    *MAP_STAGES,
-)
-#: The session's seconds that make up the "pixel classifier" stage.
-CLASSIFIER_SECONDS = ("train", "preview", "predict")
+    from ...engine import Scene
+    from ...engine.classifier.pixel_classifier import PixelClassifier, PixelPrediction
+    from ...engine.methods import MethodOutput
 
 
 def scribble_problem(scribbles: np.ndarray) -> str | None:
@@ -68,7 +51,7 @@ class ClassifierOutput:
     """What a scribble-mode job returns (or yields as a :class:`Partial`).
 
     ``segmentation`` is the engine's
-    :class:`~napari_polarseg.engine.analysis.pixel_segmentation.PixelSegmentation`: its
+    :class:`~napari_polarseg.engine.classifier.pixel_segmentation.PixelSegmentation`: its
     ``result.labels`` hold the class index 0..K-1, ``prediction.classes[k]`` is the
     scribble value (label) of class k, ``prediction.probabilities`` is (K, H, W) and
     sums to 1 over K, ``prediction.uncertainty`` is (H, W) in [0, 1]. ``trained`` is
@@ -100,111 +83,56 @@ class ClassifierOutput:
         return self.segmentation.classifier
 
 
-def fit_session(
-    session: ScribbleSession,
-    params: SegmentParams,
-    scribbles: np.ndarray | None,
-    classifier: PixelClassifier | None,
-    settings: ClassifierSettings | None,
-) -> str | None:
-    """Train ``session`` on ``scribbles`` with ``settings`` (default the defaults), or
-    give it the loaded ``classifier`` (which brings its own features); the problem's
-    text when that fails (e.g. strokes of one material), else None."""
-    settings = settings or ClassifierSettings()
-    if classifier is None:
-        session.features_params = settings.features
-        session.classifier_params = settings.classifier
-    session.segment_params = params
-    try:
-        if classifier is None:
-            session.train(scribbles)
-        else:
-            session.use(classifier)
-    except PolarsegError as exc:
-        return str(exc)
-    return None
+def classifier_segmentation(result: SegmentationResult, out: MethodOutput) -> PixelSegmentation:
+    """The classifier's run as the engine's :class:`PixelSegmentation`: the scene's
+    ``result`` and what the method's output carries (prediction, classifier, seconds)."""
+    extra = out.extra
+    return PixelSegmentation(result, extra["prediction"], extra["classifier"], extra["seconds"])
 
 
-def classifier_stages(
-    pipe: Pipeline,
-    session: ScribbleSession,
+def classify_scene(
+    scene: Scene,
     params: SegmentParams,
-    scribbles: np.ndarray | None = None,
-    classifier: PixelClassifier | None = None,
-    reconstruction: bool = True,
+    inputs: dict[str, Any],
+    maps: bool = True,
     cancel: Callable[[], bool] | None = None,
-    settings: ClassifierSettings | None = None,
-) -> Generator[Any, None, ClassifierOutput]:
-    """Run the stages the scribble mode needs (yielding after each), then classify.
+    progress: Callable[[str, float, int], None] | None = None,
+    partial: Callable[[ClassifierOutput], None] | None = None,
+) -> ClassifierOutput:
+    """The pixel classifier on ``scene``: trained on ``inputs["scribbles"]`` with
+    ``inputs["settings"]`` (default the defaults), or ``inputs["classifier"]`` applied
+    (and ``inputs["colour_stack"]`` of a colour-polarisation frame), with the thesis maps
+    and the error map when ``maps``.
 
-    Trains the pixel classifier on ``scribbles`` with ``settings`` (default the
-    defaults), or applies ``classifier`` (exactly one of them). Yields ``(stage, stages
-    done, total)`` as each stage starts (at most ``len(CLASSIFIER_STAGES)``; without the
-    reconstruction, none of :data:`MAP_STAGES`). The pipeline's cached stages and
-    ``session``'s feature stack are reused: once they are computed, a new stroke reruns
-    only training and prediction. The labels of the classifier's grid
-    (:meth:`~napari_polarseg.engine.ScribbleSession.preview`) are yielded as a
-    :class:`Partial` first, then every pixel's; when the thesis maps and the
-    reconstruction still have to be computed, the output without them is yielded as a
-    :class:`Partial` too (the segments are shown while they are computed). ``cancel``
-    is handed to the prediction: it raises :class:`~napari_polarseg.engine.Cancelled`
-    between chunks once ``cancel()`` is True.
+    The scene's cached stages and its session's feature stack are reused: once they are
+    computed, a new stroke reruns only training and prediction. ``partial`` (None: no
+    preview is computed) receives the labels of the classifier's coarser grid
+    (``preview`` True), then, when the maps are still to be computed, the final labels
+    without them. ``progress(stage, index, total)`` is the scene's; ``cancel`` stops the
+    prediction between chunks (:class:`~napari_polarseg.engine.Cancelled`). Strokes that
+    cannot train the classifier, or a classifier that does not fit the stack, give an
+    output with the ``problem`` and no segmentation.
     """
-    labelled = CLASSIFIER_STAGES.index(MAP_STAGES[0])  # the stages up to the labels
-    names = CLASSIFIER_STAGES if reconstruction else CLASSIFIER_STAGES[:labelled]
-    total = len(names)
-    timings: dict[str, float] = {}
-    recomputed: list[str] = []
-    partial = reconstruction and not pipe.is_fresh("reconstruction", params)
+    trained = inputs.get("classifier") is None
 
-    def run_stage(name: str) -> None:
-        before = pipe.calls[name]
-        t0 = time.perf_counter()
-        pipe.get(name, params)
-        if pipe.calls[name] != before:
-            timings[name] = time.perf_counter() - t0
-            recomputed.append(name)
+    def forward(result: SegmentationResult, out: MethodOutput, final: bool) -> None:
+        assert partial is not None
+        partial(ClassifierOutput(classifier_segmentation(result, out), trained, preview=not final))
 
-    # each stage is reported as it starts (index = stages done): the status names it
-    for i, name in enumerate(PIPELINE_STAGES):
-        yield name, i, total
-        run_stage(name)
-    yield "pixel features", CLASSIFIER_STAGES.index("pixel features"), total
-    before = session.feature_runs
-    problem = fit_session(session, params, scribbles, classifier, settings)
-    if problem is not None:
-        return ClassifierOutput(None, classifier is None, problem=problem)
-    if session.feature_runs != before:
-        timings["pixel features"] = session.seconds.get("features", 0.0)
-        recomputed.append("pixel features")
-    yield "normals", CLASSIFIER_STAGES.index("normals"), total
-    run_stage("normals")
-    recomputed.append("pixel classifier")
-
-    def output(with_reconstruction: bool, preview: bool = False) -> ClassifierOutput:
-        seg = session.segmentation(with_reconstruction)
-        seconds = session.seconds
-        timings["pixel classifier"] = sum(seconds.get(k, 0.0) for k in CLASSIFIER_SECONDS)
-        stages = names if with_reconstruction else names[:labelled]
-        result = replace(
-            seg.result,
-            params=params,
-            timings={name: timings.get(name, 0.0) for name in stages},
-            recomputed=[name for name in stages if name in recomputed],
+    try:
+        result = scene.segment(
+            params,
+            inputs,
+            maps=maps,
+            reconstruction=maps,
+            cancel=cancel,
+            progress=progress,
+            on_partial=None if partial is None else forward,
         )
-        return ClassifierOutput(replace(seg, result=result), classifier is None, None, preview)
-
-    yield "pixel classifier", CLASSIFIER_STAGES.index("pixel classifier"), total
-    session.preview(cancel)
-    yield Partial(output(False, preview=True))
-    session.refine(cancel)
-    if not partial:
-        return output(reconstruction)
-    yield Partial(output(False))
-    for i, name in enumerate(MAP_STAGES):
-        yield name, labelled + i, total
-        run_stage(name)
-    return output(True)
+    except ClassifierInputError as exc:
+        return ClassifierOutput(None, trained, problem=str(exc))
+    out = scene.method_output(params, inputs)  # kept by the scene: not computed again
+    return ClassifierOutput(classifier_segmentation(result, out), trained)
 
 
 def named_output(out: ClassifierOutput, names: dict[int, str]) -> ClassifierOutput:

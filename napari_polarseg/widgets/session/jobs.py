@@ -16,16 +16,16 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ...engine import PolarsegError, SegmentParams, get_method
+from ...engine import PolarsegError, Scene, SegmentParams
 from ...engine.registered import computes_block_maps
-from .classify import CLASSIFIER_STAGES, PIPELINE_STAGES, ClassifierOutput, classifier_stages
+from .classify import classify_scene
 from .results import ExportRecord
 from .runs import Job, Partial, Result, Stage
 from .store import PipelineStore
 
 if TYPE_CHECKING:
-    from ...engine.analysis.classifier_settings import ClassifierSettings
-    from ...engine.analysis.pixel_classifier import PixelClassifier
+    from ...engine.classifier.classifier_settings import ClassifierSettings
+    from ...engine.classifier.pixel_classifier import PixelClassifier
 
 
 def wants_maps(params: SegmentParams, thesis_maps: bool = False) -> bool:
@@ -46,12 +46,20 @@ def segment_job(
     mask_key: str | None = None,
     prefetch: bool = False,
     maps: bool = True,
+    inputs: dict[str, Any] | None = None,
     cancel: Callable[[], bool] | None = None,
     report: Callable[[str, float, int], None] | None = None,
+    partial: Callable[[Any], None] | None = None,
 ) -> Generator[Any, None, Any]:
     """Worker job: the method ``params.method`` on the layer's kept
     :class:`~napari_polarseg.engine.Scene` (it reruns only when a parameter it reads
-    changes); with ``maps`` also the thesis maps and then the error map.
+    changes); with ``maps`` also the thesis maps and then the error map. With
+    ``inputs`` holding ``scribbles`` or a ``classifier``, the scene's pixel classifier
+    instead (:func:`~napari_polarseg.widgets.session.classify.classify_scene`, with the
+    maps and the error map; ``colour_stack``, ``settings``): it returns a
+    :class:`~napari_polarseg.widgets.session.ClassifierOutput` and hands its preview and
+    final labels to ``partial`` (the runner's: shown in the GUI thread as a
+    :class:`~napari_polarseg.widgets.session.Partial`) while it runs.
 
     ``region`` (H, W bool, True = use) restricts the segmentation; saturated and black
     samples are left out in any case (:meth:`PipelineStore.obtain`). The progress is the
@@ -76,8 +84,10 @@ def segment_job(
     pipe = store.obtain(key, data, angles_rad, params, region=region, mask_key=mask_key)
     scene = store.scene(key)
     assert scene is not None
-    names = scene.stages(params, maps=maps, reconstruction=maps)
-    total = len(names)
+    inputs = {k: v for k, v in (inputs or {}).items() if v is not None}
+    classify = "scribbles" in inputs or "classifier" in inputs
+    maps = maps or classify
+    total = len(scene.stages(params, inputs, maps=maps, reconstruction=maps))
 
     def within(stage: str, index: float, _n: int) -> None:
         # the first call of a run with maps lists every stage but the last: the same
@@ -85,6 +95,8 @@ def segment_job(
         if report is not None and stage != "done":
             report(stage, index, total)
 
+    if classify:
+        return classify_scene(scene, params, inputs, True, cancel, within, partial)
     if not maps:
         return scene.segment(
             params, maps=False, reconstruction=False, cancel=cancel, progress=within
@@ -100,48 +112,9 @@ def segment_job(
     return result
 
 
-def classifier_job(
-    store: PipelineStore,
-    key: str,
-    data: Any,
-    angles_rad: np.ndarray,
-    params: SegmentParams,
-    scribbles: np.ndarray | None,
-    classifier: PixelClassifier | None,
-    region: np.ndarray | None = None,
-    mask_key: str | None = None,
-    colour_stack: np.ndarray | None = None,
-    settings: ClassifierSettings | None = None,
-    cancel: Callable[[], bool] | None = None,
-) -> Generator[Any, None, ClassifierOutput]:
-    """Worker job of the scribble mode: the cached pipeline's stages up to the block
-    features, the stack's kept pixel features, then the pixel classifier trained on
-    ``scribbles`` (or the loaded ``classifier`` applied) and the reconstruction
-    (:func:`~napari_polarseg.widgets.session.classify.classifier_stages`). ``cancel`` stops the
-    prediction between chunks. ``colour_stack`` (C, N, H, W): the colour stacks of a
-    colour-polarisation frame whose luminance is ``data`` (the reader's
-    ``metadata["colour_stack"]``), whose polarisation images add features. ``settings``:
-    the features and model a training uses (default the defaults)."""
-    pipe = store.obtain(key, data, angles_rad, params, region=region, mask_key=mask_key)
-    session = store.session(key, colour_stack)
-    assert session is not None
-    return (
-        yield from classifier_stages(
-            pipe,
-            session,
-            params,
-            scribbles,
-            classifier,
-            reconstruction=True,
-            cancel=cancel,
-            settings=settings,
-        )
-    )
-
-
-#: Stages :func:`features_job` reports: the pipeline's and the pixel features (the
-#: session computes the normals beside them).
-FEATURES_JOB_STAGES = len(PIPELINE_STAGES) + 1
+#: Stages :func:`features_job` reports: the polarisation image and the pixel features
+#: (the session computes the normals beside them).
+FEATURES_JOB_STAGES = 2
 
 
 def features_job(
@@ -155,14 +128,13 @@ def features_job(
     colour_stack: np.ndarray | None = None,
 ) -> Generator[Any, None, int]:
     """Worker job run when a scribbles layer is chosen before it holds strokes: the
-    stages the scribble mode shares with the pipeline and the stack's pixel features,
-    kept by its :class:`~napari_polarseg.engine.ScribbleSession`, so the first strokes
-    only train and predict. Returns the number of features."""
+    polarisation image and the stack's pixel features, kept by the scene's
+    :class:`~napari_polarseg.engine.ScribbleSession` (:meth:`PipelineStore.session`), so
+    the first strokes only train and predict. Returns the number of features."""
     pipe = store.obtain(key, data, angles_rad, params, region=region, mask_key=mask_key)
     total = FEATURES_JOB_STAGES
-    for i, name in enumerate(PIPELINE_STAGES):
-        yield name, i, total
-        pipe.get(name, params)
+    yield "polarisation", 0, total
+    pipe.get("polarisation", params)
     session = store.session(key, colour_stack)
     assert session is not None
     session.segment_params = params
@@ -235,29 +207,18 @@ def segment_request(
     maps: bool = True,
     settings: ClassifierSettings | None = None,
 ) -> SegmentRequest:
-    """The job that segments ``data``: the method of ``params`` (:func:`segment_job`,
-    with the thesis maps and error map when ``maps``; prefetching in idle time for the
+    """The job that segments ``data`` (:func:`segment_job`): the method of ``params``
+    (with the thesis maps and error map when ``maps``; prefetching in idle time for the
     thesis method) without ``scribbles`` and ``classifier``, else the pixel classifier
-    trained on the strokes (with ``settings``) or the loaded one applied
-    (:func:`classifier_job`).
+    trained on the strokes (with ``settings``) or the loaded one applied.
 
-    ``total`` is the number of stages the run goes through (the layer's scene lists
-    them; before its first run, the method's stages after the shared ones). The job
-    reports the same total with every stage."""
-    if scribbles is None and classifier is None:
-        args = (store, key, data, angles_rad, params, region, mask_key, True, maps)
-        return SegmentRequest(segment_job, args, planned_stages(store, key, params, maps), True)
-    args = (store, key, data, angles_rad, params, scribbles, classifier)
-    args += (region, mask_key, colour_stack, settings)
-    return SegmentRequest(classifier_job, args, len(CLASSIFIER_STAGES), reports=False)
-
-
-def planned_stages(store: PipelineStore, key: str, params: SegmentParams, maps: bool) -> int:
-    """How many stages a :func:`segment_job` of ``key`` with ``params`` goes through."""
-    scene = store.scene(key)
-    if scene is not None:
-        return len(scene.stages(params, maps=maps, reconstruction=maps))
-    names = ["polarisation", "normals", *get_method(params.method).stages(params)]
-    if maps:
-        names += [s for s in ("harmonics", "pca") if s not in names] + ["reconstruction"]
-    return len(names)
+    ``total`` is the number of stages the run goes through (:meth:`Scene.stages
+    <napari_polarseg.engine.Scene.stages>`; the job reports the same total with every
+    stage)."""
+    inputs = {"scribbles": scribbles, "classifier": classifier}
+    if scribbles is not None or classifier is not None:
+        inputs |= {"colour_stack": colour_stack, "settings": settings}
+        maps = True  # the classifier's result has the thesis maps and the error map
+    total = len(Scene.stages(params, inputs, maps=maps, reconstruction=maps))
+    args = (store, key, data, angles_rad, params, region, mask_key, True, maps, inputs)
+    return SegmentRequest(segment_job, args, total, True)

@@ -14,8 +14,9 @@ from typing import Any
 import numpy as np
 
 from ...engine import Pipeline, Scene, SegmentParams, validity_mask
-from ...engine.analysis.pixel_segmentation import PixelSegmenter
-from ...engine.analysis.scribble_session import ScribbleSession
+from ...engine.classifier.pixel_segmentation import PixelSegmenter
+from ...engine.classifier.scribble_session import ScribbleSession
+from ...engine.methods.pixel_classification import scribble_session
 
 
 def stack_pipeline(
@@ -35,14 +36,13 @@ def stack_pipeline(
 
 @dataclass
 class _Entry:
-    """A kept pipeline, what it was built from and the scribble session beside it."""
+    """A kept pipeline, what it was built from and the scene around it."""
 
     data: Any
     angles: tuple[float, ...]
     mask_key: str | None
     region: np.ndarray | None
     pipeline: Pipeline
-    session: ScribbleSession | None = None
     scene: Scene | None = None
 
     def matches(
@@ -60,11 +60,12 @@ class PipelineStore:
 
     The pipeline is rebuilt when the layer's data object, the angles or the mask (its
     ``mask_key`` or the content of its ``region``) change; otherwise the same object is
-    reused so cached stages survive parameter changes. Beside each pipeline it keeps one
-    :class:`~napari_polarseg.engine.analysis.pixel_segmentation.PixelSegmenter`
-    (:meth:`session`), so the scribble mode computes the pixel features once per
-    stack and a new stroke only retrains and predicts. Safe to call from a worker thread
-    (the slot runs one worker at a time; a lock guards the dict).
+    reused so cached stages survive parameter changes. Around each pipeline it keeps one
+    :class:`~napari_polarseg.engine.Scene` (:meth:`scene`), whose feature cache holds the
+    pixel classifier's :class:`~napari_polarseg.engine.ScribbleSession` (:meth:`session`),
+    so the scribble mode computes the pixel features once per stack and a new stroke only
+    retrains and predicts. Safe to call from a worker thread (the slot runs one worker at
+    a time; a lock guards the dict).
     """
 
     def __init__(self) -> None:
@@ -119,17 +120,13 @@ class PipelineStore:
             return entry.scene
 
     def session(self, key: str, colour_stack: np.ndarray | None = None) -> ScribbleSession | None:
-        """The scribble session beside ``key``'s pipeline (made at the first call; None
-        without a pipeline): it keeps the pixel features between strokes. A rebuilt
+        """The scribble session of ``key``'s scene (the one the pixel classifier method
+        runs on, :func:`~napari_polarseg.engine.methods.pixel_classification.scribble_session`;
+        None without a pipeline): it keeps the pixel features between strokes. A rebuilt
         pipeline, or another ``colour_stack`` (the colour stacks of a
         colour-polarisation frame, :class:`PixelSegmenter`), gets a new one."""
-        with self._lock:
-            entry = self._entries.get(key)
-            if entry is None:
-                return None
-            if entry.session is None or entry.session.colour_stack is not colour_stack:
-                entry.session = ScribbleSession.on_pipeline(entry.pipeline, colour_stack)
-            return entry.session
+        scene = self.scene(key)
+        return None if scene is None else scribble_session(scene, colour_stack)
 
     def segmenter(self, key: str, colour_stack: np.ndarray | None = None) -> PixelSegmenter | None:
         """The pixel segmenter of :meth:`session` (its kept feature stack)."""

@@ -3,7 +3,7 @@ and the region walk.
 
 :class:`ClassifierSettings` pairs the two parameter dataclasses the classifier is trained
 with (:class:`~napari_polarseg.engine.features.pixel_features.PixelFeatureParams`,
-:class:`~napari_polarseg.engine.analysis.pixel_classifier.ClassifierParams`);
+:class:`~napari_polarseg.engine.classifier.pixel_classifier.ClassifierParams`);
 :data:`SETTINGS` names the fields a user sets and :func:`setting_help` gives each one's
 description from the ``Attributes`` section of its dataclass's docstring, so every
 parameter is described once (the plugin's tooltips are made from it).

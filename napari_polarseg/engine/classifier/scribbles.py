@@ -223,7 +223,7 @@ def scribble_result(
     """Labels from a classifier trained on user strokes instead of the normalized cut.
 
     The block features of the ``pca`` stage (thesis section 4.3.3) of the blocks the
-    strokes cover train :func:`~napari_polarseg.engine.analysis.scribbles.classify_blocks`,
+    strokes cover train :func:`~napari_polarseg.engine.classifier.scribbles.classify_blocks`,
     which labels every block; affinity and cut are not needed.
 
     Parameters

@@ -25,7 +25,6 @@ keeps the class index 0..K−1 of the segmentation contract.
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -280,16 +279,6 @@ class ScribbleSession:
     def classes(self) -> np.ndarray:
         """(K,) the scribble value of each probability plane, ascending."""
         return self._predicted().classes
-
-    def save(self, path: str | Path) -> Path:
-        """Write the trained classifier to ``path`` (the project's classifier file,
-        ``.polarseg-clf``: a checked zip of JSON and skops data, never a pickle)."""
-        from ...classifier_file import save_pixel_classifier
-
-        if self.classifier is None:
-            raise PolarsegError("no classifier yet: update the session with scribbles first")
-        save_pixel_classifier(path, self.classifier)
-        return Path(path)
 
     def segmentation(self, reconstruction: bool = True) -> PixelSegmentation:
         """The last prediction as the segmentation contract's result (labels = class
