@@ -42,6 +42,9 @@ def test_every_parameter_flag_shows_the_value_a_run_without_it_uses(command):
         name, text = helps[flag]
         value = getattr(params if method is None else params.params_of(method), name)
         value = "none" if value is None else str(value)
+        if command == "demo" and flag == "--segments":  # the demo uses the scene's k
+            assert text.endswith("[default: the scene's number of materials]"), flag
+            continue
         assert text.endswith(f"[default: preset {preset}'s {value}]"), flag
 
 
@@ -52,3 +55,24 @@ def test_segment_help_shows_preset_auto_not_the_thesis():
     assert "[default: preset auto's surface_superpixels]" in text  # --method (thesis: thesis)
     assert "[10]" not in text and "[recursive]" not in text
     assert PRESETS["auto"].window == 12 and PRESETS["auto"].method == "surface_superpixels"
+
+
+def test_help_texts_describe_the_methods_as_they_are(capsys):
+    """The top-level help names the default and the thesis method; the classifier's
+    flags say what the model is and what it replaces; the demo lists its scenes, says
+    its number of segments is the scene's, and offers no --overview (always drawn)."""
+    from napari_polarseg import cli
+
+    def help_of(*argv: str) -> str:
+        assert cli.main([*argv, "--help"]) == 0
+        return " ".join(capsys.readouterr().out.split())
+
+    top = help_of()
+    assert "by default edge-following superpixels" in top and "--method thesis" in top
+    segment = help_of("segment")
+    assert "random forest" not in segment and "normalized cut;" not in segment
+    assert "extremely randomised trees" in segment
+    demo = help_of("demo")
+    assert "bundled scene: camouflage, fruit, leaves" in demo
+    assert "[default: the scene's number of materials]" in demo
+    assert "--overview" not in demo

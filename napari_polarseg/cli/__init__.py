@@ -149,8 +149,11 @@ def build_parser(specs: dict[str, ParamSpec] | None = None) -> CommandParser:
     :data:`~napari_polarseg.engine.params.PARAM_SPECS`)."""
     parser = CommandParser(
         prog=PROG,
-        description="Material segmentation from polarisation images (thesis pipeline: "
-        "polarisation image, Fresnel normals, spherical harmonics, PCA, normalized cuts).",
+        description="Material segmentation from polarisation images: by default "
+        "edge-following superpixels clustered by their polarisation (preset auto); the "
+        "thesis's block pipeline with --method thesis (Fresnel normals, spherical "
+        "harmonics, PCA, normalized cuts); a pixel classifier trained on painted strokes "
+        "with --scribbles.",
     )
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)

@@ -62,7 +62,7 @@ def add_parser(sub: Any, specs: dict[str, ParamSpec] | None = None) -> None:
         ("classifier",),
         helps={
             "classifier": "label every scene with this saved pixel classifier "
-            "(.polarseg-clf) instead of the normalized cut"
+            "(.polarseg-clf) instead of the unsupervised method"
         },
     )
     add_input_options(bat, "scene")

@@ -41,7 +41,11 @@ def add_parser(sub: Any, specs: dict[str, ParamSpec] | None = None) -> None:
         type=out_folder_arg,
         help=f"[./{DEFAULT_DEMO_OUT}]",
     )
-    demo.add_argument("--scene", default=DEFAULT_SCENE, help=f"bundled scene [{DEFAULT_SCENE}]")
+    demo.add_argument(
+        "--scene",
+        default=DEFAULT_SCENE,
+        help=f"bundled scene: {', '.join(available_scenes())} [{DEFAULT_SCENE}]",
+    )
     demo.add_argument(
         "--sample", metavar="FILE.npz", help="use this .npz (stack, angles, labels) instead"
     )
@@ -58,7 +62,12 @@ def add_parser(sub: Any, specs: dict[str, ParamSpec] | None = None) -> None:
         "where it has them, unless --preset, --method or --params chooses a method)",
     )
     add_plots_option(demo)
-    add_param_options(demo, specs=specs)
+    add_param_options(
+        demo,
+        specs=specs,
+        overview_flag=False,  # the demo always draws overview.png
+        default_text={"n_segments": "the scene's number of materials"},
+    )
     demo.set_defaults(func=run, overview=True)
 
 

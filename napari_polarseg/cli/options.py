@@ -108,9 +108,13 @@ def add_param_options(
     presets: tuple[str, ...] = tuple(PRESETS),
     specs: dict[str, ParamSpec] | None = None,
     method_flag: bool | None = None,
+    overview_flag: bool = True,
+    default_text: dict[str, str] | None = None,
 ) -> None:
     """Add --preset, --params, the flags of ``specs`` and of every method's own
-    parameters, --overview and -v/-q to ``parser``.
+    parameters, --overview (unless ``overview_flag`` is False: a command that always
+    writes it) and -v/-q to ``parser``; ``default_text`` says, by field name, what a run
+    without that flag uses when it is not the preset's value.
 
     Parameters
     ----------
@@ -124,6 +128,11 @@ def add_param_options(
         The parameter table (default: :data:`PARAM_SPECS`).
     method_flag
         Offer --method (default: unless ``presets`` are :data:`BLOCK_PRESETS`).
+    overview_flag
+        Offer --overview.
+    default_text
+        Field name → the text of its default in the flag's help (e.g. the demo's
+        number of segments: the scene's materials).
     """
     defaults = PRESETS[preset].to_dict()
     if method_flag is None:
@@ -150,13 +159,15 @@ def add_param_options(
     )
     for name, (flag, kwargs) in param_options(specs).items():
         kwargs = dict(kwargs)
-        used = _flag_value(defaults.get(name))
-        kwargs["help"] = f"{kwargs['help']} [default: preset {preset}'s {used}]".replace("%", "%%")
+        used = f"preset {preset}'s {_flag_value(defaults.get(name))}"
+        used = (default_text or {}).get(name, used)
+        kwargs["help"] = f"{kwargs['help']} [default: {used}]".replace("%", "%%")
         group.add_argument(flag, dest=name, default=None, **kwargs)
     add_method_options(parser, preset)
-    parser.add_argument(
-        "--overview", action="store_true", help="also write overview.png (matplotlib figure)"
-    )
+    if overview_flag:
+        parser.add_argument(
+            "--overview", action="store_true", help="also write overview.png (matplotlib figure)"
+        )
     talk = parser.add_mutually_exclusive_group()
     talk.add_argument(
         "-v", "--verbose", action="store_true", help="report stages and warnings on stderr"

@@ -174,7 +174,7 @@ class ReadOptions:
         flag="--classifier",
         metavar="FILE",
         help="apply a saved pixel classifier (.polarseg-clf, from --save-classifier or the "
-        "plugin's Save classifier...) instead of the normalized cut; nothing is retrained",
+        "plugin's Save classifier...) instead of the unsupervised method; nothing is retrained",
     )
     dark_frame: Any = _option(
         None,
@@ -222,9 +222,9 @@ class ReadOptions:
         metavar="FILE",
         help="strokes (labels image: TIFF, PNG, .npy/.npz; the outputs' height x width; 0 = "
         "unlabelled, 1, 2, ... = materials, at least two): the labels come from a pixel "
-        "classifier (random forest on multi-scale polarisation features) trained on the "
-        "scribbled pixels instead of the normalized cut; also writes probabilities.tif and "
-        "uncertainty.tif",
+        "classifier (extremely randomised trees on multi-scale polarisation features) trained "
+        "on the scribbled pixels instead of the unsupervised method; also writes "
+        "probabilities.tif and uncertainty.tif",
     )
     ground_truth: str | None = _option(
         None,

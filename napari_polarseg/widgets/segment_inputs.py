@@ -126,8 +126,9 @@ class SegmentInputs:
             "Paint a few strokes on each material and every pixel gets the material it "
             "resembles most: the segments follow your strokes.\n\nDetails: a Labels "
             "layer of the stack's height x width (0 = unlabelled, 1, 2, … = materials, at "
-            "least two); a pixel classifier (random forest on multi-scale polarisation "
-            "features) trained on the scribbled pixels replaces the unsupervised method; "
+            "least two); a pixel classifier (extremely randomised trees on multi-scale "
+            "polarisation features) trained on the scribbled pixels replaces the "
+            "unsupervised method; "
             "with live update every stroke retrains it",
         )
         #: The named materials of the chosen scribbles layer (brush class, swatch, name).
