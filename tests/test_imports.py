@@ -94,8 +94,11 @@ def test_the_first_lookup_registers_every_method_before_one_registered_from_outs
         "print(json.dumps([method_names(), PARAM_SPECS['method'].options(), text.getvalue()]))\n"
     )
     names, choices, help_text = json.loads(_fresh(code))
-    assert names == [*_built_in_names(BUILT_IN), "toy"]
-    assert choices == [*unsupervised_names(), "toy"]
+    built_in = _built_in_names(BUILT_IN)
+    assert names == [*built_in, "toy"]
+    # this process's registry may hold methods other tests registered: the built-in ones
+    menu = [name for name in unsupervised_names() if name in built_in]
+    assert choices == [*menu, "toy"]
     assert "{" + ",".join(choices) + "}" in help_text
 
 
