@@ -11,7 +11,8 @@ A simulated user paints discs of radius max(3, min(H, W) // 80) px:
 
 After every update the prediction is scored by the adjusted Rand index (ARI) over the
 labelled truth pixels. A row reports the ARI after 0, 2, 5, 10 and 15 corrections, the
-corrections needed to reach ARI 0.9 (">15" when never), the median seconds of an
+corrections needed to reach ARI 0.9 (">15" when never), how many corrections made it
+worse (the ARI fell by more than :data:`SETBACK`) and the largest fall, the median seconds of an
 update (training plus predicting the whole image) and the one-off feature seconds.
 
 Rows (methods):
@@ -156,6 +157,10 @@ def ari_labelled(truth: np.ndarray, prediction: np.ndarray) -> float:
     return float(adjusted_rand_score(truth[where], prediction[where]))
 
 
+#: A correction that lowers the ARI by more than this is counted as a setback.
+SETBACK = 0.01
+
+
 @dataclass
 class RobotRun:
     """What :func:`run_robot` measured: ``ari[n]`` after n corrections, each update's
@@ -165,6 +170,13 @@ class RobotRun:
     seconds: list[float]
     initial_centres: list
     corrections: list
+
+    def setbacks(self, tolerance: float = SETBACK) -> tuple[int, float]:
+        """How many corrections lowered the ARI by more than ``tolerance``, and the
+        largest such fall (0 when none)."""
+        falls = [b - a for a, b in zip(self.ari[1:], self.ari[:-1], strict=False)]
+        worse = [f for f in falls if f > tolerance]
+        return len(worse), max(worse, default=0.0)
 
     def corrections_to(self, target: float = TARGET_ARI) -> str:
         """Corrections needed to reach ``target`` (">rounds" when never)."""
@@ -315,6 +327,7 @@ def evaluate_scene(
                 "method": name,
                 "ari": run.ari,
                 "to": run.corrections_to(),
+                "setbacks": run.setbacks(),
                 "update s": float(np.median(run.seconds)),
                 "features s": feature_seconds,
                 "bound": b,
@@ -331,13 +344,15 @@ def milestones(rounds: int) -> list[int]:
 
 def header(rounds: int) -> str:
     cols = [f"ARI@{m}" for m in milestones(rounds)]
-    cols += [f"to {TARGET_ARI}", "s/update", "features s", "bound L→R"]
+    cols += [f"to {TARGET_ARI}", "worse (largest fall)", "s/update", "features s", "bound L→R"]
     return "| scene | method | " + " | ".join(cols) + " |\n|---|---|" + "---:|" * len(cols)
 
 
 def format_row(row: dict, rounds: int) -> str:
     cells = [f"{row['ari'][m]:.3f}" for m in milestones(rounds)]
-    cells += [row["to"], f"{row['update s']:.2f}", f"{row['features s']:.1f}"]
+    worse, fall = row.get("setbacks", (0, 0.0))
+    cells += [row["to"], f"{worse} ({fall:.2f})" if worse else "0"]
+    cells += [f"{row['update s']:.2f}", f"{row['features s']:.1f}"]
     mark = "" if row["comparable"] else " †"
     cells.append("" if row["bound"] is None else f"{row['bound']:.3f}{mark}")
     return f"| {row['scene']} | {row['method']} | " + " | ".join(cells) + " |"

@@ -118,3 +118,11 @@ def test_the_bound_is_marked_when_the_halves_hold_other_materials(robot):
     assert not robot.halves_comparable(truth)
     truth[:, 15] = 1  # one material everywhere
     assert not robot.halves_comparable(truth)
+
+
+def test_setbacks_count_the_corrections_that_lowered_the_ari(robot):
+    """A run's setbacks: the corrections after which the ARI fell by more than the
+    tolerance, and the largest fall."""
+    run = robot.RobotRun([0.5, 0.7, 0.65, 0.695, 0.9, 0.6], [0.0] * 6, [], [])
+    assert run.setbacks() == (2, pytest.approx(0.3))
+    assert robot.RobotRun([0.5, 0.6, 0.6], [0.0] * 3, [], []).setbacks() == (0, 0.0)
