@@ -323,9 +323,11 @@ def data_to_folder(
         summary["adjusted_rand_index"] = adjusted_rand_index(data.ground_truth, run.result.labels)
     evaluation = None
     if truth is not None:
+        # the block accuracy for a method that cuts blocks; the pixel measures for all
+        window = run.params.window if run.result.cuts_blocks else None
         evaluation = {
             "ground_truth": str(Path(truth_file).resolve()),
-            **evaluate(truth, run.result.labels, run.params.window),
+            **evaluate(truth, run.result.labels, window),
         }
     out = Path(out)
     status.show(f"writing the results to {out}")

@@ -16,8 +16,10 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from .engine.params import PRESETS
+from .engine.methods import get_method, method_names
+from .engine.params import PARAM_SPECS, PRESETS, SegmentParams, method_param_specs
 from .engine.physics.pixel_mask import mask_reasons
+from .engine.registered import computes_block_maps
 from .engine.unsupervised.choose_k import choice_text
 
 if TYPE_CHECKING:
@@ -36,21 +38,50 @@ class Message:
     stream: str = "stdout"
 
 
+#: What to try for the shared parameters a method may read (``reads``), by field name.
+SHARED_ADVICE = {
+    "n_segments": "fewer or more segments",
+    "object_size": "another object size",
+}
+
+
+def degenerate_advice(method: str, params: SegmentParams, classifier: bool = False) -> str:
+    """What to try after a degenerate result of ``method`` (the method that made the
+    labels) run with ``params``, naming only flags it reads: a method that cuts blocks
+    (the thesis method) the recommended preset (unless in use), ``--segments`` and
+    ``--window``; another the shared parameters it reads (``--segments``,
+    ``--object-size``) and its own numeric ones; every method scribbles. ``classifier``
+    (or a method that takes inputs, such as scribbles): the labels came from a pixel
+    classifier."""
+    known = method in method_names()
+    if classifier or (known and get_method(method).inputs):
+        return "paint strokes on every material (--scribbles) or retrain the classifier"
+    if computes_block_maps(method):
+        tries = ["fewer or more segments (--segments)", "a larger window (--window)"]
+        recommended = PRESETS["recommended"].replace(n_segments=params.n_segments)
+        if params != recommended:
+            tries.insert(0, "--preset recommended")
+        return f"try {', '.join(tries)}, or scribbles (--scribbles)"
+    reads = get_method(method).reads if known else ()
+    tries = [f"{words} ({PARAM_SPECS[n].flag})" for n, words in SHARED_ADVICE.items() if n in reads]
+    own = [s.flag for s in method_param_specs(method).values() if s.options() is None]
+    if own:
+        tries.append(f"other values of its parameters ({', '.join(own)})")
+    if not tries:
+        return "try scribbles (--scribbles)"
+    return f"try {', '.join(tries)}, or scribbles (--scribbles)"
+
+
 def degenerate_warning(run: Run) -> str | None:
     """The one-line warning of a degenerate result (``SegmentationResult.degenerate``:
-    one segment holds >= 95 % of the pixels, or every other is below the minimum size),
-    with what to try; None when the result is not degenerate."""
+    one segment holds >= 95 % of the pixels, or, for a method that cuts blocks, every
+    other is below the minimum size), with what to try (:func:`degenerate_advice`); None
+    when the result is not degenerate."""
     check = run.result.degenerate()
     if not check.degenerate:
         return None
-    if "classifier" in run.seconds:  # labels from a pixel classifier, not the cut
-        advice = "paint strokes on every material (--scribbles) or retrain the classifier"
-    else:
-        tries = ["fewer or more segments (--segments)", "a larger window (--window)"]
-        recommended = PRESETS["recommended"].replace(n_segments=run.params.n_segments)
-        if run.params != recommended:
-            tries.insert(0, "--preset recommended")
-        advice = f"try {', '.join(tries)}, or scribbles (--scribbles)"
+    # labels from a pixel classifier, not the method of the parameters
+    advice = degenerate_advice(run.result.method, run.params, "classifier" in run.seconds)
     return f"{PROG}: warning: degenerate result: {check.reason}; {advice}"
 
 
@@ -157,12 +188,17 @@ def classifier_messages(
 
 
 def evaluation_message(evaluation: dict[str, Any]) -> Message:
-    """The line of the evaluation against a ground truth."""
+    """The line of the evaluation against a ground truth (the block accuracy only where
+    it was computed: labels of a method that cuts blocks)."""
+    blocks = ""
+    if evaluation.get("block_accuracy_worst") is not None:
+        blocks = (
+            f", block accuracy {evaluation['block_accuracy_worst']:.3f} (worst) .. "
+            f"{evaluation['block_accuracy_optimistic']:.3f} (optimistic)"
+        )
     return Message(
         f"{PROG}: against the ground truth: adjusted Rand index "
-        f"{evaluation['adjusted_rand_index']:.3f}, mean IoU {evaluation['mean_iou']:.3f}, "
-        f"block accuracy {evaluation['block_accuracy_worst']:.3f} (worst) .. "
-        f"{evaluation['block_accuracy_optimistic']:.3f} (optimistic)"
+        f"{evaluation['adjusted_rand_index']:.3f}, mean IoU {evaluation['mean_iou']:.3f}" + blocks
     )
 
 

@@ -12,10 +12,11 @@ from typing import Any
 
 from .. import jobs
 from ..engine.errors import PolarsegError
-from ..engine.params import ParamSpec
+from ..engine.params import ParamSpec, SegmentParams
+from ..messages import degenerate_advice
 from .arguments import PROG
 from .options import add_input_options, add_inputs_and_out, add_param_options, add_read_options
-from .running import params_from_args, read_options
+from .running import params_from_args, read_options, running_method
 
 
 def add_parser(sub: Any, specs: dict[str, ParamSpec] | None = None) -> None:
@@ -78,9 +79,14 @@ def _batch_options(args: argparse.Namespace) -> tuple[jobs.ReadOptions, jobs.Out
     return read, jobs.OutputOptions(overview=bool(args.overview))
 
 
-def _scene_report(args: argparse.Namespace) -> Callable[[int, int, dict[str, Any]], None]:
+def _scene_report(
+    args: argparse.Namespace, params: SegmentParams
+) -> Callable[[int, int, dict[str, Any]], None]:
     """The per-scene progress callback: one stderr line per scene (only failures with
-    --quiet), a warning for a degenerate result, the scene's log with --verbose."""
+    --quiet), a warning for a degenerate result with what to try (the flags the running
+    method reads: :func:`~napari_polarseg.messages.degenerate_advice`), the scene's log
+    with --verbose."""
+    advice: list[str] = []  # made at the first degenerate scene (it reads the methods)
 
     def progress(index: int, total: int, row: dict[str, Any]) -> None:
         status = row["status"]
@@ -95,10 +101,10 @@ def _scene_report(args: argparse.Namespace) -> Callable[[int, int, dict[str, Any
         if not args.quiet or status in ("failed", "cancelled"):
             print(f"{PROG}: [{index}/{total}] {row['scene']}: {text}", file=sys.stderr, flush=True)
         if status == "done" and row.get("degenerate"):
+            advice[:] = advice or [degenerate_advice(running_method(params, args), params)]
             print(
                 f"{PROG}: warning: {row['scene']}: degenerate result: "
-                f"{row.get('degenerate_reason')}; try --preset recommended, fewer or more "
-                "segments (--segments), a larger window (--window), or scribbles (--scribbles)",
+                f"{row.get('degenerate_reason')}; {advice[0]}",
                 file=sys.stderr,
                 flush=True,
             )
@@ -146,7 +152,7 @@ def run(args: argparse.Namespace) -> int:
         n_workers=args.workers,
         memory_limit=args.memory_limit,
         resume=args.resume,
-        progress=_scene_report(args),
+        progress=_scene_report(args, params),
         on_start=started,
     )
     print(

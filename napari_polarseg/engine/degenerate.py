@@ -5,7 +5,10 @@ and the normalized cut peels off a few odd blocks: on the polanalyser fruits fra
 thesis defaults put 99.94 % of the pixels in one segment ([1252676, 100, 600] pixels).
 Such a result says nothing about the materials, and it should not pass silently: the
 command line warns, ``summary.json`` records ``"degenerate"``, the plugin's status line
-says so. :func:`degenerate_result` is the one test they all use.
+says so. :func:`degenerate_result` is the one test they all use: a method that cuts the
+w × w block grid (the thesis method) also counts segments below its minimum segment size
+(``min_pixels``); the others are judged on their pixel labels over the used pixels
+(``valid``; :meth:`~napari_polarseg.engine.result.SegmentationResult.degenerate`).
 """
 
 from __future__ import annotations
@@ -37,18 +40,32 @@ class DegenerateCheck(NamedTuple):
     reason: str
 
 
+def segment_sizes(labels: np.ndarray) -> np.ndarray:
+    """The pixel count of every segment that has pixels, in label order (any integer
+    labels; a count, not a sort, for small non-negative ones)."""
+    flat = np.asarray(labels).ravel()
+    small = flat.size and flat.dtype.kind in "iu" and flat.min() >= 0
+    if small and flat.max() < max(flat.size, 2**16):
+        counts = np.bincount(flat)
+        return counts[counts > 0]
+    return np.unique(flat, return_counts=True)[1]
+
+
 def degenerate_result(
     labels: np.ndarray,
     min_pixels: int = 1,
     share: float = DEGENERATE_SHARE,
     requested: int | None = None,
+    valid: np.ndarray | None = None,
 ) -> DegenerateCheck:
     """Whether a labelling put (nearly) every pixel in one segment.
 
     Degenerate when the largest segment holds at least ``share`` of the pixels, or when
     every other segment is smaller than ``min_pixels`` (e.g. the minimum segment size,
     ``min_segment_blocks`` · w², of the cut). A labelling of one segment is degenerate
-    only when more were asked for (``requested`` > 1; None counts as more).
+    only when more were asked for (``requested`` > 1; None counts as more). With
+    ``valid``, only the used pixels count (the reason then says "of the used pixels"
+    when some are left out).
 
     Parameters
     ----------
@@ -60,6 +77,9 @@ def degenerate_result(
         Share of the pixels in the largest segment from which the result is degenerate.
     requested : int, optional
         Number of segments asked for.
+    valid : array of bool, optional
+        The pixels that count (``labels``' shape; default all). None of them: not
+        degenerate (nothing to judge).
 
     Returns
     -------
@@ -72,7 +92,11 @@ def degenerate_result(
     >>> degenerate_result(labels).degenerate
     True
     """
-    _, sizes = np.unique(np.asarray(labels).ravel(), return_counts=True)
+    labels = np.asarray(labels)
+    pixels = "pixels"
+    if valid is not None and not np.all(valid):
+        labels, pixels = labels[np.asarray(valid, dtype=bool)], "used pixels"
+    sizes = segment_sizes(labels)
     total = int(sizes.sum())
     if total == 0:
         return DegenerateCheck(False, 0.0, "")
@@ -84,14 +108,14 @@ def degenerate_result(
     if sizes.size == 1:
         if requested is not None and requested <= 1:
             return DegenerateCheck(False, 1.0, "")
-        return DegenerateCheck(True, 1.0, "every pixel is in one segment")
+        return DegenerateCheck(True, 1.0, f"every {pixels[:-1]} is in one segment")
     if largest_share >= share:
-        return DegenerateCheck(True, largest_share, f"one segment holds {percent} of the pixels")
+        return DegenerateCheck(True, largest_share, f"one segment holds {percent} of the {pixels}")
     if others.max() < min_pixels:
         return DegenerateCheck(
             True,
             largest_share,
-            f"every segment but the largest ({percent} of the pixels) is below the "
+            f"every segment but the largest ({percent} of the {pixels}) is below the "
             f"minimum segment size of {int(min_pixels)} pixels",
         )
     return DegenerateCheck(False, largest_share, "")

@@ -13,9 +13,10 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from .degenerate import DegenerateCheck, degenerate_result
+from .degenerate import DegenerateCheck, degenerate_result, segment_sizes
 from .materials import Materials
 from .params import SegmentParams
+from .registered import computes_block_maps
 
 
 @dataclass
@@ -67,7 +68,10 @@ class SegmentationResult:
     (:class:`~napari_polarseg.engine.materials.Materials`; None for the other methods).
     ``on_blocks``: the run worked on the w × w block grid (the method cuts blocks or the
     thesis maps were computed); only then does :meth:`summary` name the grid
-    (``n_blocks``, ``block_grid``).
+    (``n_blocks``, ``block_grid``). The number of segments and the degenerate check
+    read the block grid only for a method that cuts it (:attr:`cuts_blocks`); for the
+    others ``block_labels`` is the pixel labels sampled on the grid, and they read
+    ``labels``.
     """
 
     params: SegmentParams
@@ -99,8 +103,18 @@ class SegmentationResult:
     on_blocks: bool = True
 
     @property
+    def cuts_blocks(self) -> bool:
+        """The method that made ``labels`` cuts the w × w block grid (it declares
+        ``block_maps``: the thesis method); False for the others, the classifier too."""
+        return computes_block_maps(self.method)
+
+    @property
     def n_segments(self) -> int:
-        return int(self.block_labels.max()) + 1
+        """The number of segments: the cut's (``block_labels``) for a method that cuts
+        blocks, else the distinct values of the pixel labels."""
+        if self.cuts_blocks:
+            return int(self.block_labels.max()) + 1
+        return int(segment_sizes(self.labels).size)
 
     @property
     def n_clamped(self) -> int:
@@ -117,12 +131,21 @@ class SegmentationResult:
 
     def degenerate(self) -> DegenerateCheck:
         """Whether (nearly) every pixel is in one segment
-        (:func:`~napari_polarseg.engine.degenerate.degenerate_result`, minimum segment size
-        ``min_segment_blocks`` · w² pixels)."""
+        (:func:`~napari_polarseg.engine.degenerate.degenerate_result`).
+
+        A method that cuts blocks (:attr:`cuts_blocks`): over every pixel, with its
+        minimum segment size ``min_segment_blocks`` · w² pixels. The others: their pixel
+        labels over the used pixels (``valid``), no minimum size; one segment is
+        degenerate when more were asked for (``n_segments``, 0 = found: more; a
+        classifier: its number of materials).
+        """
         p = self.params
-        return degenerate_result(
-            self.labels, p.min_segment_blocks * p.window**2, requested=p.n_segments
-        )
+        if self.cuts_blocks:
+            return degenerate_result(
+                self.labels, p.min_segment_blocks * p.window**2, requested=p.n_segments
+            )
+        asked = len(self.materials.values) if self.materials is not None else p.n_segments
+        return degenerate_result(self.labels, requested=asked or None, valid=self.valid)
 
     def summary(self) -> dict[str, Any]:
         """JSON-ready figures of the run (stage seconds, segments, variance, error).

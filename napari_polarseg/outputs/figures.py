@@ -1,8 +1,10 @@
 """Matplotlib figures of the analyst's plots, and :func:`save_plots` writing them as PNGs.
 
 :func:`render_plots` gives the same PNGs as bytes in memory (for writers that compute
-everything first); :func:`sweep_heatmap_figure` draws a parameter sweep
-(:mod:`napari_polarseg.engine.analysis.sweep`) as heatmaps.
+everything first); :func:`sweep_heatmap_figure` draws a sweep of the thesis block grid
+(:mod:`napari_polarseg.engine.analysis.sweep`) as heatmaps, :func:`param_sweep_figure` a
+sweep of another method's parameters (:mod:`napari_polarseg.engine.analysis.param_sweep`)
+as one bar per cell.
 
 Every ``*_figure`` function draws the data of :mod:`napari_polarseg.engine.analysis.plots` into a
 :class:`matplotlib.figure.Figure` (a new one, or ``fig`` cleared first, e.g. the figure
@@ -27,6 +29,7 @@ if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
     from ..engine import SegmentationResult
+    from ..engine.analysis.param_sweep import ParamSweepResult
     from ..engine.analysis.sweep_result import SweepCell, SweepResult
     from ..engine.materials import Materials
 
@@ -509,3 +512,49 @@ def _sweep_cells(
                     shade = 1.0 - shade
                 colour = "black" if shade > 0.55 else "white"
                 ax.text(j, i, f"{v:.2f}", ha="center", va="center", color=colour, fontsize="small")
+
+
+#: Scores of a sweep of a method's parameters that :func:`param_sweep_figure` draws.
+PARAM_SWEEP_METRICS = {
+    "stability": "stability",
+    "ari": "ARI (ground truth)",
+    "seconds": "seconds (lower is better)",
+}
+
+
+def param_sweep_figure(
+    result: ParamSweepResult,
+    metric: str = "stability",
+    fig: Figure | None = None,
+    theme: dict[str, str] = LIGHT,
+) -> Figure:
+    """A sweep of a method's parameters
+    (:class:`~napari_polarseg.engine.analysis.param_sweep.ParamSweepResult`): one bar per
+    cell of ``metric`` (:data:`PARAM_SWEEP_METRICS`), labelled by the cell's values; a
+    failed cell or one without the score is marked ×, the best cell (by the sweep's
+    criterion) is outlined."""
+    if metric not in PARAM_SWEEP_METRICS:
+        raise PolarsegError(f"metric must be one of {', '.join(PARAM_SWEEP_METRICS)}")
+    cells = result.cells
+    fig, ax = _single_axes(fig, (1.5 + 0.6 * len(cells), 3.0), theme)
+    try:
+        best = result.best_cell()
+    except PolarsegError:
+        best = None
+    values = np.array([getattr(c, metric) if c.ok else np.nan for c in cells], dtype=float)
+    shown = np.nan_to_num(values, nan=0.0)
+    edges = ["#ff3b30" if c is best else theme["accent"] for c in cells]
+    ax.bar(range(len(cells)), shown, color=theme["accent"], edgecolor=edges, linewidth=2.5)
+    for i, v in enumerate(values):
+        text = "×" if not np.isfinite(v) else f"{v:.2f}"
+        ax.text(i, shown[i], text, ha="center", va="bottom", color=theme["foreground"])
+    names = [", ".join(f"{k}={v}" for k, v in c.values.items()) for c in cells]
+    ax.set_xticks(range(len(cells)), names, rotation=30 if len(cells) > 4 else 0, ha="right")
+    ax.set_ylabel(PARAM_SWEEP_METRICS[metric])
+    title = f"{result.base.method}: {PARAM_SWEEP_METRICS[metric]} per cell"
+    if best is not None:
+        chosen = ", ".join(f"{k} = {v}" for k, v in best.values.items())
+        title += f"\nbest by {result.score}: {chosen}"
+    ax.set_title(title, fontsize="medium")
+    _style(ax, theme)
+    return fig

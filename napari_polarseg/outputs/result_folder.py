@@ -67,14 +67,17 @@ Step = tuple[str, Callable[[], None], bool]
 def segment_rows(result: SegmentationResult) -> list[dict[str, Any]]:
     """Per-segment statistics of ``result`` (the rows of ``segments.csv``).
 
-    Means over the used pixels (``result.valid``) and, for the PCA features, over the
-    blocks that entered the graph (:func:`~napari_polarseg.engine.stages.valid_blocks`).
-    ``segment`` is the segment's value in ``labels.tif`` (a scribble classifier's: the
-    scribble value of its material) and ``name`` its material's name (empty without
-    ``result.materials``).
+    One row per value of the pixel labels (0 to the largest; ``pixels`` is their count),
+    for every method. Means over the used pixels (``result.valid``) and, for the PCA
+    features (only when the run computed the thesis maps), over the blocks that entered
+    the graph (:func:`~napari_polarseg.engine.stages.valid_blocks`). ``segment`` is the
+    segment's value in ``labels.tif`` (a scribble classifier's: the scribble value of
+    its material) and ``name`` its material's name (empty without ``result.materials``).
     """
     valid = result.valid
-    block_valid = None if valid is None else valid_blocks(valid, result.params.window)
+    block_valid = None
+    if valid is not None and result.features is not None:  # blocks only with the maps
+        block_valid = valid_blocks(valid, result.params.window)
     rows = segment_statistics(
         result.labels,
         result.intensity,

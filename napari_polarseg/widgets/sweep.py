@@ -1,11 +1,17 @@
-"""The "Parameter sweep" widget: score a grid of w, L and n on the chosen angle stack.
+"""The "Parameter sweep" widget: score a grid of parameters on the chosen angle stack.
 
-Thin: the sweep is :func:`napari_polarseg.engine.analysis.sweep.iter_sweep` run in a napari
-worker (progress bar per cell, *Cancel* stops after the running cell), the heatmaps are
-:func:`napari_polarseg.outputs.figures.sweep_heatmap_figure` on a matplotlib canvas themed like
-napari, the table is the sweep's rows. *Use best* hands the best cell's parameters to the
-*Segment by material* widget (docking it if needed) and runs it; *Save best…* writes them
-as a SegmentParams JSON file (the format of ``polarseg segment --params``).
+For the thesis method (a method that cuts blocks) the grid is w, L and n: thin, the sweep
+is :func:`napari_polarseg.engine.analysis.sweep.iter_sweep` run in a napari worker
+(progress bar per cell, *Cancel* stops after the running cell), the heatmaps are
+:func:`napari_polarseg.outputs.figures.sweep_heatmap_figure` on a matplotlib canvas themed
+like napari, the table is the sweep's rows. For another method (the parameters' method,
+e.g. preset auto's) the grid is the values typed for its own parameters and the shared
+ones it reads (:mod:`.method_sweep`, as ``polarseg sweep --vary``): the cells are
+:func:`~napari_polarseg.engine.analysis.param_sweep.iter_param_sweep`'s, drawn by
+:func:`~napari_polarseg.outputs.figures.param_sweep_figure`. *Use best* hands the best
+cell's parameters to the *Segment by material* widget (docking it if needed) and runs it;
+*Save best…* writes them as a SegmentParams JSON file (the format of ``polarseg segment
+--params``).
 """
 
 from __future__ import annotations
@@ -20,13 +26,23 @@ import numpy as np
 from magicgui.widgets import ComboBox, Container, LineEdit, PushButton, SpinBox, Table
 
 from ..engine import PolarsegError, SegmentParams, validity_mask
+from ..engine.analysis.param_sweep import ParamCell, ParamSweepResult
 from ..engine.analysis.sweep import check_grid, iter_sweep
 from ..engine.analysis.sweep_result import DEFAULT_SCORE, SCORES, SweepResult
 from ..engine.params import PRESETS
+from ..engine.registered import computes_block_maps
 from ..outputs import figures
 from ._base import StackWidget, ask_file
 from .canvas import figure_canvas, napari_theme, show_message
 from .docks import segment_dock
+from .method_sweep import (
+    MethodAxes,
+    cell_text,
+    method_sweep_job,
+    param_score,
+    param_sweep_table,
+    table_value,
+)
 from .param_sources import params_from
 from .session import relay, write_params_json
 
@@ -36,8 +52,9 @@ if TYPE_CHECKING:
 
     from .segment import SegmentWidget
 
-#: Where the sweep's other parameters come from (the first is the default).
-PARAM_SOURCES = ("recommended", "thesis", "Segment by material widget")
+#: Where the sweep's other parameters come from (the first is the default); their method
+#: decides what is swept (the thesis method: w, L, n; another: its own parameters).
+PARAM_SOURCES = ("recommended", "thesis", "auto", "Segment by material widget")
 #: Heatmap menu: text shown → column of the sweep.
 HEATMAPS = (
     ("stability", "stability"),
@@ -90,14 +107,6 @@ def sweep_table(result: SweepResult | None) -> dict[str, list[Any]]:
         best = result.best_cell()
     except PolarsegError:
         best = None
-
-    def cell(value: Any) -> Any:
-        if value is None:
-            return ""
-        if isinstance(value, float):
-            return "" if not math.isfinite(value) else round(value, 3)
-        return value
-
     out: dict[str, list[Any]] = {}
     for head, column in TABLE_COLUMNS:
         if column is None:
@@ -105,7 +114,7 @@ def sweep_table(result: SweepResult | None) -> dict[str, list[Any]]:
         elif column == "refractive_index":
             out[head] = [f"{c.refractive_index:g}" for c in result.cells]
         else:
-            out[head] = [cell(getattr(c, column)) for c in result.cells]
+            out[head] = [table_value(getattr(c, column)) for c in result.cells]
     return out
 
 
@@ -147,7 +156,7 @@ def best_buttons() -> tuple[PushButton, PushButton]:
         text="Use best",
         enabled=False,
         tooltip="Set the Segment by material widget (docked if needed) to the preset "
-        "and the best cell's w, L and n, and segment the swept stack",
+        "and the best cell's swept parameters, and segment the swept stack",
     )
     save_button = PushButton(
         text="Save best…",
@@ -159,17 +168,23 @@ def best_buttons() -> tuple[PushButton, PushButton]:
 
 
 class SweepWidget(StackWidget):
-    """Sweep window size w, harmonic degree L and refractive index n on an angle stack.
+    """Sweep the parameters of the chosen method on an angle stack.
 
-    The other parameters come from a preset (recommended, thesis) or from the docked
+    The parameters come from a preset (recommended, thesis, auto) or from the docked
     *Segment by material* widget; *segments* (0: from those parameters) sets the number
-    of segments. The grid is typed as lists (``8,10,12``). With a *ground truth* Labels
+    of segments. Their method decides the grid: for the thesis method (a method that
+    cuts blocks) window size w, harmonic degree L and refractive index n, typed as lists
+    (``8,10,12``); for another method one list of values per parameter it declares
+    (its own, then the shared ones it reads, e.g. object size and segments; an empty
+    field is not swept), as ``polarseg sweep --vary``. With a *ground truth* Labels
     layer (any label ids; the stack's height × width) every cell also gets its adjusted
     Rand index. *best by* chooses the criterion of the best cell (the default, stability,
     is the label-free one that tracked the ground truth best on the synthetic scenes;
     docs/cli.md, "Parameter sweep"). *Run sweep* runs in a worker with a progress bar;
     *Cancel* stops after the running cell. The canvas shows one metric as heatmaps (rows
-    w, columns L, one per n; the best cell outlined) and the table every cell.
+    w, columns L, one per n; the best cell outlined), or for another method's sweep as
+    one bar per cell (stability, ARI or seconds; the best by stability or ARI), and the
+    table every cell.
 
     Parameters
     ----------
@@ -183,15 +198,16 @@ class SweepWidget(StackWidget):
 
     def __init__(self, viewer: napari.viewer.Viewer) -> None:
         super().__init__(viewer)
-        self.result: SweepResult | None = None
+        self.result: SweepResult | ParamSweepResult | None = None
         self._source: Layer | None = None
         self.source = ComboBox(
             label="parameters",
             choices=list(PARAM_SOURCES),
             value=PARAM_SOURCES[0],
-            tooltip="The parameters of every cell apart from w, L and n. No preset auto "
-            "(the Segment widget's default): the sweep varies the block window w and the "
-            "degree L of the thesis block graph, which auto's superpixels do not use. "
+            tooltip="The parameters of every cell apart from the swept ones; their method "
+            "decides what is swept: the thesis method's block window w, degree L and "
+            "refractive index n, or another method's own parameters and the shared ones "
+            "it reads (preset auto: object size, segments, fit). "
             "'Use best' sets the Segment widget to this preset and the best cell",
         )
         self.windows = LineEdit(
@@ -253,6 +269,9 @@ class SweepWidget(StackWidget):
         self.use_button.changed.connect(self.use_best)
         self.save_button.changed.connect(self._save_clicked)
         self.stack_layer.changed.connect(self.ground_truth.reset_choices)
+        self.method_axes = MethodAxes(self, self.n_segments)
+        self.source.changed.connect(self.show_axes)
+        self.show_axes()
         self.draw()
 
     # -- inputs -----------------------------------------------------------------------
@@ -269,6 +288,21 @@ class SweepWidget(StackWidget):
             params = params.replace(n_segments=int(self.n_segments.value))
         return params
 
+    def show_axes(self, *_: Any) -> SegmentParams | None:
+        """Show the fields of what the parameters' method sweeps: w, L and n for a
+        method that cuts blocks, else one field of values per parameter of the method
+        (:class:`~.method_sweep.MethodAxes`). Returns the parameters (None when they
+        cannot be read now, e.g. no Segment widget: the fields stay)."""
+        try:
+            base = self.base_params()
+        except PolarsegError:
+            return None
+        blocks = computes_block_maps(base.method)
+        for box in (self.windows, self.degrees, self.refractive_indices):
+            box.visible = blocks
+        self.method_axes.show(base)
+        return base
+
     def grid(self) -> tuple[list[int], list[int], list[float] | None]:
         """The windows, degrees and refractive indices typed (raises PolarsegError)."""
         windows = parse_numbers(self.windows.value, int, "window sizes")
@@ -278,43 +312,53 @@ class SweepWidget(StackWidget):
         return windows, degrees, ns
 
     # -- running ----------------------------------------------------------------------
+    def grid_job(self, base: SegmentParams) -> tuple[Any, tuple[Any, ...], int]:
+        """(job, its grid arguments, cells) of a sweep of the thesis block grid."""
+        windows, degrees, ns = self.grid()
+        ws, ls, nn = check_grid(base, windows, degrees, ns)
+        return sweep_job, (windows, degrees, ns), len(ws) * len(ls) * len(nn)
+
+    def method_job(self, base: SegmentParams, score: str) -> tuple[Any, tuple[Any, ...], int]:
+        """(job, its axes argument, cells) of a sweep of ``base.method``'s parameters."""
+        param_score(score)
+        axes = self.method_axes.axes(base)
+        return method_sweep_job, (axes,), math.prod(len(v) for v in axes.values())
+
     def run(self, *_: Any) -> None:
         """Start the sweep in a worker; returns at once."""
         try:
             layer, angles_deg = self.current_stack()
-            base = self.base_params()
-            windows, degrees, ns = self.grid()
-            ws, ls, nn = check_grid(base, windows, degrees, ns)
+            base = self.show_axes() or self.base_params()
             truth_layer = self.ground_truth.value
             truth = None if truth_layer is None else np.asarray(truth_layer.data)
             score = self.score.value
+            if computes_block_maps(base.method):
+                job, grid, total = self.grid_job(base)
+            else:
+                job, grid, total = self.method_job(base, score)
             if score == "ari" and truth is None:
                 raise PolarsegError("'best by ari' needs a ground-truth Labels layer")
         except PolarsegError as exc:
             self._fail(exc)
             return
-        total = len(ws) * len(ls) * len(nn)
 
-        def on_result(run_id: int, result: SweepResult) -> None:
+        def on_result(run_id: int, result: SweepResult | ParamSweepResult) -> None:
             if layer in self._viewer.layers:
                 self.set_result(layer, result)
 
-        args = (layer.data, np.deg2rad(angles_deg), base, windows, degrees, ns, truth, score)
+        args = (layer.data, np.deg2rad(angles_deg), base, *grid, truth, score)
         self._set_status(f"running {total} cells…")
-        self._submit(sweep_job, args, total, on_result)
+        self._submit(job, args, total, on_result)
 
-    def set_result(self, layer: Layer, result: SweepResult) -> None:
-        """Show ``result`` (a sweep of ``layer``): heatmap, table, status."""
+    def set_result(self, layer: Layer, result: SweepResult | ParamSweepResult) -> None:
+        """Show ``result`` (a sweep of ``layer``): heatmap or bars, table, status."""
         self.result, self._source = result, layer
-        self.table.value = sweep_table(result)
+        by_method = isinstance(result, ParamSweepResult)
+        self.table.value = param_sweep_table(result) if by_method else sweep_table(result)
         self.table.native.resizeColumnsToContents()
         failed = sum(not c.ok for c in result.cells)
         try:
-            best = result.best_cell()
-            text = (
-                f"best by {result.score}: w = {best.window}, L = {best.degree}, "
-                f"n = {best.refractive_index:g}"
-            )
+            text = f"best by {result.score}: {self.best_text()}"
             self.use_button.enabled = self.save_button.enabled = True
         except PolarsegError as exc:
             text = str(exc)
@@ -330,6 +374,13 @@ class SweepWidget(StackWidget):
         result, theme = self.result, self.theme
         if result is None:
             show_message(self.figure, theme, "press 'Run sweep' to score the grid")
+        elif isinstance(result, ParamSweepResult):
+            metric = self.metric.value
+            if metric not in figures.PARAM_SWEEP_METRICS or (
+                metric == "ari" and not result.has_ground_truth
+            ):
+                metric = "stability"
+            figures.param_sweep_figure(result, metric, fig=self.figure, theme=theme)
         else:
             metric = self.metric.value
             if metric == "ari" and not result.has_ground_truth:
@@ -344,6 +395,16 @@ class SweepWidget(StackWidget):
             raise PolarsegError("run a sweep first")
         return self.result.best()
 
+    def best_text(self) -> str:
+        """The best cell's swept values: ``"w = 8, L = 4, n = 1.45"`` for the thesis
+        grid, ``"object_size = 20"`` for another method's (PolarsegError without one)."""
+        if self.result is None:
+            raise PolarsegError("run a sweep first")
+        best = self.result.best_cell()
+        if isinstance(best, ParamCell):
+            return cell_text(best)
+        return f"w = {best.window}, L = {best.degree}, n = {best.refractive_index:g}"
+
     def segment_widget(self) -> SegmentWidget:
         """The docked *Segment by material* widget, docked now if it is not."""
         widget = segment_dock(self._viewer)
@@ -356,9 +417,10 @@ class SweepWidget(StackWidget):
         """Set the Segment widget to the best cell's parameters on this stack and run it.
 
         Its preset menu shows the preset the sweep started from (when one was chosen as
-        the *parameters*), its controls the best cell's method, w, L and n."""
+        the *parameters*), its controls the best cell's method and swept values."""
         try:
             params = self.best_params()
+            chosen = self.best_text()
             source = self._source
             if source is None or source not in self._viewer.layers:
                 raise PolarsegError("the swept stack layer is no longer in the viewer")
@@ -373,10 +435,7 @@ class SweepWidget(StackWidget):
             widget.preset.value = self.source.value
         widget.set_params(params)
         widget.run()
-        self._done(
-            f"'{SEGMENT_WIDGET}' runs w = {params.window}, L = {params.degree}, "
-            f"n = {params.refractive_index:g}"
-        )
+        self._done(f"'{SEGMENT_WIDGET}' runs {chosen}")
         return widget
 
     def save_best(self, path: str | Path | None = None) -> Path | None:

@@ -5,13 +5,22 @@ from __future__ import annotations
 import json
 
 import numpy as np
-from _gui_helpers import click, error_messages, run_and_wait, wait_idle
+import pytest
+from _gui_helpers import click, engine_result, error_messages, run_and_wait, wait_idle
 
-from napari_polarseg.engine import SegmentParams
+from napari_polarseg.engine import SegmentParams, validity_mask
+from napari_polarseg.engine.analysis.evaluation import adjusted_rand_index
+from napari_polarseg.engine.analysis.param_sweep import ParamSweepResult, param_sweep, sweepable
 from napari_polarseg.engine.analysis.sweep import sweep
-from napari_polarseg.engine.params import RECOMMENDED
+from napari_polarseg.engine.params import AUTO, RECOMMENDED
 from napari_polarseg.widgets.segment import SegmentWidget
 from napari_polarseg.widgets.sweep import SweepWidget
+
+
+def shown(control) -> bool:
+    """The control is in the dock's layout (not hidden; whether or not the dock is on
+    screen)."""
+    return not control.native.isHidden()
 
 
 def _truth_layer(viewer):
@@ -123,3 +132,53 @@ def test_sweep_widget_cancel_and_errors(viewer, open_sample, add_widget, qtbot):
     table = widget.table.to_dict("list")
     assert "larger than the image" in table["error"][1]
     assert "1 failed" in widget.status.value
+
+
+def test_sweep_widget_sweeps_the_parameters_of_a_method_without_blocks(
+    viewer, open_sample, add_widget, qtbot
+):
+    """Preset auto (a method that does not cut blocks): the dock offers the method's
+    declared parameters instead of w, L and n, and its cells are param_sweep's."""
+    stack = open_sample("fruit")
+    widget = add_widget("Parameter sweep")
+    # the thesis grid for the default source (recommended)
+    assert shown(widget.windows) and shown(widget.degrees)
+    assert widget.method_axes.edits == {}
+    widget.source.value = "auto"
+    assert not shown(widget.windows) and not shown(widget.degrees)
+    edits = widget.method_axes.edits
+    assert set(edits) == set(sweepable(AUTO)) and {"object_size", "n_segments"} <= set(edits)
+    click(qtbot, widget.run_button)  # nothing typed: told what to type, nothing runs
+    assert "type the values of at least one parameter" in widget.status.value
+    assert widget.result is None and not widget.busy
+    told = len(error_messages())
+    edits["object_size"].value = "16, 32"
+    run_and_wait(qtbot, widget)
+    assert error_messages()[told:] == []
+    result = widget.result
+    assert isinstance(result, ParamSweepResult) and result.base.method == AUTO.method
+    assert [c.values for c in result.cells] == [{"object_size": 16.0}, {"object_size": 32.0}]
+    assert all(c.ok and c.n_segments == AUTO.n_segments for c in result.cells)
+    # the labels of each cell are the engine's: the stability is the ARI of the two
+    angles = np.deg2rad(stack.metadata["angles_deg"])
+    data = np.asarray(stack.data)
+    a, b = (engine_result(stack, AUTO.replace(object_size=s)).labels for s in (16, 32))
+    assert result.cells[0].stability == pytest.approx(adjusted_rand_index(a, b))
+    ref = param_sweep(data, angles, AUTO, {"object_size": [16, 32]}, mask=validity_mask(data))
+    assert [c.n_segments for c in ref.cells] == [c.n_segments for c in result.cells]
+
+    table = widget.table.to_dict("list")
+    assert table["object_size"] == [16.0, 32.0] and table["best"].count("★") == 1
+    assert "w" not in table
+    assert "best by stability: object_size = " in widget.status.value
+    best = widget.best_params()  # what Use best and Save best… hand on
+    assert best == AUTO.replace(object_size=result.best_cell().values["object_size"])
+    assert "per cell" in widget.figure.axes[0].get_title()  # one bar per cell
+    assert len(widget.figure.axes[0].patches) == 2
+    # a score of the block grid is refused for such a sweep
+    widget.score.value = "silhouette"
+    click(qtbot, widget.run_button)
+    assert "picks its best cell by stability or ari" in widget.status.value
+    # back to the thesis method: its grid again, the method's fields gone
+    widget.source.value = "thesis"
+    assert shown(widget.windows) and widget.method_axes.edits == {}

@@ -8,7 +8,8 @@ Three measures of a labelling against the true materials (thesis section 5.4):
   segment after the optimal one-to-one matching (Hungarian algorithm).
 - :func:`block_accuracy`: the thesis's block accuracy over non-overlapping w × w blocks,
   in its worst case (a block whose ground truth mixes materials is wrong) and its
-  optimistic case (such a block is right).
+  optimistic case (such a block is right); :func:`evaluate` gives it for the labels of
+  a method that cuts blocks (given a window), the pixel measures for every method.
 
 :func:`segment_statistics` summarises each segment of a result (size, mean Î, ρ, θ,
 circular mean of φ, mean PCA features). Label ids may be any integers; nothing here
@@ -164,27 +165,31 @@ def block_accuracy(truth: np.ndarray, labels: np.ndarray, window: int) -> tuple[
     return right / n_blocks, (right + n_mixed) / n_blocks
 
 
-def evaluate(truth: np.ndarray, labels: np.ndarray, window: int) -> dict[str, Any]:
+def evaluate(truth: np.ndarray, labels: np.ndarray, window: int | None = None) -> dict[str, Any]:
     """Every measure of a labelling against the ground truth, JSON-ready.
 
     Parameters
     ----------
     truth, labels : array (H, W) of int
         True materials and segment labels of the same pixels.
-    window : int
-        Block side w (pixels) of :func:`block_accuracy`.
+    window : int, optional
+        Block side w (pixels) of :func:`block_accuracy`, for labels of a method that cuts
+        the w × w block grid (the thesis method); None (a method without blocks): no
+        block accuracy, the pixel-level measures only.
 
     Returns
     -------
     dict
         ``adjusted_rand_index``, ``iou_per_segment`` ({true label: IoU}), ``mean_iou``,
         ``matching`` ({true label: predicted label or None}), ``block_accuracy_worst``,
-        ``block_accuracy_optimistic``, ``window``, ``n_true_segments``,
-        ``n_predicted_segments``.
+        ``block_accuracy_optimistic``, ``window`` (these three None without a window),
+        ``n_true_segments``, ``n_predicted_segments``.
     """
     truth, labels = _check_pair(truth, labels)
     per, mean_iou, matching = segment_iou(truth, labels)
-    worst, optimistic = block_accuracy(truth, labels, window)
+    worst = optimistic = None
+    if window is not None:
+        worst, optimistic = block_accuracy(truth, labels, window)
     return {
         "adjusted_rand_index": adjusted_rand_index(truth, labels),
         "iou_per_segment": per,
@@ -192,7 +197,7 @@ def evaluate(truth: np.ndarray, labels: np.ndarray, window: int) -> dict[str, An
         "matching": matching,
         "block_accuracy_worst": worst,
         "block_accuracy_optimistic": optimistic,
-        "window": int(window),
+        "window": None if window is None else int(window),
         "n_true_segments": int(np.unique(truth).size),
         "n_predicted_segments": int(np.unique(labels).size),
     }
