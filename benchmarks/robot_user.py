@@ -375,9 +375,12 @@ def half_means(rows: list[dict], rounds: int) -> list[str]:
                 f"{method} {np.mean([r['ari'][at] for r in rs]):.3f} (without † "
                 f"{unmarked:.3f}; 0.9 reached {reached}/{len(rs)})"
             )
-        fair_bound = np.mean([scenes[n]["bound"] for n in fair] or [np.nan])
-        bound = f"; bound L→R {np.mean([r['bound'] for r in scenes.values()]):.3f}"
-        bound += f" (without † {fair_bound:.3f}, {len(fair)} scenes)"
+        bounds = {n: r["bound"] for n, r in scenes.items() if r["bound"] is not None}
+        bound = ""  # the real frames have no truth-trained bound
+        if bounds:
+            fair_bound = np.mean([b for n, b in bounds.items() if n in fair] or [np.nan])
+            bound = f"; bound L→R {np.mean(list(bounds.values())):.3f}"
+            bound += f" (without † {fair_bound:.3f}, {len(fair)} scenes)"
         lines.append(f"- {half} ({len(scenes)} scenes), mean ARI@{at}: " + ", ".join(parts) + bound)
     return lines
 

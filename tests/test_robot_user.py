@@ -126,3 +126,22 @@ def test_setbacks_count_the_corrections_that_lowered_the_ari(robot):
     run = robot.RobotRun([0.5, 0.7, 0.65, 0.695, 0.9, 0.6], [0.0] * 6, [], [])
     assert run.setbacks() == (2, pytest.approx(0.3))
     assert robot.RobotRun([0.5, 0.6, 0.6], [0.0] * 3, [], []).setbacks() == (0, 0.0)
+
+
+def test_half_means_of_frames_without_a_bound(robot):
+    """The real frames have no truth-trained bound: their summary line has none and does
+    not fail (``robot_user.py --real`` alone)."""
+    rows = [
+        {
+            "half": "real",
+            "scene": s,
+            "method": "product",
+            "ari": [0.5] * 16,
+            "comparable": True,
+            "bound": None,
+            "to": "1",
+        }
+        for s in ("a", "b")
+    ]
+    (line,) = robot.half_means(rows, 15)
+    assert "product 0.500" in line and "bound" not in line
