@@ -4,6 +4,8 @@ Run/Cancel, status."""
 from __future__ import annotations
 
 import contextlib
+import weakref
+from collections.abc import Callable
 from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
 import numpy as np
@@ -145,6 +147,30 @@ class DockTabber(QObject):
         dock.raise_()
 
 
+class CloseWatcher(QObject):
+    """Calls ``closed`` when a dock's frame is closed: ``close()`` (a Close event), or
+    taken out of its dock (napari's ✕ removes the dock and leaves the frame, still
+    alive, without a parent). The frame's ``destroyed`` signal is the widget's to
+    connect (a plain function: this watcher is deleted with the frame)."""
+
+    def __init__(self, frame: QWidget, closed: Callable[[], None]) -> None:
+        super().__init__(frame)
+        self._frame, self._closed = frame, closed
+        self._docked = frame.parent() is not None
+        frame.installEventFilter(self)
+
+    def eventFilter(self, watched: QObject, event: QEvent) -> bool:  # noqa: N802 (Qt)
+        kind = event.type()
+        if kind == QEvent.Type.Close:
+            self._closed()
+        elif kind == QEvent.Type.ParentChange:
+            docked = self._frame.parent() is not None
+            if self._docked and not docked:
+                self._closed()
+            self._docked = docked
+        return False
+
+
 class ScrollingContainer(Container):
     """A labelled vertical Container whose controls scroll when its dock is too short,
     with a footer that never scrolls.
@@ -180,6 +206,12 @@ class ScrollingContainer(Container):
         scroll area while magicgui's ``__init__`` runs)."""
         frame = vars(self).get("_frame")
         return self.root_native_widget if frame is None else frame
+
+    def close(self) -> None:
+        """Close the frame napari docks (magicgui's ``close`` closes the scroll area
+        only), then the controls."""
+        self._frame.close()
+        super().close()
 
     @property
     def scroll_area(self) -> QScrollArea:
@@ -275,26 +307,48 @@ class StackWidget(ScrollingContainer):
         events = viewer.layers.events
         events.inserted.connect(self._on_layers_changed)
         events.removed.connect(self._on_layers_changed)
-        slot, on_layers = self._slot, self._on_layers_changed
         #: A result's secondary layers, added one per event-loop turn (the window
         #: freezes for one layer at most).
         self._later = LayerQueue(self.native)
         #: Fits the view again when the dock narrows the canvas under a fitted view.
-        self._fit = fit = FitKeeper(viewer)
+        self._fit = FitKeeper(viewer)
         #: Shows the polariser angle of the frame shown beside the angle slider.
-        self._angle_label = angle_label = AngleLabel(viewer)
+        self._angle_label = AngleLabel(viewer)
+        self._closed = False
+        this = weakref.ref(self)
 
         def _closed(*_: Any) -> None:
-            slot.cancel()
-            fit.close()
-            angle_label.close()
-            for emitter in (events.inserted, events.removed):
-                with contextlib.suppress(Exception):
-                    emitter.disconnect(on_layers)
+            widget = this()
+            if widget is not None:
+                widget.on_closed()
 
+        self._close_watcher = CloseWatcher(self.native, _closed)
         self.native.destroyed.connect(_closed)
         self._on_layers_changed()
         warm_imports()  # the plot docks and the first segments find them imported
+
+    @property
+    def closed(self) -> bool:
+        """True once the dock was closed (:meth:`on_closed`)."""
+        return self._closed
+
+    def on_closed(self) -> None:
+        """The dock was closed (its ✕, ``close()``, or its frame destroyed): stop the
+        computation and every connection to the viewer (its layer list's events, the
+        choices napari refreshes, the view fit and the angle label), once. Subclasses
+        add theirs."""
+        if self._closed:
+            return
+        self._closed = True
+        self._slot.cancel()
+        self._fit.close()
+        self._angle_label.close()
+        events = self._viewer.layers.events
+        for name in ("inserted", "removed", "reordered", "renamed"):
+            emitter = getattr(events, name)
+            for callback in (self._on_layers_changed, self.reset_choices):
+                with contextlib.suppress(Exception):
+                    emitter.disconnect(callback)
 
     # -- building ---------------------------------------------------------------------
     def _add_parameters(self, widgets: list[Any]) -> None:

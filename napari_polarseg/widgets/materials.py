@@ -26,6 +26,15 @@ NAMES_KEY = "polarseg_materials"
 PAINT_EVENTS = ("data", "paint", "labels_update")
 
 
+def layer_names(layer: Any) -> dict[int, str]:
+    """Value → name of the named materials kept in a scribbles layer's metadata (empty
+    for None)."""
+    if layer is None:
+        return {}
+    stored = layer.metadata.get(NAMES_KEY) or {}
+    return {int(k): str(v) for k, v in stored.items()}
+
+
 def swatch_style(value: int) -> str:
     """Qt style sheet of the swatch of scribble value ``value`` (its viewer colour)."""
     r, g, b, _ = (np.asarray(label_rgba([value])[0]) * 255).round().astype(int)
@@ -103,10 +112,7 @@ class MaterialList(Container):
 
     def names(self) -> dict[int, str]:
         """Value → name of the named materials of the layer (empty without a layer)."""
-        if self.layer is None:
-            return {}
-        stored = self.layer.metadata.get(NAMES_KEY) or {}
-        return {int(k): str(v) for k, v in stored.items()}
+        return layer_names(self.layer)
 
     def set_names(self, names: dict[int, str]) -> None:
         """Name the materials of ``names`` (value → name) in the layer, keeping others."""

@@ -1,26 +1,31 @@
 """The "Segment by material" widget: the cached engine pipeline, run in a worker thread.
 
 Thin: the jobs, pipelines and result texts are the session layer
-(:mod:`napari_polarseg.widgets.session`). The widget holds its parts as objects, each
-given the public members of the widget it reads: :attr:`SegmentWidget.controls` (the
-parameters), :attr:`SegmentWidget.inputs` (mask, scribbles, materials, the
-:class:`Snapshot` of a request), :attr:`SegmentWidget.layers` (the output layers),
-:attr:`SegmentWidget.classifier_files`, :attr:`SegmentWidget.export` and
-:attr:`SegmentWidget.assist`. This module builds the widget and runs it.
+(:mod:`napari_polarseg.widgets.session`). One state holds what the dock knows
+(:attr:`SegmentWidget.state`, a
+:class:`~napari_polarseg.widgets.session.state.SegmentState`: parameters, inputs,
+results shown, loaded classifier, exports); the widget's parts read and write it and
+listen to its signals, none reaches another through the widget:
+:attr:`SegmentWidget.controls` (the parameters), :attr:`SegmentWidget.inputs` (mask,
+scribbles, materials, the :class:`Snapshot` of a request), :attr:`SegmentWidget.layers`
+(the output layers), :attr:`SegmentWidget.classifier_files`,
+:attr:`SegmentWidget.export` and :attr:`SegmentWidget.assist`. The public members
+scripts and tests use are :class:`~napari_polarseg.widgets.segment_members.SegmentMembers`.
+This module builds the widget and runs it.
 """
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import time
-from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from magicgui.widgets import CheckBox, Container
 from qtpy.QtCore import QTimer
 
-from ..engine import Pipeline, PolarsegError, SegmentationResult, SegmentParams
+from ..engine import Pipeline, PolarsegError, SegmentationResult
 from ..engine.params import PRESETS, ParamSpec
 from ._base import SEGMENT_DOCK_NAME, StackWidget
 from ._layers import find_output, source_key
@@ -28,9 +33,10 @@ from .docks import SegmentDock
 from .param_controls import controlled_names, every_param_spec
 from .segment_assist import ScribbleAssist
 from .segment_files import ClassifierFiles, ResultExport
-from .segment_inputs import CUT_ONLY, NO_MASK, NO_SCRIBBLES, SegmentInputs, Snapshot
-from .segment_layers import SegmentLayers, ShownEntry, WithContrast, with_contrast
-from .segment_params import ParameterControls
+from .segment_inputs import NO_MASK, NO_SCRIBBLES, SegmentInputs, Snapshot
+from .segment_layers import SegmentLayers, WithContrast, result_on_screen, with_contrast
+from .segment_members import SegmentMembers
+from .segment_params import CUT_ONLY, ParameterControls
 from .session import (
     FEATURES_JOB_STAGES,
     ClassifierOutput,
@@ -43,12 +49,11 @@ from .session import (
     scribble_problem,
     segment_request,
 )
+from .session.state import SegmentState, ShownEntry
 
 if TYPE_CHECKING:
     import napari
-    from napari.layers import Labels, Layer
-
-    from ..engine.classifier.pixel_classifier import PixelClassifier
+    from napari.layers import Layer
 
 # Names importers take from this module (tests, benchmarks): defined beside the parts.
 __all__ = [
@@ -74,7 +79,7 @@ CONTROLLED = controlled_names(every_param_spec())
 FIRST_CONTROLS = ("n_segments",)
 
 
-class SegmentWidget(StackWidget, SegmentDock):
+class SegmentWidget(SegmentMembers, StackWidget, SegmentDock):
     """Segment an angle stack by material (thesis section 4.5) with live parameters.
 
     Controls: a preset (thesis values or the recommended ones), *Load parameters…* and
@@ -111,7 +116,7 @@ class SegmentWidget(StackWidget, SegmentDock):
     draws label 0 as transparent background; with scribbles, each pixel gets the label
     of the scribbled material the classifier chose, so segments and strokes share their
     colours) and, when the run computes the thesis maps (the thesis method always, the
-    others with *thesis maps and error map*, :meth:`wants_maps`), ``reconstruction
+    others with *thesis maps and error map*, ``SegmentState.maps``), ``reconstruction
     error`` (Image, per-pixel |Î rebuilt from the block harmonics − Î|, added hidden
     below the segments; its mean is in the status line; removed by a run without them).
     Once a run leaves pixels out (mask, saturated, black) or uses the robust fit, also
@@ -147,39 +152,31 @@ class SegmentWidget(StackWidget, SegmentDock):
     def __init__(
         self, viewer: napari.viewer.Viewer, specs: dict[str, ParamSpec] | None = None
     ) -> None:
+        #: The dock's one state: what the parts read, write and listen to.
+        self.state = state = SegmentState()
         super().__init__(viewer)
         self.store = PipelineStore()
-        self._requested: Snapshot | None = None  # snapshot of the last request
         self._force = False  # a control changed: the next live run is not skipped
         self._live_run = False  # run() was called by the live update
-        #: The parts the widget holds: the parameter controls, the classifier files and
-        #: *Export results…*.
-        self.controls = ParameterControls(specs, self._set_status, self._fail, lambda: self.native)
-        self.classifier_files = ClassifierFiles(
-            self, viewer, self._set_status, self._fail, self._on_value_changed, self._on_inputs
+        status, fail, parent = self._set_status, self._fail, lambda: self.native
+        #: The parts: the parameters, the inputs beside the stack, the output layers,
+        #: the classifier files, *Export results…* and the scribble helpers.
+        self.controls = ParameterControls(specs, state, status, fail, parent)
+        self.inputs = SegmentInputs(
+            state, viewer, self.store, self._labels_box, status, fail, self.prefetch_features
         )
-        self.export = ResultExport(self, self._set_status, self._fail)
-        self.assist = ScribbleAssist(self, viewer, self._set_status, self._fail)
-        self._adopt_controls()
+        self.layers = SegmentLayers(state, viewer, self._later, status, self._done)
+        self.classifier_files = ClassifierFiles(
+            state, viewer, parent, status, fail, self._on_value_changed, self.run
+        )
+        self.export = ResultExport(state, self.store, parent, status, fail)
+        self.assist = ScribbleAssist(state, self.inputs, viewer, status, fail)
         self.live = CheckBox(
             text="live update",
             value=False,
             tooltip="Rerun (only the stale stages) whenever a value changes or a stroke is "
             "painted into the chosen mask or scribbles layer",
         )
-        #: The mask, the scribbles and their materials, the classifier settings (a part).
-        self.inputs = SegmentInputs(self, viewer, self._labels_box, self._set_status, self._fail)
-        for name in (
-            "mask_layer",
-            "scribbles_layer",
-            "materials",
-            "classifier_controls",
-            "new_scribbles_button",
-        ):
-            setattr(self, name, getattr(self.inputs, name))
-        #: The output layers and the results they show, the HSV and Stokes views (a part).
-        self.layers = SegmentLayers(self, viewer, self._later, self._set_status, self._done)
-        self.views, self.view_mode = self.layers.views, self.layers.view_mode
         self._lay_out()
         self.native.setObjectName(SEGMENT_DOCK_NAME)  # the others open as its tabs
         self._timer = QTimer(self.native)  # deleted with the widget: never fires after it
@@ -187,25 +184,7 @@ class SegmentWidget(StackWidget, SegmentDock):
         self._timer.setInterval(LIVE_DELAY_MS)
         self._timer.timeout.connect(self._on_timer)
         self._connect()
-        self.native.destroyed.connect(self.inputs.unwatch)
-
-    def _adopt_controls(self) -> None:
-        """The parts' controls as attributes of the widget (``widget.n_segments``, …)."""
-        controls, files = self.controls, self.classifier_files
-        for name, control in controls.controls.items():
-            setattr(self, name, control)
-        for name in ("preset", "load_button", "save_button", "params_file", "thesis_maps"):
-            setattr(self, name, getattr(controls, name))
-        self.controlled, self.param_specs = controls.controlled, controls.param_specs
-        self.parameter_widgets = controls.parameter_widgets
-        for name in (
-            "load_classifier_button",
-            "save_classifier_button",
-            "clear_classifier_button",
-            "classifier_file",
-        ):
-            setattr(self, name, getattr(files, name))
-        self.export_button = self.export.export_button
+        self._write_stack()
 
     def _lay_out(self) -> None:
         """The first controls, then the collapsed *advanced settings*; Export after Run."""
@@ -213,14 +192,14 @@ class SegmentWidget(StackWidget, SegmentDock):
         # the preset sets, the mask, the files) sit in the collapsed "advanced" section
         self.advanced = Container(
             widgets=[
-                self.params_file,
-                *(getattr(self, name) for name in self.controlled if name not in FIRST_CONTROLS),
-                self.thesis_maps,
-                self.mask_layer,
-                self.classifier_file,
-                self.classifier_controls,
-                self.views,
-                self.view_mode,
+                self.controls.params_file,
+                *(self.controls.controls[n] for n in self.controlled if n not in FIRST_CONTROLS),
+                self.controls.thesis_maps,
+                self.inputs.mask_layer,
+                self.classifier_files.classifier_file,
+                self.inputs.classifier_controls,
+                self.layers.views,
+                self.layers.view_mode,
             ],
             labels=True,
             label="",
@@ -233,145 +212,102 @@ class SegmentWidget(StackWidget, SegmentDock):
             tooltip="Show every parameter of the pipeline (the preset sets them), the thesis "
             "maps option, the mask, and the parameter and classifier files",
         )
+        inputs = self.inputs
         self._add_parameters(
             [
-                self.preset,
-                *(getattr(self, name) for name in FIRST_CONTROLS),
-                self.scribbles_layer,
-                self.new_scribbles_button,
-                self.materials,
+                self.controls.preset,
+                *(self.controls.controls[name] for name in FIRST_CONTROLS),
+                inputs.scribbles_layer,
+                inputs.new_scribbles_button,
+                inputs.materials,
                 self.assist.buttons,
                 self.live,
                 self.show_advanced,
                 self.advanced,
             ]
         )
-        self.footer.insert(self.footer.index(self.progress), self.export_button)  # after Cancel
+        self.footer.insert(self.footer.index(self.progress), self.export.export_button)
 
     def _connect(self) -> None:
-        """Connect the controls to their handlers (the parts connect their own)."""
+        """Connect the controls and the state's signals to the widget's handlers (the
+        parts connect their own)."""
+        inputs, state = self.inputs, self.state
         self.show_advanced.changed.connect(self._on_show_advanced)
-        self.stack_layer.changed.connect(self.mask_layer.reset_choices)
-        self.stack_layer.changed.connect(self.scribbles_layer.reset_choices)
-        watched = [self.stack_layer, self.angles, self.mask_layer, self.scribbles_layer]
-        for w in [*self.parameter_widgets, self.thesis_maps, *watched]:
+        self.stack_layer.changed.connect(inputs.reset_choices)
+        self.stack_layer.changed.connect(self._write_stack)
+        self.angles.changed.connect(self._write_stack)
+        watched = [self.stack_layer, self.angles, inputs.mask_layer, inputs.scribbles_layer]
+        for w in [*self.controls.parameter_widgets, self.controls.thesis_maps, *watched]:
             w.changed.connect(self._on_value_changed)
-        for w in self.classifier_controls.controls:
+        for w in inputs.classifier_controls.controls:
             w.changed.connect(self._on_value_changed)
         self.live.changed.connect(self._on_value_changed)
-        self.live.changed.connect(self.layers.prepare_segments)
-        self.scribbles_layer.changed.connect(self.prefetch_features)
+        self.live.changed.connect(self._prepare_segments)
+        inputs.scribbles_layer.changed.connect(self.prefetch_features)
+        state.edited.connect(self.schedule_live_run)
 
-    # -- the parts' public members ----------------------------------------------------
-    def params(self) -> SegmentParams:
-        """The engine parameters the controls describe (:meth:`ParameterControls.params
-        <napari_polarseg.widgets.segment_params.ParameterControls.params>`)."""
-        return self.controls.params()
+    def _write_stack(self, *_: Any) -> None:
+        """Write the chosen stack and the angles typed to the state."""
+        self.state.set_inputs(stack=self.stack_layer.value, angles=self.angles.value)
 
-    def set_params(self, params: SegmentParams | None = None, **changes: Any) -> None:
-        """Set the controls (:meth:`ParameterControls.set_params
-        <napari_polarseg.widgets.segment_params.ParameterControls.set_params>`)."""
-        self.controls.set_params(params, **changes)
-
-    def save_params(self, path: str | Path) -> bool:
-        """Write the parameters as JSON (see ``ParameterControls.save_params``)."""
-        return self.controls.save_params(path)
-
-    def load_params(self, path: str | Path) -> bool:
-        """Set every control from a parameters file (see ``ParameterControls.load_params``)."""
-        return self.controls.load_params(path)
-
-    def wants_maps(self, params: SegmentParams | None = None) -> bool:
-        """Whether a run computes the thesis maps and the error map (the thesis method,
-        or *thesis maps and error map* ticked)."""
-        return self.controls.maps(params)
-
-    @property
-    def loaded(self) -> LoadedClassifier | None:
-        """The classifier *Load classifier…* read, while it is applied."""
-        return self.classifier_files.loaded
-
-    @property
-    def classifier(self) -> PixelClassifier | None:
-        """The pixel classifier behind the chosen stack's segments (what *Save
-        classifier…* writes)."""
-        return self.classifier_files.classifier
-
-    def shown_classifier(self, layer: Layer) -> PixelClassifier | None:
-        """The pixel classifier behind ``layer``'s ``segments`` layer, if any."""
-        return self.classifier_files.shown_classifier(layer)
-
-    def load_classifier(self, path: str | Path) -> bool:
-        """Read a classifier file in a worker and apply it (see ``ClassifierFiles``)."""
-        return self.classifier_files.load_classifier(path)
-
-    def save_classifier(self, path: str | Path) -> bool:
-        """Write the chosen stack's pixel classifier (see ``ClassifierFiles``)."""
-        return self.classifier_files.save_classifier(path)
-
-    def clear_classifier(self, *_: Any) -> None:
-        """Stop applying the loaded classifier (see ``ClassifierFiles``)."""
-        self.classifier_files.clear_classifier()
-
-    def export_results(
-        self, folder: str | Path, *, overview: bool = True, plots: bool = False
-    ) -> bool:
-        """Write the chosen stack's last result into ``folder`` in a worker (the folder
-        of ``polarseg segment --out``; see ``ResultExport.export_results``)."""
-        return self.export.export_results(folder, overview=overview, plots=plots)
+    def _prepare_segments(self, *_: Any) -> None:
+        """With live update on, an empty segments layer made ahead of the first strokes
+        (``SegmentLayers.prepare_segments``)."""
+        self.layers.prepare_segments(bool(self.live.value))
 
     # -- sections -----------------------------------------------------------------------
     def _on_show_advanced(self, shown: bool) -> None:
         self.advanced.visible = bool(shown)
 
-    def _on_inputs(self) -> None:
-        """The loaded classifier changed: the cut's controls follow."""
-        self.inputs.on_scribbles_changed()
-
-    # -- the inputs part's public members ---------------------------------------------
-    def current_mask(self) -> tuple[str | None, np.ndarray | None]:
-        """Key and region of the chosen mask (``SegmentInputs.current_mask``)."""
-        return self.inputs.current_mask()
-
-    def current_scribbles(self) -> tuple[str | None, np.ndarray | None]:
-        """Key and strokes of the chosen scribbles (``SegmentInputs.current_scribbles``)."""
-        return self.inputs.current_scribbles()
-
-    def new_scribbles_layer(self, *_: Any) -> Labels | None:
-        """A new, chosen scribbles layer (``SegmentInputs.new_scribbles_layer``)."""
-        return self.inputs.new_scribbles_layer()
-
-    def material_names(self) -> dict[int, str]:
-        """Scribble value → material name (``SegmentInputs.material_names``)."""
-        return self.inputs.material_names()
-
-    def snapshot(self) -> Snapshot | None:
-        """Everything a result depends on (``SegmentInputs.snapshot``)."""
-        return self.inputs.snapshot()
-
-    @property
-    def probabilities(self) -> np.ndarray | None:
-        """Class probabilities (K, H, W) of the last scribble run shown, else None."""
-        return self.layers.probabilities
-
-    @property
-    def classes(self) -> np.ndarray | None:
-        """The scribble value of each class of :attr:`probabilities` (None: none)."""
-        return self.layers.classes
-
-    @property
-    def uncertainty(self) -> np.ndarray | None:
-        """Uncertainty (H, W) of the last scribble run shown, else None."""
-        return self.layers.uncertainty
-
-    def _show(self, *args: Any, **kwargs: Any) -> None:
-        """Show a run's layers and summary (``SegmentLayers.show``)."""
-        self.layers.show(*args, **kwargs)
+    def _show(
+        self,
+        layer: Layer,
+        angles_deg: np.ndarray,
+        result: Any,
+        seconds: float,
+        inputs: dict[str, Any] | None = None,
+        partial: bool = False,
+        snap: Snapshot | None = None,
+        contrast: dict[str, Any] | None = None,
+    ) -> None:
+        """Show a run's layers and summary: a classifier's output with the materials
+        named (``SegmentInputs.named``), then ``SegmentLayers.show``."""
+        result = self.inputs.named(result)
+        self.layers.show(layer, angles_deg, result, seconds, inputs, partial, snap, contrast)
 
     def schedule_live_run(self) -> None:
         """With live update on, rerun after the debounce (a stroke was painted)."""
-        if self.live.value:
+        if self.live.value and not self.closed:
             self._timer.start()
+
+    def on_closed(self) -> None:
+        """The dock was closed: beside the base's, stop the live update and listening to
+        the edits of the mask and scribbles layers (no stroke retrains any more); the
+        state is closed."""
+        if self.closed:
+            return
+        super().on_closed()
+        self.state.close()
+        self.inputs.unwatch()
+        with contextlib.suppress(RuntimeError):  # the timer was deleted with the frame
+            self._timer.stop()
+
+    def _on_idle(self) -> None:
+        super()._on_idle()
+        self._settle()
+
+    def _settle(self) -> None:
+        """When no run is going, queued or scheduled by the live update: a stack whose
+        segments show a run that never completed (cancelled, failed, dropped) shows its
+        last completed result again (``SegmentLayers.settle``)."""
+        layers = getattr(self, "layers", None)  # None while the base class initialises
+        timer = getattr(self, "_timer", None)
+        if layers is None or timer is None or self.busy:
+            return
+        with contextlib.suppress(RuntimeError):  # the timer was deleted with the frame
+            if timer.isActive():
+                return  # a live rerun comes: its segments replace these
+            layers.settle()
 
     # -- stacks, pipelines and results ------------------------------------------------
     def _refresh_stacks(self) -> None:
@@ -379,7 +315,8 @@ class SegmentWidget(StackWidget, SegmentDock):
         inputs = getattr(self, "inputs", None)  # None while the base class initialises
         if inputs is not None:
             inputs.reset_choices()
-            inputs.sync_watches()
+            inputs.write_choices()
+            self._write_stack()
             inputs.on_scribbles_changed()
 
     @property
@@ -394,25 +331,14 @@ class SegmentWidget(StackWidget, SegmentDock):
 
     def shown_result(self, layer: Layer) -> SegmentationResult | None:
         """The result behind ``layer``'s ``segments`` layer, if this widget made it."""
-        entry = self.layers.shown.get(source_key(layer))
-        segments = find_output(self._viewer, "segments", layer)
-        if entry is None or segments is None:
-            return None
-        if segments.metadata.get("polarseg_inputs") != entry.inputs:
-            return None  # another widget has written the layer since
-        return entry.result
+        entry = result_on_screen(self.state, self._viewer, layer)
+        return None if entry is None else entry.result
 
     def _forget(self, keep: set[str]) -> None:
         store = getattr(self, "store", None)  # None while the base class initialises
         if store is not None:
             store.discard(keep)
-        layers = getattr(self, "layers", None)  # None while the base class initialises
-        for key in set(layers.shown if layers is not None else ()) - keep:
-            del layers.shown[key]
-        for part in ("export", "classifier_files"):
-            found = getattr(self, part, None)  # None while the widget is built
-            if found is not None:
-                found.forget(keep)
+        self.state.forget(keep)
 
     def _on_value_changed(self, *_: Any) -> None:
         if self.live.value:
@@ -421,7 +347,8 @@ class SegmentWidget(StackWidget, SegmentDock):
 
     def _on_timer(self) -> None:
         force, self._force = self._force, False
-        if not force and self.snapshot() == self._requested:
+        if not force and self.inputs.snapshot() == self.state.requested:
+            self._settle()  # nothing more comes: the shown layers settle
             return  # a layer event that changed nothing (e.g. a redraw)
         self._live_run = True
         try:
@@ -452,24 +379,28 @@ class SegmentWidget(StackWidget, SegmentDock):
         self._timer.stop()
         self._force = False
         try:
+            self._request()
+        finally:
+            self._settle()  # when nothing was started (a bad value, a re-show)
+
+    def _request(self) -> None:
+        """The body of :meth:`run`: read the values, then re-show or start the job."""
+        try:
             layer, angles_deg = self.current_stack()
             params = self.params()
-            mask_key, region = self.current_mask()
-            scribble_key, scribbles = self.current_scribbles()
+            mask_key, region = self.inputs.current_mask()
+            scribble_key, scribbles = self.inputs.current_scribbles()
             if scribbles is not None:
-                self.classifier_controls.settings()  # a bad value: said before a run
+                self.inputs.classifier_controls.settings()  # a bad value: said before a run
         except PolarsegError as exc:
-            self._requested = self.snapshot()
+            self.state.requested = self.inputs.snapshot()
             self._fail(exc)
             return
         snap = self.inputs.snapshot_of(params, mask_key, region, scribble_key, scribbles)
-        self._requested = snap
-        files = self.classifier_files
+        self.state.requested = snap
         loaded = self.inputs.applied(scribble_key, snap.scribbles_digest)
-        if files.loaded is not None and loaded is None:  # painted since: train again
-            files.loaded = None
-            files.update_buttons()
-            self.inputs.on_scribbles_changed()
+        if self.state.loaded is not None and loaded is None:  # painted since: train again
+            self.state.set_loaded(None)
         if scribbles is not None and loaded is None:
             problem = scribble_problem(scribbles)
             if problem is not None:
@@ -477,11 +408,12 @@ class SegmentWidget(StackWidget, SegmentDock):
                 return
         if scribbles is None and loaded is None and self._reshow(layer, snap):
             return
+        chosen = self.state.inputs
         inputs = {
-            "mask": input_info(self.mask_layer.value, mask_key, snap.mask_digest),
+            "mask": input_info(chosen.mask, mask_key, snap.mask_digest),
             "scribbles": None
             if loaded is not None
-            else input_info(self.scribbles_layer.value, scribble_key, snap.scribbles_digest),
+            else input_info(chosen.scribbles, scribble_key, snap.scribbles_digest),
             "classifier": None if loaded is None else str(loaded.path),
         }
         self._start(layer, angles_deg, snap, inputs, region, loaded, scribbles)
@@ -523,12 +455,12 @@ class SegmentWidget(StackWidget, SegmentDock):
     def prefetch_features(self, *_: Any, force: bool = False) -> None:
         """Compute the pixel features in the worker while the first strokes are painted,
         once a scribbles layer is chosen (or ``force``), unless they train or a run waits."""
-        if (self.scribbles_layer.value is None and not force) or self.busy or self._waiting():
+        if (self.state.inputs.scribbles is None and not force) or self.busy or self._waiting():
             return
         try:
             layer, angles_deg = self.current_stack()
-            mask_key, region = self.current_mask()
-            scribbles = self.current_scribbles()[1]
+            mask_key, region = self.inputs.current_mask()
+            scribbles = self.inputs.current_scribbles()[1]
         except PolarsegError:
             return
         if scribbles is not None and scribble_problem(scribbles) is None:
@@ -537,10 +469,10 @@ class SegmentWidget(StackWidget, SegmentDock):
         args += (region, mask_key, colour_stack_of(layer))
 
         def ready(run_id: int, n_features: int) -> None:
-            strokes = self.current_scribbles()[1]
+            strokes = self.inputs.current_scribbles()[1]
             problem = scribble_problem(np.zeros(1) if strokes is None else strokes)
             self._set_status(f"pixel features ready ({n_features} features); {problem or ''}")
-            self.layers.prepare_segments()  # with live update on: the labels fill it
+            self._prepare_segments()  # with live update on: the labels fill it
 
         self._submit(features_job, args, FEATURES_JOB_STAGES, ready, live=True)
 
@@ -549,7 +481,7 @@ class SegmentWidget(StackWidget, SegmentDock):
         changed (e.g. the refractive index under the superpixel method) and no thesis
         maps are asked for: nothing is recomputed. True if it did."""
         key = source_key(layer)
-        entry = self.layers.shown.get(key)
+        entry = self.state.shown.get(key)
         scene = self.store.scene(key)
         if entry is None or entry.snap is None or scene is None or snap.maps:
             return False
@@ -566,9 +498,10 @@ class SegmentWidget(StackWidget, SegmentDock):
         assert segments is not None  # shown_result found it
         angles = segments.metadata.get("polarseg_params", {}).get("angles_deg")
         params_meta = {**new.to_dict(), "angles_deg": angles}
+        meta = {**entry.metadata, "polarseg_params": params_meta}
         segments.metadata = {**segments.metadata, "polarseg_params": params_meta}
-        self.layers.shown[key] = ShownEntry(entry.result, entry.inputs, snap)
-        self.export.reshown(layer, new)
+        # the export records the parameters shown (its maps are computed for them)
+        self.state.show(key, ShownEntry(layer, entry.angles_deg, entry.shown, snap, meta))
         self._slot.drop()  # a run of other values still going is outdated: no word of it
         fields = ", ".join(changed) if changed else "nothing"
         self._set_status(
@@ -582,7 +515,7 @@ class SegmentWidget(StackWidget, SegmentDock):
         contrast: dict[str, Any] = {}
         if isinstance(result, WithContrast):
             result, contrast = result.value, result.contrast
-        if run.snap != self.snapshot() or run.layer not in self._viewer.layers:
+        if run.snap != self.inputs.snapshot() or run.layer not in self._viewer.layers:
             self._set_status("result dropped: the parameters changed while it was computed")
             return
         if isinstance(result, ClassifierOutput) and result.problem is not None:
@@ -595,5 +528,5 @@ class SegmentWidget(StackWidget, SegmentDock):
 
     def _on_partial(self, run: Delivery, run_id: int, result: Any) -> None:
         """The segments (or classes) before the error map; dropped like a result."""
-        if run.snap == self.snapshot() and run.layer in self._viewer.layers:
+        if run.snap == self.inputs.snapshot() and run.layer in self._viewer.layers:
             self._show(run.layer, run.angles_deg, result, run.seconds(), run.inputs, True)

@@ -23,9 +23,13 @@ from ..engine import PolarsegError
 from ..engine.classifier.scribbles_from_labels import DEFAULT_MARGIN, scribbles_from_labels
 from ..engine.classifier.suggestion import Suggestion, paint_here_next
 from ._layers import find_output
+from .segment_layers import result_on_screen
 
 if TYPE_CHECKING:
     import napari
+
+    from .segment_inputs import SegmentInputs
+    from .session.state import SegmentState
 
 #: Name suffix of the suggestion's Shapes layer (``"<stack> paint here next"``).
 SUGGESTION_SUFFIX = "paint here next"
@@ -54,9 +58,10 @@ class ScribbleAssist:
 
     Parameters
     ----------
-    host : SegmentWidget
-        Its stack chooser, shown results, scribbles chooser, material list and
-        *New scribbles layer*.
+    state : SegmentState
+        The dock's state: the chosen stack and scribbles, the results shown.
+    inputs : SegmentInputs
+        The widget's inputs part: its strokes, material list and *New scribbles layer*.
     viewer : napari.viewer.Viewer
     status, fail : callable
         The widget's status line and error report.
@@ -64,12 +69,14 @@ class ScribbleAssist:
 
     def __init__(
         self,
-        host: Any,
+        state: SegmentState,
+        inputs: SegmentInputs,
         viewer: napari.viewer.Viewer,
         status: Callable[[str], None],
         fail: Callable[[PolarsegError], None],
     ) -> None:
-        self._host, self._viewer, self._status, self._fail = host, viewer, status, fail
+        self._state, self._inputs, self._viewer = state, inputs, viewer
+        self._status, self._fail = status, fail
         #: The last suggestion shown (None before, or when there was nothing to suggest).
         self.suggestion: Suggestion | None = None
         self.use_button = PushButton(
@@ -96,14 +103,14 @@ class ScribbleAssist:
 
     def _shown(self) -> tuple[Any, Any, Any]:
         """The chosen stack, its segments layer and result; raises PolarsegError."""
-        layer = self._host.stack_layer.value
+        layer = self._state.inputs.stack
         if layer is None:
             raise PolarsegError("choose an angle-stack image layer first")
         segments = find_output(self._viewer, "segments", layer)
-        result = self._host.shown_result(layer)
-        if segments is None or result is None:
+        entry = result_on_screen(self._state, self._viewer, layer)
+        if segments is None or entry is None:
             raise PolarsegError("run a segmentation of this stack first")
-        return layer, segments, result
+        return layer, segments, entry.result
 
     def use_as_scribbles(self, *_: Any) -> Any:
         """A new scribbles layer from the chosen stack's segments (its values kept: a
@@ -119,13 +126,13 @@ class ScribbleAssist:
         )
         materials = result.materials
         names = {} if materials is None else {int(v): n for v, n in materials.to_dict().items()}
-        layer = self._host.new_scribbles_layer()
+        layer = self._inputs.new_scribbles_layer()
         if layer is None:
             return None
         layer.data = strokes
         if names:
-            self._host.materials.set_names(names)
-        self._host.materials.refresh()
+            self._inputs.materials.set_names(names)
+        self._inputs.materials.refresh()
         n = len(np.unique(strokes[strokes > 0]))
         self._status(
             f"{n} materials as scribbles in {layer.name!r}: each segment's interior, "
@@ -142,7 +149,7 @@ class ScribbleAssist:
             uncertainty = find_output(self._viewer, "uncertainty", layer)
             if uncertainty is None:
                 raise PolarsegError("paint scribbles and run the classifier first")
-            _, painted = self._host.current_scribbles()
+            _, painted = self._inputs.current_scribbles()
         except PolarsegError as exc:
             self._fail(exc)
             return None
@@ -182,4 +189,4 @@ class ScribbleAssist:
         world = translate + scale * np.asarray(suggestion.centre, dtype=float)
         camera = view_camera(self._viewer)
         camera.center = (*tuple(camera.center)[:-2], *world)
-        self._viewer.layers.selection.active = self._host.scribbles_layer.value or shapes
+        self._viewer.layers.selection.active = self._state.inputs.scribbles or shapes

@@ -1,8 +1,10 @@
 """The Segment widget's files: the pixel classifier (*Load classifier…*, *Save
 classifier…*, *Clear*) and *Export results…*, each written or read in a worker.
 
-Two objects the widget holds (:class:`ClassifierFiles`, :class:`ResultExport`); what
-they need of it comes in as a :class:`SegmentHost` (its public members) and callables.
+Two objects the widget holds (:class:`ClassifierFiles`, :class:`ResultExport`). Both
+read and write the dock's state (:class:`~napari_polarseg.widgets.session.state.SegmentState`:
+the chosen stack and scribbles, the results shown, the loaded classifier, the exports)
+and follow its signals; what else they need of the widget comes in as callables.
 """
 
 from __future__ import annotations
@@ -10,7 +12,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from magicgui.widgets import Container, PushButton
@@ -20,79 +22,64 @@ from ._base import ClassifierListener, ask_file
 from ._layers import source_key
 from ._runner import WorkerSlot
 from .docks import docked
+from .materials import layer_names
+from .segment_layers import result_on_screen
 from .session import (
     ExportRecord,
     LoadedClassifier,
     PipelineStore,
-    ShownResult,
     classifier_text,
     content_digest,
     export_job,
     read_classifier_job,
     write_classifier_job,
 )
+from .session.state import SegmentState, ShownEntry
 
 if TYPE_CHECKING:
     import napari
-    from magicgui.widgets import ComboBox
     from napari.layers import Layer
     from qtpy.QtWidgets import QWidget
 
-    from ..engine import SegmentationResult
     from ..engine.classifier.pixel_classifier import PixelClassifier
-
-
-class SegmentHost(Protocol):
-    """What the file parts use of the Segment widget (its public members)."""
-
-    stack_layer: ComboBox
-    native: QWidget
-
-    def current_scribbles(self) -> tuple[str | None, Any]: ...
-
-    def material_names(self) -> dict[int, str]: ...
-
-    def shown_result(self, layer: Layer) -> SegmentationResult | None: ...
-
-    def run(self, *_: Any) -> None: ...
-
-    @property
-    def store(self) -> PipelineStore: ...
 
 
 class ClassifierFiles:
     """The pixel classifier behind the segments, its files and the loaded one.
 
+    The classifier behind a stack's segments is the one of the state's entry for it;
+    the loaded one is the state's (``SegmentState.loaded``). A docked *Polarisation
+    plots* widget gets every new classifier shown.
+
     Parameters
     ----------
-    host : SegmentHost
-        The Segment widget (stack chooser, scribbles, results, ``run``).
+    state : SegmentState
+        The dock's state.
     viewer : napari.viewer.Viewer
         Its viewer (the docked plots get each new classifier).
+    parent : callable() -> QWidget
+        The widget file dialogs open over.
     status, fail : callable
         The widget's status line and error report.
     changed : callable()
         A change that a live update reruns after (the classifier was cleared).
-    inputs_changed : callable()
-        The scribbles or the loaded classifier changed (the cut's controls follow).
+    run : callable()
+        Runs the widget (a classifier was loaded).
     """
 
     def __init__(
         self,
-        host: SegmentHost,
+        state: SegmentState,
         viewer: napari.viewer.Viewer,
+        parent: Callable[[], QWidget],
         status: Callable[[str], None],
         fail: Callable[[PolarsegError], None],
         changed: Callable[[], None],
-        inputs_changed: Callable[[], None],
+        run: Callable[[], None],
     ) -> None:
-        self._host, self._viewer = host, viewer
+        self._state, self._viewer, self._parent = state, viewer, parent
         self._status, self._fail = status, fail
-        self._changed, self._inputs_changed = changed, inputs_changed
-        #: Per stack key: the pixel classifier behind the stack's ``segments`` layer.
-        self._classifiers: dict[str, PixelClassifier] = {}
-        #: The classifier *Load classifier…* read, while it is applied.
-        self.loaded: LoadedClassifier | None = None
+        self._changed, self._run = changed, run
         self._loads = 0  # serial number of the last load
         self._classifier_dir = Path.home()
         self.slot = WorkerSlot("Classifier file", on_status=status)
@@ -129,21 +116,27 @@ class ClassifierFiles:
         self.load_classifier_button.changed.connect(self._on_load_classifier_clicked)
         self.save_classifier_button.changed.connect(self._on_save_classifier_clicked)
         self.clear_classifier_button.changed.connect(self.clear_classifier)
-        host.stack_layer.changed.connect(self.update_buttons)
+        for signal in (state.inputs_changed, state.loaded_changed, state.forgotten):
+            signal.connect(self.update_buttons)
+        state.shown_changed.connect(self._on_shown)
+
+    @property
+    def loaded(self) -> LoadedClassifier | None:
+        """The classifier *Load classifier…* read, while it is applied (the state's)."""
+        return self._state.loaded
 
     @property
     def classifier(self) -> PixelClassifier | None:
         """The pixel classifier behind the chosen stack's segments (None if they did not
         come from it): what *Save classifier…* writes."""
-        layer = self._host.stack_layer.value
+        layer = self._state.inputs.stack
         return None if layer is None else self.shown_classifier(layer)
 
     def shown_classifier(self, layer: Layer) -> PixelClassifier | None:
         """The pixel classifier behind ``layer``'s ``segments`` layer, if this widget made
         them with one (trained on strokes or loaded)."""
-        if self._host.shown_result(layer) is None:
-            return None
-        return self._classifiers.get(source_key(layer))
+        entry = result_on_screen(self._state, self._viewer, layer)
+        return None if entry is None else entry.classifier
 
     def save_classifier(self, path: str | Path) -> bool:
         """Write the chosen stack's pixel classifier to ``path`` in a worker thread.
@@ -172,7 +165,7 @@ class ClassifierFiles:
             self._status(f"saved the classifier to {written}")
 
         self._status(f"saving the classifier to {path}…")
-        classifier = classifier.named(self._host.material_names())
+        classifier = classifier.named(layer_names(self._state.inputs.scribbles))
         self.slot.submit(write_classifier_job, (path, classifier), 1, on_result)
         return True
 
@@ -189,20 +182,17 @@ class ClassifierFiles:
         path = Path(path)
 
         def on_result(run_id: int, classifier: PixelClassifier) -> None:
-            try:
-                key, strokes = self._host.current_scribbles()
-            except PolarsegError:
-                key, strokes = None, None
+            layer = self._state.inputs.scribbles
+            key, strokes = None, None
+            if layer is not None and layer in self._viewer.layers:
+                key, strokes = source_key(layer), np.array(layer.data, copy=True)
             self._loads += 1
-            self.loaded = LoadedClassifier(
-                classifier, path, (key, content_digest(strokes)), self._loads
-            )
+            strokes_id = (key, content_digest(strokes))
             self._classifier_dir = path.parent
-            self.update_buttons()
-            self._inputs_changed()
+            self._state.set_loaded(LoadedClassifier(classifier, path, strokes_id, self._loads))
             self._status(f"loaded the classifier {path.name}: {classifier_text(classifier)}")
-            if self._host.stack_layer.value is not None:
-                self._host.run()
+            if self._state.inputs.stack is not None:
+                self._run()
 
         self._status(f"reading the classifier {path}…")
         self.slot.submit(read_classifier_job, (path,), 1, on_result)
@@ -211,12 +201,11 @@ class ClassifierFiles:
     def clear_classifier(self, *_: Any) -> None:
         """Stop applying the loaded classifier (a rerun trains on the strokes again, or
         segments without supervision when no scribbles layer is chosen)."""
-        if self.loaded is None:
+        loaded = self._state.loaded
+        if loaded is None:
             return
-        name, self.loaded = self.loaded.path.name, None
-        self.update_buttons()
-        self._inputs_changed()
-        self._status(f"the classifier {name} is no longer applied")
+        self._state.set_loaded(None)
+        self._status(f"the classifier {loaded.path.name} is no longer applied")
         self._changed()
 
     def ask_path(self, save: bool) -> str | None:
@@ -225,11 +214,11 @@ class ClassifierFiles:
 
         filters = f"Classifier (*{SUFFIX});;All files (*)"
         if save:
-            layer = self._host.stack_layer.value
+            layer = self._state.inputs.stack
             stem = "classifier" if layer is None else f"{layer.name} classifier"
             start = str(self._classifier_dir / f"{stem}{SUFFIX}")
-            return ask_file(self._host.native, "Save classifier", start, filters, save=True)
-        parent = self._host.native
+            return ask_file(self._parent(), "Save classifier", start, filters, save=True)
+        parent = self._parent()
         return ask_file(parent, "Load classifier", str(self._classifier_dir), filters)
 
     def _on_save_classifier_clicked(self, *_: Any) -> None:
@@ -250,24 +239,15 @@ class ClassifierFiles:
         except RuntimeError:  # the widget was deleted
             pass
 
-    def forget(self, keep: set[str]) -> None:
-        """Drop the classifiers of stack layers whose key is not in ``keep``."""
-        for key in set(self._classifiers) - keep:
-            del self._classifiers[key]
+    def _on_shown(self, key: str, old: ShownEntry | None) -> None:
+        """A stack shows another result: *Save classifier…* follows, and the docked
+        plots get its classifier when it is another one."""
+        entry = self._state.shown.get(key)
         self.update_buttons()
-
-    def record(self, layer: Layer, classifier: PixelClassifier | None) -> None:
-        """Keep the classifier behind ``layer``'s segments (for *Save classifier…* and
-        the plots' feature importances)."""
-        key = source_key(layer)
-        if classifier is None and key not in self._classifiers:
-            return
-        if classifier is None:
-            del self._classifiers[key]
-        else:
-            self._classifiers[key] = classifier
-        self.update_buttons()
-        self._notify_plots(layer, classifier)
+        before = None if old is None else old.classifier
+        classifier = None if entry is None else entry.classifier
+        if entry is not None and classifier is not before:
+            self._notify_plots(entry.layer, classifier)
 
     def _notify_plots(self, layer: Layer, classifier: PixelClassifier | None) -> None:
         """Hand every docked :class:`ClassifierListener` (the *Polarisation plots*
@@ -280,23 +260,32 @@ class ResultExport:
     """*Export results…*: the chosen stack's last result as the folder ``polarseg
     segment --out`` writes.
 
+    What it writes is the state's record of the chosen stack
+    (``SegmentState.exports``), made from each completed result the state shows (with
+    the pixel mask and the scene of the pipeline that made it).
+
     Parameters
     ----------
-    host : SegmentHost
-        The Segment widget (stack chooser, the pipeline of a stack).
+    state : SegmentState
+        The dock's state.
+    store : PipelineStore
+        The widget's pipelines (the mask and scene behind a result).
+    parent : callable() -> QWidget
+        The widget the folder dialog opens over.
     status, fail : callable
         The widget's status line and error report.
     """
 
     def __init__(
         self,
-        host: SegmentHost,
+        state: SegmentState,
+        store: PipelineStore,
+        parent: Callable[[], QWidget],
         status: Callable[[str], None],
         fail: Callable[[PolarsegError], None],
     ) -> None:
-        self._host, self._status, self._fail = host, status, fail
-        #: Per stack key: what *Export results…* writes (the last result shown).
-        self._exports: dict[str, ExportRecord] = {}
+        self._state, self._store, self._parent = state, store, parent
+        self._status, self._fail = status, fail
         self._export_dir = Path.home()
         self.slot = WorkerSlot("Export results", on_status=status)
         self.export_button = PushButton(
@@ -308,7 +297,9 @@ class ResultExport:
             "as polarseg segment --out writes them",
         )
         self.export_button.changed.connect(self._on_export_clicked)
-        host.stack_layer.changed.connect(self.update_button)
+        for signal in (state.inputs_changed, state.exports_changed, state.forgotten):
+            signal.connect(self.update_button)
+        state.shown_changed.connect(self._on_shown)
 
     def export_results(
         self, folder: str | Path, *, overview: bool = True, plots: bool = False
@@ -331,14 +322,14 @@ class ResultExport:
         :meth:`~napari_polarseg.widgets.segment.SegmentWidget.wait`
         waits for it.
         """
-        layer = self._host.stack_layer.value
-        record = None if layer is None else self._exports.get(source_key(layer))
+        layer = self._state.inputs.stack
+        record = None if layer is None else self._state.exports.get(source_key(layer))
         if record is None:
             self._fail(PolarsegError("nothing to export: run a segmentation of this stack first"))
             return False
         folder = Path(folder)
         options = {"overview": overview, "plots": plots}
-        record = record.named(self._host.material_names())  # renamed since the run
+        record = record.named(layer_names(self._state.inputs.scribbles))  # renamed since
 
         def on_result(run_id: int, written: list[str]) -> None:
             self._export_dir = folder
@@ -353,45 +344,47 @@ class ResultExport:
         from qtpy.QtWidgets import QFileDialog
 
         folder = QFileDialog.getExistingDirectory(
-            self._host.native, "Export results into a folder", str(self._export_dir)
+            self._parent(), "Export results into a folder", str(self._export_dir)
         )
         if folder:
             self.export_results(folder)
 
     def update_button(self, *_: Any) -> None:
         """*Export results…* while the chosen stack has a result."""
-        layer = self._host.stack_layer.value
+        layer = self._state.inputs.stack
+        exports = self._state.exports
         try:
-            self.export_button.enabled = layer is not None and source_key(layer) in self._exports
+            self.export_button.enabled = layer is not None and source_key(layer) in exports
         except RuntimeError:  # the widget was deleted
             pass
 
-    def forget(self, keep: set[str]) -> None:
-        """Drop the records of stack layers whose key is not in ``keep``."""
-        for key in set(self._exports) - keep:
-            del self._exports[key]
-        self.update_button()
+    def _on_shown(self, key: str, old: ShownEntry | None) -> None:
+        """A stack shows another result: keep what *Export results…* writes of it. The
+        same result shown again for parameters its method does not read: the folder
+        records them (its maps are computed for them at the export)."""
+        state = self._state
+        entry = state.shown.get(key)
+        if entry is None:
+            state.set_export(key, None)
+            return
+        if old is not None and entry.shown is old.shown:  # re-shown for other parameters
+            record = state.exports.get(key)
+            if record is not None and record.scene is not None and entry.snap is not None:
+                state.set_export(key, replace(record, params=entry.snap.params))
+            return
+        state.set_export(key, self.record_of(key, entry))
 
-    def reshown(self, layer: Layer, params: Any) -> None:
-        """``layer``'s result is shown again for ``params``, which its method does not
-        read: the folder records them (its maps are computed for them at the export)."""
-        record = self._exports.get(source_key(layer))
-        if record is not None and record.scene is not None:
-            self._exports[source_key(layer)] = replace(record, params=params)
-
-    def record(self, layer: Layer, angles_deg: np.ndarray, shown: ShownResult) -> None:
-        """Keep what *Export results…* needs of the result just shown for ``layer``."""
-        key = source_key(layer)
-        store = self._host.store
+    def record_of(self, key: str, entry: ShownEntry) -> ExportRecord:
+        """What *Export results…* needs of ``entry``, just shown for stack ``key``."""
+        layer, store = entry.layer, self._store
         pipe = store.get(key)  # the pipeline that made the result (its pixel mask)
         source = getattr(getattr(layer, "source", None), "path", None)
-        self._exports[key] = ExportRecord.of(
-            shown,
+        return ExportRecord.of(
+            entry.shown,
             stack=layer.data,
-            angles_deg=angles_deg,
+            angles_deg=entry.angles_deg,
             mask=None if pipe is None else pipe.mask,
             source=None if source is None else str(source),
             layer_name=layer.name,
             scene=None if pipe is None else store.scene(key),
         )
-        self.update_button()

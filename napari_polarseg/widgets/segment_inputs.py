@@ -14,10 +14,19 @@ from napari.layers import Labels
 
 from ..engine import PolarsegError, SegmentParams
 from ..engine.chunks import in_background
+from ..io import parse_angles
 from ._layers import label_colormap, source_key
 from .classifier_controls import ClassifierControls
 from .materials import MaterialList
-from .session import LoadedClassifier, content_digest, region_digest
+from .session import (
+    ClassifierOutput,
+    LoadedClassifier,
+    PipelineStore,
+    content_digest,
+    named_output,
+    region_digest,
+)
+from .session.state import Inputs, SegmentState
 
 #: Text of the "mask" menu entry that segments every pixel.
 NO_MASK = "none"
@@ -28,9 +37,6 @@ NO_SCRIBBLES = "none (unsupervised)"
 #: Layer events that mean the user edited a Labels layer: a brush, fill or eraser stroke
 #: (``paint``), new data (``data``), undo/redo and other refreshes (``set_data``).
 EDIT_EVENTS = ("paint", "data", "set_data")
-
-#: Controls of the normalized cut only: disabled while scribbles replace the cut.
-CUT_ONLY = ("scale", "scale_mode", "clustering", "min_segment_blocks", "n_segments")
 
 
 @dataclass(frozen=True)
@@ -88,30 +94,42 @@ class SegmentInputs:
     classifier settings, *New scribbles layer*, the edits painted into the chosen
     layers, and the :class:`Snapshot` of everything a result depends on.
 
+    It writes the chosen mask and scribbles layers to the dock's state
+    (``SegmentState.set_inputs``) and follows the state's inputs: it listens to the
+    edits of the chosen layers (:meth:`sync_watches`; an edit is
+    ``SegmentState.mark_edited``), lists the chosen scribbles' materials and computes a
+    newly chosen stack's polarisation image in the background
+    (:meth:`prefetch_polarisation`). The snapshot reads the parameters, the stack, the
+    angles and the loaded classifier from the state.
+
     Parameters
     ----------
-    owner : SegmentWidget
-        What the part reads of the widget, by its public members: the ``stack_layer``
-        and ``angles`` controls, ``params()``, ``wants_maps()``, the ``loaded``
-        classifier, the parameter ``controls`` part and
-        ``schedule_live_run()``.
+    state : SegmentState
+        The dock's state.
     viewer : napari.viewer.Viewer
+    store : PipelineStore
+        The widget's pipelines (the background polarisation image goes there).
     labels_box : callable(label, none, tooltip) -> ComboBox
         Makes a chooser of the Labels layers that fit the stack.
     set_status, fail : callable
         The widget's status line.
+    prefetch_features : callable(force=True)
+        Starts computing the chosen stack's pixel features (*New scribbles layer*).
     """
 
     def __init__(
         self,
-        owner: Any,
+        state: SegmentState,
         viewer: Any,
+        store: PipelineStore,
         labels_box: Callable[[str, str, str], Any],
         set_status: Callable[[str], None],
         fail: Callable[[PolarsegError], None],
+        prefetch_features: Callable[..., None],
     ) -> None:
-        self._owner, self._viewer = owner, viewer
+        self._state, self._viewer, self._store = state, viewer, store
         self._set_status, self._fail = set_status, fail
+        self._prefetch_features = prefetch_features
         #: The layers whose edits are listened to, by role (``mask``, ``scribbles``).
         self.watched: dict[str, Any] = {"mask": None, "scribbles": None}
         self.mask_layer = labels_box(
@@ -141,25 +159,40 @@ class SegmentInputs:
             "scribbles and start the paint brush: paint label 1 on one material, 2 on "
             "another, …",
         )
-        self.mask_layer.changed.connect(self.sync_watches)
-        self.scribbles_layer.changed.connect(self.sync_watches)
-        self.scribbles_layer.changed.connect(self.on_scribbles_changed)
+        self.mask_layer.changed.connect(self.write_choices)
+        self.scribbles_layer.changed.connect(self.write_choices)
         self.new_scribbles_button.changed.connect(self.new_scribbles_layer)
-        owner.stack_layer.changed.connect(self.prefetch_polarisation)
-        self.prefetch_polarisation()  # the stack chosen when the dock opens
+        state.inputs_changed.connect(self._on_inputs_changed)
+        self.write_choices()
+
+    def write_choices(self, *_: Any) -> None:
+        """Write the chosen mask and scribbles layers to the dock's state."""
+        self._state.set_inputs(mask=self.mask_layer.value, scribbles=self.scribbles_layer.value)
+
+    def _on_inputs_changed(self, new: Inputs, old: Inputs) -> None:
+        """The state's inputs changed: listen to the chosen layers' edits, list the
+        scribbles' materials, and compute a new stack's polarisation image."""
+        self.sync_watches()
+        if new.scribbles is not old.scribbles:
+            self.on_scribbles_changed()
+        if new.stack is not old.stack:
+            self.prefetch_polarisation()
 
     def prefetch_polarisation(self, *_: Any) -> None:
         """Compute the chosen stack's polarisation image, which every method reads, on a
         background thread as soon as the stack is chosen: a run, or the scribbles'
         features, started meanwhile waits for it on the pipeline's lock."""
-        owner = self._owner
+        state = self._state
+        layer = state.inputs.stack
         try:
-            layer, angles_deg = owner.current_stack()
+            if layer is None:
+                return
+            angles_deg = parse_angles(state.inputs.angles, option=None)
             mask_key, region = self.current_mask()
-            params = owner.params()
+            params = state.params
         except PolarsegError:
             return  # nothing to compute yet; a run says why
-        store, key, data, angles = owner.store, source_key(layer), layer.data, angles_deg
+        store, key, data, angles = self._store, source_key(layer), layer.data, angles_deg
 
         def polarisation() -> None:
             rad = np.deg2rad(angles)
@@ -169,10 +202,14 @@ class SegmentInputs:
         in_background(polarisation)  # its errors are the run's to report
 
     def unwatch(self, *_: Any) -> None:
-        """Stop listening to the edits of the watched layers (the widget is closed)."""
+        """Stop listening to the edits of the watched layers and the material list's
+        layer (the widget is closed; :meth:`sync_watches` connects nothing once the
+        state is closed)."""
         for layer in self.watched.values():
             disconnect_edits(layer, self._on_layer_edited)
         self.watched.clear()
+        with contextlib.suppress(RuntimeError):  # its Qt widgets were deleted
+            self.materials.set_layer(None)  # disconnected first, then redrawn
 
     # -- mask and scribbles -----------------------------------------------------------
     def current_mask(self) -> tuple[str | None, np.ndarray | None]:
@@ -208,11 +245,11 @@ class SegmentInputs:
         Named ``"<stack> scribbles"``, of the stack's height x width (and placement),
         selected in the layer list with the paint tool on label 1.
         """
-        stack = self._owner.stack_layer.value
+        stack = self._state.inputs.stack
         if stack is None:
             self._fail(PolarsegError("choose an angle-stack image layer first"))
             return None
-        self._owner.prefetch_features(force=True)  # started before napari adds the layer
+        self._prefetch_features(force=True)  # started before napari adds the layer
         h, w = stack.data.shape[-2:]
         layer = self._viewer.add_labels(
             np.zeros((h, w), dtype=np.int32),
@@ -237,6 +274,16 @@ class SegmentInputs:
         """Scribble value → name of the chosen scribbles layer's named materials."""
         return self.materials.names()
 
+    def named(self, result: Any) -> Any:
+        """``result`` with its materials named, when it is a classifier's output: the
+        loaded classifier's names name the strokes' materials that have none yet, and
+        the list's names name the result (its plots, export, saved classifier)."""
+        if not isinstance(result, ClassifierOutput) or result.segmentation is None:
+            return result
+        materials = result.classifier.materials()
+        self.materials.adopt(dict(zip(materials.values, materials.names, strict=True)))
+        return named_output(result, self.material_names())
+
     def _on_materials_renamed(self) -> None:
         """A material was renamed: the status line says so (the names reach the next
         export, saved classifier and result)."""
@@ -245,17 +292,16 @@ class SegmentInputs:
         )
 
     def on_scribbles_changed(self, *_: Any) -> None:
-        """Another scribbles layer (or classifier) is chosen: its materials are listed,
-        and the unsupervised method's controls are enabled only without either."""
-        self.materials.set_layer(self.scribbles_layer.value)
-        # the classifier replaces the unsupervised method: its controls do nothing
-        unsupervised = self.scribbles_layer.value is None and self._owner.loaded is None
-        controls = self._owner.controls.controls
-        for name in CUT_ONLY:
-            controls[name].enabled = unsupervised
+        """Another scribbles layer is chosen (or its names may have changed): its
+        materials are listed (none once the dock is closed)."""
+        if not self._state.is_closed:
+            self.materials.set_layer(self.scribbles_layer.value)
 
     def sync_watches(self, *_: Any) -> None:
-        """Listen to edits of the chosen mask and scribbles layers (and no others)."""
+        """Listen to edits of the chosen mask and scribbles layers (and no others;
+        none once the dock is closed)."""
+        if self._state.is_closed:
+            return
         for role, chooser in (("mask", self.mask_layer), ("scribbles", self.scribbles_layer)):
             old, new = self.watched.get(role), chooser.value
             if old is new:
@@ -273,7 +319,7 @@ class SegmentInputs:
     def _on_layer_edited(self, *_: Any) -> None:
         """A stroke (or undo, new data) in the chosen mask or scribbles layer."""
         try:
-            self._owner.schedule_live_run()
+            self._state.mark_edited()
         except RuntimeError:  # the widget was deleted
             pass
 
@@ -281,7 +327,7 @@ class SegmentInputs:
     def snapshot(self) -> Snapshot | None:
         """Everything a result depends on, or None if the values are invalid."""
         try:
-            params = self._owner.params()
+            params = self._state.params
             mask_key, region = self.current_mask()
             scribble_key, scribbles = self.current_scribbles()
         except PolarsegError:
@@ -297,28 +343,28 @@ class SegmentInputs:
         scribbles: np.ndarray | None,
     ) -> Snapshot:
         """The :class:`Snapshot` of these values (read once by the caller) and the
-        widget's stack, angles, applied classifier and settings."""
-        owner = self._owner
-        layer = owner.stack_layer.value
+        state's stack, angles, applied classifier and thesis maps, and the settings."""
+        state = self._state
+        layer = state.inputs.stack
         key = None if layer is None else source_key(layer)
         digest = content_digest(scribbles)
         loaded = self.applied(scribble_key, digest)
         return Snapshot(
             stack_key=key,
-            angles=owner.angles.value,
+            angles=state.inputs.angles,
             params=params,
             mask_key=mask_key,
             mask_digest=region_digest(region),
             scribbles_key=scribble_key,
             scribbles_digest=digest,
             classifier_serial=None if loaded is None else loaded.serial,
-            maps=owner.wants_maps(params),
+            maps=state.maps,
             classifier_settings=self.classifier_controls.settings_or_none(),
         )
 
     def applied(self, scribble_key: str | None, digest: str | None) -> LoadedClassifier | None:
         """The loaded classifier if it still applies (the strokes are as when loaded)."""
-        loaded = self._owner.loaded
+        loaded = self._state.loaded
         if loaded is None or loaded.strokes != (scribble_key, digest):
             return None
         return loaded

@@ -1,5 +1,6 @@
 """The Segment widget's output layers: what a result adds to the viewer (segments,
-error map, diagnostics, class probability and uncertainty, the HSV and Stokes views)."""
+error map, diagnostics, class probability and uncertainty, the HSV and Stokes views),
+and which result a stack's segments show (:func:`result_on_screen`)."""
 
 from __future__ import annotations
 
@@ -13,7 +14,8 @@ from magicgui.widgets import CheckBox
 from ..engine.physics.stokes import stokes_components
 from ._layers import Contrast, contrasts_of, find_output, remove_output, show_output, source_key
 from .layer_queue import LayerQueue
-from .session import ClassifierOutput, Result, ShownResult, named_output, shown_result
+from .session import ClassifierOutput, Result, ShownResult, shown_result
+from .session.state import Prediction, SegmentState, ShownEntry
 from .views import VIEW_OUTPUTS, composite_for, view_mode_box
 
 if TYPE_CHECKING:
@@ -22,14 +24,16 @@ if TYPE_CHECKING:
     from ..engine import SegmentationResult
 
 
-@dataclass(frozen=True)
-class ShownEntry:
-    """What a stack's ``segments`` layer shows: the result, the inputs it used (the
-    layer's ``polarseg_inputs``) and the snapshot of the controls it was made with."""
-
-    result: SegmentationResult
-    inputs: dict[str, Any]
-    snap: Any = None
+def result_on_screen(state: SegmentState, viewer: Any, layer: Layer) -> ShownEntry | None:
+    """The state's entry for the result ``layer``'s ``segments`` layer shows (None: no
+    result of this dock, or another widget has written the layer since)."""
+    entry = state.shown.get(source_key(layer))
+    segments = find_output(viewer, "segments", layer)
+    if entry is None or segments is None:
+        return None
+    if segments.metadata.get("polarseg_inputs") != entry.inputs:
+        return None  # another widget has written the layer since
+    return entry
 
 
 @dataclass(frozen=True)
@@ -98,15 +102,19 @@ def with_contrast(
 
 class SegmentLayers:
     """The Segment widget's output layers, a part the widget holds (``widget.layers``):
-    what a result adds to the viewer, the results shown per stack (:attr:`shown`), and
-    the *HSV and Stokes layers* option with its *HSV view* menu.
+    what a result adds to the viewer, and the *HSV and Stokes layers* option with its
+    *HSV view* menu.
+
+    It writes to the dock's state which result each stack shows
+    (``SegmentState.show`` once a run completes, ``show_partial`` for the segments
+    shown before) and the classifier's prediction; once the runs have ended, a stack
+    whose segments show a run that never completed shows its last completed result
+    again (:meth:`settle`): every layer then comes from one set of parameters.
 
     Parameters
     ----------
-    owner : SegmentWidget
-        What the part reads of the widget, by its public members: the ``stack_layer``
-        chooser, the ``inputs`` part (the named materials), and the
-        ``classifier_files`` and ``export`` parts (told of every result shown).
+    state : SegmentState
+        The dock's state (the chosen stack, the results shown).
     viewer : napari.viewer.Viewer
     later : LayerQueue
         The widget's queue of layers added one per event-loop turn.
@@ -116,22 +124,14 @@ class SegmentLayers:
 
     def __init__(
         self,
-        owner: Any,
+        state: SegmentState,
         viewer: Any,
         later: LayerQueue,
         set_status: Callable[[str], None],
         done: Callable[[str], None],
     ) -> None:
-        self._owner, self._viewer, self._later = owner, viewer, later
+        self._state, self._viewer, self._later = state, viewer, later
         self._set_status, self._done = set_status, done
-        #: Per stack key: the result behind the stack's ``segments`` layer.
-        self.shown: dict[str, ShownEntry] = {}
-        #: Class probabilities (K, H, W) of the last scribble run shown, and the
-        #: scribble label of each class (None after an unsupervised run).
-        self.probabilities: np.ndarray | None = None
-        self.classes: np.ndarray | None = None
-        #: Uncertainty (H, W) of the last scribble run shown (None after an unsupervised run).
-        self.uncertainty: np.ndarray | None = None
         #: Per stack key: the fit residual the diagnostics layers show (the cached
         #: polarisation image's array: the same object while the image is unchanged).
         self._diagnostics: dict[str, Any] = {}
@@ -170,60 +170,78 @@ class SegmentLayers:
         stage) updates the segments (and class probability, uncertainty) layers and the
         status line only; the complete result that follows updates the rest. Labels equal
         to those already shown only update the segments' metadata. ``snap``: the
-        snapshot of the controls the run was requested with.
+        snapshot of the controls the run was requested with. A classifier's output comes
+        with its materials named (``SegmentInputs.named``).
         """
-        if isinstance(result, ClassifierOutput) and result.segmentation is not None:
-            # a loaded classifier's names name the strokes' materials that have none; the
-            # list's names name the result (its plots, export, saved classifier)
-            inputs_part = self._owner.inputs
-            inputs_part.materials.adopt(dict(zip(*_values_names(result), strict=True)))
-            result = named_output(result, inputs_part.material_names())
         shown = shown_result(result, angles_deg, inputs, partial)
-        meta, out = shown.meta, shown.out
         if not shown.partial:
             self._show_complete(layer, shown, contrast or {})
-        if out is not None and out.preview:
-            pass  # the grid's labels: the probability and uncertainty maps follow
-        elif out is not None:
-            prediction = out.prediction
-            # hidden maps with fixed limits: added in later turns, after the segments
-            for role, data in (
-                ("probability", shown.confidence),
-                ("uncertainty", prediction.uncertainty),
-            ):
-                self._queue(
-                    role,
-                    layer,
-                    lambda role=role, data=data: self._show_below_segments(role, data, layer, meta),
-                )
-            self.probabilities, self.classes = prediction.probabilities, prediction.classes
-            self.uncertainty = prediction.uncertainty
-        else:
-            for role in ("probability", "uncertainty"):  # they would be stale
-                self._queue(role, layer, lambda role=role: remove_output(self._viewer, role, layer))
-            self.probabilities, self.classes, self.uncertainty = None, None, None
+        self._show_prediction(layer, shown, shown.meta)
+        self._show_segments(layer, shown.labels, shown.meta)
+        if shown.partial:
+            self._state.show_partial(source_key(layer))
+            self._set_status(shown.status(seconds))
+            return
+        self._state.show(source_key(layer), ShownEntry(layer, angles_deg, shown, snap))
+        self._done(shown.status(seconds))
+
+    def _show_segments(self, layer: Layer, labels: np.ndarray, meta: dict[str, Any]) -> None:
+        """``labels`` in ``layer``'s segments layer (its data kept when equal)."""
         segments = find_output(self._viewer, "segments", layer)
-        if segments is not None and np.array_equal(segments.data, shown.labels):
+        if segments is not None and np.array_equal(segments.data, labels):
             # e.g. the partial result already shows these labels: keep the data (no redraw)
             segments.metadata = {**segments.metadata, **meta}
         else:
-            show_output(self._viewer, "segments", shown.labels, layer, meta)
-        if shown.partial:
-            self._set_status(shown.status(seconds))
-            return
-        self.shown[source_key(layer)] = ShownEntry(shown.result, shown.inputs, snap)
-        self._owner.classifier_files.record(layer, None if out is None else out.classifier)
-        self._owner.export.record(layer, angles_deg, shown)
-        self._done(shown.status(seconds))
+            show_output(self._viewer, "segments", labels, layer, meta)
 
-    def prepare_segments(self, *_: Any) -> None:
-        """With live update on and a scribbles layer chosen, add the chosen stack's
+    def _show_prediction(self, layer: Layer, shown: ShownResult, meta: dict[str, Any]) -> None:
+        """The classifier's class probability and uncertainty layers (queued), or their
+        removal after an unsupervised run; the state's prediction follows."""
+        out = shown.out
+        if out is not None and out.preview:
+            return  # the grid's labels: the probability and uncertainty maps follow
+        if out is None:
+            for role in ("probability", "uncertainty"):  # they would be stale
+                self._queue(role, layer, lambda role=role: remove_output(self._viewer, role, layer))
+            self._state.set_prediction(Prediction())
+            return
+        prediction = out.prediction
+        # hidden maps with fixed limits: added in later turns, after the segments
+        maps = (("probability", shown.confidence), ("uncertainty", prediction.uncertainty))
+        for role, data in maps:
+            self._queue(
+                role,
+                layer,
+                lambda role=role, data=data: self._show_below_segments(role, data, layer, meta),
+            )
+        self._state.set_prediction(
+            Prediction(prediction.probabilities, prediction.classes, prediction.uncertainty)
+        )
+
+    def settle(self) -> None:
+        """The runs have ended: every stack whose segments show a run that never
+        completed (cancelled, failed, or its result dropped) shows its last completed
+        result again, so its segments, error map and other layers come from one set of
+        parameters (without a completed result, the segments stay: the only layer)."""
+        viewer = self._viewer
+        for key in self._state.take_partial():
+            entry = self._state.shown.get(key)
+            if entry is None or entry.layer not in viewer.layers:
+                continue
+            if find_output(viewer, "segments", entry.layer) is None:
+                continue  # removed by the user: not brought back
+            meta = entry.metadata
+            self._show_prediction(entry.layer, entry.shown, meta)
+            self._show_segments(entry.layer, entry.shown.labels, meta)
+
+    def prepare_segments(self, live: bool) -> None:
+        """With ``live`` update on and a scribbles layer chosen, add the chosen stack's
         segments layer, empty (all 0: transparent), if it has none: made while the first
         strokes are painted, the first labels then only replace its data (napari takes
         about 0.3 s to add a Labels layer to a camera frame's viewer)."""
-        owner, viewer = self._owner, self._viewer
-        layer = owner.stack_layer.value
-        if not owner.live.value or owner.scribbles_layer.value is None or layer is None:
+        viewer, inputs = self._viewer, self._state.inputs
+        layer = inputs.stack
+        if not live or inputs.scribbles is None or layer is None:
             return
         if layer in viewer.layers and find_output(viewer, "segments", layer) is None:
             show_output(viewer, "segments", np.zeros(layer.data.shape[-2:], np.int32), layer)
@@ -326,8 +344,8 @@ class SegmentLayers:
 
     def on_views_changed(self, *_: Any) -> None:
         """Draw the views of the chosen stack's shown result at once (no rerun)."""
-        layer = self._owner.stack_layer.value
-        shown = None if layer is None else self.shown.get(source_key(layer))
+        layer = self._state.inputs.stack
+        shown = None if layer is None else self._state.shown.get(source_key(layer))
         if self.views.value and shown is not None and layer in self._viewer.layers:
             segments = find_output(self._viewer, "segments", layer)
             meta = (
@@ -356,9 +374,3 @@ class SegmentLayers:
             self._show_below_segments("hsv", rgb, layer, {**meta, **how})
 
         self._queue("hsv", layer, composite)
-
-
-def _values_names(out: ClassifierOutput) -> tuple[tuple[int, ...], tuple[str, ...]]:
-    """The scribble values and names of a classifier output's materials."""
-    materials = out.classifier.materials()
-    return materials.values, materials.names

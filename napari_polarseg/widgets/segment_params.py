@@ -32,6 +32,8 @@ if TYPE_CHECKING:
     from magicgui.widgets.bases import ValueWidget
     from qtpy.QtWidgets import QWidget
 
+    from .session.state import SegmentState
+
 #: Tooltip of the preset menu: what a preset does to the controls, then each preset.
 PRESET_TOOLTIP = (
     "Sets every parameter to a tested starting point; change any control afterwards.\n\n"
@@ -41,22 +43,29 @@ PRESET_TOOLTIP = (
 #: Text of the option that adds the thesis maps and the error map to other methods' runs.
 THESIS_MAPS_TEXT = "thesis maps and error map"
 
+#: Controls of the normalized cut only: disabled while scribbles replace the cut.
+CUT_ONLY = ("scale", "scale_mode", "clustering", "min_segment_blocks", "n_segments")
+
 
 class ParameterControls:
     """The parameters of :class:`~napari_polarseg.widgets.segment.SegmentWidget`.
 
     The preset menu, the parameter-file buttons, one control per labelled spec of the
     shared table and of every registered method's own (:attr:`controls`, by parameter
-    name; also attributes of that name; :attr:`owners`: the method of each method
-    control) and the *thesis maps and error map* option (:attr:`thesis_maps`). Only
-    the chosen method's own controls show (:meth:`show_method_controls`). :meth:`params`
-    reads them, :meth:`set_params` sets them; :meth:`maps` says whether a run computes
-    the thesis maps.
+    name; :attr:`owners`: the method of each method control) and the *thesis maps and
+    error map* option (:attr:`thesis_maps`). Only the chosen method's own controls show
+    (:meth:`show_method_controls`). :meth:`params` reads them, :meth:`set_params` sets
+    them; :meth:`maps` says whether a run computes the thesis maps. Every change is
+    written to the dock's state (``SegmentState.set_params``); the controls of the
+    normalized cut follow the state's inputs (disabled while scribbles or a loaded
+    classifier replace the cut: :data:`CUT_ONLY`).
 
     Parameters
     ----------
     specs : dict, optional
         The parameter table the controls are made from (default ``PARAM_SPECS``).
+    state : SegmentState
+        The dock's state: written on every change, its inputs followed.
     status, fail : callable
         The widget's status line (a text) and its error report (a PolarsegError).
     parent : callable() -> QWidget
@@ -66,11 +75,13 @@ class ParameterControls:
     def __init__(
         self,
         specs: dict[str, ParamSpec] | None,
+        state: SegmentState,
         status: Callable[[str], None],
         fail: Callable[[PolarsegError], None],
         parent: Callable[[], QWidget],
     ) -> None:
         self._status, self._fail, self._parent = status, fail, parent
+        self._state = state
         d = PRESETS[DEFAULT_PRESET]
         self._base = d  # values of the fields without a control
         self._params_dir = Path.home()
@@ -108,9 +119,7 @@ class ParameterControls:
                 self.owners[name], self.controls[name] = method, control
                 self.param_specs[name] = method_param_specs(method)[name]
         self.controlled = controlled_names(self.param_specs)
-        for name, control in self.controls.items():
-            setattr(self, name, control)
-        self.specular_branch.visible = False
+        self.controls["specular_branch"].visible = False
         self.thesis_maps = CheckBox(
             text=THESIS_MAPS_TEXT,
             value=False,
@@ -121,9 +130,9 @@ class ParameterControls:
             "and the error layer is removed. The thesis method always computes them",
         )
         self._maps_choice = False  # the option's value for the other methods
-        self.parameter_widgets: list[Widget] = [getattr(self, n) for n in self.controlled]
+        self.parameter_widgets: list[Widget] = [self.controls[n] for n in self.controlled]
         self.preset.changed.connect(self._on_preset_changed)
-        self.model.changed.connect(self._on_model_changed)
+        self.controls["model"].changed.connect(self._on_model_changed)
         if "method" in self.controls:
             self.controls["method"].changed.connect(self._on_method_changed)
             self._on_method_changed(self.controls["method"].value)
@@ -132,6 +141,31 @@ class ParameterControls:
         self.thesis_maps.changed.connect(self.on_maps_toggled)
         self.load_button.changed.connect(self._on_load_clicked)
         self.save_button.changed.connect(self._on_save_clicked)
+        # after the handlers above: the state gets the values they leave
+        for control in [*self.parameter_widgets, self.thesis_maps]:
+            control.changed.connect(self.sync)
+        state.inputs_changed.connect(self.follow_inputs)
+        state.loaded_changed.connect(self.follow_inputs)
+        self.sync()
+
+    def sync(self, *_: Any) -> None:
+        """Write the parameters (or the PolarsegError of a bad value) and whether a run
+        computes the thesis maps to the dock's state."""
+        try:
+            params = self.params()
+        except PolarsegError as exc:
+            self._state.set_params(None, False, exc)
+            return
+        self._state.set_params(params, self.maps(params))
+
+    def follow_inputs(self, *_: Any) -> None:
+        """Enable the normalized cut's controls (:data:`CUT_ONLY`) only while neither
+        scribbles nor a loaded classifier replace the unsupervised method."""
+        state = self._state
+        unsupervised = state.inputs.scribbles is None and state.loaded is None
+        for name in CUT_ONLY:
+            if name in self.controls:
+                self.controls[name].enabled = unsupervised
 
     def maps(self, params: SegmentParams | None = None) -> bool:
         """Whether a run with ``params`` (default: the current ones) computes the thesis
@@ -194,7 +228,7 @@ class ParameterControls:
         values: dict[str, Any] = {}
         own: dict[str, dict[str, Any]] = {}
         for name in self.controlled:
-            spec, shown = self.param_specs[name], getattr(self, name).value
+            spec, shown = self.param_specs[name], self.controls[name].value
             owner = self.owners.get(name)
             if spec.options() is not None:
                 value: Any = str(shown)
@@ -228,12 +262,13 @@ class ParameterControls:
         self._check_controls(values)
         self._base = values
         for name in self.controlled:
-            getattr(self, name).value = self._value(values, name)
+            self.controls[name].value = self._value(values, name)
+        self.sync()  # also when no control changed (a field without one did)
 
     def _check_controls(self, values: SegmentParams) -> None:
         """Raise PolarsegError if a value does not fit its control (range, menu)."""
         for name in self.controlled:
-            control, value = getattr(self, name), self._value(values, name)
+            control, value = self.controls[name], self._value(values, name)
             if isinstance(control, ComboBox):
                 if value not in control.choices:
                     raise PolarsegError(f"{name} {value!r} is not offered by the widget")
@@ -246,7 +281,7 @@ class ParameterControls:
         self.set_params(PRESETS[name])
 
     def _on_model_changed(self, model: str) -> None:
-        self.specular_branch.visible = model == "specular"
+        self.controls["specular_branch"].visible = model == "specular"
 
     def save_params(self, path: str | Path) -> bool:
         """Write the current parameters to ``path`` as JSON (``SegmentParams.to_json``).
