@@ -114,3 +114,18 @@ def test_loaded_classifier_exports_and_closing() -> None:
     state.close()
     state.mark_edited()  # a closed dock: ignored
     assert state.is_closed and closed == [1] and edits == [1]
+
+
+def test_the_degenerate_status_names_what_the_method_reads():
+    """The status line's advice after a degenerate result: a larger window only for the
+    thesis method, the object size for the default, more strokes for the classifier."""
+    from napari_polarseg.widgets.session import degenerate_text
+
+    reason = {"degenerate": True, "degenerate_reason": "one segment holds 99 % of the pixels"}
+    thesis = degenerate_text({**reason, "method": "thesis"})
+    default = degenerate_text({**reason, "method": "surface_superpixels"})
+    classifier = degenerate_text({**reason, "method": "classifier"})
+    assert "a larger window" in thesis
+    assert "window" not in default and "another object size" in default
+    assert "more strokes" in classifier and "window" not in classifier
+    assert degenerate_text({"degenerate": False, "method": "thesis"}) == ""

@@ -9,7 +9,9 @@ from typing import Any
 import numpy as np
 
 from ...engine import PolarsegError
+from ...engine.methods import get_method, method_names
 from ...engine.physics.pixel_mask import mask_reasons
+from ...engine.registered import computes_block_maps
 from ...engine.unsupervised.choose_k import choice_text
 from ...io.common import format_numbers
 from .runs import StageFailed
@@ -38,16 +40,28 @@ def format_angles(angles_deg: Any) -> str:
     return format_numbers(np.asarray(angles_deg, dtype=float).ravel())
 
 
+#: What to try after a degenerate result, in the plugin's words, by kind of method.
+DEGENERATE_TRIES = {
+    "blocks": "the recommended preset, fewer or more segments, a larger window, or scribbles",
+    "classifier": "more strokes on every material",
+    "other": "fewer or more segments, another object size, or scribbles",
+}
+
+
 def degenerate_text(summary: dict[str, Any]) -> str:
     """The status line's warning of a degenerate result, from ``result.summary()``
-    (``"degenerate"``: one segment holds >= 95 % of the pixels, or every other is below
-    the minimum size), with what to try; "" when the result is not degenerate."""
+    (``"degenerate"``: one segment holds >= 95 % of the pixels, or, for a method that
+    cuts blocks, every other is below the minimum size), with what to try for the method
+    that made the labels (:data:`DEGENERATE_TRIES`: a larger window only where the method
+    reads one); "" when the result is not degenerate."""
     if not summary.get("degenerate"):
         return ""
-    return (
-        f"degenerate: {summary.get('degenerate_reason')} (try the recommended preset, "
-        "fewer or more segments, a larger window, or scribbles)"
-    )
+    method = str(summary.get("method") or "")
+    if method in method_names() and get_method(method).inputs:  # scribbles, a classifier
+        kind = "classifier"
+    else:
+        kind = "blocks" if computes_block_maps(method) else "other"
+    return f"degenerate: {summary.get('degenerate_reason')} (try {DEGENERATE_TRIES[kind]})"
 
 
 def close_up_text(summary: dict[str, Any]) -> str:
