@@ -503,11 +503,12 @@ class SegmentWidget(SegmentMembers, StackWidget, SegmentDock):
         # the export records the parameters shown (its maps are computed for them)
         self.state.show(key, ShownEntry(layer, entry.angles_deg, entry.shown, snap, meta))
         self._slot.drop()  # a run of other values still going is outdated: no word of it
-        fields = ", ".join(changed) if changed else "nothing"
-        self._set_status(
-            f"{entry.result.n_segments} segments, unchanged: the {method.name} method does "
-            f"not read {fields}"
+        why = (
+            f"the {method.name} method does not read {', '.join(changed)}"
+            if changed
+            else "no parameter changed"
         )
+        self._set_status(f"{entry.result.n_segments} segments, unchanged: {why}")
         return True
 
     def _on_result(self, run: Delivery, run_id: int, result: Any) -> None:
