@@ -19,14 +19,12 @@ the interactive loop (features kept, each update retrains and predicts coarse to
 
 from __future__ import annotations
 
-import importlib
-from typing import Any
-
 # the registry (light: no method module) hands over its loader, so the first read of
 # the choices of SegmentParams.method (--method, the plugin's menu) or the first lookup
 # of a method registers the built-in ones
 from . import methods as methods
 from .errors import Cancelled, PolarsegError
+from .lazy import lazy_attributes
 from .params import SegmentParams
 
 #: Every public name of the engine and the module that defines it; imported on first use
@@ -171,14 +169,4 @@ __all__ = [
 ]
 
 
-def __getattr__(name: str) -> Any:
-    module = PUBLIC.get(name)
-    if module is None:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(importlib.import_module(module, __name__), name)
-    globals()[name] = value  # later lookups skip this function
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(PUBLIC))
+__getattr__, __dir__ = lazy_attributes(__name__, PUBLIC)
