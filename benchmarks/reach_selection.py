@@ -1,0 +1,136 @@
+"""Can a scene say, without its truth, whether the diffusion should reach far or near?
+
+The default's diffusion over 20 % of the image side wins on scenes whose materials
+cover large regions (the diffuse *leaves* layout, the textured renders, few large
+objects) and loses where they are mixed object by object (many small objects, the
+diffuse *scattered leaves* and *texture patches*). This bench reads, on the
+development halves of every family (:mod:`families`), the default (``long``: the
+surface method's parameters, weakest-border merge) against the valid-superpixel method
+(``short``: reach 7 % of the side, τ 0.75, closest-centroid merge) and three criteria a
+scene can compute by itself, each choosing the setting it scores higher:
+
+- ``stability``: the mean ARI between the labels at superpixel areas × 0.6, 1 and 1.7
+  (a split that follows the materials should not move with the superpixels' size);
+- ``silhouette``: the silhouette of the k clusters on the projected node features;
+- ``separation``: R² of the clustering, the share of the node features' weighted
+  variance between the clusters.
+
+It prints each frame's ARI for both settings and the criteria, then the mean ARI by
+family of each setting and of each criterion's choice. Only development halves are read.
+
+Usage::
+
+    cd benchmarks && OMP_NUM_THREADS=1 PYTHONPATH=.. python reach_selection.py \\
+        [--families objects,small,textured,diffuse,real]
+"""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+import time
+
+import numpy as np
+from families import FAMILIES, Frame, frames
+from sklearn.metrics import adjusted_rand_score, silhouette_score
+
+from napari_polarseg.engine import Pipeline, Scene
+from napari_polarseg.engine.methods.surface_superpixels import SurfaceSuperpixels
+from napari_polarseg.engine.methods.valid_superpixels import ValidSuperpixels, clustered_pixels
+from napari_polarseg.engine.params import PRESETS
+from napari_polarseg.engine.unsupervised.merge import (
+    closest_centroids,
+    merged_clustering,
+    weakest_border,
+)
+from napari_polarseg.engine.unsupervised.segmenter import prepare_regions
+
+#: Superpixel areas read for the stability criterion, × the setting's own area.
+AREA_FACTORS = (0.6, 1.0, 1.7)
+SETTINGS = {
+    "long": (SurfaceSuperpixels().params, weakest_border),
+    "short": (ValidSuperpixels().params, closest_centroids),
+}
+CRITERIA = ("stability", "silhouette", "separation")
+
+
+def separation(z: np.ndarray, weight: np.ndarray, labels: np.ndarray) -> float:
+    """R² = 1 − Σ_c Σ_{i∈c} w_i |z_i − z̄_c|² / Σ_i w_i |z_i − z̄|² (dimensionless)."""
+    w = weight / weight.sum()
+    total = float((w[:, None] * (z - (w[:, None] * z).sum(0)) ** 2).sum())
+    within = 0.0
+    for c in np.unique(labels):
+        m = labels == c
+        centre = (w[m, None] * z[m]).sum(0) / w[m].sum()
+        within += float((w[m, None] * (z[m] - centre) ** 2).sum())
+    return 1.0 - within / max(total, 1e-12)
+
+
+def read_setting(frame: Frame, name: str) -> dict[str, float]:
+    """ARI at the setting's own superpixel area and the three criteria."""
+    pipe = Pipeline(frame.stack, frame.angles, PRESETS["auto"].replace(n_segments=frame.k))
+    pol = Scene(pipeline=pipe).polarisation(pipe.params)
+    valid = clustered_pixels(None, pol.invalid)
+    params, merge = SETTINGS[name]
+    shape = pol.intensity.shape
+    labels, model, result = [], None, None
+    for f in AREA_FACTORS:
+        p = params.replace(region_area=max(9, int(params.area_of(shape) * f)))
+        m = prepare_regions(pol.intensity, pol.dop, pol.phase, p, valid)
+        r = merged_clustering(m, frame.k, merge=merge)
+        labels.append(r.labels)
+        if f == 1.0:
+            model, result = m, r
+    scored = frame.truth > 0
+    inside = valid if valid is not None else np.ones(shape, bool)
+    nodes = result.node_labels[: model.z.shape[0]]
+    sample = min(3000, nodes.size)
+    return {
+        "ari": float(adjusted_rand_score(frame.truth[scored], result.labels[scored])),
+        "stability": float(
+            np.mean(
+                [
+                    adjusted_rand_score(a[inside], b[inside])
+                    for a, b in itertools.combinations(labels, 2)
+                ]
+            )
+        ),
+        "silhouette": float(silhouette_score(model.z, nodes, sample_size=sample, random_state=0))
+        if np.unique(nodes).size > 1
+        else -1.0,
+        "separation": separation(model.z, model.weight, nodes),
+    }
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--families", default=",".join(FAMILIES))
+    args = ap.parse_args(argv)
+    t0 = time.perf_counter()
+    means: dict[str, dict[str, list[float]]] = {}
+    for family in args.families.split(","):
+        rows = means.setdefault(family, {})
+        for frame in frames(family, "dev"):
+            read = {name: read_setting(frame, name) for name in SETTINGS}
+            for name in SETTINGS:
+                rows.setdefault(name, []).append(read[name]["ari"])
+            for c in CRITERIA:
+                pick = "short" if read["short"][c] > read["long"][c] else "long"
+                rows.setdefault(c, []).append(read[pick]["ari"])
+            cells = ", ".join(
+                f"{n} ARI {r['ari']:.3f} stab {r['stability']:.2f} sil {r['silhouette']:.2f} "
+                f"R² {r['separation']:.2f}"
+                for n, r in read.items()
+            )
+            print(f"{family} {frame.name}: {cells}", flush=True)
+    print(f"\n{time.perf_counter() - t0:.0f} s")
+    cols = [*SETTINGS, *(f"chosen by {c}" for c in CRITERIA)]
+    print("| family | " + " | ".join(cols) + " |\n|---|" + "---:|" * len(cols))
+    for family, rows in means.items():
+        cells = [f"{np.mean(rows[k]):.3f}" for k in (*SETTINGS, *CRITERIA)]
+        print(f"| {family} | " + " | ".join(cells) + " |")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
