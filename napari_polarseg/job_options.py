@@ -28,12 +28,16 @@ class OutputOptions:
         coefficients and PCA features: the feature columns of ``segments.csv`` and the
         plots; the reconstruction-error map ``reconstruction_error.tif``). The thesis
         method always computes them; ``plots`` asks for them too.
+    image_format : str
+        The images as ``tiff`` (a tiled BigTIFF when large) or ``zarr`` (OME-Zarr
+        directories, ``labels.zarr``, …): ``polarseg segment --format``.
     """
 
     overview: bool = False
     plots: bool = False
     save_classifier: str | None = None
     thesis_maps: bool = False
+    image_format: str = "tiff"
 
 
 def segment_args(read: ReadOptions, outputs: OutputOptions) -> list[str]:

@@ -79,7 +79,9 @@ class FolderResult:
 
 
 def pixel_mask(data: pio.StackData, read: ReadOptions) -> PixelMask:
-    """Validity mask: the reader's saturated samples, black samples, the user's region."""
+    """Validity mask: the reader's saturated samples, black samples, the user's region.
+    A stack read lazily is read into memory here, once: the engine takes it whole."""
+    pio.in_memory(data, read.max_bytes())
     region = None
     if read.mask:
         superpixel = data.metadata.get("demosaic") == "superpixel"
@@ -153,6 +155,8 @@ def segment_data(
     check counts the blocks only then)."""
     status = status or StatusLine(False, PROG)
     seconds: dict[str, float] = {}
+    # the engine takes the stack in memory: a stack read lazily is read here, once
+    data = pio.in_memory(data, max_bytes or pio.ReadOptions().max_bytes())
     stack, shifts = data.stack, None
     maps = maps or computes_block_maps(params.method) and labels_by is None
     check_pipeline_memory(stack.shape, params, max_bytes, blocks=maps)
@@ -283,6 +287,12 @@ def _files_info(read: ReadOptions) -> dict[str, Any]:
     return info
 
 
+def _folder_options(outputs: OutputOptions) -> dict[str, Any]:
+    """The keywords of :func:`write_result_folder` that ``outputs`` chooses."""
+    chosen = {"overview": outputs.overview, "plots": outputs.plots}
+    return {**chosen, "image_format": outputs.image_format}
+
+
 def data_to_folder(
     data: pio.StackData,
     out: pio.PathLike,
@@ -340,8 +350,6 @@ def data_to_folder(
         mask=run.mask,
         source=str(Path(data.source).resolve()),
         command=command,
-        overview=outputs.overview,
-        plots=outputs.plots,
         probabilities=probabilities,
         uncertainty=uncertainty,
         evaluation=evaluation,
@@ -349,6 +357,7 @@ def data_to_folder(
         info={**input_info(data, read), **_files_info(read)},
         summary=summary,
         truth=truth if truth is not None else data.ground_truth,
+        **_folder_options(outputs),
     )
     status.clear()
     removed = [name for name in before if name not in written]  # an earlier run's

@@ -133,12 +133,14 @@ def read_input(source: str | Sequence[str], args: argparse.Namespace) -> pio.Sta
 
 
 def output_options(args: argparse.Namespace) -> jobs.OutputOptions:
-    """The output options of a command line (--overview, --plots, --save-classifier)."""
+    """The output options of a command line (--overview, --plots, --save-classifier,
+    --thesis-maps, --format)."""
     return jobs.OutputOptions(
         overview=bool(args.overview),
         plots=bool(getattr(args, "plots", False)),
         save_classifier=getattr(args, "save_classifier", None),
         thesis_maps=bool(getattr(args, "thesis_maps", False)),
+        image_format=getattr(args, "image_format", None) or "tiff",
     )
 
 

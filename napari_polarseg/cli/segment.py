@@ -9,6 +9,7 @@ from .. import io as pio
 from .. import jobs
 from ..engine.errors import PolarsegError
 from ..engine.params import ParamSpec
+from ..outputs.image_formats import IMAGE_FORMATS
 from .arguments import PROG
 from .options import (
     STACK_INPUT_HELP,
@@ -51,6 +52,7 @@ def add_parser(sub: Any, specs: dict[str, ParamSpec] | None = None) -> None:
     add_inputs_and_out(seg, STACK_INPUT_HELP)
     add_read_options(seg, ("angles_deg", "mosaic_deg", "bayer", "demosaic"))
     add_read_options(seg, CAPTURE_OPTIONS)
+    add_read_options(seg, ("lazy",))
     labels_from = seg.add_mutually_exclusive_group()
     add_read_options(labels_from, ("scribbles", "classifier"))
     seg.add_argument(
@@ -67,6 +69,15 @@ def add_parser(sub: Any, specs: dict[str, ParamSpec] | None = None) -> None:
         "reconstruction-error map (reconstruction_error.tif) and the PCA features of the "
         "blocks (feature columns of segments.csv); always on with --method thesis and "
         "with --plots",
+    )
+    seg.add_argument(
+        "--format",
+        dest="image_format",
+        choices=tuple(IMAGE_FORMATS),
+        default="tiff",
+        help="the label and map images as TIFF (labels.tif, ...; a tiled BigTIFF from "
+        "4096 x 4096 pixels) or as OME-Zarr directories (labels.zarr, ...: NGFF 0.4 "
+        "multiscale, opened lazily by zarr and napari-ome-zarr) [tiff]",
     )
     add_param_options(seg, specs=specs)
     seg.set_defaults(func=run)

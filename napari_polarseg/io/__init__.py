@@ -22,8 +22,15 @@ The package's modules:
   :func:`sensor_from_name`;
 - :mod:`~napari_polarseg.io.params_files`: :func:`read_params_dict`,
   :func:`read_params_file`;
-- :mod:`~napari_polarseg.io.writers`: :func:`atomic_output` and the atomic writers
-  :func:`write_tiff`, :func:`write_stack_tiff`, :func:`write_json`, :func:`write_png`;
+- :mod:`~napari_polarseg.io.lazy_stack`: stacks left on disk and read block by block
+  (:data:`LAZY_BYTES`, :func:`is_lazy`, :func:`in_memory`); the lazy TIFF reader
+  :mod:`~napari_polarseg.io.lazy_tiff` and the Zarr / OME-Zarr reader
+  :mod:`~napari_polarseg.io.zarr_stack` (the angles in the attribute :data:`ANGLES_ATTR`);
+- :mod:`~napari_polarseg.io.writers`: :func:`atomic_output`, :func:`atomic_folder` and the
+  atomic writers :func:`write_tiff` (a tiled BigTIFF when large:
+  :mod:`~napari_polarseg.io.tiff_tiles`), :func:`write_zarr` (OME-Zarr:
+  :mod:`~napari_polarseg.io.ome_zarr`), :func:`write_stack_tiff`, :func:`write_json`,
+  :func:`write_png`;
 - :mod:`~napari_polarseg.io.common`: the one-line errors and size checks they share.
 
 Every name below is importable from ``napari_polarseg.io`` itself
@@ -48,17 +55,29 @@ from .frames import (
     single_frame_file,
     to_grey,
 )
+from .lazy_stack import LAZY_BYTES, in_memory, is_lazy
 from .masks import MASK_SUFFIXES, read_labels, read_mask
 from .params_files import read_params_dict, read_params_file
 from .read_options import ReadOptions, ReadSpec, options_from_values, read_specs
 from .readers import STACK_SUFFIXES, read_stack
 from .stack_data import StackData
 from .stack_formats import STACK_FORMATS, StackFormat
-from .writers import atomic_output, write_json, write_png, write_stack_tiff, write_tiff
+from .writers import (
+    atomic_folder,
+    atomic_output,
+    write_json,
+    write_png,
+    write_stack_tiff,
+    write_tiff,
+    write_zarr,
+)
+from .zarr_stack import ANGLES_ATTR
 
 __all__ = [
+    "ANGLES_ATTR",
     "DEFAULT_MOSAIC",
     "FRAME_SUFFIXES",
+    "LAZY_BYTES",
     "LUMA_BT601",
     "MASK_SUFFIXES",
     "SENSOR_NAMES",
@@ -71,7 +90,10 @@ __all__ = [
     "StackData",
     "StackFormat",
     "angle_from_name",
+    "atomic_folder",
     "atomic_output",
+    "in_memory",
+    "is_lazy",
     "natural_key",
     "options_from_values",
     "parse_angles",
@@ -90,4 +112,5 @@ __all__ = [
     "write_png",
     "write_stack_tiff",
     "write_tiff",
+    "write_zarr",
 ]

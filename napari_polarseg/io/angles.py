@@ -14,12 +14,14 @@ import os
 import re
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from ..engine.errors import PolarsegError
 from ..engine.physics.colour_mosaic import IMX250MYR_BAYER, IMX250MYR_LAYOUT
 from ..engine.physics.mosaic import IMX250MZR_LAYOUT
+from ..engine.physics.polarimage import distinct_angle_count
 from .common import PathLike
 
 #: Default 2 x 2 super-pixel layout (degrees, row-major) of a polarisation camera.
@@ -159,3 +161,13 @@ def sensor_from_name(name: PathLike) -> SensorDefaults | None:
     if sensor.endswith("MYR"):
         return SensorDefaults(sensor, tuple(IMX250MYR_LAYOUT), IMX250MYR_BAYER)
     return SensorDefaults(sensor, tuple(IMX250MZR_LAYOUT), None)
+
+
+def enough_angles(angles: Any) -> bool:
+    """Whether ``angles`` (degrees) are finite numbers with at least 3 distinct modulo
+    180 degrees (never raises)."""
+    try:
+        values = np.asarray(angles, dtype=float).ravel()
+    except (TypeError, ValueError):
+        return False
+    return bool(np.all(np.isfinite(values))) and distinct_angle_count(np.deg2rad(values)) >= 3

@@ -69,6 +69,9 @@ def _option(default: Any, **spec: Any) -> Any:
     return field(default=default, metadata={"spec": ReadSpec(**spec)})
 
 
+#: The words of :attr:`ReadOptions.lazy`.
+LAZY_CHOICES = ("auto", "always", "never")
+
 _SENSOR_NOTE = "A frame named after a Sony sensor (..._IMX250MZR.png, ..._IMX250MYR.png)"
 
 
@@ -93,6 +96,10 @@ class ReadOptions:
         Colour channel to use (None: BT.601 luma).
     max_memory_gib : float or None
         Memory limit of the read and the run, GiB (None: ``$POLARSEG_MAX_BYTES`` or 8).
+    lazy : str
+        Leave a tiled TIFF or a Zarr stack on disk and read it block by block
+        (:mod:`napari_polarseg.io.lazy_stack`): ``auto`` (when larger than
+        :data:`~napari_polarseg.io.lazy_stack.LAZY_BYTES`), ``always`` or ``never``.
     classifier, scribbles : str or None
         A saved pixel classifier (``.polarseg-clf``), or a strokes file to train one on:
         it labels the pixels instead of the cut.
@@ -168,6 +175,15 @@ class ReadOptions:
         stack=True,
         help="refuse inputs and runs that would need more memory than this: GiB, or with "
         "a unit (20G, 512M) [$POLARSEG_MAX_BYTES or 8G]",
+    )
+    lazy: str = _option(
+        "auto",
+        flag="--lazy",
+        kind="choice",
+        choices=LAZY_CHOICES,
+        stack=True,
+        help="read a tiled TIFF or a Zarr stack block by block instead of whole: 'auto' when "
+        "it decodes to more than 256 MiB, 'always', 'never' [auto]",
     )
     classifier: str | None = _option(
         None,

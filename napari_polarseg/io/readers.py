@@ -95,7 +95,8 @@ from .angles import sensor_from_name
 from .arrays import read_arrays
 from .common import PathLike, finite_number, format_numbers, input_error
 from .frames import FRAME_SUFFIXES, folder_frames, read_frame, single_frame_file
-from .read_options import ReadOptions
+from .lazy_stack import frame_extremes, is_lazy, lazy_read_error, wants_lazy
+from .read_options import LAZY_CHOICES, ReadOptions
 from .stack_data import BlackLevel, StackData
 from .stack_formats import STACK_FORMATS, read_frame_files, read_mosaic
 
@@ -132,22 +133,24 @@ def _check_angles(path: Path, angles: np.ndarray | None, n: int) -> np.ndarray:
     return angles
 
 
-def _frame_ranges(path: Path, flat: np.ndarray, angles: np.ndarray) -> tuple[Any, Any]:
-    """Lowest and highest finite value of each frame (rows of ``flat``)."""
-    if flat.dtype.kind != "f":
-        return flat.min(axis=1), flat.max(axis=1)
-    finite = np.isfinite(flat)
+def _frame_ranges(path: Path, stack: Any, angles: np.ndarray) -> tuple[Any, Any]:
+    """Lowest and highest finite value of each frame (a lazy stack: read block by block)."""
+    try:
+        lo, hi, finite = frame_extremes(stack)
+    except Exception as exc:
+        if not is_lazy(stack) or isinstance(exc, PolarsegError):
+            raise
+        raise lazy_read_error(path, exc) from exc
+    if finite is None:
+        return lo, hi
     if not finite.any():
         raise input_error(path, "the data has no finite values (all NaN or infinite)")
-    empty = np.flatnonzero(~finite.any(axis=1))
+    empty = np.flatnonzero(~finite)
     if empty.size:
         raise input_error(
             path,
             f"{_frame_label(int(empty[0]), angles)} has no finite values (all NaN or infinite)",
         )
-    with np.errstate(invalid="ignore"):
-        lo = np.nanmin(np.where(finite, flat, np.nan), axis=1)
-        hi = np.nanmax(np.where(finite, flat, np.nan), axis=1)
     return lo, hi
 
 
@@ -158,8 +161,7 @@ def _check_stack_data(path: Path, data: StackData) -> StackData:
     angles = _check_angles(path, data.angles_deg, n)
     if min(stack.shape[1:]) < 1:
         raise input_error(path, f"the frames are empty (shape {stack.shape})")
-    flat = stack.reshape(n, -1)
-    lo, hi = _frame_ranges(path, flat, angles)
+    lo, hi = _frame_ranges(path, stack, angles)
     negative = np.flatnonzero(lo < 0)
     if negative.size:
         k = int(negative[0])
@@ -169,7 +171,7 @@ def _check_stack_data(path: Path, data: StackData) -> StackData:
             "light through a polariser is never negative; subtract a smaller offset or dark "
             "frame, or shift the data with a negative --offset",
         )
-    if flat.shape[1] > 1:
+    if stack.shape[1] * stack.shape[2] > 1:
         constant = np.flatnonzero(lo == hi)
         if constant.size:
             k = int(constant[0])
@@ -219,6 +221,8 @@ def _input_paths(path: PathLike | Sequence[PathLike]) -> tuple[Path, list[Path] 
 def _checked(read: ReadOptions) -> ReadOptions:
     """The reading options checked: demosaicing method, Bayer order (upper case),
     saturation level and offset (finite numbers)."""
+    if read.lazy not in LAZY_CHOICES:
+        raise PolarsegError(f"lazy must be one of {', '.join(LAZY_CHOICES)}; got {read.lazy!r}")
     if read.demosaic not in DEMOSAIC_METHODS:
         raise PolarsegError(
             f"demosaic method must be one of {', '.join(DEMOSAIC_METHODS)}; got {read.demosaic!r}"
@@ -259,10 +263,14 @@ def _read_file_list(
 
 
 def _read_stack_file(p: Path, read: ReadOptions, black: BlackLevel) -> StackData:
-    """A file that holds a whole stack (TIFF, NumPy), by its type (:data:`STACK_FORMATS`)."""
+    """A file that holds a whole stack (TIFF, NumPy, Zarr), by its type
+    (:data:`STACK_FORMATS`): lazily if the format can and :func:`wants_lazy` says so."""
     suffix = p.suffix.lower()
     if suffix in STACK_FORMATS:
-        return STACK_FORMATS[suffix].read(p, read, black)
+        kind = STACK_FORMATS[suffix]
+        if kind.lazy is not None and wants_lazy(read, kind.lazy.nbytes(p)):
+            return kind.lazy.read(p, read, black)
+        return kind.read(p, read, black)
     if suffix in FRAME_SUFFIXES:
         raise input_error(
             p,
@@ -293,7 +301,7 @@ def _read_path(p: Path, read: ReadOptions, black: BlackLevel) -> StackData:
         if sensor is not None:
             data.metadata["sensor"] = sensor.sensor
         return data
-    if p.is_dir():
+    if p.is_dir() and p.suffix.lower() not in STACK_FORMATS:
         return read_frame_files(p, folder_frames(p), given, read, black, "folder")
     return _read_stack_file(p, read, black)
 
@@ -315,7 +323,7 @@ def _note_reading(data: StackData, black: BlackLevel, angles_deg: Any) -> None:
 
 def _options(options: ReadOptions | None, keywords: dict[str, Any]) -> ReadOptions:
     """``options``, or the options the keywords of :func:`read_stack` ask for (not both)."""
-    defaults = {"demosaic": "superpixel", "saturation": "auto"}
+    defaults = {"demosaic": "superpixel", "saturation": "auto", "lazy": "auto"}
     changed = [k for k, v in keywords.items() if not _is(v, defaults.get(k))]
     if options is not None:
         if changed:
@@ -350,6 +358,7 @@ def read_stack(
     offset: float | None = None,
     saturation: float | str | None = "auto",
     max_bytes: int | None = None,
+    lazy: str = "auto",
     options: ReadOptions | None = None,
 ) -> StackData:
     """Read an angle stack from a TIFF, an ``.npz``/``.npy``, a folder, files or a mosaic.
@@ -387,6 +396,8 @@ def read_stack(
         per sample), nothing for float data; None = do not check.
     max_bytes : int, optional
         Memory limit for reading (default: :func:`~napari_polarseg.engine.limits.memory_limit`).
+    lazy : {"auto", "always", "never"}
+        Leave a TIFF or Zarr stack on disk (a Dask stack: :mod:`~napari_polarseg.io.lazy_stack`).
     options : ReadOptions, optional
         All of the above in one :class:`~napari_polarseg.io.read_options.ReadOptions`
         (its other fields are the job's), instead of the keywords: give one or the other.
@@ -404,9 +415,6 @@ def read_stack(
         missing, unreadable, truncated, non-image or too large file; missing or too few
         angles; frames of different sizes; bad data; an odd-sized mosaic; a bad option.
 
-    Examples
-    --------
-    >>> data = read_stack("scene.tif", angles_deg=[0, 45, 90, 135])  # doctest: +SKIP
     """
     keywords = {k: v for k, v in locals().items() if k not in ("path", "options")}
     first, files = _input_paths(path)

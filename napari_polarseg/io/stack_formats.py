@@ -1,6 +1,7 @@
 """One reader per kind of angle stack: a multi-page TIFF, an ``.npz``/``.npy``, frame files
 (a folder or a list), a raw mono or colour-polarisation mosaic; :data:`STACK_FORMATS`, the
-suffix -> reader table of the stack files.
+suffix -> reader table of the stack files (the lazy TIFF and the Zarr readers are their
+own modules, :mod:`~napari_polarseg.io.lazy_tiff` and :mod:`~napari_polarseg.io.zarr_stack`).
 
 Each returns a :class:`~napari_polarseg.io.stack_data.StackData` whose angles may still be
 missing; :func:`napari_polarseg.io.readers.read_stack` picks the reader and checks the
@@ -28,16 +29,18 @@ from ..engine.physics.colour_mosaic import (
     luminance,
 )
 from ..engine.physics.mosaic import demosaic, demosaic_flags
-from ..engine.physics.polarimage import distinct_angle_count
 from ..tiff_angles import FROM_JSON
-from .angles import angle_from_name
+from .angles import angle_from_name, enough_angles
 from .arrays import read_arrays
 from .common import dims, first_line, input_error, saturation_level
 from .frames import grey_frames, load_frame
+from .lazy_stack import LazyReader
+from .lazy_tiff import LAZY_TIFF
 from .mosaic_checks import check_mosaic_channels, periodicity_warning
 from .read_options import ReadOptions
 from .stack_data import BlackLevel, StackData
-from .tiff import colour_last, frame_axes, read_tiff, tifffile_messages
+from .tiff import SINGLE_IMAGE, colour_last, frame_axes, read_tiff, tifffile_messages
+from .zarr_stack import LAZY_ZARR, read_zarr_stack, zarr_carries_angles
 
 
 def _metadata_angles(path: Path, angles: Any) -> np.ndarray | None:
@@ -58,11 +61,7 @@ def read_tiff_stack(path: Path, opts: ReadOptions, black: BlackLevel) -> StackDa
     data, axes, meta = read_tiff(path, opts.max_bytes())
     data, colour = colour_last(data, frame_axes(axes))
     if data.ndim == (3 if colour else 2):
-        raise input_error(
-            path,
-            "the TIFF holds a single image, not an angle stack "
-            "(for a raw polarisation-camera frame give the mosaic layout, --mosaic)",
-        )
+        raise input_error(path, SINGLE_IMAGE)
     bits = meta.get("bits_per_sample")
     level = saturation_level(opts.saturation, data.dtype, bits)
     stack, saturated = grey_frames(path, data, colour, opts.channel, True, level)
@@ -254,16 +253,6 @@ def _tiff_json_angles(path: Path) -> Any:
     return None
 
 
-def enough_angles(angles: Any) -> bool:
-    """Whether ``angles`` (degrees) are finite numbers with at least 3 distinct modulo
-    180 degrees (never raises)."""
-    try:
-        values = np.asarray(angles, dtype=float).ravel()
-    except (TypeError, ValueError):
-        return False
-    return bool(np.all(np.isfinite(values))) and distinct_angle_count(np.deg2rad(values)) >= 3
-
-
 def _tiff_carries_angles(path: Path) -> bool:
     return enough_angles(_tiff_json_angles(path))
 
@@ -292,13 +281,18 @@ class StackFormat:
         ``carries_angles(path) -> bool``, a cheap look at the file (its header, the names
         of its arrays): whether it names its own polariser angles, so that it can be
         opened without being told them (the napari reader claims only those files).
+    lazy : LazyReader or None
+        How the format is read block by block (:mod:`napari_polarseg.io.lazy_stack`),
+        when it can be; :func:`~napari_polarseg.io.read_stack` does when it is large or
+        asked to.
     """
 
     read: Callable[[Path, ReadOptions, BlackLevel], StackData]
     carries_angles: Callable[[Path], bool]
+    lazy: LazyReader | None = None
 
 
-_TIFF = StackFormat(read_tiff_stack, _tiff_carries_angles)
+_TIFF = StackFormat(read_tiff_stack, _tiff_carries_angles, LAZY_TIFF)
 _NPZ = StackFormat(read_array_stack, _npz_carries_angles)
 
 #: File suffix (lower case) -> the format of a file that holds a whole stack; the one
@@ -310,4 +304,5 @@ STACK_FORMATS: dict[str, StackFormat] = {
     ".tiff": _TIFF,
     ".npz": _NPZ,
     ".npy": StackFormat(read_array_stack, _never),
+    ".zarr": StackFormat(read_zarr_stack, zarr_carries_angles, LAZY_ZARR),
 }

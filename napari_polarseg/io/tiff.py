@@ -54,6 +54,12 @@ def tifffile_messages() -> Iterator[list[str]]:
         logger.propagate = propagate
 
 
+#: Why a TIFF of one (grey or colour) image is not read as an angle stack.
+SINGLE_IMAGE = (
+    "the TIFF holds a single image, not an angle stack "
+    "(for a raw polarisation-camera frame give the mosaic layout, --mosaic)"
+)
+
 #: Axes of one planar page of 3 or 4 samples, as ``tifffile.imwrite(path, stack)`` stores
 #: a (3, H, W) or (4, H, W) array (planar RGB or RGBA): read as that many frames.
 PLANAR_SAMPLES = "SYX"

@@ -1,9 +1,11 @@
-"""Writing results atomically: TIFF, angle-stack TIFF, JSON and PNG (no napari, no Qt).
+"""Writing results atomically: TIFF, OME-Zarr, angle-stack TIFF, JSON and PNG (no napari,
+no Qt).
 
 :func:`write_tiff`, :func:`write_stack_tiff`, :func:`write_json` and :func:`write_png`
 write to a temporary file in the destination's directory and :func:`os.replace` it into
 place (:func:`atomic_output`), so a failure never leaves a truncated file where a good one
-was.
+was; :func:`write_zarr` does the same with a directory (:func:`atomic_folder`). A large or
+lazy image goes to a tiled BigTIFF (:mod:`napari_polarseg.io.tiff_tiles`).
 """
 
 from __future__ import annotations
@@ -12,6 +14,7 @@ import contextlib
 import json
 import math
 import os
+import shutil
 import uuid
 from collections.abc import Iterator, Sequence
 from pathlib import Path
@@ -22,6 +25,8 @@ import tifffile
 
 from ..engine.errors import PolarsegError
 from .common import PathLike
+from .ome_zarr import write_ome_zarr
+from .tiff_tiles import wants_tiles, write_tiled_tiff
 
 
 @contextlib.contextmanager
@@ -50,22 +55,68 @@ def atomic_output(path: PathLike) -> Iterator[Path]:
         raise
 
 
-def write_tiff(path: PathLike, array: np.ndarray, metadata: dict[str, Any] | None = None) -> None:
-    """Write an array as a grey (multi-page if 3-D) TIFF, atomically.
+@contextlib.contextmanager
+def atomic_folder(path: PathLike) -> Iterator[Path]:
+    """Context manager giving a temporary directory name that replaces the directory (or
+    file) ``path`` on success; on any exception the temporary directory is removed and
+    ``path`` is left as it was."""
+    path = Path(path)
+    tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex[:12]}.tmp")
+    old = path.with_name(f".{path.name}.{uuid.uuid4().hex[:12]}.old")
+    try:
+        yield tmp
+        if path.exists():
+            os.replace(path, old)
+        try:
+            os.replace(tmp, path)
+        except BaseException:
+            if old.exists():
+                os.replace(old, path)
+            raise
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    if old.is_dir():
+        shutil.rmtree(old, ignore_errors=True)
+    elif old.exists():
+        old.unlink()
+
+
+def write_tiff(path: PathLike, array: Any, metadata: dict[str, Any] | None = None) -> None:
+    """Write an array as a grey (multi-page if 3-D) TIFF, atomically: a tiled BigTIFF
+    written tile by tile for a large or lazy image
+    (:func:`~napari_polarseg.io.tiff_tiles.wants_tiles`).
 
     Parameters
     ----------
     path : str or path
         Destination ``.tif``.
     array : array
-        (H, W) or (N, H, W), any dtype tifffile writes.
+        (H, W) or (N, H, W), any dtype tifffile writes; NumPy or Dask.
     metadata : dict, optional
         JSON-serialisable items stored in the ImageDescription (tifffile's shaped
         metadata, read back by ``TiffFile.shaped_metadata``).
     """
-    array = np.asarray(array)
     with atomic_output(path) as tmp:
-        tifffile.imwrite(tmp, array, photometric="minisblack", metadata=dict(metadata or {}))
+        if wants_tiles(array):
+            write_tiled_tiff(tmp, array, dict(metadata or {}))
+        else:
+            data = np.asarray(array)
+            tifffile.imwrite(tmp, data, photometric="minisblack", metadata=dict(metadata or {}))
+
+
+def write_zarr(
+    path: PathLike, array: Any, metadata: dict[str, Any] | None = None, *, labels: bool = False
+) -> None:
+    """Write an image (H, W) or planes (C, H, W), NumPy or Dask, as an OME-Zarr directory
+    (:func:`~napari_polarseg.io.ome_zarr.write_ome_zarr`), atomically.
+
+    ``metadata`` goes under the group's ``"polarseg"`` attribute; ``labels``: a labels
+    image (NGFF ``image-label``, downsampled without new values).
+    """
+    path = Path(path)
+    with atomic_folder(path) as tmp:
+        write_ome_zarr(tmp, array, _jsonable(metadata or {}), labels=labels, name=path.stem)
 
 
 def write_stack_tiff(path: PathLike, stack: np.ndarray, angles_deg: Sequence[float]) -> None:

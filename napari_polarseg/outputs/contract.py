@@ -124,9 +124,31 @@ def used_pixels(result: SegmentationResult) -> np.ndarray:
     return np.asarray(valid, dtype=np.uint8)
 
 
-#: Every file a result folder may hold, relative to it. A run into a folder that holds
-#: an earlier run's results removes those of these files it did not write itself
-#: (:func:`stale_files`), so the folder describes one run; no other file is touched.
+#: The images of a result folder, by their TIFF names: ``polarseg segment --format zarr``
+#: writes each as an OME-Zarr directory of the same stem (:func:`image_name`).
+IMAGE_FILES: tuple[str, ...] = (
+    "labels.tif",
+    *FLOAT_OUTPUTS,
+    "mask.tif",
+    STOKES_FILE,
+    "probabilities.tif",
+    "uncertainty.tif",
+)
+#: Suffix of an image written as OME-Zarr (a directory).
+ZARR_SUFFIX = ".zarr"
+
+
+def image_name(name: str, suffix: str) -> str:
+    """The name of the image ``name`` (an :data:`IMAGE_FILES` name) written with the file
+    suffix ``suffix`` (``.tif``, ``.zarr``): ``image_name("labels.tif", ".zarr")`` is
+    ``"labels.zarr"``."""
+    return name.removesuffix(".tif") + suffix
+
+
+#: Every file a result folder may hold, relative to it (the images in either format; an
+#: OME-Zarr image is a directory). A run into a folder that holds an earlier run's results
+#: removes those of these files it did not write itself (:func:`stale_files`), so the
+#: folder describes one run, whichever format each wrote; no other file is touched.
 RESULT_FILES: tuple[str, ...] = (
     "labels.tif",
     *FLOAT_OUTPUTS,
@@ -136,6 +158,7 @@ RESULT_FILES: tuple[str, ...] = (
     "segments.csv",
     "probabilities.tif",
     "uncertainty.tif",
+    *(image_name(name, ZARR_SUFFIX) for name in IMAGE_FILES),
     "evaluation.json",
     "overview.png",
     *(f"plots/{name}" for name in PLOT_FILES),
@@ -144,13 +167,19 @@ RESULT_FILES: tuple[str, ...] = (
 )
 
 
+def _present(path: Path) -> bool:
+    """Whether a result file is there: a file, or an OME-Zarr image's directory."""
+    return path.is_dir() if path.suffix == ZARR_SUFFIX else path.is_file()
+
+
 def result_files(out: Path) -> list[str]:
     """The files of :data:`RESULT_FILES` that the folder ``out`` holds, relative to it."""
-    return [name for name in RESULT_FILES if (out / name).is_file()]
+    return [name for name in RESULT_FILES if _present(out / name)]
 
 
 def stale_files(out: Path, written: Iterable[str]) -> list[str]:
     """The files of :data:`RESULT_FILES` in ``out`` that ``written`` does not name: an
-    earlier run's results, which a new run into ``out`` removes."""
+    earlier run's results (in either image format), which a new run into ``out``
+    removes."""
     keep = set(written)
     return [name for name in result_files(out) if name not in keep]

@@ -24,6 +24,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import os
+import shutil
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -55,6 +56,7 @@ from .contract import (
     stale_files,
     used_pixels,
 )
+from .image_formats import IMAGE_FORMATS
 from .overview import render_overview
 
 #: One file to write: (name relative to the folder, the writing, listed among the files
@@ -216,22 +218,37 @@ def classifier_summary(segmentation: Any, labels_from: str) -> dict[str, Any]:
 
 
 class _Folder:
-    """Writes the files of a result folder, each atomically; keeps the names written and
-    the path being written (the one an :class:`OutputError` names)."""
+    """Writes the files of a result folder, each atomically, its images in ``image_format``
+    (:data:`~napari_polarseg.outputs.image_formats.IMAGE_FORMATS`); keeps the names written
+    and the path being written (the one an :class:`OutputError` names)."""
 
-    def __init__(self, out: Path) -> None:
+    def __init__(self, out: Path, image_format: str = "tiff") -> None:
         self.out = out
         self.written: list[str] = []
         self.current = str(out)
+        if image_format not in IMAGE_FORMATS:
+            words = ", ".join(IMAGE_FORMATS)
+            raise PolarsegError(f"the image format must be one of {words}; got {image_format!r}")
+        self.format = IMAGE_FORMATS[image_format]
 
     def path(self, rel: str) -> Path:
         """The path of ``rel``, named by the error of any failure from now on."""
         self.current = str(self.out / rel)
         return self.out / rel
 
-    def tiff(self, rel: str, image: np.ndarray, meta: dict[str, Any]) -> None:
-        pio.write_tiff(self.path(rel), image, meta)
+    def tiff(self, rel: str, image: Any, meta: dict[str, Any], labels: bool = False) -> None:
+        """The image named ``rel`` as a TIFF, in the folder's image format."""
+        rel = self.format.name(rel)
+        self.format.write(self.path(rel), image, meta, labels=labels)
         self.written.append(rel)
+
+    def remove(self, rel: str) -> None:
+        """Remove an earlier run's file (an OME-Zarr image: its directory)."""
+        path = self.path(rel)
+        if path.is_dir():
+            shutil.rmtree(path)
+        else:
+            path.unlink(missing_ok=True)
 
     def png(self, rel: str, image: np.ndarray) -> None:
         pio.write_png(self.path(rel), image)
@@ -250,7 +267,8 @@ def _write_maps(
 ) -> None:
     """``labels.tif``, the float maps, ``mask.tif`` and the polarisation views."""
     materials = result.materials
-    folder.tiff("labels.tif", labels_image(result.labels, materials), labels_meta(materials))
+    labels = labels_image(result.labels, materials)
+    folder.tiff("labels.tif", labels, labels_meta(materials), labels=True)
     for fname, (attr, meta) in FLOAT_OUTPUTS.items():
         value = getattr(result, attr)
         if value is not None:  # the reconstruction error: the thesis maps, when computed
@@ -312,8 +330,11 @@ def write_outputs(
     plots: dict[str, bytes] | None = None,
     stokes: np.ndarray | None = None,
     composite: np.ndarray | None = None,
+    image_format: str = "tiff",
 ) -> list[str]:
-    """Write already computed outputs into ``out`` (created), each file atomically.
+    """Write already computed outputs into ``out`` (created), each file atomically, the
+    images as ``image_format`` (:data:`~napari_polarseg.outputs.image_formats.IMAGE_FORMATS`:
+    ``tiff``, ``zarr``).
 
     ``stokes`` (3, H, W) goes to :data:`~napari_polarseg.outputs.contract.STOKES_FILE`
     (float32; its planes and sign convention in the JSON ImageDescription,
@@ -327,7 +348,7 @@ def write_outputs(
     """
     out = Path(out)
     t0 = time.perf_counter()
-    folder = _Folder(out)
+    folder = _Folder(out, image_format)
     try:
         out.mkdir(parents=True, exist_ok=True)
         _write_maps(folder, result, stokes, composite)
@@ -342,7 +363,7 @@ def write_outputs(
         summary["io_seconds"]["write"] = round(time.perf_counter() - t0, 6)
         folder.json("summary.json", summary)
         for name in stale:
-            folder.path(name).unlink(missing_ok=True)
+            folder.remove(name)
         if any(name.startswith("plots/") for name in stale):
             with contextlib.suppress(OSError):  # only when no file is left in it
                 folder.path("plots").rmdir()
@@ -480,6 +501,7 @@ def write_result_folder(
     truth: np.ndarray | None = None,
     views: bool = True,
     composite_params: CompositeParams | None = None,
+    image_format: str = "tiff",
 ) -> list[str]:
     """Write a segmentation's results into the folder ``out``, as ``polarseg segment``.
 
@@ -503,20 +525,19 @@ def write_result_folder(
         and ``stokes.tif`` (S0, S1, S2) and ``aolp_dolp.png`` (the AoLP/DoLP HSV composite)
         of :mod:`napari_polarseg.engine.analysis.views`.
     probabilities, uncertainty : array (K, H, W), array (H, W), optional
-        Class probabilities and uncertainty of the pixel classifier: ``probabilities.tif``,
-        ``uncertainty.tif``.
+        The pixel classifier's: ``probabilities.tif``, ``uncertainty.tif``.
     evaluation : dict, optional
-        :func:`~napari_polarseg.engine.analysis.evaluation.evaluate` figures (plus e.g. the
-        ground truth's file): ``evaluation.json``, repeated in ``summary.json``.
+        :func:`~napari_polarseg.engine.analysis.evaluation.evaluate` figures (and e.g. the
+        truth's file): ``evaluation.json``, in ``summary.json`` too.
     info, summary : dict, optional
-        Items added to (or replacing those of) ``params.json`` (:func:`run_info`) and
-        ``summary.json`` (``result.summary()``, ``io_seconds``, ``output_shape``).
+        Items added to (or replacing those of) ``params.json`` and ``summary.json``.
     truth : array (H, W) of int, optional
-        The true materials, drawn beside the segments in ``overview.png`` (with the ARI).
+        The true materials, drawn beside the segments in ``overview.png``.
     composite_params : CompositeParams, optional
-        Settings of the composite (default: ρ_max from
-        :func:`~napari_polarseg.engine.analysis.views.auto_dolp_max`, value from Î);
-        ``params.json``'s ``"aolp_dolp"``.
+        Settings of the composite (``params.json``'s ``"aolp_dolp"``; default: ρ_max from
+        :func:`~napari_polarseg.engine.analysis.views.auto_dolp_max`, value from Î).
+    image_format : {"tiff", "zarr"}
+        Images as TIFF or OME-Zarr (:mod:`~napari_polarseg.outputs.image_formats`).
 
     Returns
     -------
@@ -539,4 +560,4 @@ def write_result_folder(
     files.update(
         _pictures(stack[0], result, params_json, truth, overview, plots, views, composite_params)
     )
-    return write_outputs(out, result, params_json, summary_json, **files)
+    return write_outputs(out, result, params_json, summary_json, **files, image_format=image_format)
