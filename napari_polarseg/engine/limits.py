@@ -9,12 +9,20 @@ with a :class:`PolarsegError` that says how much would be needed.
 The limit is :data:`DEFAULT_MAX_BYTES` (8 GiB), or the number of bytes in the environment
 variable :data:`ENV_VAR` (``POLARSEG_MAX_BYTES``, e.g. ``32e9`` or ``32GiB``), or the
 ``limit`` argument (``polarseg segment --max-memory GIB``).
+
+Per method: :func:`estimate_pipeline_bytes` counts the polarisation fit (and the
+thesis blocks); :func:`estimate_scribble_bytes` the scribbles method on the whole
+image, from the feature stack it builds (:func:`feature_bytes_per_pixel`) and the
+full-size arrays it keeps (:func:`scribble_bytes_per_pixel`); the latter's split into
+tile-bound and full-size bytes chooses its tile size
+(:func:`~.classifier.tiled_prediction.scribble_tiles`).
 """
 
 from __future__ import annotations
 
 import os
 import re
+from typing import Any
 
 from .chunks import CHUNK_BYTES
 from .errors import PolarsegError
@@ -95,6 +103,84 @@ def check_bytes(needed: float, what: str, limit: int | float | None = None) -> N
             f"{what} would need {format_bytes(needed)} of memory, more than the limit of "
             f"{format_bytes(cap)} (set {ENV_VAR} or --max-memory to allow more)"
         )
+
+
+#: float64 maps of H × W the pipeline keeps after its fit (Î, ρ, φ, residual, masks, θ,
+#: azimuth, labels): what a method's work sits on top of.
+KEPT_MAPS = 8
+#: Bytes a pixel of the scribbles method's full-size arrays beyond the pipeline's maps
+#: and its K class planes: the superpixels' edge map (float64) and its temporaries
+#: (4 float64 maps while it is made), the superpixels (int32), the walk's nodes
+#: (int32, int64 while renumbered), the labels (int32 and the result's int64), the
+#: uncertainty (float32).
+SCRIBBLE_FIXED_BYTES = 8 + 32 + 4 + 12 + 12 + 4
+#: Float32 per-pixel products whose local means the features take (:data:`MOMENTS`).
+FEATURE_MOMENTS = 10
+#: Float32 temporaries of one scale while its features are made, beyond its features:
+#: the smoothed moments, DoLP, the two variances.
+SCALE_TEMPORARIES = 14
+#: Bytes a pixel of the region means' averaging matrix (float32 weight, int32 row and
+#: column) and of one expanded plane.
+REGION_MEAN_BYTES = 16
+
+
+def feature_bytes_per_pixel(
+    params: Any = None, channels: int = 1, threads: int | None = None
+) -> float:
+    """Peak bytes a pixel of :func:`~.features.pixel_features.pixel_features` on one
+    image: per channel its Î, ρ, φ (float32), the moments of every pyramid level
+    (:data:`FEATURE_MOMENTS` float32 / f²), the features kept (11 a scale for the
+    default groups, / f² on a coarser grid: 113 bytes), the temporaries of the scales
+    computed at once (``threads``, :data:`SCALE_TEMPORARIES` + features, / f²) and the
+    region means' matrix. Measured: 320 bytes a pixel at 1 MP and 348 at 4 MP, on
+    2 threads, for the 390 counted."""
+    from .features.pixel_features import (
+        PixelFeatureParams,
+        feature_names,
+        feature_threads,
+        pyramid_factor,
+    )
+
+    params = params or PixelFeatureParams()
+    threads = feature_threads() if threads is None else int(threads)
+    names = feature_names(params)
+    per_scale = {
+        s: sum(n.endswith(f"@{s:g}") and ":" not in n for n in names) for s in params.scales
+    }
+    area = {s: 1.0 / pyramid_factor(s) ** 2 for s in params.scales}
+    kept = sum(4 * per_scale[s] * area[s] for s in params.scales)
+    moments = sum(4 * FEATURE_MOMENTS / f**2 for f in {pyramid_factor(s) for s in params.scales})
+    work = sorted(4 * (SCALE_TEMPORARIES + per_scale[s]) * area[s] for s in params.scales)
+    busy = sum(work[-max(threads, 1) :])
+    regions = REGION_MEAN_BYTES if "regions" in params.groups else 0
+    return channels * (12 + moments + kept * 1.0) + busy + regions
+
+
+def scribble_bytes_per_pixel(
+    params: Any = None, channels: int = 1, n_classes: int = 4, tiled: bool = False
+) -> tuple[float, float]:
+    """(bytes a pixel of the work that tiles bound, bytes a pixel of the full-size
+    arrays) of the scribbles method beyond the pipeline's kept maps.
+
+    The first: :func:`feature_bytes_per_pixel` and the prediction's K float32 planes
+    twice (the prior and the interpolated grid). The second: the K float32 planes of
+    the output probabilities and :data:`SCRIBBLE_FIXED_BYTES`; whole-image (not
+    ``tiled``) also the prior of the walk (K float32 planes) and a full-size float32
+    copy of Î while its median is taken.
+    """
+    work = feature_bytes_per_pixel(params, channels) + 8 * n_classes
+    fixed = 4 * n_classes + SCRIBBLE_FIXED_BYTES + (0 if tiled else 4 * n_classes + 4)
+    return work, fixed
+
+
+def estimate_scribble_bytes(
+    shape: tuple[int, int], params: Any = None, channels: int = 1, n_classes: int = 4
+) -> int:
+    """Peak bytes of the scribbles method (features, training, prediction, walk) on
+    the whole image of ``shape`` (H, W), with the pipeline's :data:`KEPT_MAPS`."""
+    pixels = int(shape[0]) * int(shape[1])
+    work, fixed = scribble_bytes_per_pixel(params, channels, n_classes)
+    return int(pixels * (work + fixed + 8 * KEPT_MAPS))
 
 
 def _graph_kind(blocks: int, params: SegmentParams) -> str:

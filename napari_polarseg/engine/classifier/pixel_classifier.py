@@ -396,13 +396,28 @@ def guided_filter(
     return out
 
 
-def smooth_probabilities(probabilities: np.ndarray, guide: np.ndarray, radius: float) -> np.ndarray:
-    """Guided-filter the probabilities with ``guide`` (e.g. log Î), renormalised to sum 1."""
+def guide_stats(guide: np.ndarray) -> tuple[float, float]:
+    """(mean, standard deviation) of a guide image (float32), what
+    :func:`smooth_probabilities` scales it by (a deviation of 0 is taken as 1)."""
+    g = np.asarray(guide, dtype=np.float32)
+    return float(np.mean(g)), float(np.std(g)) or 1.0
+
+
+def smooth_probabilities(
+    probabilities: np.ndarray,
+    guide: np.ndarray,
+    radius: float,
+    stats: tuple[float, float] | None = None,
+) -> np.ndarray:
+    """Guided-filter the probabilities with ``guide`` (e.g. log Î), scaled to
+    (g − mean) / std (``stats``: that mean and std, default :func:`guide_stats` of
+    ``guide``; a tile passes the whole image's), renormalised to sum 1. Reads
+    2 ``radius`` pixels each way (two box means)."""
     if radius <= 0:
         return probabilities
     g = guide.astype(np.float32)
-    spread = float(np.std(g)) or 1.0
-    out = guided_filter((g - float(np.mean(g))) / spread, probabilities, max(1, round(radius)))
+    centre, spread = guide_stats(g) if stats is None else stats
+    out = guided_filter((g - centre) / spread, probabilities, max(1, round(radius)))
     np.clip(out, 0, None, out=out)
     total = out.sum(axis=0, keepdims=True)
     out /= np.where(total > 0, total, 1)
@@ -435,6 +450,15 @@ def margin_uncertainty(probabilities: np.ndarray) -> np.ndarray:
     return np.subtract(1.0, first, dtype=np.float32)
 
 
+def check_feature_names(classifier: PixelClassifier, names: tuple[str, ...]) -> None:
+    """Raise :class:`PolarsegError` unless the image's feature ``names`` are the
+    classifier's, in order."""
+    if tuple(names) != tuple(classifier.feature_names):
+        missing = [n for n in classifier.feature_names if n not in names]
+        detail = f"missing {', '.join(missing[:3])}" if missing else "in another order"
+        raise PolarsegError(f"the image's features do not match the classifier's ({detail})")
+
+
 def predict_pixels(
     classifier: PixelClassifier,
     features: FeatureStack,
@@ -462,10 +486,7 @@ def predict_pixels(
     coarse : array (K, ⌈H/s⌉, ⌈W/s⌉), optional
         The grid's probabilities when already predicted (by this classifier).
     """
-    if tuple(features.names) != tuple(classifier.feature_names):
-        missing = [n for n in classifier.feature_names if n not in features.names]
-        detail = f"missing {', '.join(missing[:3])}" if missing else "in another order"
-        raise PolarsegError(f"the image's features do not match the classifier's ({detail})")
+    check_feature_names(classifier, features.names)
     out = refined_probabilities(classifier.model, features, stride, cancel, coarse)
     proba = out.probabilities
     radius = classifier.params.smoothing

@@ -47,10 +47,19 @@ from .pixel_classifier import (
     ClassifierParams,
     PixelClassifier,
     PixelPrediction,
+    check_feature_names,
+    guide_stats,
     predict_pixels,
     train_pixel_classifier,
 )
 from .region_walk import RegionGraph, region_graph, walk_region_area, walked_prediction
+from .tiled_features import TiledFeatures, tile_align, tile_halo, tiled_features
+from .tiled_prediction import prediction_margin, scribble_tiles, tiled_pixels, tiled_walk
+
+#: Largest edge-aware smoothing radius (pixels) a tile's halo is grown for; a larger
+#: ``smoothing`` on a tiled image reads past the halo (its probabilities near the
+#: tiles' cuts then differ slightly from the whole image's).
+TILED_SMOOTHING = 8.0
 
 
 @dataclass(frozen=True)
@@ -95,12 +104,18 @@ class PixelSegmenter:
     stride : int
         Grid step of the coarse-to-fine prediction (:func:`predict_pixels`; 1 = every
         pixel on its own features).
+    max_bytes : int, optional
+        Memory limit, bytes (default :func:`~napari_polarseg.engine.limits.memory_limit`:
+        ``$POLARSEG_MAX_BYTES`` or 8 GiB). An image whose whole-image features would
+        exceed it is segmented tile by tile (:mod:`.tiled_prediction`): the features are
+        then a :class:`~.tiled_features.TiledFeatures`.
     """
 
     pipeline: Pipeline
     colour_stack: np.ndarray | None = None
     colours: tuple[str, ...] = COLOURS
     stride: int = PREDICTION_STRIDE
+    max_bytes: int | None = None
     _features: tuple[Any, FeatureStack] | None = field(default=None, init=False, repr=False)
     _colour_images: tuple[int, list] | None = field(default=None, init=False, repr=False)
     _graph: tuple[int, RegionGraph] | None = field(default=None, init=False, repr=False)
@@ -158,6 +173,10 @@ class PixelSegmenter:
         key = (id(pol), params, colour)
         if self._features is None or self._features[0] != key:
             maps = self.maps(segment_params)
+            tiled = self.tiled(params, colour, segment_params)
+            if tiled is not None:
+                self._features = (key, tiled)
+                return tiled
             regions = None
             if "regions" in params.groups:
                 area = params.regions_of(maps[0].shape)
@@ -172,6 +191,33 @@ class PixelSegmenter:
                 feats = pixel_features(*maps, params, progress=progress, regions=regions)
             self._features = (key, feats)
         return self._features[1]
+
+    def tiled(
+        self,
+        params: PixelFeatureParams,
+        colour: bool = True,
+        segment_params: SegmentParams | None = None,
+    ) -> TiledFeatures | None:
+        """The image's features as tiles (:class:`~.tiled_features.TiledFeatures`) when
+        its whole-image estimate exceeds the memory limit (:attr:`max_bytes`;
+        :func:`~.tiled_prediction.scribble_tiles`), else None. The halo: the features'
+        reach and the prediction's margin (:func:`~.tiled_features.tile_halo`)."""
+        maps = self.maps(segment_params)
+        shape = maps[0].shape
+        colour = colour and self.colour_stack is not None
+        channels = ["", *self.colours] if colour else [""]
+        align = tile_align(params, self.stride)
+        margin = prediction_margin(self.stride, TILED_SMOOTHING)
+        halo = tile_halo(params, margin)
+        grid = scribble_tiles(shape, params, halo, align, len(channels), limit=self.max_bytes)
+        if grid is None:
+            return None
+        regions = None
+        if "regions" in params.groups:
+            regions = self.superpixels(params.regions_of(shape), segment_params, colour)
+        images = [maps]
+        images += [(c.intensity, c.dop, c.phase) for c in self.colour_images(segment_params)]
+        return tiled_features(images[: len(channels)], channels, params, grid, regions)
 
     def edges(self, segment_params: SegmentParams | None = None, colour: bool = True) -> np.ndarray:
         """The superpixels' edge map: :func:`superpixel_edges` of the maps of
@@ -265,6 +311,16 @@ class PixelSegmenter:
         ``stride``: the grid step (default :attr:`stride`); ``coarse``: its
         probabilities when already predicted."""
         s = self.stride if stride is None else int(stride)
+        if isinstance(features, TiledFeatures):
+            check_feature_names(classifier, features.names)
+            if classifier.params.region_walk > 0:
+                graph = self.graph(segment_params)
+                return tiled_walk(classifier, features, graph, s, scribbles, cancel)
+            guide = None
+            if classifier.params.smoothing > 0:
+                g = self.guide(segment_params)
+                guide = (g, guide_stats(g))
+            return tiled_pixels(classifier, features, s, guide, cancel)
         if classifier.params.region_walk > 0:
             graph = self.graph(segment_params)
             return walked_prediction(classifier, features, graph, s, scribbles, cancel, coarse)

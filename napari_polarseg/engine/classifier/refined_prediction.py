@@ -164,3 +164,52 @@ def refined_probabilities(
         part = flat[start : start + CHUNK_PIXELS]
         out[:, part] = predict_rows(model, features.take(part), cancel).T
     return RefinedProbabilities(proba, int(coarse[0].size + flat.size))
+
+
+def border_pixels(cells: np.ndarray, stride: int, shape: tuple[int, int]) -> np.ndarray:
+    """Flat row-major indices (sorted) inside ``shape`` of every pixel of the grid cells
+    where ``cells`` (h', w') is True, cells of ``stride`` pixels."""
+    s = int(stride)
+    rows, cols = np.nonzero(cells)
+    dr, dc = np.divmod(np.arange(s * s), s)
+    pr = (rows[:, None] * s + dr[None, :]).ravel()
+    pc = (cols[:, None] * s + dc[None, :]).ravel()
+    inside = (pr < shape[0]) & (pc < shape[1])
+    return np.sort(pr[inside] * shape[1] + pc[inside])
+
+
+def window_probabilities(
+    model: Any,
+    features: FeatureStack,
+    window: tuple[slice, slice],
+    stride: int,
+    cancel: Any = None,
+) -> RefinedProbabilities:
+    """:func:`refined_probabilities` of the pixels of ``window`` (rows, columns of
+    ``features``) only: p_k (K, h, w) of the window.
+
+    The grid samples are the whole image's when the window starts on a multiple of
+    ``stride`` (counted from the image's origin), so away from the window's edges (two
+    cells: the interpolation and the 3 × 3 border test read one cell each way) the
+    probabilities equal those of the whole image (to float rounding)."""
+    h, w = features.shape
+    r0, r1 = window[0].start, min(window[0].stop, h)
+    c0, c1 = window[1].start, min(window[1].stop, w)
+    size = (r1 - r0, c1 - c0)
+    k = len(model.classes_)
+    s = max(1, int(stride))
+    rows = np.minimum(r0 + np.arange(0, size[0], s) + s // 2, r1 - 1)
+    cols = np.minimum(c0 + np.arange(0, size[1], s) + s // 2, c1 - 1)
+    grid = predict_rows(model, features.take((rows[:, None] * w + cols[None, :]).ravel()), cancel)
+    coarse = grid.T.reshape(k, rows.size, cols.size)
+    if s == 1:
+        return RefinedProbabilities(np.ascontiguousarray(coarse), coarse[0].size)
+    proba = upsampled(coarse, s, size)
+    flat = border_pixels(border_cells(np.argmax(coarse, axis=0)), s, size)
+    out = proba.reshape(k, -1)
+    pr, pc = np.divmod(flat, size[1])
+    image_index = (pr + r0) * w + (pc + c0)
+    for start in range(0, flat.size, CHUNK_PIXELS):
+        part = slice(start, start + CHUNK_PIXELS)
+        out[:, flat[part]] = predict_rows(model, features.take(image_index[part]), cancel).T
+    return RefinedProbabilities(proba, int(coarse[0].size + flat.size))

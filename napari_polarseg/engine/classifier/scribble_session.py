@@ -47,6 +47,7 @@ from .pixel_classifier import (
 from .pixel_segmentation import PixelSegmentation, PixelSegmenter
 from .refined_prediction import grid_index, grid_probabilities, upsampled
 from .region_walk import preview_prediction
+from .tiled_features import TiledFeatures
 
 
 @dataclass(frozen=True)
@@ -213,6 +214,8 @@ class ScribbleSession:
         (probabilities smoothed on the grid, the uncertainty taken there and
         interpolated too; no border predicted yet)."""
         clf, feats = self._ready()
+        if isinstance(feats, TiledFeatures):  # no whole-image grid: the tiles' answer
+            return self.refine(cancel)
         s = int(self.prediction_params.preview_stride)
         with timed(self.seconds, "preview"):
             coarse = grid_probabilities(clf.model, feats, s, cancel)

@@ -249,15 +249,28 @@ GROUP_MOMENTS = {
 }
 
 
+def log_intensity_centre(intensity: np.ndarray) -> np.float32:
+    """The median of log Î over the image (float32; Î floored at :data:`EPS_INTENSITY`):
+    what :func:`pixel_features` subtracts from log Î before taking its moments."""
+    i = np.asarray(intensity, dtype=np.float32)
+    log_i = np.log(np.maximum(np.where(np.isfinite(i), i, 0), EPS_INTENSITY))
+    return np.float32(np.median(log_i))
+
+
 def _moments(
-    intensity: np.ndarray, dop: np.ndarray, phase: np.ndarray, groups: Sequence[str]
+    intensity: np.ndarray,
+    dop: np.ndarray,
+    phase: np.ndarray,
+    groups: Sequence[str],
+    log_centre: float | None = None,
 ) -> dict[str, np.ndarray]:
-    """The per-pixel products (:data:`MOMENTS`) the chosen groups need."""
+    """The per-pixel products (:data:`MOMENTS`) the chosen groups need; log Î minus
+    ``log_centre`` (default: its median over these pixels)."""
     need = {m for g in groups for m in GROUP_MOMENTS[g]}
     log_i = np.log(np.maximum(intensity, EPS_INTENSITY))
     # centred on the image's median: local variances and covariances of log Î are
     # differences of means, which lose float32 digits when log Î is far from 0
-    log_i -= np.float32(np.median(log_i))
+    log_i -= np.float32(np.median(log_i)) if log_centre is None else np.float32(log_centre)
     c, s = np.cos(2 * phase), np.sin(2 * phase)
     make = {
         "s0": lambda: intensity,
@@ -334,6 +347,7 @@ def pixel_features(
     channel: str = "",
     progress: Callable[[float], None] | None = None,
     regions: np.ndarray | Callable[[], np.ndarray] | None = None,
+    log_centre: float | None = None,
 ) -> FeatureStack:
     """The feature stack of one polarisation image.
 
@@ -344,7 +358,7 @@ def pixel_features(
     params : PixelFeatureParams, optional
         Scales and groups (default ``PixelFeatureParams()``).
     channel : str, optional
-        Prefix of every name (``"<channel>:"``) for multi-channel inputs.
+        Name prefix ``"<channel>:"`` for multi-channel inputs.
     progress : callable(share), optional
         Called with the share of the scales done after each (it may raise to stop).
     regions : array (H, W) int or callable, optional
@@ -352,6 +366,8 @@ def pixel_features(
         (called once the other features are made, so a caller may draw them on another
         thread meanwhile). Default: :func:`~.superpixels.polarisation_superpixels` of
         ``params.regions_of`` the image's shape.
+    log_centre : float, optional
+        Subtracted from log Î (:func:`log_intensity_centre`; a tile passes its image's).
 
     Returns
     -------
@@ -376,9 +392,8 @@ def pixel_features(
         labels = _once(lambda: polarisation_superpixels(i, d, p, params.regions_of(i.shape)))
     else:
         labels = _once(regions if callable(regions) else lambda: regions)
-    levels = {1: _moments(i, d, p, params.groups)}
-    # every scale on a thread (the filters and ufuncs release the GIL); a local scale's
-    # region means on the same thread once the superpixels are there
+    levels = {1: _moments(i, d, p, params.groups, log_centre)}
+    # a scale a thread (numpy releases the GIL); its region means there too
     with ThreadPoolExecutor(feature_threads()) as pool:
 
         def submit(sigma: float) -> Future:
@@ -451,6 +466,38 @@ def _scale_of(name: str) -> float:
     return float(name.rsplit("@", 1)[1])
 
 
+def _radius(sigma: float) -> int:
+    """Pixels each way a Gaussian of ``sigma`` reads (SciPy: ⌊3 σ + ½⌋ at truncate 3)."""
+    return int(3.0 * sigma + 0.5)
+
+
+def feature_reach(params: PixelFeatureParams, largest: float | None = None) -> int:
+    """Pixels each way a feature of ``params`` reads: beyond it, no pixel changes any
+    feature of the scales σ ≤ ``largest`` (default: all of them).
+
+    At scale σ on the grid of factor f = :func:`pyramid_factor` (σ_f =
+    :func:`level_sigma`), the longest chain of filters is the widest of the Gaussian
+    of 2 σ_f (the surround of ``dop_over_surround``), of 1.6 σ_f (the difference of
+    Gaussians) and of σ_f / 2 then σ_f (the structure tensor), each reading
+    r(σ) = ⌊3 σ + ½⌋ cells, plus two cells of gradients; the block means and the
+    interpolation back read one more cell each: reach = f · (r + 4) pixels.
+    """
+    reach = 0
+    for sigma in params.scales:
+        if largest is not None and sigma > largest:
+            continue
+        f = pyramid_factor(sigma)
+        s = level_sigma(sigma, f)
+        chain = max(_radius(2 * s), _radius(1.6 * s), _radius(max(s / 2, 0.5)) + _radius(s) + 1)
+        reach = max(reach, f * (chain + 4))
+    return reach
+
+
+def largest_factor(params: PixelFeatureParams) -> int:
+    """The coarsest grid of ``params``' scales: max f of :func:`pyramid_factor`."""
+    return max(pyramid_factor(s) for s in params.scales)
+
+
 def feature_names(params: PixelFeatureParams) -> tuple[str, ...]:
     """Names of the features :func:`pixel_features` computes for ``params`` (no prefix),
     in order (found by running the groups on a tiny image)."""
@@ -471,13 +518,15 @@ def multichannel_features(
     params: PixelFeatureParams | None = None,
     channels: Sequence[str] | None = None,
     regions: np.ndarray | Callable[[], np.ndarray] | None = None,
+    log_centres: Sequence[float] | None = None,
 ) -> FeatureStack:
     """Features of every channel's polarisation image side by side.
 
     ``images[c] = (Î, ρ, φ)`` of channel c (e.g. each colour of a colour-polarisation
     sensor); names carry the channel name (``channels[c]``, default ``"c0"``, ``"c1"``…).
     ``regions``: the superpixels every channel's ``regions`` group averages over (as in
-    :func:`pixel_features`; default: each channel's own).
+    :func:`pixel_features`; default: each channel's own). ``log_centres``: each
+    channel's ``log_centre`` (:func:`pixel_features`; default each one's median).
     """
     if not images:
         raise PolarsegError("no channels to compute features of")
@@ -488,8 +537,9 @@ def multichannel_features(
         raise PolarsegError(f"{len(images)} channels but {len(channels)} channel names")
     if callable(regions):
         regions = _once(regions)  # the first channel to need them waits
+    centres = [None] * len(images) if log_centres is None else list(log_centres)
     stacks = [
-        pixel_features(*im, params, channel=c, regions=regions)
-        for im, c in zip(images, channels, strict=True)
+        pixel_features(*im, params, channel=c, regions=regions, log_centre=m)
+        for im, c, m in zip(images, channels, centres, strict=True)
     ]
     return stacks[0] if len(stacks) == 1 else FeatureStack.joined(stacks)

@@ -1,0 +1,205 @@
+"""The pixel features of a large image, made tile by tile when they are read.
+
+A whole-image feature stack (:func:`~..features.pixel_features.pixel_features`) holds
+about 200 bytes a pixel with its temporaries: 5 GB for a 24 MP frame. A
+:class:`TiledFeatures` holds only the polarisation maps and the superpixels; the
+features of a box are computed when a reader asks for them
+(:meth:`TiledFeatures.box`), on the box grown by the halo of a
+:class:`~..tiles.TileGrid`, so inside the box they equal the whole image's:
+
+- every filter reads at most :func:`~..features.pixel_features.feature_reach` pixels
+  (the largest σ × truncate of the filter chains, on its pyramid grid);
+- log Î is centred on the whole image's median (:func:`log_intensity_centre`), not the
+  box's;
+- the ``regions`` group averages the σ ≤ 4 features over each superpixel of the
+  whole image's superpixels (drawn once over the image: the compact watershed floods
+  from a grid of seeds over the whole edge map, which no tile reproduces). A
+  superpixel may stretch over hundreds of pixels (598 px on the fruits frame), so no
+  halo holds them: their means are statistics gathered over the tiles first
+  (:meth:`TiledFeatures.region_values`: every core's sums of those features per
+  superpixel, ``np.bincount``), then every box reads them as one
+  :class:`~..features.feature_stack.RegionBlock` per channel.
+
+Training reads the rows of the stroke pixels (:meth:`TiledFeatures.take`), gathered
+tile by tile around the strokes of each tile; the prediction reads each tile's box
+(:mod:`.tiled_prediction`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from ..features.feature_stack import FeatureStack, RegionBlock
+from ..features.pixel_features import (
+    REGION_MAX_SIGMA,
+    PixelFeatureParams,
+    feature_names,
+    feature_reach,
+    largest_factor,
+    log_intensity_centre,
+    pixel_features,
+)
+from ..tiles import Box, TileGrid, round_up
+
+Maps = tuple[np.ndarray, np.ndarray, np.ndarray]
+
+
+def tile_halo(params: PixelFeatureParams, margin: int) -> int:
+    """Pixels a tile reads beyond the pixels it answers for, so its features there and
+    ``margin`` pixels further equal the whole image's: ``margin`` plus the features'
+    reach (:func:`~..features.pixel_features.feature_reach`)."""
+    return int(margin) + feature_reach(params)
+
+
+def without_regions(params: PixelFeatureParams, largest: float | None = None) -> PixelFeatureParams:
+    """``params`` without the ``regions`` group (and with ``largest``, only the scales
+    σ ≤ it): the features a box computes itself."""
+    scales = tuple(s for s in params.scales if largest is None or s <= largest)
+    groups = tuple(g for g in params.groups if g != "regions")
+    return replace(params, scales=scales or params.scales[:1], groups=groups)
+
+
+def core_sums(features: FeatureStack, inner: Box, regions: np.ndarray, n: int) -> np.ndarray:
+    """(F, n) float64 sums of every feature over the pixels of the box ``inner`` of
+    ``features`` per region (``regions``: the flat region of each of those pixels,
+    0 … n − 1)."""
+    planes = (features.plane(j)[inner].ravel() for j in range(features.n_features))
+    return np.stack([np.bincount(regions, p, n) for p in planes])
+
+
+def region_names(params: PixelFeatureParams) -> tuple[str, ...]:
+    """The names of the ``regions`` group's features of ``params`` (no prefix)."""
+    return tuple(n for n in feature_names(params) if n.startswith("region:"))
+
+
+def tile_align(params: PixelFeatureParams, stride: int) -> int:
+    """Multiple of pixels tiles start on: the coarsest feature grid and the prediction
+    grid both divide it."""
+    return math.lcm(largest_factor(params), max(1, int(stride)))
+
+
+@dataclass
+class TiledFeatures:
+    """Pixel features of an image computed on boxes of it (module docstring).
+
+    Attributes
+    ----------
+    images : list of (Î, ρ, φ)
+        Every channel's polarisation image (H, W each): the luminance first.
+    channels : list of str
+        The channels' name prefixes (``""`` for the luminance).
+    params : PixelFeatureParams
+    grid : TileGrid
+        The tiles the prediction runs on; its halo and alignment hold for any box.
+    regions : ndarray (H, W) int or None
+        The whole image's superpixels (with the ``regions`` group).
+    """
+
+    images: list[Maps]
+    channels: list[str]
+    params: PixelFeatureParams
+    grid: TileGrid
+    regions: np.ndarray | None = None
+    log_centres: list[float] = field(default_factory=list)
+    _region_values: list[np.ndarray] | None = field(default=None, init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        if not self.log_centres:
+            self.log_centres = [float(log_intensity_centre(im[0])) for im in self.images]
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return self.grid.shape
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        """The features' names, as the whole image's stack names them."""
+        plain = feature_names(self.params)
+        return tuple(f"{c}:{n}" if c else n for c in self.channels for n in plain)
+
+    @property
+    def n_features(self) -> int:
+        return len(self.names)
+
+    def box(self, outer: Box) -> FeatureStack:
+        """The features of the pixels of ``outer`` (a box starting on the grid's
+        alignment); they equal the whole image's at least a halo inside its cut edges
+        (the region means: everywhere)."""
+        own = without_regions(self.params)
+        means = self.region_values() if self.regions is not None else None
+        stacks = []
+        for n, (c, (i, d, p)) in enumerate(zip(self.channels, self.images, strict=True)):
+            f = pixel_features(
+                i[outer], d[outer], p[outer], own, channel=c, log_centre=self.log_centres[n]
+            )
+            if means is not None:
+                block = RegionBlock(means[n], self.regions[outer])
+                names = [f"{c}:{x}" if c else x for x in region_names(self.params)]
+                f = FeatureStack((*f.blocks, block), (*f.names, *names), self.params)
+            stacks.append(f)
+        return stacks[0] if len(stacks) == 1 else FeatureStack.joined(stacks)
+
+    def region_values(self) -> list[np.ndarray]:
+        """Every channel's (F_r, n) float32 means of its σ ≤ 4 features over each
+        superpixel, gathered over the tiles' cores (sums per superpixel, then divided
+        by its pixels); made once."""
+        if self._region_values is None:
+            assert self.regions is not None
+            small = without_regions(self.params, REGION_MAX_SIGMA)
+            halo = round_up(feature_reach(small), self.grid.align)
+            grid = TileGrid(self.shape, self.grid.core, halo, self.grid.align)
+            n = int(self.regions.max()) + 1
+            sums: list[np.ndarray | None] = [None] * len(self.images)
+            for tile in grid:
+                core = self.regions[tile.core].ravel()
+                for k, (i, d, p) in enumerate(self.images):
+                    o = tile.outer
+                    f = pixel_features(i[o], d[o], p[o], small, log_centre=self.log_centres[k])
+                    add = core_sums(f, tile.inner, core, n)
+                    sums[k] = add if sums[k] is None else sums[k] + add
+            counts = np.maximum(np.bincount(self.regions.ravel(), minlength=n), 1)
+            self._region_values = [(v / counts).astype(np.float32) for v in sums]
+        return self._region_values
+
+    def around(self, rows: tuple[int, int], cols: tuple[int, int]) -> Box:
+        """The box read for the pixels rows[0]:rows[1] × cols[0]:cols[1]: grown by the
+        halo, its start rounded down and its end up to the alignment, clipped."""
+        a, h = self.grid.align, self.grid.halo
+        return (
+            slice(max(0, (rows[0] - h) // a * a), min(self.shape[0], round_up(rows[1] + h, a))),
+            slice(max(0, (cols[0] - h) // a * a), min(self.shape[1], round_up(cols[1] + h, a))),
+        )
+
+    def take(self, index: np.ndarray) -> np.ndarray:
+        """(n, F) float32 rows of the pixels at flat ``index``: for every tile's share of
+        them, the features of the box around those pixels only."""
+        index = np.asarray(index, dtype=np.int64).ravel()
+        out = np.empty((index.size, self.n_features), dtype=np.float32)
+        r, c = np.divmod(index, self.shape[1])
+        tile = (r // self.grid.core) * self.grid.counts[1] + c // self.grid.core
+        for t in np.unique(tile):
+            mine = np.flatnonzero(tile == t)
+            rr, cc = r[mine], c[mine]
+            rows, cols = (int(rr.min()), int(rr.max()) + 1), (int(cc.min()), int(cc.max()) + 1)
+            outer = self.around(rows, cols)
+            feats = self.box(outer)
+            width = outer[1].stop - outer[1].start
+            local = (rr - outer[0].start) * width + (cc - outer[1].start)
+            out[mine] = feats.take(local)
+        return out
+
+
+def tiled_features(
+    images: Sequence[Maps],
+    channels: Sequence[str],
+    params: PixelFeatureParams,
+    grid: TileGrid,
+    regions: np.ndarray | None,
+) -> TiledFeatures:
+    """A :class:`TiledFeatures` (``regions`` dropped without the ``regions`` group)."""
+    keep = regions if "regions" in params.groups else None
+    return TiledFeatures(list(images), list(channels), params, grid, keep)

@@ -1,0 +1,177 @@
+"""The scribbles method's prediction tile by tile: bounded memory on a large image.
+
+Whether an image is tiled follows from its size and the memory limit
+(:func:`scribble_tiles`): when the whole-image estimate
+(:func:`~..limits.estimate_scribble_bytes`) exceeds the limit, the image is cut into
+the tiles of a :class:`~..tiles.TileGrid` whose outer boxes fit what is left of the
+limit after the full-size arrays (:func:`~..limits.scribble_bytes_per_pixel`).
+
+Every tile's features are computed on its outer box
+(:class:`~.tiled_features.TiledFeatures`), the classifier predicts the core grown by a
+margin coarse to fine (:func:`~.refined_prediction.window_probabilities`: two grid cells,
+what the interpolation and the border test read, plus the guided filter's 2 r), and the
+core is kept. So the probabilities equal the whole image's to float rounding.
+
+The region walk (:mod:`.region_walk`) is global — one linear system over every node of
+the image — but it reads the pixels only through sums: for every superpixel and class
+the number of pixels the classifier gives that class and their summed probabilities
+(the nodes and their means λ), and the borders between nodes. So each tile adds its
+core's counts and sums (``np.bincount``) and keeps its labels (uint8); the nodes,
+their graph (:meth:`~.region_walk.RegionGraph.adjacency`, from the whole image's
+superpixels and edge map), the seeds and the walk are then made once, and every pixel
+takes its node's answer: the same system as the whole image's.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from ..limits import KEPT_MAPS, memory_limit, scribble_bytes_per_pixel
+from ..tiles import Box, TileGrid
+from .pixel_classifier import (
+    PixelClassifier,
+    PixelPrediction,
+    margin_uncertainty,
+    most_probable,
+    smooth_probabilities,
+)
+from .refined_prediction import window_probabilities
+from .region_walk import RegionGraph, confident_seeds, node_prediction, walk, with_scribbles
+from .tiled_features import TiledFeatures
+
+#: Rows of the full-size node image renumbered at once (bounds the int64 keys).
+BAND_ROWS = 512
+
+
+def prediction_margin(stride: int, smoothing: float) -> int:
+    """Pixels beyond a core its prediction must be right on: two grid cells and the
+    guided filter's two box means of radius r = round(``smoothing``)."""
+    r = max(1, round(smoothing)) if smoothing > 0 else 0
+    return 2 * max(1, int(stride)) + 2 * r
+
+
+def scribble_tiles(
+    shape: tuple[int, int],
+    feature_params: Any,
+    halo: int,
+    align: int,
+    channels: int = 1,
+    n_classes: int = 4,
+    limit: int | float | None = None,
+) -> TileGrid | None:
+    """The tiles of the scribbles method on an image of ``shape``, or None when the
+    whole image fits the memory ``limit`` (default :func:`~..limits.memory_limit`).
+
+    Whole image: the work and full-size bytes a pixel of
+    :func:`~..limits.scribble_bytes_per_pixel` plus the pipeline's
+    :data:`~..limits.KEPT_MAPS` float64 maps. Tiled: the limit less the full-size
+    arrays is the budget of one outer box of (c + 2h)² pixels at the work's bytes a
+    pixel (:meth:`TileGrid.for_budget`; at least its smallest core).
+    """
+    cap = memory_limit(limit)
+    pixels = int(shape[0]) * int(shape[1])
+    work, fixed = scribble_bytes_per_pixel(feature_params, channels, n_classes)
+    if pixels * (work + fixed + 8 * KEPT_MAPS) <= cap:
+        return None
+    _, fixed = scribble_bytes_per_pixel(feature_params, channels, n_classes, tiled=True)
+    budget = cap - pixels * (fixed + 8 * KEPT_MAPS)
+    return TileGrid.for_budget(shape, budget, work, halo, align)
+
+
+def _local(box: Box, outer: Box) -> Box:
+    """``box`` in the coordinates of ``outer``."""
+    r0, c0 = outer[0].start, outer[1].start
+    return slice(box[0].start - r0, box[0].stop - r0), slice(box[1].start - c0, box[1].stop - c0)
+
+
+def core_probabilities(
+    classifier: PixelClassifier,
+    features: TiledFeatures,
+    tile: Any,
+    stride: int,
+    guide: tuple[np.ndarray, tuple[float, float]] | None,
+    cancel: Any = None,
+) -> tuple[np.ndarray, int]:
+    """p_k (K, h, w) of a tile's core and the pixels predicted on their own features:
+    its box's features, the window around the core coarse to fine, smoothed with the
+    ``guide`` (the whole image's guide and its (mean, std)) when given."""
+    smoothing = classifier.params.smoothing if guide is not None else 0.0
+    window = tile.grown(prediction_margin(stride, smoothing), features.shape)
+    feats = features.box(tile.outer)
+    out = window_probabilities(classifier.model, feats, _local(window, tile.outer), stride, cancel)
+    proba = out.probabilities
+    if guide is not None and smoothing > 0:
+        proba = smooth_probabilities(proba, guide[0][window], smoothing, guide[1])
+    core = _local(tile.core, window)
+    return np.ascontiguousarray(proba[:, core[0], core[1]]), out.n_predicted
+
+
+def tiled_pixels(
+    classifier: PixelClassifier,
+    features: TiledFeatures,
+    stride: int,
+    guide: tuple[np.ndarray, tuple[float, float]] | None = None,
+    cancel: Any = None,
+) -> PixelPrediction:
+    """:func:`~.pixel_classifier.predict_pixels` tile by tile (no walk): every core's
+    probabilities (:func:`core_probabilities`), label and uncertainty stitched."""
+    k = classifier.classes.size
+    h, w = features.shape
+    proba = np.empty((k, h, w), dtype=np.float32)
+    labels = np.empty((h, w), dtype=np.int32)
+    uncertainty = np.empty((h, w), dtype=np.float32)
+    predicted = 0
+    for tile in features.grid:
+        p, n = core_probabilities(classifier, features, tile, stride, guide, cancel)
+        proba[:, tile.core[0], tile.core[1]] = p
+        labels[tile.core] = most_probable(p)
+        uncertainty[tile.core] = margin_uncertainty(p)
+        predicted += n
+    return PixelPrediction(labels, proba, uncertainty, classifier.classes, predicted)
+
+
+def tiled_walk(
+    classifier: PixelClassifier,
+    features: TiledFeatures,
+    graph: RegionGraph,
+    stride: int,
+    scribbles: np.ndarray | None = None,
+    cancel: Any = None,
+) -> PixelPrediction:
+    """:func:`~.region_walk.walked_prediction` with the prior made tile by tile (module
+    docstring): the node counts and probability sums gathered over the cores, then the
+    walk over the nodes of the whole image."""
+    k = classifier.classes.size
+    keys = (int(graph.regions.max()) + 1) * k
+    counts = np.zeros(keys)
+    sums = np.zeros((keys, k))
+    labels = np.empty(features.shape, dtype=np.uint8 if k < 256 else np.int32)
+    predicted = 0
+    for tile in features.grid:
+        prior, n = core_probabilities(classifier, features, tile, stride, None, cancel)
+        lab = most_probable(prior)
+        key = (graph.regions[tile.core].astype(np.int64) * k + lab).ravel()
+        counts += np.bincount(key, minlength=keys)
+        for j in range(k):
+            sums[:, j] += np.bincount(key, weights=prior[j].ravel(), minlength=keys)
+        labels[tile.core] = lab
+        predicted += n
+    present = counts > 0
+    node_of = (np.cumsum(present) - 1).astype(np.int32)
+    nodes = np.empty(features.shape, dtype=np.int32)
+    for start in range(0, nodes.shape[0], BAND_ROWS):
+        band = slice(start, start + BAND_ROWS)
+        nodes[band] = node_of[graph.regions[band].astype(np.int64) * k + labels[band]]
+    means = sums[present] / counts[present][:, None]
+    seeds = with_scribbles(confident_seeds(means), nodes, scribbles, classifier.classes)
+    x = walk(graph.adjacency(nodes), means, seeds, classifier.params.region_walk)
+    return node_prediction(x, nodes, classifier.classes, predicted)
+
+
+def tiles_needed(core: int, halo: int) -> float:
+    """Outer pixels read per core pixel for a square core of side ``core`` with a halo
+    of ``halo``: ((c + 2h) / c)² (the tiling's extra work, ≥ 1)."""
+    return math.pow((core + 2 * halo) / max(core, 1), 2)

@@ -1,0 +1,105 @@
+"""The scribbles method tile by tile (issue 39): the tiled labels equal the whole
+image's on a synthetic scene with ground truth, no seams along the tiles' cuts, the
+tile size follows the memory limit, training reads the strokes' pixels only."""
+
+import numpy as np
+import pytest
+from sklearn.metrics import adjusted_rand_score
+
+from napari_polarseg.engine import ScribbleSession
+from napari_polarseg.engine.classifier.pixel_classifier import ClassifierParams
+from napari_polarseg.engine.classifier.tiled_features import TiledFeatures
+from napari_polarseg.engine.classifier.tiled_prediction import scribble_tiles
+from napari_polarseg.engine.features.pixel_features import PixelFeatureParams
+from napari_polarseg.engine.limits import (
+    KEPT_MAPS,
+    estimate_scribble_bytes,
+    feature_bytes_per_pixel,
+    scribble_bytes_per_pixel,
+)
+from napari_polarseg.engine.synthetic.scenes import make_scene, scribble_strokes
+
+ANGLES = [0, 45, 90, 135]
+SHAPE = (360, 420)
+#: A limit far below the whole-image estimate of SHAPE: the image is tiled.
+SMALL = 40e6
+
+
+@pytest.fixture(scope="module")
+def scene():
+    scene = make_scene("leaves", shape=SHAPE, angles_deg=ANGLES)
+    return scene, scribble_strokes(scene.labels, seed=0)
+
+
+def _run(scene, limit, walk=0.03):
+    s = ScribbleSession(
+        scene[0].stack, ANGLES, classifier_params=ClassifierParams(region_walk=walk)
+    )
+    s.segmenter.max_bytes = limit
+    labels = s.update(scene[1])
+    return s, labels
+
+
+@pytest.mark.parametrize("walk", [0.03, 0.0])
+def test_tiled_labels_equal_whole_image_labels(scene, walk):
+    whole, labels = _run(scene, None, walk)
+    tiled, tiled_labels = _run(scene, SMALL, walk)
+    assert not isinstance(whole.cached_features, TiledFeatures)
+    feats = tiled.cached_features
+    assert isinstance(feats, TiledFeatures) and len(feats.grid) > 4
+    assert feats.names == whole.cached_features.names
+    assert adjusted_rand_score(labels.ravel(), tiled_labels.ravel()) >= 0.98
+    assert np.mean(labels == tiled_labels) > 0.995
+    # both as good against the ground truth
+    truth = scene[0].labels.ravel()
+    ari = [adjusted_rand_score(truth, x.ravel()) for x in (labels, tiled_labels)]
+    assert abs(ari[0] - ari[1]) < 0.01
+
+
+def test_training_reads_the_strokes_pixels_only(scene):
+    whole, _ = _run(scene, None)
+    tiled, _ = _run(scene, SMALL)
+    index = np.flatnonzero(scene[1].ravel() > 0)[::37]
+    rows = tiled.cached_features.take(index)
+    np.testing.assert_allclose(rows, whole.cached_features.take(index), rtol=1e-4, atol=1e-5)
+    assert tiled.classifier.n_training_pixels == whole.classifier.n_training_pixels
+
+
+def test_no_more_label_changes_along_tile_cuts(scene):
+    tiled, labels = _run(scene, SMALL)
+    grid = tiled.cached_features.grid
+    change = np.zeros(SHAPE, dtype=bool)
+    change[:, 1:] |= labels[:, 1:] != labels[:, :-1]
+    change[1:] |= labels[1:] != labels[:-1]
+    truth = scene[0].labels
+    true_change = np.zeros(SHAPE, dtype=bool)
+    true_change[:, 1:] |= truth[:, 1:] != truth[:, :-1]
+    true_change[1:] |= truth[1:] != truth[:-1]
+    cuts = grid.borders()
+    # label changes not explained by a true border: as rare on the cuts as elsewhere
+    spurious = change & ~true_change
+    on_cuts, elsewhere = spurious[cuts].mean(), spurious[~cuts].mean()
+    assert on_cuts <= elsewhere + 0.01
+
+
+def test_tile_size_follows_the_memory_limit(scene):
+    shape, params = (4000, 6000), PixelFeatureParams()
+    work, fixed = scribble_bytes_per_pixel(params, tiled=True)
+    grids = [scribble_tiles(shape, params, 136, 4, limit=g * 2**30) for g in (6, 12)]
+    assert grids[0].core < grids[1].core
+    for grid, g in zip(grids, (6, 12), strict=True):
+        full = shape[0] * shape[1] * (fixed + 8 * KEPT_MAPS)
+        assert full + grid.largest_outer * work <= g * 2**30  # within the limit
+    # below the threshold nothing is tiled, above it the image is
+    big = 2 * estimate_scribble_bytes(SHAPE)
+    s, _ = _run(scene, big)
+    assert not isinstance(s.cached_features, TiledFeatures)
+    assert scribble_tiles(SHAPE, params, 136, 4, limit=big) is None
+
+
+def test_memory_estimates_follow_the_features():
+    one = feature_bytes_per_pixel(PixelFeatureParams(scales=(1.0,)), threads=1)
+    five = feature_bytes_per_pixel(PixelFeatureParams(), threads=1)
+    assert 0 < one < five
+    assert feature_bytes_per_pixel(PixelFeatureParams(), channels=4) > five
+    assert estimate_scribble_bytes((2000, 2000)) == 4 * estimate_scribble_bytes((1000, 1000))
