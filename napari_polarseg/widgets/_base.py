@@ -12,7 +12,7 @@ import numpy as np
 from magicgui.widgets import ComboBox, Container, Label, LineEdit, ProgressBar, PushButton
 from napari.layers import Image, Labels
 from napari.utils.notifications import show_error
-from qtpy.QtCore import QEvent, QObject, QTimer
+from qtpy.QtCore import QEvent, QObject, Qt, QTimer
 from qtpy.QtWidgets import QDockWidget, QMainWindow, QScrollArea, QVBoxLayout, QWidget
 
 from ..engine import PolarsegError
@@ -21,6 +21,7 @@ from ._layers import ANGLES_KEY, find_output, layer_tag, source_key
 from ._runner import PROGRESS_STEPS, WorkerSlot
 from .angle_axis import AngleLabel
 from .dims_guard import guard_viewer
+from .dock_layout import MAX_DOCK_WIDTH, full_width_status, shrink_menus, title_dock
 from .layer_queue import LayerQueue
 from .session import format_angles
 from .view_fit import FitKeeper
@@ -82,10 +83,14 @@ class WidthFollower(QObject):
         return False
 
     def fit(self) -> None:
-        """Set the area's minimum width to its widget's plus the vertical scroll bar."""
+        """Set the area's minimum width to its widget's plus the vertical scroll bar, at
+        most :data:`~.dock_layout.MAX_DOCK_WIDTH` (its menus shrink first:
+        :func:`~.dock_layout.shrink_menus`; wider controls scroll sideways)."""
+        shrink_menus(self._area.widget())
         bar = self._area.verticalScrollBar().sizeHint().width()
         frame = 2 * self._area.frameWidth()
-        self._area.setMinimumWidth(self._area.widget().minimumSizeHint().width() + bar + frame)
+        wanted = self._area.widget().minimumSizeHint().width() + bar + frame
+        self._area.setMinimumWidth(min(wanted, MAX_DOCK_WIDTH))
 
 
 #: Object name of every plugin dock's frame (:class:`ScrollingContainer`), and of the
@@ -110,9 +115,9 @@ class DockTabber(QObject):
     dock, the next event-loop turn (the dock is then in its window) tabifies it.
     """
 
-    def __init__(self, frame: QWidget) -> None:
+    def __init__(self, frame: QWidget, title: str = "") -> None:
         super().__init__(frame)
-        self._frame = frame
+        self._frame, self._title = frame, title
         frame.installEventFilter(self)
 
     def eventFilter(self, watched: QObject, event: QEvent) -> bool:  # noqa: N802 (Qt)
@@ -121,9 +126,10 @@ class DockTabber(QObject):
         return False
 
     def tabify(self) -> None:
-        """Tabify the frame's dock with the first plugin dock in the same window area."""
+        """Give the frame's dock its short tab title (:func:`~.dock_layout.title_dock`),
+        and tabify it with the first plugin dock in the same window area."""
         try:
-            dock = _dock_of(self._frame)
+            dock = title_dock(self._frame, self._title)
             window = None if dock is None else dock.parentWidget()
         except RuntimeError:  # deleted meanwhile
             return
@@ -185,8 +191,13 @@ class ScrollingContainer(Container):
     (where a subclass adds plain Qt widgets such as a plot canvas).
     """
 
+    #: The dock's tab title: short, and distinct from the other docks' first letters.
+    dock_title = ""
+
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(scrollable=True, **kwargs)
+        # controls wider than MAX_DOCK_WIDTH scroll sideways (magicgui: never)
+        self.scroll_area.setHorizontalScrollBarPolicy(Qt.ScrollBarPolicy.ScrollBarAsNeeded)
         # the scroll area stretches the controls' widget to its height: a stretch below
         # them keeps them packed at the top (napari adds one to a dock that does not scroll)
         self.content.layout().addStretch(1)
@@ -197,7 +208,7 @@ class ScrollingContainer(Container):
         frame_layout.addWidget(self.root_native_widget, 1)
         self._frame.setObjectName(DOCK_NAME)
         self._frame._magic_widget = self  # type: ignore[attr-defined] (as magicgui's native)
-        self._tabber = DockTabber(self._frame)
+        self._tabber = DockTabber(self._frame, self.dock_title)
         self._width = WidthFollower(self.scroll_area)
 
     @property
@@ -227,6 +238,9 @@ class ScrollingContainer(Container):
         """A labelled Container of ``widgets`` below the scroll area (always in view)."""
         footer = Container(widgets=widgets, labels=True)
         self._frame.layout().addWidget(footer.native)
+        for widget in widgets:  # the status line: the footer's whole width
+            if isinstance(widget, Label) and not widget.label:
+                full_width_status(widget.native)
         return footer
 
     def add_native(self, widget: QWidget, expand: bool = False) -> None:
@@ -287,7 +301,6 @@ class StackWidget(ScrollingContainer):
         #: (see ``_runner.ACTIVITY_DELAY``)
         self.progress = ProgressBar(label="progress", value=0, min=0, max=1)
         self.status = Label(value="")
-        self.status.native.setWordWrap(True)
         self.extend([self.stack_layer, self.angles])
         #: Run, Cancel, progress and status, below the scrolling controls
         self.footer = self.add_footer(

@@ -248,6 +248,32 @@ def show_output(
     return layer
 
 
+#: Column of a segments layer's ``features`` that napari's status bar shows on hover.
+MATERIAL_COLUMN = "material"
+
+
+def name_labels(layer: Layer, names: dict[int, str]) -> None:
+    """Show ``names`` (label value → name) on hover over the Labels ``layer``: its
+    ``features`` table gets an ``index`` column (the label values, which napari looks a
+    hovered value up in) and a ``material`` column, so the status bar reads e.g.
+    ``3; material: banana``. Without names the table is emptied (nothing extra shown);
+    a table already holding these names is left as it is."""
+    import pandas as pd
+
+    if not names:
+        if layer.features.shape[1]:
+            layer.features = pd.DataFrame()
+        return
+    values = sorted(int(v) for v in names)
+    table = pd.DataFrame({"index": values, MATERIAL_COLUMN: [names[v] for v in values]})
+    current = layer.features
+    if list(current.columns) == list(table.columns) and current.reset_index(drop=True).equals(
+        table
+    ):
+        return
+    layer.features = table
+
+
 def below_labels(viewer: napari.Viewer, layer: Layer, source: Layer) -> None:
     """Move the new image ``layer`` below the lowest Labels layer above ``source``.
 

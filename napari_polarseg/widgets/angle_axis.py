@@ -7,7 +7,10 @@ spaced (0, 45, 90, 135 and a repeated 180, or any order a folder of files gives)
 So each plugin dock keeps an :class:`AngleLabel`: on every slider move (and layer change)
 it sets the slider's axis label to the angle of the frame shown, e.g. ``angle 45°``,
 read from the stack layer's ``metadata["angles_deg"]``. The label sits where the eye
-already is, and napari widens the label column to fit it.
+already is, and napari widens the label column to fit it. napari writes the layers' own
+axis labels (``angle``) back to the slider whenever a layer's data, scale or translate
+changes (a rerun replacing the segments' data did): the label also follows the slider's
+labels, and puts the angle back.
 """
 
 from __future__ import annotations
@@ -77,6 +80,7 @@ class AngleLabel:
         self._viewer = viewer
         self._emitters = (
             viewer.dims.events.current_step,
+            viewer.dims.events.axis_labels,  # napari resets them when a layer's data changes
             viewer.layers.events.inserted,
             viewer.layers.events.removed,
             viewer.layers.events.reordered,

@@ -123,6 +123,8 @@ class BatchWidget(ScrollingContainer):
         The viewer (its *Segment by material* widget supplies the parameters).
     """
 
+    dock_title = "Batch"
+
     def __init__(self, viewer: napari.viewer.Viewer) -> None:
         super().__init__(labels=True)
         self._viewer = viewer
@@ -488,6 +490,8 @@ class TimeSeriesWidget(ScrollingContainer):
     false-alarm rate of the change test and the parameters (as in :class:`BatchWidget`),
     press *Run*: adds the layers of :func:`add_timeseries_layers`.
     """
+
+    dock_title = "Time series"
 
     def __init__(self, viewer: napari.viewer.Viewer) -> None:
         super().__init__(labels=True)

@@ -19,6 +19,7 @@ from magicgui.widgets import ComboBox, Container, Label, LineEdit, PushButton
 
 from ..engine.materials import clean_name, default_name
 from ..palette import label_rgba
+from .dock_layout import grow_with_entries
 
 #: Metadata key of a scribbles layer holding its material names.
 NAMES_KEY = "polarseg_materials"
@@ -81,6 +82,7 @@ class MaterialList(Container):
         row.margins = (0, 0, 0, 0)
         super().__init__(widgets=[row, self.name_edit], labels=True, label="materials")
         self.margins = (0, 0, 0, 0)
+        grow_with_entries(self.material.native)  # whole names: "3: banana"
         self.material.changed.connect(self._on_material)
         # renamed when the editing ends (Enter, focus out): not at every key
         self.name_edit.native.editingFinished.connect(self._on_name)
@@ -157,6 +159,7 @@ class MaterialList(Container):
         try:
             values = self.values()
             self.material.reset_choices()
+            grow_with_entries(self.material.native)  # the longest name whole
             selected = None if self.layer is None else int(self.layer.selected_label)
             if selected in values:
                 self.material.value = selected

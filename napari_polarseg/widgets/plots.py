@@ -134,6 +134,7 @@ class PlotsWidget(StackWidget):
     follows the strokes as they are painted.
     """
 
+    dock_title = "Plots"
     run_text = "Load segmentation"
     run_tooltip = "Load the chosen stack's last segmentation and draw its plots"
     progress_desc = "Polarisation plots"

@@ -97,6 +97,7 @@ class PolarisationWidget(StackWidget):
         The viewer whose layers the widget reads and writes.
     """
 
+    dock_title = "Polarisation"
     run_text = "Compute"
     run_tooltip = (
         "Fit the polarisation image (Î, ρ, φ) and the zenith θ of the chosen stack and "

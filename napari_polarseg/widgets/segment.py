@@ -19,6 +19,7 @@ from __future__ import annotations
 import contextlib
 import functools
 import time
+from dataclasses import replace
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -29,6 +30,7 @@ from ..engine import Pipeline, PolarsegError, SegmentationResult
 from ..engine.params import PRESETS, ParamSpec
 from ._base import SEGMENT_DOCK_NAME, StackWidget
 from ._layers import find_output, source_key
+from .dock_layout import release_dock_minimum
 from .docks import SegmentDock
 from .param_controls import controlled_names, every_param_spec
 from .segment_assist import ScribbleAssist
@@ -141,6 +143,7 @@ class SegmentWidget(SegmentMembers, StackWidget, SegmentDock):
         The viewer whose layers the widget reads and writes.
     """
 
+    dock_title = "Segment"
     run_text = "Run"
     run_tooltip = (
         "Segment the chosen stack by material with the parameters below (or the "
@@ -158,6 +161,7 @@ class SegmentWidget(SegmentMembers, StackWidget, SegmentDock):
         self.store = PipelineStore()
         self._force = False  # a control changed: the next live run is not skipped
         self._live_run = False  # run() was called by the live update
+        self._features_later = False  # pixel features put off while a run computes
         status, fail, parent = self._set_status, self._fail, lambda: self.native
         #: The parts: the parameters, the inputs beside the stack, the output layers,
         #: the classifier files, *Export results…* and the scribble helpers.
@@ -241,7 +245,7 @@ class SegmentWidget(SegmentMembers, StackWidget, SegmentDock):
             w.changed.connect(self._on_value_changed)
         for w in inputs.classifier_controls.controls:
             w.changed.connect(self._on_value_changed)
-        self.live.changed.connect(self._on_value_changed)
+        self.live.changed.connect(self._on_live_toggled)
         self.live.changed.connect(self._prepare_segments)
         inputs.scribbles_layer.changed.connect(self.prefetch_features)
         state.edited.connect(self.schedule_live_run)
@@ -257,7 +261,10 @@ class SegmentWidget(SegmentMembers, StackWidget, SegmentDock):
 
     # -- sections -----------------------------------------------------------------------
     def _on_show_advanced(self, shown: bool) -> None:
+        """Show or hide the advanced section; hidden, the dock can be narrowed again."""
         self.advanced.visible = bool(shown)
+        if not shown:
+            QTimer.singleShot(0, functools.partial(release_dock_minimum, self.native))
 
     def _show(
         self,
@@ -271,8 +278,9 @@ class SegmentWidget(SegmentMembers, StackWidget, SegmentDock):
         contrast: dict[str, Any] | None = None,
     ) -> None:
         """Show a run's layers and summary: a classifier's output with the materials
-        named (``SegmentInputs.named``), then ``SegmentLayers.show``."""
-        result = self.inputs.named(result)
+        named (``SegmentInputs.named``), segments that survive keeping their numbers
+        (``SegmentLayers.keep_colours``), then ``SegmentLayers.show``."""
+        result = self.layers.keep_colours(layer, self.inputs.named(result))
         self.layers.show(layer, angles_deg, result, seconds, inputs, partial, snap, contrast)
 
     def schedule_live_run(self) -> None:
@@ -295,6 +303,19 @@ class SegmentWidget(SegmentMembers, StackWidget, SegmentDock):
     def _on_idle(self) -> None:
         super()._on_idle()
         self._settle()
+        if getattr(self, "_features_later", False) and not self.closed:
+            QTimer.singleShot(0, self._prefetch_later)
+
+    def _prefetch_later(self) -> None:
+        """The pixel features a busy worker put off, for the chosen scribbles layer,
+        once the result's layers are added (no run waits)."""
+        if not self._features_later or self.closed:
+            return
+        with contextlib.suppress(RuntimeError):  # the widget was deleted meanwhile
+            if self.busy or self._waiting():
+                QTimer.singleShot(LIVE_DELAY_MS, self._prefetch_later)
+            else:
+                self.prefetch_features()
 
     def _settle(self) -> None:
         """When no run is going, queued or scheduled by the live update: a stack whose
@@ -344,6 +365,29 @@ class SegmentWidget(SegmentMembers, StackWidget, SegmentDock):
         if self.live.value:
             self._force = True
             self._timer.start()  # restarts the delay: a burst of changes runs once
+
+    def _on_live_toggled(self, on: bool) -> None:
+        """Ticking *live update* arms it. It reruns at once only what was asked for
+        before and has changed since (values changed after a Run, strokes painted, a
+        classifier loaded); before any Run it starts nothing and says what it will do."""
+        if not on:
+            return
+        if self.state.requested is None and not self._has_strokes():
+            self._set_status(
+                "live update on: press Run (or paint strokes) for a first result; "
+                "every change after it reruns"
+            )
+            return
+        self._timer.start()  # not forced: runs only if the values differ from the last run's
+
+    def _has_strokes(self) -> bool:
+        """Whether the chosen scribbles train a classifier, or a classifier is loaded."""
+        try:
+            scribbles = self.inputs.current_scribbles()[1]
+        except PolarsegError:
+            return False
+        trains = scribbles is not None and scribble_problem(scribbles) is None
+        return trains or self.state.loaded is not None
 
     def _on_timer(self) -> None:
         force, self._force = self._force, False
@@ -455,8 +499,12 @@ class SegmentWidget(SegmentMembers, StackWidget, SegmentDock):
     def prefetch_features(self, *_: Any, force: bool = False) -> None:
         """Compute the pixel features in the worker while the first strokes are painted,
         once a scribbles layer is chosen (or ``force``), unless they train or a run waits."""
-        if (self.state.inputs.scribbles is None and not force) or self.busy or self._waiting():
+        if self.state.inputs.scribbles is None and not force:
             return
+        if self.busy or self._waiting():
+            self._features_later = True  # computed once the run ends (``_on_idle``)
+            return
+        self._features_later = False
         try:
             layer, angles_deg = self.current_stack()
             mask_key, region = self.inputs.current_mask()
@@ -516,7 +564,7 @@ class SegmentWidget(SegmentMembers, StackWidget, SegmentDock):
         contrast: dict[str, Any] = {}
         if isinstance(result, WithContrast):
             result, contrast = result.value, result.contrast
-        if run.snap != self.inputs.snapshot() or run.layer not in self._viewer.layers:
+        if not self._still_wanted(run) or run.layer not in self._viewer.layers:
             self._set_status("result dropped: the parameters changed while it was computed")
             return
         if isinstance(result, ClassifierOutput) and result.problem is not None:
@@ -527,7 +575,19 @@ class SegmentWidget(SegmentMembers, StackWidget, SegmentDock):
             run.layer, run.angles_deg, result, run.seconds(), run.inputs, False, run.snap, contrast
         )
 
+    def _still_wanted(self, run: Delivery) -> bool:
+        """Whether ``run``'s result is what the controls ask for now: the same
+        snapshot, or an unsupervised run while the only change since is a scribbles
+        layer without strokes to train on (*New scribbles layer* clicked meanwhile), for
+        which a new run would compute the same."""
+        now = self.inputs.snapshot()
+        if now is None or run.snap == now:
+            return now is not None
+        if run.snap.scribbles_key is not None or self._has_strokes():
+            return False
+        return replace(now, scribbles_key=None, scribbles_digest=None) == run.snap
+
     def _on_partial(self, run: Delivery, run_id: int, result: Any) -> None:
         """The segments (or classes) before the error map; dropped like a result."""
-        if run.snap == self.inputs.snapshot() and run.layer in self._viewer.layers:
+        if self._still_wanted(run) and run.layer in self._viewer.layers:
             self._show(run.layer, run.angles_deg, result, run.seconds(), run.inputs, True)

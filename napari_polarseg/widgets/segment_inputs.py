@@ -15,7 +15,7 @@ from napari.layers import Labels
 from ..engine import PolarsegError, SegmentParams
 from ..engine.chunks import in_background
 from ..io import parse_angles
-from ._layers import label_colormap, source_key
+from ._layers import MATERIAL_COLUMN, find_output, label_colormap, name_labels, source_key
 from .classifier_controls import ClassifierControls
 from .materials import MaterialList
 from .session import (
@@ -285,11 +285,16 @@ class SegmentInputs:
         return named_output(result, self.material_names())
 
     def _on_materials_renamed(self) -> None:
-        """A material was renamed: the status line says so (the names reach the next
-        export, saved classifier and result)."""
-        self._set_status(
-            "renamed: " + ", ".join(f"{v} {n}" for v, n in self.material_names().items())
-        )
+        """A material was renamed: the status line says so, the segments shown name it
+        on hover (the names reach the next export, saved classifier and result)."""
+        names = self.material_names()
+        self._set_status("renamed: " + ", ".join(f"{v} {n}" for v, n in names.items()))
+        stack = self._state.inputs.stack
+        segments = None if stack is None else find_output(self._viewer, "segments", stack)
+        if segments is not None and MATERIAL_COLUMN in segments.features:  # names on hover
+            table = segments.features
+            shown = dict(zip(table["index"].astype(int), table[MATERIAL_COLUMN], strict=True))
+            name_labels(segments, {v: names.get(v, n) for v, n in shown.items()})
 
     def on_scribbles_changed(self, *_: Any) -> None:
         """Another scribbles layer is chosen (or its names may have changed): its

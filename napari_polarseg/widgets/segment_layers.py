@@ -12,9 +12,18 @@ import numpy as np
 from magicgui.widgets import CheckBox
 
 from ..engine.physics.stokes import stokes_components
-from ._layers import Contrast, contrasts_of, find_output, remove_output, show_output, source_key
+from ._layers import (
+    Contrast,
+    contrasts_of,
+    find_output,
+    name_labels,
+    remove_output,
+    show_output,
+    source_key,
+)
 from .layer_queue import LayerQueue
 from .session import ClassifierOutput, Result, ShownResult, shown_result
+from .session.stable_labels import keep_numbers
 from .session.state import Prediction, SegmentState, ShownEntry
 from .views import VIEW_OUTPUTS, composite_for, view_mode_box
 
@@ -177,7 +186,7 @@ class SegmentLayers:
         if not shown.partial:
             self._show_complete(layer, shown, contrast or {})
         self._show_prediction(layer, shown, shown.meta)
-        self._show_segments(layer, shown.labels, shown.meta)
+        self._show_segments(layer, shown.labels, shown.meta, shown.result.materials)
         if shown.partial:
             self._state.show_partial(source_key(layer))
             self._set_status(shown.status(seconds))
@@ -185,14 +194,30 @@ class SegmentLayers:
         self._state.show(source_key(layer), ShownEntry(layer, angles_deg, shown, snap))
         self._done(shown.status(seconds))
 
-    def _show_segments(self, layer: Layer, labels: np.ndarray, meta: dict[str, Any]) -> None:
-        """``labels`` in ``layer``'s segments layer (its data kept when equal)."""
+    def keep_colours(self, layer: Layer, result: Any) -> Any:
+        """``result`` with its segments renumbered after those ``layer``'s segments
+        layer shows, so that a segment that survives a rerun keeps its number and colour
+        (:func:`~.session.stable_labels.keep_numbers`; a classifier's output as it is)."""
+        if isinstance(result, ClassifierOutput):
+            return result
+        segments = find_output(self._viewer, "segments", layer)
+        return keep_numbers(result, None if segments is None else np.asarray(segments.data))
+
+    def _show_segments(
+        self, layer: Layer, labels: np.ndarray, meta: dict[str, Any], materials: Any = None
+    ) -> None:
+        """``labels`` in ``layer``'s segments layer (its data kept when equal), with the
+        names of a classifier's ``materials`` shown on hover (:func:`~._layers.name_labels`)."""
         segments = find_output(self._viewer, "segments", layer)
         if segments is not None and np.array_equal(segments.data, labels):
             # e.g. the partial result already shows these labels: keep the data (no redraw)
             segments.metadata = {**segments.metadata, **meta}
         else:
-            show_output(self._viewer, "segments", labels, layer, meta)
+            segments = show_output(self._viewer, "segments", labels, layer, meta)
+        names = (
+            {} if materials is None else dict(zip(materials.values, materials.names, strict=True))
+        )
+        name_labels(segments, names)
 
     def _show_prediction(self, layer: Layer, shown: ShownResult, meta: dict[str, Any]) -> None:
         """The classifier's class probability and uncertainty layers (queued), or their
@@ -232,7 +257,7 @@ class SegmentLayers:
                 continue  # removed by the user: not brought back
             meta = entry.metadata
             self._show_prediction(entry.layer, entry.shown, meta)
-            self._show_segments(entry.layer, entry.shown.labels, meta)
+            self._show_segments(entry.layer, entry.shown.labels, meta, entry.result.materials)
 
     def prepare_segments(self, live: bool) -> None:
         """With ``live`` update on and a scribbles layer chosen, add the chosen stack's

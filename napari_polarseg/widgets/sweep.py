@@ -194,6 +194,7 @@ class SweepWidget(StackWidget):
 
     run_text = "Run sweep"
     run_tooltip = "Segment the chosen stack for every cell of the grid and score each"
+    dock_title = "Sweep"
     progress_desc = "Parameter sweep"
 
     def __init__(self, viewer: napari.viewer.Viewer) -> None:

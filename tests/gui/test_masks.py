@@ -205,6 +205,7 @@ def test_painting_the_mask_with_live_update_reruns(viewer, open_sample, add_widg
     widget = add_widget("Segment by material")
     widget.set_params(**FAST)
     widget.mask_layer.value = user_mask
+    run_and_wait(qtbot, widget)  # ticking live update runs nothing before a first Run
     widget.live.value = True
     wait_idle(qtbot, widget)
     masked = widget.output("masked")

@@ -183,7 +183,10 @@ class ExportRecord:
         params = self.params if self.params is not None else self.result.params
         maps = plots or self.result.features is not None or computes_block_maps(params.method)
         result = self.scene.segment(params, maps=maps, reconstruction=maps)
-        return replace(self, result=result)
+        # the same method and values: the same segments, numbered as the viewer shows
+        # them (``stable_labels``: a rerun may have renumbered them)
+        kept = {"labels": self.result.labels, "block_labels": self.result.block_labels}
+        return replace(self, result=replace(result, **kept))
 
     def named(self, names: dict[int, str]) -> ExportRecord:
         """This record with the classifier's materials renamed by ``names`` (scribble
