@@ -67,28 +67,44 @@ def superpixels(
     return np.ascontiguousarray(labels)
 
 
+def edge_gradients(
+    intensity: np.ndarray, dop: np.ndarray, phase: np.ndarray, polarisation: bool = True
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """The two gradient magnitudes of :func:`superpixel_edges` before they are scaled,
+    (H, W) each, per pixel: |∇(G * log Î)| (Î in units of the input) and, when
+    ``polarisation``, |∇(G * (s1, s2))| (dimensionless; else None)."""
+    log_i = np.log(np.maximum(intensity, INTENSITY_FLOOR))
+    grad = ndimage.gaussian_gradient_magnitude(log_i, EDGE_SIGMA)
+    if not polarisation:
+        return grad, None
+    pol = np.hypot(
+        ndimage.gaussian_gradient_magnitude(dop * np.cos(2 * phase), EDGE_SIGMA),
+        ndimage.gaussian_gradient_magnitude(dop * np.sin(2 * phase), EDGE_SIGMA),
+    )
+    return grad, pol
+
+
 def superpixel_edges(
     intensity: np.ndarray,
     dop: np.ndarray,
     phase: np.ndarray,
     polarisation_edge_weight: float = 1.0,
+    scales: tuple[float, float] | None = None,
 ) -> np.ndarray:
     """Edge map (H, W), dimensionless: |∇(G * log Î)| / m_log + w · |∇(G * (s1, s2))| / m_s.
 
     s1 = ρ cos 2φ and s2 = ρ sin 2φ are the Stokes components normalised by S0, G a
-    Gaussian of :data:`EDGE_SIGMA` px, each gradient divided by its median m over the
-    image (so the two edge maps weigh alike whatever the units) and
-    w = ``polarisation_edge_weight`` (0: log Î alone).
+    Gaussian of :data:`EDGE_SIGMA` px (:func:`edge_gradients`), each gradient divided by
+    its median m over the image (so the two edge maps weigh alike whatever the units;
+    ``scales`` = (m_log, m_s) when they are known, e.g. of a whole image cut into tiles)
+    and w = ``polarisation_edge_weight`` (0: log Î alone).
     """
-    log_i = np.log(np.maximum(intensity, INTENSITY_FLOOR))
-    edges = ndimage.gaussian_gradient_magnitude(log_i, EDGE_SIGMA)
-    edges /= max(float(np.median(edges)), 1e-12)
-    if polarisation_edge_weight > 0:
-        pol = np.hypot(
-            ndimage.gaussian_gradient_magnitude(dop * np.cos(2 * phase), EDGE_SIGMA),
-            ndimage.gaussian_gradient_magnitude(dop * np.sin(2 * phase), EDGE_SIGMA),
-        )
-        edges += polarisation_edge_weight * pol / max(float(np.median(pol)), 1e-12)
+    edges, pol = edge_gradients(intensity, dop, phase, polarisation_edge_weight > 0)
+    m_log = float(np.median(edges)) if scales is None else float(scales[0])
+    edges /= max(m_log, 1e-12)
+    if pol is not None:
+        m_pol = float(np.median(pol)) if scales is None else float(scales[1])
+        edges += polarisation_edge_weight * pol / max(m_pol, 1e-12)
     return edges
 
 

@@ -48,6 +48,7 @@ from ..unsupervised.segmenter import (
     prepare_regions,
     without_refinement,
 )
+from ..unsupervised.tiled_regions import region_tiles, tiled_prepare_regions
 from .base import MethodOutput, MethodRun
 from .superpixel_clustering import SuperpixelClustering
 
@@ -139,11 +140,18 @@ class ValidSuperpixels(SuperpixelClustering):
         """The region models the labels are drawn from: here one, the superpixels and node
         features of ``params`` on the scene's clustered pixels
         (:func:`clustered_pixels`), made once per image, region and parameters and kept
-        in the scene's feature cache; ``run`` shows the progress and may stop it."""
+        in the scene's feature cache, tile by tile when the whole image would not fit
+        the memory limit
+        (:func:`~..unsupervised.tiled_regions.region_tiles`); ``run`` shows the
+        progress and may stop it."""
 
         def prepare() -> RegionModel:
             valid = clustered_pixels(scene.region, pol.invalid)
-            return prepare_regions(pol.intensity, pol.dop, pol.phase, params, valid, run.within)
+            maps = (pol.intensity, pol.dop, pol.phase)
+            grid = region_tiles(pol.intensity.shape, params)
+            if grid is None:
+                return prepare_regions(*maps, params, valid, run.within)
+            return tiled_prepare_regions(*maps, params, valid, grid, run.within)
 
         # the clustered pixels follow from the image (its invalid pixels) and the
         # scene's region, fixed for the scene's life: the image's identity keys them

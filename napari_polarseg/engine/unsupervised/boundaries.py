@@ -85,6 +85,22 @@ def _border(labels: np.ndarray) -> np.ndarray:
     return border
 
 
+#: (count (k,), sums (2, k), spread (2,)) of :func:`segment_stats`.
+SegmentStats = tuple[np.ndarray, np.ndarray, np.ndarray]
+
+
+def segment_stats(count: np.ndarray, sums: np.ndarray, squares: np.ndarray) -> SegmentStats:
+    """What :func:`refined_labels` reads of the segments, from their pixel counts n_k
+    (k,), the sums Σv (2, k) and the sums of squares Σv² (2, k) of log Î and ρ over
+    their pixels: (n_k, Σv, the pooled spread √((Σ_k Σv² − Σ_k (Σv)² / n_k) / Σ n_k)
+    of each map), the spread in the units of the maps (log Î: ln of the input's units;
+    ρ: none)."""
+    count = np.asarray(count, dtype=np.float64)
+    within = squares.sum(axis=1) - (sums**2 / np.maximum(count, 1.0)).sum(axis=1)
+    spread = np.sqrt(np.maximum(within, 0.0) / max(float(count.sum()), 1.0)) + 1e-12
+    return count, np.asarray(sums, dtype=np.float64), spread
+
+
 def _spread(flat: np.ndarray, values: np.ndarray, means: np.ndarray) -> np.ndarray:
     """Pooled within-segment standard deviation of log Î and of ρ, (2,): the units of
     :func:`refine_boundaries`, from the flat labels, the (2, P) ``values`` of
@@ -94,10 +110,17 @@ def _spread(flat: np.ndarray, values: np.ndarray, means: np.ndarray) -> np.ndarr
 
 
 def refined_labels(
-    labels: np.ndarray, i: np.ndarray, d: np.ndarray, k: int, maps: np.ndarray | None = None
+    labels: np.ndarray,
+    i: np.ndarray,
+    d: np.ndarray,
+    k: int,
+    maps: np.ndarray | None = None,
+    stats: SegmentStats | None = None,
 ) -> np.ndarray:
     """Labels after up to :data:`REFINE_PASSES` passes of :func:`refine_boundaries`;
-    ``maps``: :func:`refine_maps` of ``i`` and ``d`` when already made.
+    ``maps``: :func:`refine_maps` of ``i`` and ``d`` when already made; ``stats``: the
+    segments' pixel counts, sums of log Î and ρ and pooled spread of a larger image
+    that ``labels`` is a tile of (:func:`segment_stats`), else taken from ``labels``.
 
     The same labels as calling :func:`refine_boundaries` pass after pass (with the
     spread of the first labels), but each pass looks only at the pixels that can be on
@@ -111,10 +134,13 @@ def refined_labels(
     maps = refine_maps(i, d) if maps is None else maps
     h, w = labels.shape
     values = maps.reshape(2, -1)
-    first = np.ascontiguousarray(labels, dtype=np.int32).ravel()
-    count = np.bincount(first, minlength=k).astype(np.float64)
-    sums = np.stack([np.bincount(first, v, k) for v in values])
-    spread = _spread(first, values, sums / np.maximum(count, 1.0))
+    if stats is None:
+        first = np.ascontiguousarray(labels, dtype=np.int32).ravel()
+        count = np.bincount(first, minlength=k).astype(np.float64)
+        sums = np.stack([np.bincount(first, v, k) for v in values])
+        spread = _spread(first, values, sums / np.maximum(count, 1.0))
+    else:
+        count, sums, spread = (np.array(a, dtype=np.float64) for a in stats)
     # the labels inside a frame of the label k (no segment): a neighbour's flat index
     # is the pixel's plus a fixed offset, and the frame is never a candidate
     padded = np.full((h + 2, w + 2), k, dtype=np.int32)

@@ -23,15 +23,18 @@ def _region_sums(flat: np.ndarray, n: int, maps: dict[str, np.ndarray]) -> dict[
     return {k: np.bincount(flat, weights=v.ravel(), minlength=n) for k, v in maps.items()}
 
 
-def pixel_terms(intensity: np.ndarray, dop: np.ndarray, phase: np.ndarray) -> dict[str, np.ndarray]:
+def pixel_terms(
+    intensity: np.ndarray, dop: np.ndarray, phase: np.ndarray, centre: float | None = None
+) -> dict[str, np.ndarray]:
     """The per-pixel maps whose region sums give :func:`node_features` (float64): Î, S1,
-    S2, log Î (centred on its median), (log Î)², ρ, ρ², ρ log Î, cos 2φ and sin 2φ.
+    S2, log Î (centred on its median, or on ``centre``: the same constant for every
+    tile of one image), (log Î)², ρ, ρ², ρ log Î, cos 2φ and sin 2φ.
 
     They do not depend on the regions, so :func:`~.pixel_maps.pixel_maps` computes them
     while the superpixels' edge map is drawn, once for every superpixel size.
     """
     log_i = np.log(np.maximum(intensity, EPS_INTENSITY)).astype(np.float64)
-    log_i -= np.median(log_i)
+    log_i -= np.median(log_i) if centre is None else centre
     d = dop.astype(np.float64)
     c, s = np.cos(2 * phase.astype(np.float64)), np.sin(2 * phase.astype(np.float64))
     return {
@@ -71,6 +74,23 @@ def node_features(
     count = np.maximum(np.bincount(flat, minlength=n), 1).astype(float)
     terms = pixel_terms(intensity, dop, phase) if terms is None else terms
     sums = _region_sums(flat, n, terms)
+    centroid = region_centroids(regions, count) if "dop_over_shape_trend" in names else None
+    return features_of_sums(sums, count, names, trend, centroid, regions.shape)
+
+
+def features_of_sums(
+    sums: dict[str, np.ndarray],
+    count: np.ndarray,
+    names: tuple[str, ...] = NODE_FEATURES,
+    trend: tuple[int, float, int] = TREND,
+    centroid: np.ndarray | None = None,
+    shape: tuple[int, int] = (1, 1),
+) -> np.ndarray:
+    """The features of :func:`node_features` (n, len(names)) from the region sums of the
+    :func:`pixel_terms` (each (n,), keyed as they are) and the regions' pixel counts
+    ``count`` (n,), at least 1; ``centroid`` (n, 2, pixels) and the frame's ``shape``
+    (H, W) are read by ``dop_over_shape_trend`` alone. Whatever adds the sums up (one
+    image, or its tiles one after the other) gives the same features."""
     m = {k: v / count for k, v in sums.items()}
     var_l = np.maximum(m["ll"] - m["l"] ** 2, 0)
     var_d = np.maximum(m["dd"] - m["d"] ** 2, 0)
@@ -87,19 +107,24 @@ def node_features(
         "dop_vs_log_intensity_slope": lambda: cov / (var_l + 1e-6),
         "dop_vs_log_intensity_corr": lambda: cov / np.sqrt(var_l * var_d + 1e-12),
         "log_dop_given_intensity": lambda: dop_given_intensity(m["l"], m["d"], count),
-        "dop_over_shape_trend": lambda: _over_trend(regions, sums, count, trend),
+        "dop_over_shape_trend": lambda: _over_trend(sums, count, centroid, shape, trend),
     }
     return np.stack([make[k]() for k in names], axis=1)
 
 
 def _over_trend(
-    regions: np.ndarray, sums: dict[str, np.ndarray], count: np.ndarray, trend: tuple
+    sums: dict[str, np.ndarray],
+    count: np.ndarray,
+    centroid: np.ndarray | None,
+    shape: tuple[int, int],
+    trend: tuple,
 ) -> np.ndarray:
     """:func:`.shape_trend.polarisation_over_trend` from the region sums; ``trend`` =
     (degree, reach, iterations)."""
+    if centroid is None:
+        raise ValueError("dop_over_shape_trend needs the regions' centroids")
     z = (sums["s1"] + 1j * sums["s2"]) / np.maximum(sums["s0"], EPS_INTENSITY)
-    centroid = region_centroids(regions, count)
-    return polarisation_over_trend(z, count, centroid, regions.shape, *trend)
+    return polarisation_over_trend(z, count, centroid, shape, *trend)
 
 
 def dop_given_intensity(

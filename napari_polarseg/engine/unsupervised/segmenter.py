@@ -230,7 +230,7 @@ def _region_features(
     return np.where(np.isfinite(x), x, 0.0), names
 
 
-def _project(
+def project_features(
     x: np.ndarray,
     weight: np.ndarray,
     graph: sps.csr_matrix,
@@ -329,7 +329,7 @@ class RegionModel:
     adjacency : scipy.sparse.csr_matrix (n, n)
         Shared-border lengths between superpixels.
     z : ndarray (n, c)
-        Projected node features (:func:`_project`).
+        Projected node features (:func:`project_features`).
     feature_names : tuple of str
     surface_share : float
     close_up : bool
@@ -346,6 +346,10 @@ class RegionModel:
         (:func:`.region_diffusion.edge_aware_adjacency`, τ = ``diffusion_tau``): the
         diffusion's graph and the merge's (:func:`.merge.weakest_border`); None below
         two superpixels.
+    labeller : callable (model, node labels) -> (labels, node labels), or None
+        What :func:`pixel_labels` hands the model to when it was made tile by tile
+        (:mod:`.tiled_regions`): its maps are then the unfilled ones, and
+        ``refine_maps`` and ``nearest`` None.
     """
 
     maps: tuple[np.ndarray, np.ndarray, np.ndarray]
@@ -362,6 +366,7 @@ class RegionModel:
     refine_maps: np.ndarray | None = None
     nearest: np.ndarray | None = None
     borders: sps.csr_matrix | None = None
+    labeller: Callable[[RegionModel, np.ndarray], tuple[np.ndarray, np.ndarray]] | None = None
 
     @property
     def used_params(self) -> UnsupervisedParams:
@@ -428,7 +433,7 @@ def prepare_regions(
         z = np.zeros((n, 0))
     else:  # the border weights serve the diffusion and the merge by weakest border
         borders = edge_aware_adjacency(regions, edges, q.diffusion_tau)[keep][:, keep].tocsr()
-        z = _project(x[keep], weight, borders, adjacency, q)
+        z = project_features(x[keep], weight, borders, adjacency, q)
     maps = refine_maps(i, d) if q.refine_boundaries else None
     return RegionModel(
         (i, d, ph),
@@ -454,7 +459,10 @@ def pixel_labels(model: RegionModel, node_labels: np.ndarray) -> tuple[np.ndarra
     the nearest valid pixel's), the pixels on a segment border move to the neighbouring
     segment they resemble most when the parameters ask for it
     (:func:`.boundaries.refined_labels`), and the segments are renumbered in order of
-    first appearance (:func:`first_appearance`)."""
+    first appearance (:func:`first_appearance`); a model made tile by tile writes them
+    tile by tile (``RegionModel.labeller``)."""
+    if model.labeller is not None:
+        return model.labeller(model, np.asarray(node_labels, dtype=np.int32))
     i, d, _ = model.maps
     node_labels = np.asarray(node_labels, dtype=np.int32)
     m = int(node_labels.max()) + 1 if node_labels.size else 1
