@@ -7,7 +7,7 @@ point of its truth, then each correction one disc of the true class at the deepe
 point of the largest wrong region of the labels on screen.
 
 Timed, each from the action to the layers on screen, minus the live-update debounce
-(``LIVE_DELAY_MS``, printed) for the painted corrections:
+(``STROKE_DELAY_MS``, printed; 0 since issue 40) for the painted corrections:
 
 - background features: from *New scribbles layer* (clicked 0.5 s after the dock opened
   on the frame: the polarisation image, computed once the stack is chosen, is ready) to
@@ -56,7 +56,7 @@ def scribble_frame_main(path: Path, mosaic: tuple[int, ...], crop=None) -> None:
     from robot_user import deepest_point, disc_radius, initial_scribbles, largest_wrong_region
 
     from napari_polarseg.io import read_stack
-    from napari_polarseg.widgets.segment import LIVE_DELAY_MS
+    from napari_polarseg.widgets.segment import STROKE_DELAY_MS
 
     truth, layout = frame_truth(path, crop)  # the truth file's layout, not ``mosaic``
     data = read_stack(path, mosaic=layout)
@@ -110,7 +110,7 @@ def scribble_frame_main(path: Path, mosaic: tuple[int, ...], crop=None) -> None:
     first, _ = initial_scribbles(truth, radius)
     rows = [("first strokes -> labels", *measure(lambda: setattr(layer, "data", first), 0))]
     layer.brush_size = 2 * radius + 1
-    delay = LIVE_DELAY_MS / 1000
+    delay = STROKE_DELAY_MS / 1000
     for n in range(1, CORRECTIONS + 1):
         region = largest_wrong_region(np.asarray(widget.output("segments").data), truth)
         if region is None:
@@ -124,7 +124,7 @@ def scribble_frame_main(path: Path, mosaic: tuple[int, ...], crop=None) -> None:
     print(f"pixel features in the background after 'New scribbles layer': {features:.2f} s")
     print("seconds from the action to the labels on screen: 'preview' = every pixel's labels")
     print("from the walk on the 8 px grid, 'all' = the final ones (4 px grid and border")
-    print(f"cells); corrections minus the live debounce ({LIVE_DELAY_MS} ms)")
+    print(f"cells); corrections minus the stroke debounce ({STROKE_DELAY_MS} ms)")
     print(f"{'action':<28}| preview |  all   | engine train, preview, predict | show preview")
     for label, first_s, all_s, eng in rows:
         parts = ", ".join(f"{eng.get(k, 0.0):.3f}" for k in ("train", "preview", "predict", "show"))

@@ -8,6 +8,12 @@ Handles (the reading itself is :func:`napari_polarseg.io.read_stack`):
 - an ``.npz`` with arrays ``stack`` (N, H, W) and ``angles`` (degrees);
 - a folder of at least three frames whose file names carry the angle (the last number in
   the name: ``leaf_030.png`` is 30 degrees);
+- a Zarr or OME-Zarr store (``NAME.zarr``, a folder) whose ``angles_deg`` attribute holds
+  the angles (:mod:`napari_polarseg.io.zarr_stack`); a big TIFF or Zarr stack (over
+  :data:`napari_polarseg.io.LAZY_BYTES`) becomes a lazy layer, its data a Dask array
+  (:func:`read_angle_stack`);
+- an OME-Zarr image of a result folder (``polarseg segment --format zarr``: ``labels.zarr``,
+  ``dop.zarr``, …) as lazy multiscale layers (:mod:`napari_polarseg.zarr_layers`);
 - a raw polarisation-camera frame (one 2-D grey PNG or TIFF) whose file name names a Sony
   polarisation sensor (:func:`napari_polarseg.io.sensor_from_name`): mono ``IMX250MZR``,
   ``IMX253MZR``, ``IMX264MZR`` (as in ``fruits_IMX250MZR.png``), decoded as a 2 × 2
@@ -38,6 +44,8 @@ import numpy as np
 from .io import SENSOR_NAMES, STACK_FORMATS, angle_from_name, read_stack, single_frame_file
 from .io.frames import frame_files
 from .io.stack_formats import enough_angles
+from .io.zarr_stack import zarr_carries_angles
+from .zarr_layers import is_result_image, result_layer_data
 
 #: Sony polarisation sensors named in raw files (mono ``…MZR``, colour ``…MYR``).
 MOSAIC_SENSOR_NAMES = SENSOR_NAMES
@@ -88,6 +96,10 @@ def get_reader(path: str | list[str]) -> ReaderFunction | None:
     p = _single_path(path)
     if p is None or not p.exists():
         return None
+    if p.suffix.lower() == ".zarr":
+        if zarr_carries_angles(p):
+            return read_angle_stack
+        return read_result_image if is_result_image(p) else None
     if p.is_dir():
         return read_angle_stack if _folder_angles(p) is not None else None
     if MOSAIC_SENSOR_NAMES.search(p.stem) and single_frame_file(p):
@@ -142,8 +154,15 @@ def stack_layer_data(data: Any, name: str | None = None) -> LayerData:
     return (data.stack, kwargs, "image")
 
 
-def read_angle_stack(path: str | list[str]) -> list[LayerData]:
+def read_angle_stack(path: str | list[str], lazy: str = "auto") -> list[LayerData]:
     """Read an angle stack into one image layer with ``metadata["angles_deg"]``.
+
+    A multi-page TIFF or a Zarr store whose stack decodes to more than
+    :data:`napari_polarseg.io.LAZY_BYTES` (``lazy="auto"``, what napari calls), or any
+    with ``lazy="always"``, is read lazily: the layer's data is the Dask array of
+    :func:`napari_polarseg.io.read_stack`, which napari draws tile by tile without
+    loading the file (the Segment dock reads it whole for a run, within the memory
+    limit).
 
     Raises :class:`napari_polarseg.engine.PolarsegError` with a one-line message naming
     the file for input that cannot be used (napari shows it as an error notification).
@@ -151,7 +170,16 @@ def read_angle_stack(path: str | list[str]) -> list[LayerData]:
     p = _single_path(path)
     if p is None:
         raise ValueError("napari-polarseg reads one angle stack (file or folder) at a time")
-    return [stack_layer_data(read_stack(p))]
+    return [stack_layer_data(read_stack(p, lazy=lazy))]
+
+
+def read_result_image(path: str | list[str]) -> list[LayerData]:
+    """Read an OME-Zarr image of a result folder (``polarseg segment --format zarr``) as
+    lazy multiscale layers (:func:`napari_polarseg.zarr_layers.result_layer_data`)."""
+    p = _single_path(path)
+    if p is None:
+        raise ValueError("napari-polarseg reads one result image at a time")
+    return result_layer_data(p)
 
 
 def read_mosaic_frame(path: str | list[str]) -> list[LayerData]:

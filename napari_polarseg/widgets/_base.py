@@ -23,6 +23,7 @@ from .angle_axis import AngleLabel
 from .dims_guard import guard_viewer
 from .dock_layout import MAX_DOCK_WIDTH, full_width_status, shrink_menus, title_dock
 from .layer_queue import LayerQueue
+from .raw_mosaic import RAW_MOSAIC_SUFFIX, is_raw_mosaic
 from .session import format_angles
 from .view_fit import FitKeeper
 from .warm import warm_imports
@@ -274,6 +275,9 @@ class StackWidget(ScrollingContainer):
     run_tooltip = "Run the computation on the chosen angle stack in the background"
     #: Description of the progress bar.
     progress_desc = "napari-polarseg"
+    #: Whether the stack chooser lists raw mosaic frames too (the Segment dock decodes
+    #: them: :class:`~.raw_mosaic.MosaicInput`).
+    lists_raw_mosaics = False
 
     def __init__(self, viewer: napari.viewer.Viewer) -> None:
         super().__init__(labels=True)
@@ -371,7 +375,15 @@ class StackWidget(ScrollingContainer):
 
     # -- stack and angles -------------------------------------------------------------
     def _stack_choices(self, _widget: Any = None) -> list[tuple[str, Layer]]:
-        return [(layer.name, layer) for layer in self._viewer.layers if is_angle_stack(layer)]
+        """The angle-stack layers; with :attr:`lists_raw_mosaics`, also the raw mosaic
+        frames (:func:`~.raw_mosaic.is_raw_mosaic`), named ``"<name> (raw mosaic)"``."""
+        choices = []
+        for layer in self._viewer.layers:
+            if is_angle_stack(layer):
+                choices.append((layer.name, layer))
+            elif self.lists_raw_mosaics and is_raw_mosaic(layer):
+                choices.append((layer.name + RAW_MOSAIC_SUFFIX, layer))
+        return choices
 
     def _labels_choices(self, _widget: Any = None) -> list[tuple[str, Layer]]:
         """The user's 2-D Labels layers with the chosen stack's height x width.
@@ -380,7 +392,7 @@ class StackWidget(ScrollingContainer):
         """
         stack = getattr(self, "stack_layer", None)
         stack = None if stack is None else stack.value
-        if stack is None:
+        if stack is None or stack.ndim != 3:  # none, or a raw mosaic frame (decoded by Run)
             return []
         size = tuple(stack.data.shape[-2:])
         return [
@@ -413,14 +425,18 @@ class StackWidget(ScrollingContainer):
         self.stack_layer.reset_choices()
         if self.stack_layer.value is None:
             choices = [c for c in self.stack_layer.choices if c is not None]
-            if choices:
-                self.stack_layer.value = choices[-1]
+            stacks = [c for c in choices if is_angle_stack(c)]  # before a raw mosaic frame
+            if stacks or choices:
+                self.stack_layer.value = (stacks or choices)[-1]
 
     def _forget(self, keep: set[str]) -> None:
         """Subclasses: drop state kept for stack layers whose key is not in ``keep``."""
 
     def _on_stack_changed(self, layer: Layer | None) -> None:
         if layer is None:
+            return
+        if layer.ndim != 3:  # a raw mosaic frame: its decoded stack brings the angles
+            self.angles.value = ""
             return
         angles = layer.metadata.get(ANGLES_KEY) if isinstance(layer.metadata, dict) else None
         if angles is not None and np.size(angles) == layer.data.shape[0]:
@@ -505,10 +521,19 @@ class StackWidget(ScrollingContainer):
             pass
 
     def _set_progress(self, index: float, total: int) -> None:
+        """Move the progress bar to ``index`` of ``total`` stages, painted with the
+        window's next repaint: a QProgressBar whose value moves repaints at once, which
+        with a software-rendered canvas composes the whole window (20-90 ms of the GUI
+        thread, just before a result is shown), so its updates are off meanwhile."""
         try:
-            # PROGRESS_STEPS ticks per stage: a share of a stage (index 2.4) moves the bar
-            self.progress.max = max(total, 1) * PROGRESS_STEPS
-            self.progress.value = round(min(index, total) * PROGRESS_STEPS)
+            bar = self.progress.native
+            bar.setUpdatesEnabled(False)
+            try:
+                # PROGRESS_STEPS ticks per stage: a share of a stage (index 2.4) moves it
+                self.progress.max = max(total, 1) * PROGRESS_STEPS
+                self.progress.value = round(min(index, total) * PROGRESS_STEPS)
+            finally:
+                bar.setUpdatesEnabled(True)  # schedules its paint (no repaint now)
             if self._slot.worker is not None:
                 self.cancel_button.enabled = True
         except RuntimeError:  # the widget was deleted while a worker ended

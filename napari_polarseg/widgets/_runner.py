@@ -38,13 +38,15 @@ from ..engine.errors import Cancelled
 from .session import Job, Partial, Result, error_message, guarded, stage_text
 
 #: Seconds a run must last before it appears in napari's activity dock (a progress bar
-#: there and an animated "in progress" spinner in the status bar). Interactive reruns end
-#: sooner and show their stages only in the widget: the spinner repaints the window ~25
-#: times a second, which on a software-rendered canvas (Mesa llvmpipe under Xvfb) takes
-#: CPU from the engine's stages. Live reruns (a changed value, a painted stroke) never
-#: appear there, however long they last: the spinner slowed a retraining of the pixel
-#: classifier after a stroke as much (docs/performance.md, "Measurements behind the code").
-ACTIVITY_DELAY = 1.0
+#: there and an animated "in progress" spinner in the status bar). The widget's own
+#: progress bar and status line show every run; the spinner repaints the window ~33
+#: times a second, 16-30 ms each on a software-rendered canvas (Mesa llvmpipe under
+#: Xvfb): two thirds of a core taken from the engine's stages. A first *Run* on a camera
+#: frame (2-3 s) stays out of it; long runs (large images, batches) appear there. Live
+#: reruns (a changed value, a painted stroke) never appear there, however long they
+#: last: the spinner slowed a retraining of the pixel classifier after a stroke as much
+#: (docs/performance.md, "Measurements behind the code").
+ACTIVITY_DELAY = 5.0
 
 #: Least seconds between two reports (status line, progress bars) of a running job; a
 #: live rerun's first report comes one interval after its start, so a rerun that ends

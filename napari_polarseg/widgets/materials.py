@@ -141,7 +141,8 @@ class MaterialList(Container):
         if self.layer is None:
             return []
         if self._painted is None:  # the menu asks at every layer added: once per edit
-            self._painted = {int(v) for v in np.unique(np.asarray(self.layer.data)) if v > 0}
+            data = np.asarray(self.layer.data)
+            self._painted = {int(v) for v in np.unique(data[data > 0])}  # the strokes only
         found = self._painted | set(self.names())
         selected = int(self.layer.selected_label)
         if selected > 0:

@@ -26,13 +26,14 @@ import numpy as np
 from magicgui.widgets import CheckBox, Container
 from qtpy.QtCore import QTimer
 
-from ..engine import Pipeline, PolarsegError, SegmentationResult
+from ..engine import PolarsegError, SegmentationResult
 from ..engine.params import PRESETS, ParamSpec
 from ._base import SEGMENT_DOCK_NAME, StackWidget
 from ._layers import find_output, source_key
 from .dock_layout import release_dock_minimum
 from .docks import SegmentDock
 from .param_controls import controlled_names, every_param_spec
+from .raw_mosaic import MosaicInput
 from .segment_assist import ScribbleAssist
 from .segment_files import ClassifierFiles, ResultExport
 from .segment_inputs import NO_MASK, NO_SCRIBBLES, SegmentInputs, Snapshot
@@ -63,6 +64,7 @@ __all__ = [
     "CUT_ONLY",
     "FIRST_CONTROLS",
     "LIVE_DELAY_MS",
+    "STROKE_DELAY_MS",
     "NO_MASK",
     "NO_SCRIBBLES",
     "PRESETS",
@@ -70,8 +72,14 @@ __all__ = [
     "Snapshot",
 ]
 
-#: Milliseconds the live update waits after the last change before it reruns.
+#: Milliseconds the live update waits after the last change of a control before it
+#: reruns (a slider dragged or a number typed: a burst of changes runs once).
 LIVE_DELAY_MS = 150
+
+#: Milliseconds the live update waits after a stroke (or new data) in the chosen mask or
+#: scribbles layer: napari reports a brush stroke once, at the mouse release, so the
+#: rerun starts in the next event-loop turn (the stroke's events of that turn run once).
+STROKE_DELAY_MS = 0
 
 #: Parameters with a control in the widget (labelled specs of the shared table and of
 #: the methods registered when this module is imported); the others: from the preset.
@@ -151,6 +159,7 @@ class SegmentWidget(SegmentMembers, StackWidget, SegmentDock):
         "reconstruction-error map) as layers"
     )
     progress_desc = "Segment by material"
+    lists_raw_mosaics = True  # a raw camera frame is decoded first (``MosaicInput``)
 
     def __init__(
         self, viewer: napari.viewer.Viewer, specs: dict[str, ParamSpec] | None = None
@@ -175,6 +184,7 @@ class SegmentWidget(SegmentMembers, StackWidget, SegmentDock):
         )
         self.export = ResultExport(state, self.store, parent, status, fail)
         self.assist = ScribbleAssist(state, self.inputs, viewer, status, fail)
+        self.mosaic = MosaicInput(viewer, self.stack_layer, self._submit, self.run, status)
         self.live = CheckBox(
             text="live update",
             value=False,
@@ -219,6 +229,7 @@ class SegmentWidget(SegmentMembers, StackWidget, SegmentDock):
         inputs = self.inputs
         self._add_parameters(
             [
+                self.mosaic.layout,
                 self.controls.preset,
                 *(self.controls.controls[name] for name in FIRST_CONTROLS),
                 inputs.scribbles_layer,
@@ -284,9 +295,10 @@ class SegmentWidget(SegmentMembers, StackWidget, SegmentDock):
         self.layers.show(layer, angles_deg, result, seconds, inputs, partial, snap, contrast)
 
     def schedule_live_run(self) -> None:
-        """With live update on, rerun after the debounce (a stroke was painted)."""
+        """With live update on, rerun in the next event-loop turn (a stroke was painted:
+        :data:`STROKE_DELAY_MS`; a control's pending change runs with it)."""
         if self.live.value and not self.closed:
-            self._timer.start()
+            self._timer.start(STROKE_DELAY_MS)
 
     def on_closed(self) -> None:
         """The dock was closed: beside the base's, stop the live update and listening to
@@ -340,16 +352,6 @@ class SegmentWidget(SegmentMembers, StackWidget, SegmentDock):
             self._write_stack()
             inputs.on_scribbles_changed()
 
-    @property
-    def pipeline(self) -> Pipeline | None:
-        """The cached pipeline of the chosen stack layer (None before its first run)."""
-        layer = self.stack_layer.value
-        return None if layer is None else self.store.get(source_key(layer))
-
-    def pipeline_for(self, layer: Layer) -> Pipeline | None:
-        """The cached pipeline of ``layer`` (None before its first run)."""
-        return self.store.get(source_key(layer))
-
     def shown_result(self, layer: Layer) -> SegmentationResult | None:
         """The result behind ``layer``'s ``segments`` layer, if this widget made it."""
         entry = result_on_screen(self.state, self._viewer, layer)
@@ -364,7 +366,7 @@ class SegmentWidget(SegmentMembers, StackWidget, SegmentDock):
     def _on_value_changed(self, *_: Any) -> None:
         if self.live.value:
             self._force = True
-            self._timer.start()  # restarts the delay: a burst of changes runs once
+            self._timer.start(LIVE_DELAY_MS)  # restarts the delay: a burst runs once
 
     def _on_live_toggled(self, on: bool) -> None:
         """Ticking *live update* arms it. It reruns at once only what was asked for
@@ -378,7 +380,8 @@ class SegmentWidget(SegmentMembers, StackWidget, SegmentDock):
                 "every change after it reruns"
             )
             return
-        self._timer.start()  # not forced: runs only if the values differ from the last run's
+        # not forced: runs only if the values differ from the last run's
+        self._timer.start(LIVE_DELAY_MS)
 
     def _has_strokes(self) -> bool:
         """Whether the chosen scribbles train a classifier, or a classifier is loaded."""
@@ -422,6 +425,8 @@ class SegmentWidget(SegmentMembers, StackWidget, SegmentDock):
         """
         self._timer.stop()
         self._force = False
+        if self.mosaic.decode_first():
+            return  # a raw mosaic frame: decoded into a stack layer first, which then runs
         try:
             self._request()
         finally:

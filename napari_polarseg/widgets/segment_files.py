@@ -379,9 +379,10 @@ class ResultExport:
         layer, store = entry.layer, self._store
         pipe = store.get(key)  # the pipeline that made the result (its pixel mask)
         source = getattr(getattr(layer, "source", None), "path", None)
+        held = store.stack_of(key)  # a lazy layer's stack as read for the run
         return ExportRecord.of(
             entry.shown,
-            stack=layer.data,
+            stack=layer.data if held is None else held,
             angles_deg=entry.angles_deg,
             mask=None if pipe is None else pipe.mask,
             source=None if source is None else str(source),

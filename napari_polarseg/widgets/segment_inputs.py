@@ -193,6 +193,8 @@ class SegmentInputs:
         except PolarsegError:
             return  # nothing to compute yet; a run says why
         store, key, data, angles = self._store, source_key(layer), layer.data, angles_deg
+        if store.needs_reading(key, data):
+            return  # a stack shown from disk is read whole by a run, not on choosing it
 
         def polarisation() -> None:
             rad = np.deg2rad(angles)
@@ -248,6 +250,14 @@ class SegmentInputs:
         stack = self._state.inputs.stack
         if stack is None:
             self._fail(PolarsegError("choose an angle-stack image layer first"))
+            return None
+        if stack.ndim != 3:  # a raw mosaic frame: strokes go on the stack decoded from it
+            self._fail(
+                PolarsegError(
+                    "press Run first: it decodes the raw mosaic frame into "
+                    "the angle-stack layer the strokes are painted on"
+                )
+            )
             return None
         self._prefetch_features(force=True)  # started before napari adds the layer
         h, w = stack.data.shape[-2:]

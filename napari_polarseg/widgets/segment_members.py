@@ -17,12 +17,14 @@ from __future__ import annotations
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from ._layers import source_key
+
 if TYPE_CHECKING:
     import numpy as np
     from magicgui.widgets import CheckBox, ComboBox, Container, PushButton
     from napari.layers import Labels, Layer
 
-    from ..engine import SegmentParams
+    from ..engine import Pipeline, SegmentParams
     from ..engine.classifier.pixel_classifier import PixelClassifier
     from ..engine.params import ParamSpec
     from .classifier_controls import ClassifierControls
@@ -31,7 +33,7 @@ if TYPE_CHECKING:
     from .segment_inputs import SegmentInputs
     from .segment_layers import SegmentLayers
     from .segment_params import ParameterControls
-    from .session import LoadedClassifier
+    from .session import LoadedClassifier, PipelineStore
     from .session.state import SegmentState
 
 
@@ -44,6 +46,8 @@ class SegmentMembers:
     layers: SegmentLayers
     classifier_files: ClassifierFiles
     export: ResultExport
+    store: PipelineStore
+    stack_layer: ComboBox
 
     def __getattr__(self, name: str) -> Any:
         """A parameter's control by the parameter's name (``widget.window``); else the
@@ -142,6 +146,16 @@ class SegmentMembers:
         return self.inputs.material_names()
 
     # -- the results shown --------------------------------------------------------------
+    @property
+    def pipeline(self) -> Pipeline | None:
+        """The cached pipeline of the chosen stack layer (None before its first run)."""
+        layer = self.stack_layer.value
+        return None if layer is None else self.store.get(source_key(layer))
+
+    def pipeline_for(self, layer: Layer) -> Pipeline | None:
+        """The cached pipeline of ``layer`` (None before its first run)."""
+        return self.store.get(source_key(layer))
+
     @property
     def views(self) -> CheckBox:
         """The *HSV and Stokes layers* option."""

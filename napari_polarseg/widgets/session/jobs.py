@@ -19,6 +19,7 @@ import numpy as np
 from ...engine import PolarsegError, Scene, SegmentParams
 from ...engine.registered import computes_block_maps
 from .classify import classify_scene
+from .lazy_input import reading_stage
 from .results import ExportRecord
 from .runs import Job, Partial, Result, Stage
 from .store import PipelineStore
@@ -80,14 +81,19 @@ def segment_job(
 
     ``cancel`` (the runner's stop request) is checked by the scene before every stage and
     inside the long ones (:class:`~napari_polarseg.engine.errors.Cancelled`).
+
+    A lazy (Dask) stack layer no pipeline has read yet is read whole first, its own stage
+    in the status line, or refused when it does not fit the memory limit
+    (:mod:`~napari_polarseg.widgets.session.lazy_input`).
     """
-    pipe = store.obtain(key, data, angles_rad, params, region=region, mask_key=mask_key)
-    scene = store.scene(key)
-    assert scene is not None
     inputs = {k: v for k, v in (inputs or {}).items() if v is not None}
     classify = "scribbles" in inputs or "classifier" in inputs
     maps = maps or classify
-    total = len(scene.stages(params, inputs, maps=maps, reconstruction=maps))
+    total = len(Scene.stages(params, inputs, maps=maps, reconstruction=maps))
+    yield from reading_stage(store, key, data, total)  # a lazy stack: read whole first
+    pipe = store.obtain(key, data, angles_rad, params, region=region, mask_key=mask_key)
+    scene = store.scene(key)
+    assert scene is not None
 
     def within(stage: str, index: float, _n: int) -> None:
         # the first call of a run with maps lists every stage but the last: the same
@@ -131,8 +137,9 @@ def features_job(
     polarisation image and the stack's pixel features, kept by the scene's
     :class:`~napari_polarseg.engine.ScribbleSession` (:meth:`PipelineStore.session`), so
     the first strokes only train and predict. Returns the number of features."""
-    pipe = store.obtain(key, data, angles_rad, params, region=region, mask_key=mask_key)
     total = FEATURES_JOB_STAGES
+    yield from reading_stage(store, key, data, total)  # a lazy stack: read whole first
+    pipe = store.obtain(key, data, angles_rad, params, region=region, mask_key=mask_key)
     yield "polarisation", 0, total
     pipe.get("polarisation", params)
     session = store.session(key, colour_stack)

@@ -2,7 +2,9 @@
 
 :class:`PipelineStore` keeps one :class:`~napari_polarseg.engine.Pipeline` per
 angle-stack layer so that a rerun only recomputes the stages a parameter change made
-stale; a different mask (another region, an edited one, or none) builds a new one.
+stale; a different mask (another region, an edited one, or none) builds a new one. A
+lazy (Dask) stack layer is read into memory by its first pipeline, within the memory
+limit (:mod:`.lazy_input`), and the array read is reused by the next.
 """
 
 from __future__ import annotations
@@ -17,6 +19,8 @@ from ...engine import Pipeline, Scene, SegmentParams, validity_mask
 from ...engine.classifier.pixel_segmentation import PixelSegmenter
 from ...engine.classifier.scribble_session import ScribbleSession
 from ...engine.methods.pixel_classification import scribble_session
+from ...io import is_lazy
+from .lazy_input import read_whole
 
 
 def stack_pipeline(
@@ -29,7 +33,7 @@ def stack_pipeline(
     counted, and so is every pixel outside ``region`` ((H, W) bool, True = use; None:
     every pixel).
     """
-    stack = np.asarray(data)
+    stack = np.asarray(read_whole(data))  # a lazy stack: read once, within the limit
     mask = validity_mask(stack, saturation="auto", dark_level=0, region=region)
     return Pipeline(stack, np.asarray(angles_rad, dtype=float), params, mask=mask)
 
@@ -43,6 +47,7 @@ class _Entry:
     mask_key: str | None
     region: np.ndarray | None
     pipeline: Pipeline
+    stack: Any = None  # ``data`` in memory (a lazy stack read whole)
     scene: Scene | None = None
 
     def matches(
@@ -101,11 +106,28 @@ class PipelineStore:
         with self._lock:
             entry = self._entries.get(key)
         if entry is None or not entry.matches(data, angles, mask_key, region):
-            pipeline = stack_pipeline(data, angles, params, region)
-            entry = _Entry(data, angles, mask_key, region, pipeline)
+            # a lazy stack read for the layer's last pipeline is not read again
+            held = entry is not None and entry.data is data
+            stack = entry.stack if held else np.asarray(read_whole(data))
+            pipeline = stack_pipeline(stack, angles, params, region)
+            entry = _Entry(data, angles, mask_key, region, pipeline, stack)
             with self._lock:
                 self._entries[key] = entry
         return entry.pipeline
+
+    def stack_of(self, key: str) -> Any:
+        """The stack in memory that ``key``'s pipeline was built from (a lazy layer's
+        data read whole), or None without a pipeline."""
+        with self._lock:
+            entry = self._entries.get(key)
+        return None if entry is None else entry.stack
+
+    def needs_reading(self, key: str, data: Any) -> bool:
+        """Whether a pipeline of ``key`` has to read ``data`` first: a lazy (Dask) stack
+        no pipeline of ``key`` has read yet (:mod:`.lazy_input`)."""
+        with self._lock:
+            entry = self._entries.get(key)
+        return is_lazy(data) and (entry is None or entry.data is not data)
 
     def scene(self, key: str) -> Scene | None:
         """The :class:`~napari_polarseg.engine.Scene` around ``key``'s pipeline (made at
