@@ -24,10 +24,10 @@ from . import io as pio
 from .engine import Scene
 from .engine.analysis.evaluation import adjusted_rand_index, evaluate
 from .engine.errors import PolarsegError
-from .engine.limits import check_pipeline_memory
 from .engine.params import SegmentParams
 from .engine.physics.pixel_mask import PixelMask, validity_mask
 from .engine.registered import computes_block_maps
+from .engine.run_memory import check_pipeline_memory
 from .engine.timing import timed
 from .io.read_options import ReadOptions
 from .job_options import OutputOptions
@@ -152,14 +152,18 @@ def segment_data(
 
     ``maps``: also the thesis maps and the reconstruction-error map (a method that
     declares ``block_maps``, the thesis method, computes them in any case; the memory
-    check counts the blocks only then)."""
+    check counts the blocks only then). ``max_bytes`` (default: the engine's
+    :func:`~napari_polarseg.engine.limits.memory_limit`) is the run's memory limit: the
+    methods that tile choose their tiles from it, and the run is refused only when its
+    estimate with those tiles exceeds it
+    (:func:`~napari_polarseg.engine.run_memory.check_pipeline_memory`)."""
     status = status or StatusLine(False, PROG)
     seconds: dict[str, float] = {}
     # the engine takes the stack in memory: a stack read lazily is read here, once
     data = pio.in_memory(data, max_bytes or pio.ReadOptions().max_bytes())
     stack, shifts = data.stack, None
     maps = maps or computes_block_maps(params.method) and labels_by is None
-    check_pipeline_memory(stack.shape, params, max_bytes, blocks=maps)
+    check_pipeline_memory(stack.shape, params, max_bytes, blocks=maps, **run_kinds(data, labels_by))
     if mask is None:
         mask = validity_mask(
             stack, saturation=data.metadata.get("saturation_level"), saturated=data.saturated
@@ -176,7 +180,7 @@ def segment_data(
             if colour_stack is not None:
                 colour_stack = shift_frames(colour_stack, shifts)
     with timed(seconds, "segment"):
-        scene = Scene(stack, data.angles_rad, mask=mask)
+        scene = Scene(stack, data.angles_rad, mask=mask, max_bytes=max_bytes)
         run = Run(data, params, stack, None, shifts, seconds, mask, scene.pipeline)  # type: ignore[arg-type]
         run.colour_stack = colour_stack
         run.scene = scene
@@ -188,6 +192,24 @@ def segment_data(
             status.show("pixel classifier: features, training and prediction")
             labels_by.label(run, progress, maps)
     return run
+
+
+def run_kinds(data: pio.StackData, labels_by: LabelSource | None) -> dict[str, Any]:
+    """What the memory estimate of a run needs to know of it beyond its shape: the
+    bytes a sample of the stack as the engine keeps it (an integer stack as it is, a
+    float one as float64), and for the pixel classifier its channels (the luminance and
+    a colour stack's colours) and classes (the scribbles' materials, else 4)."""
+    dtype = np.dtype(data.stack.dtype)
+    itemsize = dtype.itemsize if np.issubdtype(dtype, np.integer) else 8
+    kinds: dict[str, Any] = {"itemsize": itemsize}
+    if labels_by is not None:
+        colours = data.colour_stack
+        kinds["scribbles"] = True
+        kinds["channels"] = 1 + (0 if colours is None else int(np.shape(colours)[0]))
+        if labels_by.scribbles is not None:
+            values = np.unique(labels_by.scribbles)
+            kinds["n_classes"] = max(int(np.count_nonzero(values)), 2)
+    return kinds
 
 
 def _resolved(name: str | None) -> str | None:

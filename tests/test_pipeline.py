@@ -389,10 +389,11 @@ def test_run_iter_reports_progress_within_the_chunked_stages(coefficients):
         inside = [v for v in values if i < v < i + 1]
         assert len(inside) >= 2, (name, values)  # strictly between the stage boundaries
         assert values == sorted(values) and values[-1] == i + 1
-    # the chunked stages report within; polarisation (row bands) and pca (a checkpoint)
-    # may too, where Cancel is checked
+    # the chunked stages report within; polarisation and normals (pixel chunks) and pca
+    # (a checkpoint) may too, where Cancel is checked
     assert {"harmonics", "reconstruction"} <= {s for s, _, _ in reports}
-    assert {s for s, _, _ in reports} <= {"polarisation", "harmonics", "pca", "reconstruction"}
+    chunked = {"polarisation", "normals", "harmonics", "pca", "reconstruction"}
+    assert {s for s, _, _ in reports} <= chunked
     assert all(total == n for _, _, total in reports)
     # the yields and the result are those of a run without progress
     ref = Pipeline(stack, ANGLES, params)

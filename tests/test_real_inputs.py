@@ -28,9 +28,11 @@ from napari_polarseg.engine.limits import (
     DEFAULT_MAX_BYTES,
     ENV_VAR,
     check_bytes,
-    estimate_pipeline_bytes,
+    default_max_bytes,
+    format_bytes,
     memory_limit,
     parse_bytes,
+    physical_memory,
 )
 from napari_polarseg.engine.physics.mosaic import (
     demosaic,
@@ -51,6 +53,7 @@ from napari_polarseg.engine.physics.polarimage import (
     duplicate_angle_frames,
 )
 from napari_polarseg.engine.physics.registration import register_stack
+from napari_polarseg.engine.run_memory import estimate_pipeline_bytes
 from napari_polarseg.engine.synthetic.scenes import make_scene
 
 REPO = Path(__file__).resolve().parents[1]
@@ -71,6 +74,11 @@ needs_real_data = pytest.mark.skipif(
     reason="real polarisation-camera frames not found in ../shared/data/polanalyser "
     "(beside the repository; docs/data.md, 'Optional real data')",
 )
+
+#: The default memory limit as an error names it (16 GiB, less on a smaller machine).
+DEFAULT_LIMIT = format_bytes(default_max_bytes())
+#: The machine's physical memory, bytes.
+RAM = physical_memory() or float("inf")
 
 
 def real_frame(name: str) -> Path:
@@ -656,7 +664,9 @@ def test_cli_dark_frame_and_interpolated_demosaic(tmp_path, capsys):
 
 def test_memory_limit_and_estimate(monkeypatch):
     monkeypatch.delenv(ENV_VAR, raising=False)
-    assert memory_limit() == DEFAULT_MAX_BYTES == 8 * 2**30
+    # 16 GiB, or three quarters of the machine's memory when that is less
+    assert memory_limit() == default_max_bytes() == min(DEFAULT_MAX_BYTES, 0.75 * RAM) // 1
+    assert DEFAULT_MAX_BYTES == 16 * 2**30
     monkeypatch.setenv(ENV_VAR, "512MiB")
     assert memory_limit() == 512 * 2**20
     assert parse_bytes("2G") == 2 * 2**30 and parse_bytes("3e9") == 3_000_000_000
@@ -999,7 +1009,7 @@ BAD_REAL_INPUTS = {
     "absurd size in an npy header": (
         _absurd_npy,
         "huge.npy: reading 19 x 200000 x 300000 values of uint16 would need 10.4 TiB of memory, "
-        "more than the limit of 8.0 GiB",
+        f"more than the limit of {DEFAULT_LIMIT}",
     ),
     "absurd size in a PNG header": (
         _absurd_png,
@@ -1008,16 +1018,16 @@ BAD_REAL_INPUTS = {
     "run too large for memory": (
         _tiny_window_on_a_large_image,
         "segmenting 4 frames of 400 x 400 pixels with window 1 (160000 blocks) and degree 60 "
-        "would need 18.2 GiB of memory, more than the limit of 8.0 GiB",
+        f"would need 18.2 GiB of memory, more than the limit of {DEFAULT_LIMIT}",
     ),
     "memory limit given": (
         lambda t: [_tif(t, _good()), "--max-memory", "0.0001"],
-        "segmenting 4 frames of 30 x 32 pixels would need 240.0 KiB of memory, more than "
+        "segmenting 4 frames of 30 x 32 pixels would need 128.2 MiB of memory, more than "
         "the limit of 104.9 KiB",
     ),
     "memory limit given with a unit": (
         lambda t: [_tif(t, _good()), "--max-memory", "100K"],
-        "segmenting 4 frames of 30 x 32 pixels would need 240.0 KiB of memory, more than "
+        "segmenting 4 frames of 30 x 32 pixels would need 128.2 MiB of memory, more than "
         "the limit of 100.0 KiB",
     ),
     "mask of another size": (

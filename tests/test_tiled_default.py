@@ -121,7 +121,7 @@ def test_scene_tiles_under_a_small_memory_limit(scene, monkeypatch):
     params = PRESETS["auto"]
     monkeypatch.setenv(ENV_VAR, str(2**50))
     whole = Scene(s.stack, s.angles).segment(params, maps=False, reconstruction=False)
-    monkeypatch.setenv(ENV_VAR, "60M")
+    monkeypatch.setenv(ENV_VAR, "45M")
     grid = region_tiles(SHAPE, SurfaceSuperpixels().params)
     assert grid is not None and len(grid) > 1
     tiled = Scene(s.stack, s.angles).segment(params, maps=False, reconstruction=False)

@@ -29,6 +29,7 @@ from ..engine.errors import Cancelled, PolarsegError
 from ..engine.params import SegmentParams
 from ..io.read_options import ReadOptions
 from ..job_options import OutputOptions, segment_args
+from .cluster import parse_scheduler
 from .plan import (
     COLUMNS,
     LOCK_FILE,
@@ -267,10 +268,9 @@ class _Run:
             self.runner = InlineRunner(task)
             self.result.n_workers, label = 1, "inline (this process)"
         else:
-            n = n_workers or max(1, min(os.cpu_count() or 1, len(self.todo)))
-            self.runner = DaskRunner(
-                task, self.scheduler, n, memory_limit, allowed_failures, timeout
-            )
+            address, count = parse_scheduler(self.scheduler or "local")
+            n = count or n_workers or max(1, min(os.cpu_count() or 1, len(self.todo)))
+            self.runner = DaskRunner(task, address, n, memory_limit, allowed_failures, timeout)
             self.result.n_workers, label = self.runner.n_workers, self.runner.label
             self.read = memory_capped(self.read, self.runner.memory_limits)
         self.result.scheduler = self.scheduler or ("local" if self.todo else "none")
@@ -360,9 +360,9 @@ def iter_batch(
         classifier, …; default: as ``polarseg segment`` without options), and the
         optional files of every scene folder (``overview.png``, …).
     scheduler : str, optional
-        None: start a local cluster of worker processes; ``"inline"``: no Dask, one
-        scene after the other here; otherwise the address of a running
-        ``dask.distributed`` scheduler (``tcp://host:port``).
+        None or ``"local"``: a new local cluster of worker processes (``"local:N"``: of
+        N); ``"inline"``: no Dask, one scene after the other here; else the address of
+        a running scheduler (``tcp://host:port``; :func:`~.cluster.parse_scheduler`).
     n_workers, memory_limit, allowed_failures : optional
         Local cluster: its size (default: the number of cores, at most one per scene),
         each worker's memory limit (``"4GiB"``, bytes; default ``"auto"``: the machine's

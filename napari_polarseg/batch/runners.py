@@ -2,21 +2,21 @@
 
 :class:`InlineRunner` runs the tasks one after the other here (``scheduler="inline"``);
 :class:`DaskRunner` starts a local cluster (one single-threaded worker process per core)
-or connects to a running scheduler, and keeps only as many scenes in flight as the
+or connects to a running scheduler (:func:`~.cluster.open_cluster`, as ``polarseg segment
+--dask`` does), and keeps only as many scenes in flight as the
 cluster has threads. Both yield ``(job, row or exception)`` as tasks complete.
 """
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
-import logging
 import uuid
 from collections.abc import Callable, Generator
 from typing import Any
 
-from ..engine.errors import Cancelled, PolarsegError
+from ..engine.errors import Cancelled
 from ..io.read_options import ReadOptions
+from .cluster import open_cluster
 from .plan import MEMORY_SHARE
 
 
@@ -62,48 +62,14 @@ class DaskRunner:
         allowed_failures: int,
         timeout: float,
     ) -> None:
-        import dask
-        from distributed import Client, LocalCluster
-
         self.task = task
-        self.cluster = None
-        if address is None:
-            config = {
-                "distributed.scheduler.allowed-failures": allowed_failures,
-            }
-            with dask.config.set(config):
-                self.cluster = LocalCluster(
-                    n_workers=n_workers,
-                    threads_per_worker=1,
-                    processes=True,
-                    memory_limit="auto" if memory_limit is None else memory_limit,
-                    host="127.0.0.1",
-                    dashboard_address=None,
-                    silence_logs=logging.ERROR,
-                )
-            self.client = Client(self.cluster, timeout=timeout)
-            self.label = f"local cluster ({n_workers} worker process(es), 1 thread each)"
-        else:
-            try:
-                self.client = Client(address, timeout=timeout)
-            except (OSError, TimeoutError, ValueError) as exc:
-                raise PolarsegError(
-                    f"cannot reach the Dask scheduler at {address} within {timeout:g} s "
-                    f"({type(exc).__name__}: {exc})"
-                ) from None
-            self.label = f"scheduler {address}"
-        try:
-            self.client.wait_for_workers(1, timeout=timeout)
-        except Exception as exc:
-            self.close()
-            raise PolarsegError(
-                f"no Dask worker joined {self.label} within {timeout:g} s ({exc})"
-            ) from None
-        with contextlib.suppress(Exception):  # imports once per worker, before the clock
-            self.client.run(_warm_up)
-        workers = self.client.scheduler_info(n_workers=-1)["workers"]
-        self.n_workers = len(workers)
-        self.memory_limits = [float(w.get("memory_limit") or 0) for w in workers.values()]
+        self.cluster = open_cluster(
+            address, n_workers, memory_limit, allowed_failures, timeout, warm_up=_warm_up
+        )
+        self.client = self.cluster.client
+        self.label = self.cluster.label
+        self.memory_limits = self.cluster.memory_limits
+        self.n_workers = len(self.memory_limits)
 
     def run(
         self, jobs: list[dict[str, Any]], cancel: Callable[[], bool]
@@ -152,11 +118,7 @@ class DaskRunner:
                 self.client.cancel(list(futures), force=True)
 
     def close(self) -> None:
-        with contextlib.suppress(Exception):
-            self.client.close(timeout=10)
-        if self.cluster is not None:
-            with contextlib.suppress(Exception):
-                self.cluster.close(timeout=10)
+        self.cluster.close()
 
 
 def _warm_up() -> None:

@@ -90,10 +90,12 @@ the fit and the features and counted; ``--dark-frame``/``--offset`` are subtract
 saturation is found; ``--mask`` restricts the segmentation to a region (a labels image,
 non-zero = use); frames at a repeated angle (modulo 180 degrees) are averaged before the
 fit; ``--fit robust`` resists a wrong frame (5 or more distinct angles). Before any work
-the memory a run needs is estimated from the stack's shape (and, for a method that cuts
-blocks or with the thesis maps, the window and the degree), and a run above the limit
-(8 GiB, ``--max-memory`` or ``$POLARSEG_MAX_BYTES``) is refused with the size it would
-need.
+the memory a run needs is estimated from the stack's shape and the method (with the
+tiles it would work in; for a method that cuts blocks or with the thesis maps, the
+window and the degree). The limit (``--max-memory`` or ``$POLARSEG_MAX_BYTES``, default
+16 GiB or three quarters of the machine's memory when that is less) chooses the tiles
+of the methods that work tile by tile, so their peak follows it; a run whose estimate
+stays above it even tiled is refused with the size it would need.
 
 Progress: on a terminal (stdout and stderr both terminals) ``segment``, ``demo`` and
 ``sweep`` show the running stage on one stderr line that is rewritten in place and erased

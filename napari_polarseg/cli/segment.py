@@ -11,6 +11,7 @@ from ..engine.errors import PolarsegError
 from ..engine.params import ParamSpec
 from ..outputs.image_formats import IMAGE_FORMATS
 from .arguments import PROG
+from .dask_options import add_dask_options, dask_tiles
 from .options import (
     STACK_INPUT_HELP,
     add_inputs_and_out,
@@ -79,6 +80,7 @@ def add_parser(sub: Any, specs: dict[str, ParamSpec] | None = None) -> None:
         "4096 x 4096 pixels) or as OME-Zarr directories (labels.zarr, ...: NGFF 0.4 "
         "multiscale, opened lazily by zarr and napari-ome-zarr) [tiff]",
     )
+    add_dask_options(seg)
     add_param_options(seg, specs=specs)
     seg.set_defaults(func=run)
 
@@ -98,15 +100,16 @@ def run(args: argparse.Namespace) -> int:
     params = params_from_args(args)
     _check_demosaic_args(args)
     status = status_line(args)
-    done = jobs.segment_to_folder(
-        args.input[0] if len(args.input) == 1 else args.input,
-        args.out,
-        params,
-        read_options(args),
-        output_options(args),
-        status=status,
-        progress=progress_report(args.verbose, status),
-    )
+    with dask_tiles(args):
+        done = jobs.segment_to_folder(
+            args.input[0] if len(args.input) == 1 else args.input,
+            args.out,
+            params,
+            read_options(args),
+            output_options(args),
+            status=status,
+            progress=progress_report(args.verbose, status),
+        )
     warning = done.run.data.metadata.get("mosaic_warning")
     if warning:
         print_messages([jobs.Message(f"{PROG}: warning: {warning}", "stderr")])

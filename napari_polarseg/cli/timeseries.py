@@ -17,9 +17,9 @@ from .. import io as pio
 from ..engine import Pipeline
 from ..engine.analysis.evaluation import adjusted_rand_index
 from ..engine.errors import PolarsegError
-from ..engine.limits import check_pipeline_memory
 from ..engine.params import ParamSpec, SegmentParams
 from ..engine.physics.pixel_mask import PixelMask, validity_mask
+from ..engine.run_memory import check_pipeline_memory
 from .arguments import PROG
 from .options import BLOCK_PRESETS, add_input_options, add_inputs_and_out, add_param_options
 from .running import max_bytes, params_from_args, progress_report, read_input

@@ -78,8 +78,8 @@ PUBLIC: dict[str, str] = {
     "bipartition": ".graph.ncut",
     "recursive_ncut": ".graph.ncut",
     # limits
-    "check_pipeline_memory": ".limits",
-    "estimate_pipeline_bytes": ".limits",
+    "check_pipeline_memory": ".run_memory",
+    "estimate_pipeline_bytes": ".run_memory",
     # methods
     "MethodOutput": ".methods",
     "Scene": ".methods.scene",

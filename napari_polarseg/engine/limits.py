@@ -6,15 +6,24 @@ machine into swap. Instead, readers check a file's header and the command line e
 the pipeline's peak memory from the stack's shape and the parameters, and both refuse
 with a :class:`PolarsegError` that says how much would be needed.
 
-The limit is :data:`DEFAULT_MAX_BYTES` (8 GiB), or the number of bytes in the environment
-variable :data:`ENV_VAR` (``POLARSEG_MAX_BYTES``, e.g. ``32e9`` or ``32GiB``), or the
-``limit`` argument (``polarseg segment --max-memory GIB``).
+The limit is the number of bytes in the environment variable :data:`ENV_VAR`
+(``POLARSEG_MAX_BYTES``, e.g. ``32e9`` or ``32GiB``), or the ``limit`` argument
+(``polarseg segment --max-memory 20G``), else :func:`default_max_bytes`:
+:data:`DEFAULT_MAX_BYTES` (16 GiB), or :data:`RAM_SHARE` of the machine's physical memory
+when that is less. The methods that work tile by tile choose their tiles from the limit,
+so their peak follows it; a run is refused only when its full-size arrays alone exceed
+it. 16 GiB: at that limit no input under 100 MP is refused, by the default method or by
+scribbles, whose full-size arrays at 100 MP (the stack, the pipeline's kept maps, the
+labels, the class probabilities) come to about 15 GiB; beyond it a tile gains nothing
+(the tiles of the default method stop growing at 2048 px) while a whole-image run of an
+image that would fit only wastes memory the viewer and the system need.
 
-Per method: :func:`estimate_pipeline_bytes` counts the polarisation fit (and the
-thesis blocks); :func:`estimate_scribble_bytes` the scribbles method on the whole
-image, from the feature stack it builds (:func:`feature_bytes_per_pixel`) and the
-full-size arrays it keeps (:func:`scribble_bytes_per_pixel`); the latter's split into
-tile-bound and full-size bytes chooses its tile size
+Per method: :func:`~.run_memory.estimate_pipeline_bytes` counts the thesis blocks, or
+the method's own peak with the tiles it would use (:mod:`.run_memory`);
+:func:`estimate_scribble_bytes` the scribbles method on the whole image, from the
+feature stack it builds (:func:`feature_bytes_per_pixel`) and the full-size arrays it
+keeps (:func:`scribble_bytes_per_pixel`); the latter's split into tile-bound and
+full-size bytes chooses its tile size
 (:func:`~.classifier.tiled_prediction.scribble_tiles`).
 """
 
@@ -24,13 +33,12 @@ import os
 import re
 from typing import Any
 
-from .chunks import CHUNK_BYTES
 from .errors import PolarsegError
-from .params import SegmentParams
-from .registered import computes_block_maps
 
-#: Default largest memory (bytes) a read or a run may need.
-DEFAULT_MAX_BYTES = 8 * 2**30
+#: Largest default memory limit (bytes) of a read or a run (:func:`default_max_bytes`).
+DEFAULT_MAX_BYTES = 16 * 2**30
+#: Share of the machine's physical memory the default limit never exceeds.
+RAM_SHARE = 0.75
 #: Environment variable overriding :data:`DEFAULT_MAX_BYTES`.
 ENV_VAR = "POLARSEG_MAX_BYTES"
 
@@ -55,8 +63,26 @@ def parse_bytes(text: str) -> int:
     return int(value)
 
 
+def physical_memory() -> int | None:
+    """Bytes of physical memory of the machine (None where the system does not say)."""
+    try:
+        return int(os.sysconf("SC_PAGE_SIZE")) * int(os.sysconf("SC_PHYS_PAGES"))
+    except (AttributeError, ValueError, OSError):  # pragma: no cover - e.g. Windows
+        return None
+
+
+def default_max_bytes() -> int:
+    """The default memory limit: :data:`DEFAULT_MAX_BYTES`, or :data:`RAM_SHARE` of the
+    physical memory when that is less (module docstring)."""
+    ram = physical_memory()
+    if ram is None or ram <= 0:
+        return DEFAULT_MAX_BYTES
+    return min(DEFAULT_MAX_BYTES, int(RAM_SHARE * ram))
+
+
 def memory_limit(limit: int | float | None = None) -> int:
-    """The memory limit in bytes: ``limit``, else ``$POLARSEG_MAX_BYTES``, else 8 GiB."""
+    """The memory limit in bytes: ``limit``, else ``$POLARSEG_MAX_BYTES``, else
+    :func:`default_max_bytes`."""
     if limit is not None:
         if not limit > 0:
             raise PolarsegError(f"the memory limit must be positive, got {limit!r}")
@@ -67,7 +93,7 @@ def memory_limit(limit: int | float | None = None) -> int:
             return parse_bytes(env)
         except PolarsegError:
             raise PolarsegError(f"{ENV_VAR}={env!r} is not a memory size") from None
-    return DEFAULT_MAX_BYTES
+    return default_max_bytes()
 
 
 def format_bytes(n: float) -> str:
@@ -105,9 +131,16 @@ def check_bytes(needed: float, what: str, limit: int | float | None = None) -> N
         )
 
 
-#: float64 maps of H × W the pipeline keeps after its fit (Î, ρ, φ, residual, masks, θ,
-#: azimuth, labels): what a method's work sits on top of.
-KEPT_MAPS = 8
+#: Bytes of the running interpreter and the libraries a run loads (numpy, SciPy,
+#: scikit-image, scikit-learn) before any array: 85 MB measured after a default run on a
+#: small image. Counted in every run's estimate and kept out of the methods' work
+#: (:meth:`~.pipeline.Pipeline.work_limit`).
+RUNTIME_BYTES = 128 * 2**20
+#: float64 maps of H × W the pipeline keeps after its chunked fit, beyond the stack and
+#: its flags (:meth:`~.pipeline.Pipeline.work_limit`): Î, ρ, φ, residual, θ and the
+#: invalid and clamped masks (42 bytes a pixel; the diffuse azimuth is φ itself, the
+#: specular one 8 more): what a method's work sits on top of.
+KEPT_MAPS = 6
 #: Bytes a pixel of the scribbles method's full-size arrays beyond the pipeline's maps
 #: and its K class planes: the superpixels' edge map (float64) and its temporaries
 #: (4 float64 maps while it is made), the superpixels (int32), the walk's nodes
@@ -181,70 +214,3 @@ def estimate_scribble_bytes(
     pixels = int(shape[0]) * int(shape[1])
     work, fixed = scribble_bytes_per_pixel(params, channels, n_classes)
     return int(pixels * (work + fixed + 8 * KEPT_MAPS))
-
-
-def _graph_kind(blocks: int, params: SegmentParams) -> str:
-    """How the pipeline will store the block graph ("dense", "knn" or "spatial")."""
-    from .stages import affinity_graph_kind
-
-    return affinity_graph_kind(blocks, params)
-
-
-def estimate_pipeline_bytes(
-    shape: tuple[int, int, int], params: SegmentParams, blocks: bool | None = None
-) -> int:
-    """Rough peak memory (bytes) of one run on a stack of ``shape`` (N, H, W).
-
-    Every method: the float64 copy of the stack and the temporaries of the sinusoid fit
-    (about 6 N × H × W values) and about 8 float64 maps of H × W (Î, ρ, φ, residual, θ,
-    azimuth, masks, labels); a method's own working memory is not counted (measured: the
-    default method peaks at about 220 bytes a pixel on a 4 × 1024 × 1224 stack, under
-    the 256 counted here).
-    With ``blocks`` (default: when the method declares ``block_maps``, the thesis
-    method; a run that asks for the thesis maps too) about 24 maps instead (with the
-    reconstruction, its error and their temporaries), the block coefficients and
-    features ((L + 1)² per block, a few copies), one chunk of harmonic evaluations, and
-    the block graph: for a dense affinity its distance matrix and eigen-solver
-    workspace (about 5 n_blocks² values); for a sparse one (k nearest neighbours or the
-    spatial neighbourhood) a few copies of its non-zeros and the Lanczos vectors.
-    """
-    n, h, w = (int(v) for v in shape)
-    pixels = h * w
-    if not (computes_block_maps(params.method) if blocks is None else blocks):
-        return int(8 * (6 * n * pixels + 8 * pixels))
-    win = max(int(params.window), 1)
-    blocks_n = (h // win) * (w // win)
-    k = (int(params.degree) + 1) ** 2
-    kind = _graph_kind(blocks_n, params)
-    if kind == "dense":
-        graph = 5 * blocks_n * blocks_n
-    else:
-        radius = float(params.spatial_radius)
-        neighbours = 30 if kind == "knn" else int(3.2 * (radius + 1) ** 2)
-        graph = 6 * blocks_n * neighbours + 40 * blocks_n
-    total = 8 * (6 * n * pixels + 24 * pixels + 4 * blocks_n * k + graph)
-    return int(total + 2 * CHUNK_BYTES)
-
-
-def check_pipeline_memory(
-    shape: tuple[int, int, int],
-    params: SegmentParams,
-    limit: int | float | None = None,
-    blocks: bool | None = None,
-) -> int:
-    """Refuse a run whose :func:`estimate_pipeline_bytes` exceeds the limit.
-
-    ``blocks``: whether the run computes the block maps (default: when the method
-    declares ``block_maps``). Returns the estimate (bytes). Raises
-    :class:`PolarsegError` naming the stack size (and, for a run on blocks, the window,
-    the number of blocks and the degree) and the memory it would need.
-    """
-    blocks = computes_block_maps(params.method) if blocks is None else blocks
-    needed = estimate_pipeline_bytes(shape, params, blocks)
-    n, h, w = shape
-    what = f"segmenting {n} frames of {h} x {w} pixels"
-    if blocks:
-        n_blocks = (h // params.window) * (w // params.window)
-        what += f" with window {params.window} ({n_blocks} blocks) and degree {params.degree}"
-    check_bytes(needed, what, limit)
-    return needed

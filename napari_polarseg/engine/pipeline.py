@@ -29,6 +29,7 @@ import numpy as np
 from .errors import Cancelled, PolarsegError
 from .features import harmonics
 from .graph import affinity, ncut
+from .limits import RUNTIME_BYTES, memory_limit
 from .matrix_pool import DenseDistances, MatrixPool
 from .params import SegmentParams
 from .physics import pixel_mask, polarimage
@@ -71,6 +72,10 @@ class Pipeline:
         Excluded pixels still get values and labels (their block's), but are left out of
         the sinusoid fit of their own pixel where possible, of the block coefficients and
         of the reconstruction fit; counts are in :meth:`SegmentationResult.summary`.
+    max_bytes : int, optional
+        Memory limit of the runs on this stack, bytes (:attr:`max_bytes`; None:
+        :func:`~.limits.memory_limit`, ``$POLARSEG_MAX_BYTES`` or its default). The
+        methods that work tile by tile choose their tiles from it.
 
     The cache holds one value per stage, keyed on the stage's own parameters and its
     upstream stage's key; a re-entrant lock guards it, so runs from several threads
@@ -91,6 +96,7 @@ class Pipeline:
         angles: np.ndarray,
         params: SegmentParams | None = None,
         mask: np.ndarray | PixelMask | None = None,
+        max_bytes: int | None = None,
     ) -> None:
         raw = stack
         self.stack, self.angles = polarimage.check_stack(stack, angles)
@@ -110,6 +116,8 @@ class Pipeline:
             )
         self.mask: PixelMask = mask
         pixel_mask.check_usable(self.stack, self.mask)
+        #: memory limit of the runs, bytes (None: :func:`~.limits.memory_limit`)
+        self.max_bytes = None if max_bytes is None else memory_limit(max_bytes)
         #: how often each stage was computed
         self.calls: Counter = Counter()
         #: memory for the dense n × n matrices, and the kept distances (stages.py)
@@ -120,6 +128,14 @@ class Pipeline:
         #: (parameters, stages computed for them since their run began)
         self._recomputed: tuple[SegmentParams, list[str]] = (params, [])
         self._lock = threading.RLock()
+
+    def work_limit(self) -> int:
+        """The memory limit of the methods' work, bytes: :attr:`max_bytes` (or
+        :func:`~.limits.memory_limit`) less the stack, the mask's flags and the
+        libraries (:data:`~.limits.RUNTIME_BYTES`), which the methods' own estimates
+        (over :data:`~.limits.KEPT_MAPS`) do not count; at least 1 byte."""
+        held = self.stack.nbytes + self.mask.flags.nbytes + RUNTIME_BYTES
+        return max(memory_limit(self.max_bytes) - held, 1)
 
     # -- parameters -------------------------------------------------------------------
     @property

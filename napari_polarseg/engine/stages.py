@@ -17,6 +17,7 @@ from typing import Any, Protocol
 import numpy as np
 from scipy import ndimage
 
+from .chunks import chunk_bounds, run_chunks
 from .errors import PolarsegError
 from .features import harmonics, polstats
 from .features import pca as feat
@@ -196,54 +197,56 @@ def block_vectors(
     return polstats.standardise(stats) if standardise else stats
 
 
-#: Rows per band of the least-squares fit when the stage reports progress: every pixel
-#: is fitted on its own, so bands give the same image and a checkpoint between them.
-FIT_BAND_ROWS = 128
+#: Pixels a chunk of the normals stage works on at once (whole rows of them).
+NORMALS_CHUNK_PIXELS = 1 << 16
 
 
 def polarisation_stage(pipe: StageHost, run: StageRun) -> polarimage.PolarisationImage:
     """Î, ρ, φ of the sinusoid fit (thesis eq. 3.14), masked samples down-weighted.
 
-    The plain least-squares fit (no sample weights, every sample finite) runs in bands
-    of :data:`FIT_BAND_ROWS` rows when the stage reports progress (which may stop it
-    between bands); a weighted or robust fit in one piece."""
+    The fit runs chunk by chunk into preallocated maps
+    (:func:`~.physics.polarimage.polarisation_image`), reporting its progress (which may
+    stop it between chunks). The masked samples' weights go in as booleans (1 byte a
+    sample, not a float64 copy of the stack) and the final weights are not kept."""
     mask = pipe.mask
     flagged = bool(np.any(mask.flags))
-    robust = run.params.fit == "robust"
-    weights = mask.sample_weights if flagged else None
-    progress = run.progress("polarisation")
-    h = pipe.stack.shape[1]
-    plain = weights is None and not robust and bool(np.isfinite(pipe.stack).all())
-    if progress is None or not plain or h <= FIT_BAND_ROWS:
-        pol = polarimage.polarisation_image(pipe.stack, pipe.angles, robust, weights=weights)
-    else:
-        bands = []
-        for top in range(0, h, FIT_BAND_ROWS):
-            band = pipe.stack[:, top : top + FIT_BAND_ROWS]
-            bands.append(polarimage.polarisation_image(band, pipe.angles))
-            progress(min(top + FIT_BAND_ROWS, h) / h)
-        pol = _stacked_rows(bands)
+    pol = polarimage.polarisation_image(
+        pipe.stack,
+        pipe.angles,
+        run.params.fit == "robust",
+        weights=mask.flags == 0 if flagged else None,
+        keep_weights=False,
+        progress=run.progress("polarisation"),
+    )
     if flagged or mask.region is not None:
-        pol = replace(pol, invalid=pol.invalid | ~mask.valid)
+        np.logical_or(pol.invalid, ~mask.valid, out=pol.invalid)
     return pol
 
 
-def _stacked_rows(
-    bands: list[polarimage.PolarisationImage],
-) -> polarimage.PolarisationImage:
-    """One polarisation image of the unweighted fits of consecutive row bands."""
-    names = ("intensity", "dop", "phase", "residual", "invalid")
-    rows = {name: np.concatenate([getattr(b, name) for b in bands], axis=0) for name in names}
-    return replace(bands[0], **rows)
-
-
 def normals_stage(pipe: StageHost, run: StageRun) -> Normals:
-    """Zenith from ρ (Fresnel model, refractive index) and azimuth from φ."""
+    """Zenith θ from ρ (Fresnel model, refractive index; eqs. 3.11/3.13) and azimuth
+    from φ, radians, in chunks of rows written into preallocated (H, W) maps (every
+    pixel on its own: the maps equal one whole-image pass's).
+
+    The diffuse azimuth is φ mod π, and the fit's φ already lies in [0, π) (NaN where
+    the fit gave none): it is φ itself, a read-only view instead of a float64 copy."""
     p = run.params
     pol = pipe.stage_value("polarisation", run)
-    est = fresnel.zenith_from_dop(pol.dop, p.refractive_index, p.model, p.specular_branch)
-    azimuth = fresnel.azimuth_from_phase(pol.phase, p.model)
-    return Normals(est.zenith, azimuth, est.clamped)
+    h, w = pol.dop.shape
+    zenith, clamped = np.empty((h, w)), np.empty((h, w), dtype=bool)
+    diffuse = p.model == "diffuse"
+    azimuth = pol.phase.view() if diffuse else np.empty((h, w))
+
+    def work(a: int, b: int) -> None:
+        est = fresnel.zenith_from_dop(pol.dop[a:b], p.refractive_index, p.model, p.specular_branch)
+        zenith[a:b], clamped[a:b] = est.zenith, est.clamped
+        if not diffuse:
+            azimuth[a:b] = fresnel.azimuth_from_phase(pol.phase[a:b], p.model)
+
+    rows = max(1, NORMALS_CHUNK_PIXELS // max(w, 1))
+    run_chunks(chunk_bounds(h, rows), work, h * w, run.progress("normals"))
+    azimuth.flags.writeable = not diffuse
+    return Normals(zenith, azimuth, clamped)
 
 
 def harmonics_stage(pipe: StageHost, run: StageRun) -> np.ndarray:

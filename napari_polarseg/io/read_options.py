@@ -95,7 +95,8 @@ class ReadOptions:
     channel : int or None
         Colour channel to use (None: BT.601 luma).
     max_memory_gib : float or None
-        Memory limit of the read and the run, GiB (None: ``$POLARSEG_MAX_BYTES`` or 8).
+        Memory limit of the read and the run, GiB (None: ``$POLARSEG_MAX_BYTES`` or the
+        engine's default, :func:`~napari_polarseg.engine.limits.default_max_bytes`).
     lazy : str
         Leave a tiled TIFF or a Zarr stack on disk and read it block by block
         (:mod:`napari_polarseg.io.lazy_stack`): ``auto`` (when larger than
@@ -173,8 +174,10 @@ class ReadOptions:
         kind="gib",
         metavar="SIZE",
         stack=True,
-        help="refuse inputs and runs that would need more memory than this: GiB, or with "
-        "a unit (20G, 512M) [$POLARSEG_MAX_BYTES or 8G]",
+        help="memory limit of the read and the run, GiB, or with a unit (20G, 512M): the "
+        "tile size of a large image follows from it; inputs and runs that would need more "
+        "even tiled are refused [$POLARSEG_MAX_BYTES, or 16G or 3/4 of the machine's "
+        "memory when less]",
     )
     lazy: str = _option(
         "auto",

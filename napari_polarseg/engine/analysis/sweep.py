@@ -62,10 +62,10 @@ import numpy as np
 
 from ..errors import Cancelled, PolarsegError
 from ..features.pca import whiten
-from ..limits import check_pipeline_memory
 from ..params import SegmentParams
 from ..pipeline import Pipeline
 from ..registered import computes_block_maps
+from ..run_memory import check_pipeline_memory
 from .evaluation import adjusted_rand_index
 from .sweep_result import DEFAULT_SCORE, SCORES, SweepCell, SweepResult
 
@@ -399,7 +399,7 @@ def sweep(
     mask : array (H, W) or PixelMask, optional
         Region / pixel mask, as for :class:`Pipeline`.
     max_bytes : int, optional
-        Memory limit per cell (:func:`~napari_polarseg.engine.limits.check_pipeline_memory`);
+        Memory limit per cell (:func:`~napari_polarseg.engine.run_memory.check_pipeline_memory`);
         a cell above it is recorded as failed.
     keep_labels : bool
         Keep every cell's pixel labels in memory (``SweepResult.labels(cell)``).

@@ -105,10 +105,12 @@ class PixelSegmenter:
         Grid step of the coarse-to-fine prediction (:func:`predict_pixels`; 1 = every
         pixel on its own features).
     max_bytes : int, optional
-        Memory limit, bytes (default :func:`~napari_polarseg.engine.limits.memory_limit`:
-        ``$POLARSEG_MAX_BYTES`` or 8 GiB). An image whose whole-image features would
-        exceed it is segmented tile by tile (:mod:`.tiled_prediction`): the features are
-        then a :class:`~.tiled_features.TiledFeatures`.
+        Memory limit of the method's work, bytes (default: the pipeline's
+        ``work_limit()``, its limit less the stack and its flags; the limit is its
+        ``max_bytes``, else :func:`~napari_polarseg.engine.limits.memory_limit`). An
+        image whose whole-image features would exceed it is segmented tile by tile
+        (:mod:`.tiled_prediction`): the features are then a
+        :class:`~.tiled_features.TiledFeatures`.
     """
 
     pipeline: Pipeline
@@ -209,7 +211,8 @@ class PixelSegmenter:
         align = tile_align(params, self.stride)
         margin = prediction_margin(self.stride, TILED_SMOOTHING)
         halo = tile_halo(params, margin)
-        grid = scribble_tiles(shape, params, halo, align, len(channels), limit=self.max_bytes)
+        limit = self.max_bytes if self.max_bytes is not None else self.pipeline.work_limit()
+        grid = scribble_tiles(shape, params, halo, align, len(channels), limit=limit)
         if grid is None:
             return None
         regions = None

@@ -85,6 +85,16 @@ class SceneView(Protocol):
         """The user's region (H, W bool) or None (every pixel)."""
         ...
 
+    @property
+    def max_bytes(self) -> int | None:
+        """The memory limit of the runs, bytes (None: the engine's default)."""
+        ...
+
+    def work_limit(self) -> int:
+        """The memory limit of a method's work, bytes (the limit less the stack and its
+        flags): a method that works tile by tile chooses its tiles from it."""
+        ...
+
     def polarisation(self, params: SegmentParams) -> PolarisationImage:
         """The shared polarisation image for ``params.fit``."""
         ...
@@ -124,7 +134,9 @@ class Segmenter(Protocol):
     ``block_maps`` (it cuts the w × w block grid and computes the harmonic coefficients,
     the PCA features and the reconstruction-error map in any case, as the thesis method
     does: its runs show those maps, summaries name the block grid, the time series cuts
-    its blocks and the memory estimate counts them).
+    its blocks and the memory estimate counts them). ``reads_normals`` (True when
+    absent, read at each run): the scene computes the Fresnel normals before its stages;
+    False: after them, for the result only, so they are not in memory while it works.
     """
 
     name: str

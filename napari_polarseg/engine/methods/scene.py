@@ -21,6 +21,7 @@ import numpy as np
 
 from ..features.harmonics import top_left_block_labels
 from ..features.object_size import ObjectSize, estimate_object_size
+from ..limits import memory_limit
 from ..params import DEFAULT_PRESET, PRESETS, SegmentParams
 from ..physics import polarimage
 from ..physics.pixel_mask import PixelMask
@@ -61,6 +62,11 @@ class Scene:
         the labels inside it do not depend on the pixels outside.
     pipeline : Pipeline, optional
         An existing pipeline of the stack to share (its cache is reused).
+    max_bytes : int, optional
+        Memory limit of the runs, bytes (the pipeline's :attr:`~.Pipeline.max_bytes`;
+        None: :func:`~..limits.memory_limit`). The methods that work tile by tile (the
+        default method, the pixel classifier) choose their tiles from it; a shared
+        ``pipeline`` takes it when given.
 
     Examples
     --------
@@ -75,8 +81,13 @@ class Scene:
         angles: np.ndarray | None = None,
         mask: np.ndarray | PixelMask | None = None,
         pipeline: Pipeline | None = None,
+        max_bytes: int | None = None,
     ) -> None:
-        self.pipeline = pipeline if pipeline is not None else Pipeline(stack, angles, mask=mask)
+        if pipeline is None:
+            pipeline = Pipeline(stack, angles, mask=mask, max_bytes=max_bytes)
+        elif max_bytes is not None:
+            pipeline.max_bytes = memory_limit(max_bytes)
+        self.pipeline = pipeline
         #: how often each method ran (its labels were computed, not taken from the cache)
         self.method_calls: dict[str, int] = {}
         self._cache: dict[str, tuple[Any, Any]] = {}
@@ -90,6 +101,17 @@ class Scene:
     @property
     def shape(self) -> tuple[int, int]:
         return tuple(self.pipeline.stack.shape[1:])  # type: ignore[return-value]
+
+    @property
+    def max_bytes(self) -> int | None:
+        """The memory limit of the runs, bytes (None: :func:`~..limits.memory_limit`)."""
+        return self.pipeline.max_bytes
+
+    def work_limit(self) -> int:
+        """The memory limit of a method's work, bytes: the limit less the stack and its
+        flags (:meth:`Pipeline.work_limit <napari_polarseg.engine.Pipeline.work_limit>`);
+        the tiles of the methods that tile follow from it."""
+        return self.pipeline.work_limit()
 
     @property
     def region(self) -> np.ndarray | None:
@@ -149,9 +171,15 @@ class Scene:
         reconstruction: bool = False,
     ) -> list[str]:
         """The stages a run goes through, in order (the progress bar's total; no scene
-        needed: ``Scene.stages(params, ...)`` before a stack's scene exists)."""
+        needed: ``Scene.stages(params, ...)`` before a stack's scene exists).
+
+        The normals (θ, azimuth: what the result shows) come before the method's
+        stages, or after them for a method that does not read them
+        (:func:`early_stages`): they are then not in memory while it works."""
         method = Scene.method_for(params, inputs)
-        names = ["polarisation", "normals", *method.stages(params)]
+        names = [*early_stages(method), *method.stages(params)]
+        if "normals" not in names:
+            names.append("normals")
         if maps:
             names += [s for s in MAP_STAGES if s not in names]
         if reconstruction:
@@ -215,7 +243,7 @@ class Scene:
             run.on_partial = self._forward(p, method, run, timings, on_partial)
         with self._lock:
             self.pipeline.snapshot(p)
-            for stage in ("polarisation", "normals"):
+            for stage in early_stages(method):
                 self._thesis_stage(stage, p, run, timings)
             out = self._method_output(method, p, inputs, run, timings)
             for stage in run.names[run.names.index(run.current) + 1 :]:
@@ -281,6 +309,7 @@ class Scene:
         stages are left after the method's (else the whole result follows at once)."""
         last = max((run.names.index(s) for s in method.stages(p)), default=1)  # normals
         done, left = run.names[: last + 1], run.names[last + 1 :]
+        left = [s for s in left if s != "normals"]  # part of any result, no maps
 
         def forward(out: MethodOutput, final: bool) -> None:
             if final and all(self.pipeline.is_fresh(s, p) for s in left):
@@ -320,6 +349,15 @@ class Scene:
             materials=out.extra.get("materials"),  # a classifier's classes: value and name
             on_blocks=maps or bool(getattr(method, "block_maps", False)),
         )
+
+
+def early_stages(method: Segmenter) -> tuple[str, ...]:
+    """The shared stages a run computes before ``method``'s: the polarisation fit, and
+    the normals unless the method declares ``reads_normals = False`` (the superpixel
+    methods; the scene then computes them after the method, for the result)."""
+    if getattr(method, "reads_normals", True):
+        return ("polarisation", "normals")
+    return ("polarisation",)
 
 
 def segment(

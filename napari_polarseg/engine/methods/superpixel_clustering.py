@@ -29,6 +29,8 @@ class SuperpixelClustering:
     title = "superpixels (unsupervised)"
     reads = ("fit", "n_segments")
     inputs: tuple[str, ...] = ()
+    #: The labels read Î, ρ, φ only: the scene computes the normals after the method
+    reads_normals = False
 
     def __init__(self, params: UnsupervisedParams | None = None) -> None:
         self.params = params or UnsupervisedParams()

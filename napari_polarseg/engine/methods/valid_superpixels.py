@@ -141,14 +141,14 @@ class ValidSuperpixels(SuperpixelClustering):
         features of ``params`` on the scene's clustered pixels
         (:func:`clustered_pixels`), made once per image, region and parameters and kept
         in the scene's feature cache, tile by tile when the whole image would not fit
-        the memory limit
-        (:func:`~..unsupervised.tiled_regions.region_tiles`); ``run`` shows the
+        the scene's memory limit (less the stack: ``scene.work_limit()``;
+        :func:`~..unsupervised.tiled_regions.region_tiles`); ``run`` shows the
         progress and may stop it."""
 
         def prepare() -> RegionModel:
             valid = clustered_pixels(scene.region, pol.invalid)
             maps = (pol.intensity, pol.dop, pol.phase)
-            grid = region_tiles(pol.intensity.shape, params)
+            grid = region_tiles(pol.intensity.shape, params, scene.work_limit())
             if grid is None:
                 return prepare_regions(*maps, params, valid, run.within)
             return tiled_prepare_regions(*maps, params, valid, grid, run.within)

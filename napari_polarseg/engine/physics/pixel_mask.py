@@ -67,7 +67,12 @@ class PixelMask:
         return tuple(self.flags.shape[1:])  # type: ignore[return-value]
 
     def _any(self, bit: int) -> np.ndarray:
-        return np.any(self.flags & bit, axis=0)
+        """(H, W) pixels with ``bit`` set in any frame, frame by frame (no (N, H, W)
+        temporary)."""
+        out = np.zeros(self.shape, dtype=bool)
+        for frame in self.flags:
+            out |= (frame & bit) != 0
+        return out
 
     @property
     def saturated(self) -> np.ndarray:
@@ -94,7 +99,9 @@ class PixelMask:
     @property
     def valid(self) -> np.ndarray:
         """(H, W) pixels the fit and the features use."""
-        ok = ~np.any(self.flags, axis=0)
+        ok = np.ones(self.shape, dtype=bool)
+        for frame in self.flags:
+            ok &= frame == 0
         return ok if self.region is None else ok & self.region
 
     @property

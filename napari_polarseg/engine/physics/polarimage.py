@@ -35,6 +35,12 @@ Three refinements for real captures:
   told apart with at least 5 distinct angles; with fewer (a polarisation camera has 4,
   whose residuals all have the same size) the robust fit equals the least-squares fit.
 
+The least-squares fit (plain or weighted) runs chunk by chunk over the pixels, on the
+cores, each chunk writing its slice of preallocated maps (:class:`~.fit_maps.FitMaps`):
+its memory is the maps (33 bytes a pixel, plus the final weights when kept) and a few
+chunks whatever the image's size, and the maps are those of one whole-image pass to the
+bit. The robust fit (its IRLS iterations stop together) runs on the whole image.
+
 Angles are radians, measured from the image's column axis towards its row axis.
 """
 
@@ -44,16 +50,29 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..chunks import chunk_bounds, run_chunks
+from ..chunks import Progress, chunk_bounds, run_chunks
 from ..errors import PolarsegError
-from .sinusoid_fit import ROBUST_LOSSES, irls, sinusoid_design, unweighted_fit, weighted_fit
+from .fit_maps import FitMaps
+from .sinusoid_fit import (
+    ROBUST_LOSSES,
+    irls,
+    sinusoid_design,
+    unweighted_chunk,
+    unweighted_solver,
+    weighted_fit,
+)
 
 #: Two polariser angles closer than this (radians, modulo π) are the same state.
 ANGLE_TOLERANCE = 1e-6
 #: Largest magnitude of a sample: beyond it squares overflow in float64 downstream.
 MAX_ABS_VALUE = 1e100
-#: Pixels per chunk of the weighted least-squares fit (:func:`_weighted_polarisation`).
+#: Pixels per chunk of the weighted least-squares fit (:class:`_WeightedFit`). The
+#: chunks' small matrix products may take other BLAS kernels at another chunk size,
+#: so the sizes stay those the maps were first computed with: the maps do not change
+#: to the bit (1 << 16 would be faster and lighter, and change the last bit of some).
 FIT_CHUNK_PIXELS = 1 << 18
+#: Pixels per chunk of the unweighted least-squares fit (:func:`_plain_fit`).
+PLAIN_CHUNK_PIXELS = 1 << 15
 
 
 @dataclass(frozen=True)
@@ -277,6 +296,8 @@ def polarisation_image(
     weights: np.ndarray | None = None,
     loss: str = "tukey",
     iterations: int = 10,
+    keep_weights: bool = True,
+    progress: Progress | None = None,
 ) -> PolarisationImage:
     """Fit thesis eq. 3.14 at every pixel by (optionally robust) least squares.
 
@@ -299,6 +320,10 @@ def polarisation_image(
         Huber's (bounded influence, never rejects a sample).
     iterations : int
         Most IRLS iterations (stops earlier once the coefficients settle).
+    keep_weights : bool
+        Return ``sample_weights`` (4·G bytes a pixel); False: None (the pipeline's).
+    progress : callable(share), optional
+        Called with the share fitted (0..1]; what it raises stops the fit there.
 
     Returns
     -------
@@ -332,83 +357,134 @@ def polarisation_image(
     (0.436, 0.3)
     """
     data, angles = check_stack(stack, angles)
+    _check_robust_options(loss, iterations)
+    n, h, w = data.shape
+    groups = angle_groups(angles)
+    g = int(groups.max()) + 1
+    robust = robust and g > 4
+    if weights is None and not robust and _all_finite(data):
+        # every sample usable and weighted once: one pseudo-inverse fits every pixel
+        maps, fit_angles = _plain_fit(data.reshape(n, -1), angles, groups, progress)
+        return _image(maps, (h, w), None, fit_angles)
+    fit = _WeightedFit(loss, int(iterations), keep_weights, progress)
+    return fit.run(data, angles, _checked_weights(weights, data.shape), robust)
+
+
+def _check_robust_options(loss: str, iterations: int) -> None:
+    """Raise for an unknown ``loss`` or a non-positive ``iterations``."""
     if loss not in ROBUST_LOSSES:
         raise PolarsegError(f"loss must be one of {', '.join(ROBUST_LOSSES)}; got {loss!r}")
     if not isinstance(iterations, (int, np.integer)) or iterations < 1:
         raise PolarsegError(f"iterations must be a positive integer, got {iterations!r}")
-    n, h, w = data.shape
-    groups = angle_groups(angles)
-    g = int(groups.max()) + 1
-    if weights is None and not (robust and g > 4) and _all_finite(data):
-        # every sample usable and weighted once: one pseudo-inverse fits every pixel
-        coef, residual, fit_angles = unweighted_fit(data, angles, groups, g)
-        ok = np.ones(coef.shape[1], dtype=bool)
-        return _polarisation_result(coef, ok, ok, residual, None, fit_angles, (h, w))
-    return _weighted_polarisation(data, angles, weights, robust and g > 4, loss, int(iterations))
 
 
-def _weighted_polarisation(
-    data: np.ndarray,
-    angles: np.ndarray,
-    weights: np.ndarray | None,
-    robust: bool,
-    loss: str,
-    iterations: int,
-) -> PolarisationImage:
+def _checked_weights(weights: np.ndarray | None, shape: tuple[int, ...]) -> np.ndarray | None:
+    """``weights`` as an array of the stack's ``shape`` (any real dtype: bool weights
+    are 0 or 1, converted chunk by chunk); raises for another shape or a negative or
+    non-finite weight."""
+    if weights is None:
+        return None
+    weights = np.asarray(weights)
+    if weights.shape != shape:
+        raise PolarsegError(f"sample weights have shape {weights.shape} but the stack is {shape}")
+    if not (_all_finite(weights) and (weights.size == 0 or weights.min() >= 0)):
+        raise PolarsegError("sample weights must be finite numbers >= 0")
+    return weights
+
+
+def _every_percent(progress: Progress | None) -> Progress | None:
+    """``progress`` called once a percent of the work more is done (and at the end)."""
+    if progress is None:
+        return None
+    last = [0.0]
+
+    def report(share: float) -> None:
+        if share >= 1.0 or share >= last[0] + 0.01:
+            last[0] = share
+            progress(share)
+
+    return report
+
+
+def _plain_fit(
+    flat: np.ndarray, angles: np.ndarray, groups: np.ndarray, progress: Progress | None
+) -> tuple[FitMaps, np.ndarray]:
+    """The unweighted least-squares fit of eq. 3.14 of ``flat`` (N, P) in chunks of
+    :data:`PLAIN_CHUNK_PIXELS` pixels on the cores
+    (:func:`~.sinusoid_fit.unweighted_chunk`), written into the maps; returns them and
+    the states' angles (radians)."""
+    to_coef, to_residual, fit_angles = unweighted_solver(angles, groups, int(groups.max()) + 1)
+    p = flat.shape[1]
+    maps = FitMaps.empty(p)
+
+    def work(a: int, b: int) -> None:
+        coef, residual = unweighted_chunk(to_coef, to_residual, flat[:, a:b])
+        maps.write(a, b, coef, None, None, residual)
+
+    run_chunks(chunk_bounds(p, PLAIN_CHUNK_PIXELS), work, p, _every_percent(progress))
+    return maps, fit_angles
+
+
+@dataclass(frozen=True)
+class _WeightedFit:
     """:func:`polarisation_image` with sample weights, missing samples or the robust fit.
 
     Duplicate angles averaged (:func:`average_duplicate_angles`), then one weighted
     pseudo-inverse for the pixels whose every sample is usable and a 3 × 3 solve per
-    pixel for the others (:func:`_fit_pixels`); ``robust``: IRLS with ``loss`` from
-    there (eq. 3.14). The least-squares fit runs on chunks of
-    :data:`FIT_CHUNK_PIXELS` pixels on the cores (:func:`~..chunks.run_chunks`): its
-    float64 temporaries stay small and are reused instead of a dozen whole-image arrays
-    of fresh pages (3× faster on a camera frame). The robust fit, whose iterations stop
+    pixel for the others (:func:`_fit_pixels`); robust: IRLS with ``loss`` from there
+    (eq. 3.14). The least-squares fit runs on chunks of :data:`FIT_CHUNK_PIXELS` pixels
+    on the cores (:func:`~..chunks.run_chunks`), each written into the maps: its float64
+    temporaries stay small and are reused instead of a dozen whole-image arrays of fresh
+    pages (3× faster on a camera frame). The robust fit, whose iterations stop
     together, runs on the whole image.
     """
-    n, h, w = data.shape
-    if weights is not None:
-        weights = np.asarray(weights)
-        if weights.shape != data.shape:
-            raise PolarsegError(
-                f"sample weights have shape {weights.shape} but the stack is {data.shape}"
+
+    loss: str
+    iterations: int
+    keep_weights: bool
+    progress: Progress | None
+
+    def run(
+        self, data: np.ndarray, angles: np.ndarray, weights: np.ndarray | None, robust: bool
+    ) -> PolarisationImage:
+        n, h, w = data.shape
+        p = h * w
+        flat = data.reshape(n, -1)
+        flat_w = None if weights is None else weights.reshape(n, -1)
+        maps = FitMaps.empty(p)
+        if robust:
+            coef, ok, good, residual, final_w, _, fit_angles = _fit_pixels(
+                flat, angles, flat_w, True, self.loss, self.iterations
             )
-        if not (_all_finite(weights) and (weights.size == 0 or weights.min() >= 0)):
-            raise PolarsegError("sample weights must be finite numbers >= 0")
-    flat = data.reshape(n, -1)
-    flat_w = None if weights is None else weights.reshape(n, -1)
-    if robust:
-        coef, ok, good, residual, final_w, _, fit_angles = _fit_pixels(
-            flat, angles, flat_w, robust, loss, iterations
-        )
-        report_w = None if final_w is None else final_w.reshape(-1, h, w).astype(np.float32)
-        return _polarisation_result(coef, ok, good, residual, report_w, fit_angles, (h, w))
-    p = h * w
-    g = int(angle_groups(angles).max()) + 1
-    coef, residual = np.empty((3, p)), np.empty(p)
-    ok, good = np.empty(p, dtype=bool), np.empty(p, dtype=bool)
-    final = np.empty((g, p), dtype=np.float32)  # pages touched only where written
-    uniform: dict[int, np.ndarray] = {}  # chunk start -> its one weight per state
-    states: list[np.ndarray] = []
+            maps.write(0, p, coef, ok, good, residual)
+            report_w = None
+            if final_w is not None and self.keep_weights:
+                report_w = final_w.reshape(-1, h, w).astype(np.float32)
+            return _image(maps, (h, w), report_w, fit_angles)
+        g = int(angle_groups(angles).max()) + 1
+        # pages touched only where written
+        final = np.empty((g, p), dtype=np.float32) if self.keep_weights else None
+        uniform: dict[int, np.ndarray] = {}  # chunk start -> its one weight per state
+        states: list[np.ndarray] = []
 
-    def work(a: int, b: int) -> None:
-        w_ab = None if flat_w is None else flat_w[:, a:b]
-        c, o, gd, r, f, ref, fa = _fit_pixels(flat[:, a:b], angles, w_ab, False, loss, 1)
-        coef[:, a:b], ok[a:b], good[a:b], residual[a:b] = c, o, gd, r
-        if f is None:
-            uniform[a] = ref
-        else:
-            final[:, a:b] = f
-        states.append(fa)
+        def work(a: int, b: int) -> None:
+            w_ab = None if flat_w is None else flat_w[:, a:b]
+            c, o, gd, r, f, ref, fa = _fit_pixels(flat[:, a:b], angles, w_ab, False, self.loss, 1)
+            maps.write(a, b, c, o, gd, r)
+            if f is None:
+                uniform[a] = ref
+            elif final is not None:
+                final[:, a:b] = f
+            states.append(fa)
 
-    bounds = chunk_bounds(p, FIT_CHUNK_PIXELS)
-    run_chunks(bounds, work, p)
-    report_w = None
-    if len(uniform) < len(bounds):  # some pixel had a missing sample
-        for a, ref in uniform.items():
-            final[:, a : a + FIT_CHUNK_PIXELS] = ref[:, None]
-        report_w = final.reshape(g, h, w)
-    return _polarisation_result(coef, ok, good, residual, report_w, states[0], (h, w))
+        bounds = chunk_bounds(p, FIT_CHUNK_PIXELS)
+        run_chunks(bounds, work, p, self.progress)
+        report_w = None
+        if final is not None and len(uniform) < len(bounds):  # a pixel had a missing sample
+            for a, ref in uniform.items():
+                final[:, a : a + FIT_CHUNK_PIXELS] = ref[:, None]
+            report_w = final.reshape(g, h, w)
+        return _image(maps, (h, w), report_w, states[0])
 
 
 def _fit_pixels(
@@ -454,35 +530,12 @@ def _fit_pixels(
     return coef, ok, ~bad_pixel, residual, reported, ref, fit_angles
 
 
-def _polarisation_result(
-    coef: np.ndarray,
-    ok: np.ndarray,
-    good_pixel: np.ndarray,
-    residual: np.ndarray,
+def _image(
+    maps: FitMaps,
+    shape: tuple[int, int],
     report_w: np.ndarray | None,
     fit_angles: np.ndarray,
-    shape: tuple[int, int],
 ) -> PolarisationImage:
-    """Î, ρ, φ from the fitted coefficients c = (Î, Îρ cos 2φ, Îρ sin 2φ) of eq. 3.14."""
-    c0, c1, c2 = coef
-    amp = np.hypot(c1, c2)
-    no_value = (c0 <= 0) | ~ok
-    invalid = no_value | ~good_pixel
-    with np.errstate(divide="ignore", invalid="ignore"):
-        dop = np.where(no_value, 0.0, amp / np.where(no_value, 1.0, c0))
-    dop = np.clip(dop, 0.0, 1.0)
-    phase = np.mod(0.5 * np.arctan2(c2, c1), np.pi)
-    phase = np.where(no_value, 0.0, phase)
-    # mod can return π itself for tiny negative inputs in floating point
-    phase[phase >= np.pi] = 0.0
-    intensity = np.where(ok, c0, 0.0)
-    h, w = shape
-    return PolarisationImage(
-        intensity=intensity.reshape(h, w),
-        dop=dop.reshape(h, w),
-        phase=phase.reshape(h, w),
-        residual=np.where(ok, residual, 0.0).reshape(h, w),
-        invalid=invalid.reshape(h, w),
-        sample_weights=report_w,
-        angles=fit_angles,
-    )
+    """The :class:`PolarisationImage` of the written maps (views, no copy)."""
+    intensity, dop, phase, residual, invalid = maps.shaped(shape)
+    return PolarisationImage(intensity, dop, phase, residual, invalid, report_w, fit_angles)

@@ -13,8 +13,6 @@ import warnings
 
 import numpy as np
 
-from ..chunks import chunk_bounds, run_chunks
-
 #: Robust losses of :func:`.polarimage.polarisation_image` (``loss=``).
 ROBUST_LOSSES = ("tukey", "huber")
 
@@ -32,22 +30,19 @@ def sinusoid_design(angles: np.ndarray) -> np.ndarray:
     return np.stack([np.ones_like(a), np.cos(2 * a), np.sin(2 * a)], axis=1)
 
 
-def unweighted_fit(
-    data: np.ndarray, angles: np.ndarray, groups: np.ndarray, n_groups: int
+def unweighted_solver(
+    angles: np.ndarray, groups: np.ndarray, n_groups: int
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Least-squares fit of eq. 3.14 when every sample counts once: (coef, RMS, angles).
+    """The least-squares fit of eq. 3.14 when every sample counts once, as two matrices.
 
     The fit of the per-state means (frames at one angle modulo π averaged, each state
-    weighted by its frame count, as :func:`.polarimage.average_duplicate_angles` with unit weights)
-    is linear in the frames: coef = M A x and the residual of the states r = (A − D M A) x
-    for a pixel's samples x, with A (G, N) the averaging, D (G, 3) the design and M its
-    weighted pseudo-inverse. Both small matrices are formed once and applied to chunks of
-    pixels on the cores (no (G, P) array of means or residuals: the means alone were
-    68 MB of fresh pages on the 720 × 660 × 19 reference stack, 0.2–0.4 s of a first run).
-    Returns ``coef`` (3, P), the RMS residual over the states (P,) and the states' angles.
+    weighted by its frame count, as :func:`.polarimage.average_duplicate_angles` with unit
+    weights) is linear in the frames: coef = M A x and the residual of the states
+    r = (A − D M A) x for a pixel's samples x, with A (G, N) the averaging, D (G, 3) the
+    design and M its weighted pseudo-inverse. Returns ``to_coef`` = M A (3, N),
+    ``to_residual`` = A − D M A (G, N) and the states' angles (G,), radians; applied to
+    chunks of pixels by :func:`unweighted_chunk` (no (G, P) array of means or residuals).
     """
-    n = angles.size
-    flat = data.reshape(n, -1)
     counts = np.bincount(groups, minlength=n_groups).astype(np.float64)
     first = np.array([np.flatnonzero(groups == g)[0] for g in range(n_groups)])
     average = (groups[None, :] == np.arange(n_groups)[:, None]) / counts[:, None]  # A
@@ -55,19 +50,17 @@ def unweighted_fit(
     sw = np.sqrt(counts)[:, None]
     to_coef = (np.linalg.pinv(design * sw) * sw.T) @ average  # M A (3, N)
     to_residual = average - design @ to_coef  # (G, N)
-    p = flat.shape[1]
-    coef = np.empty((3, p))
-    residual = np.empty(p)
+    return to_coef, to_residual, angles[first]
 
-    def work(a: int, b: int) -> None:
-        x = flat[:, a:b]
-        np.matmul(to_coef, x, out=coef[:, a:b])
-        r = to_residual @ x
-        residual[a:b] = np.sqrt(np.einsum("ij,ij->j", r, r) / n_groups)
 
-    step = 1 << 15
-    run_chunks(chunk_bounds(p, step), work, p)
-    return coef, residual, angles[first]
+def unweighted_chunk(
+    to_coef: np.ndarray, to_residual: np.ndarray, x: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Coefficients (3, Q) of eq. 3.14 and RMS residual over the G states (Q,) of the
+    pixels (columns) of ``x`` (N, Q), with the matrices of :func:`unweighted_solver`."""
+    coef = to_coef @ x
+    r = to_residual @ x
+    return coef, np.sqrt(np.einsum("ij,ij->j", r, r) / to_residual.shape[0])
 
 
 def weighted_fit(design: np.ndarray, y: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -22,14 +22,17 @@ keeps its core:
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..tile_map import current_tile_map
 from ..tiles import Tile, TileGrid
 from .boundaries import SegmentStats, refine_maps, refined_labels, segment_stats
 from .tile_maps import filled_box
+from .tiled_region_tasks import box_payload
 
 if TYPE_CHECKING:
     from .segmenter import RegionModel
@@ -107,20 +110,56 @@ class TiledLabels:
         squares = np.stack([per_segment(self.moments[1]), per_segment(self.moments[3])])
         return segment_stats(per_segment(weight), sums, squares)
 
-    def tile_labels(
-        self,
-        model: RegionModel,
-        lookup: np.ndarray,
-        tile: Tile,
-        m: int,
-        stats: SegmentStats | None,
-    ) -> np.ndarray:
-        """One core's labels: its box's superpixel labels (``lookup``), the outside
-        pixels the nearest clustered one's, refined with ``stats`` when given."""
-        labels = lookup[model.regions[tile.outer]]
-        if stats is None and model.valid is None:
-            return labels[tile.inner]
-        filled, _, nearest = filled_box(model.maps, model.valid, tile.outer)
+    def __call__(
+        self, model: RegionModel, node_labels: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """(labels (H, W) int32, node labels (n,)) of ``model`` whose superpixels are
+        labelled ``node_labels``: :func:`~.segmenter.pixel_labels` tile by tile, each
+        tile on the current tile map (:func:`~..tile_map.current_tile_map`)."""
+        node_labels = np.asarray(node_labels, dtype=np.int32)
+        m = int(node_labels.max()) + 1 if node_labels.size else 1
+        lookup = node_labels if model.valid is None else np.append(node_labels, 0)
+        lookup = lookup.astype(np.int32)
+        refine = model.used_params.refine_boundaries and m > 1
+        stats = self.stats(node_labels, model.weight, m) if refine else None
+        shape = model.regions.shape
+        plain = stats is None and model.valid is None  # no pixel maps needed
+
+        def payloads() -> Iterator[tuple]:
+            for tile in self.grid:
+                maps, valid = (
+                    (None, None) if plain else box_payload(model.maps, model.valid, tile.outer)
+                )
+                regions = model.regions[tile.outer]
+                yield regions, lookup, maps, valid, tile, m, stats, shape[1]
+
+        labels = np.empty(shape, dtype=np.int32)
+        first = np.full(m, np.iinfo(np.int64).max)
+        cores = current_tile_map()(core_labels, payloads())
+        for tile, (core, tile_first) in zip(self.grid, cores, strict=True):
+            labels[tile.core] = core
+            np.minimum(first, tile_first, out=first)
+        return in_order_of_appearance(labels, node_labels, first)
+
+
+def core_labels(
+    regions: np.ndarray,
+    lookup: np.ndarray,
+    maps: tuple[np.ndarray, ...] | None,
+    valid: np.ndarray | None,
+    tile: Tile,
+    m: int,
+    stats: SegmentStats | None,
+    width: int,
+) -> tuple[np.ndarray, np.ndarray]:
+    """One core's labels (h, w) int32 and the smallest raster index (image of ``width``
+    columns) of each of the ``m`` labels' pixels in it (the largest int64 for none):
+    its outer box's superpixels (``regions``) labelled by ``lookup``, the outside
+    pixels (not ``valid``) the nearest clustered one's, refined with ``stats`` on the
+    box's ``maps`` (Î, ρ, φ) when given (module docstring)."""
+    labels = lookup[regions]
+    if maps is not None:
+        filled, _, nearest = filled_box(maps, valid, (slice(None), slice(None)))
         if nearest is not None:
             labels = labels.ravel()[nearest]
         if stats is not None:
@@ -128,26 +167,13 @@ class TiledLabels:
             labels = refined_labels(labels, i, d, m, refine_maps(i, d), stats)
             if nearest is not None:
                 labels = labels.ravel()[nearest]
-        return labels[tile.inner]
-
-    def __call__(
-        self, model: RegionModel, node_labels: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """(labels (H, W) int32, node labels (n,)) of ``model`` whose superpixels are
-        labelled ``node_labels``: :func:`~.segmenter.pixel_labels` tile by tile."""
-        node_labels = np.asarray(node_labels, dtype=np.int32)
-        m = int(node_labels.max()) + 1 if node_labels.size else 1
-        lookup = node_labels if model.valid is None else np.append(node_labels, 0)
-        refine = model.used_params.refine_boundaries and m > 1
-        stats = self.stats(node_labels, model.weight, m) if refine else None
-        shape = model.regions.shape
-        labels = np.empty(shape, dtype=np.int32)
-        first = np.full(m, np.iinfo(np.int64).max)
-        for tile in self.grid:
-            core = self.tile_labels(model, lookup.astype(np.int32), tile, m, stats)
-            core = core.reshape(tile.core[0].stop - tile.core[0].start, -1)
-            labels[tile.core] = core
-            rows = np.arange(tile.core[0].start, tile.core[0].stop, dtype=np.int64)
-            cols = np.arange(tile.core[1].start, tile.core[1].stop, dtype=np.int64)
-            np.minimum.at(first, core.ravel(), (rows[:, None] * shape[1] + cols).ravel())
-        return in_order_of_appearance(labels, node_labels, first)
+    (r0, r1), (c0, c1) = (
+        (tile.core[0].start, tile.core[0].stop),
+        (tile.core[1].start, tile.core[1].stop),
+    )
+    core = np.ascontiguousarray(labels[tile.inner]).reshape(r1 - r0, c1 - c0)
+    rows = np.arange(r0, r1, dtype=np.int64)
+    cols = np.arange(c0, c1, dtype=np.int64)
+    first = np.full(m, np.iinfo(np.int64).max)
+    np.minimum.at(first, core.ravel(), (rows[:, None] * width + cols).ravel())
+    return core, first

@@ -31,6 +31,12 @@ So (:func:`tiled_prepare_regions`):
 The superpixels themselves are kept as one int32 image (4 bytes a pixel); the labels are
 written tile by tile by node lookup and border refinement (:mod:`.tiled_labels`).
 
+Every tile's work (:mod:`.tiled_region_tasks`) reads only its outer box and returns only
+its sums, border pairs and core; it runs on the current tile map
+(:func:`~..tile_map.current_tile_map`): one tile after the other here, or on a Dask
+cluster (``polarseg segment --dask``), the results added in the tiles' order either way
+(the same labels to the bit).
+
 Whether an image is tiled follows from its size and the memory limit
 (:func:`region_tiles`), never from the user; below it the whole-image code runs
 unchanged. Tiled labels differ from the whole image's only where a watershed decision
@@ -41,26 +47,32 @@ means tile by tile, differ (``tests/test_tiled_default.py``: ARI ≥ 0.98).
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
-from dataclasses import dataclass
+from collections.abc import Callable, Iterator
 
 import numpy as np
 import scipy.sparse as sps
-from skimage.segmentation import watershed
-from skimage.util import regular_grid
 
 from ..features.pixel_features import EPS_INTENSITY
-from ..features.superpixels import COMPACTNESS, edge_gradients, superpixel_edges
 from ..limits import KEPT_MAPS, memory_limit
-from ..tiles import Box, Tile, TileGrid
+from ..tile_map import current_tile_map, worker_bytes
+from ..tiles import MIN_CORE, Tile, TileGrid
 from .params import UnsupervisedParams
 from .pixel_maps import edge_weight
 from .region_diffusion import border_weights, symmetric
-from .region_features import features_of_sums, pixel_terms
+from .region_features import features_of_sums
 from .segmenter import RegionModel, project_features
 from .shape_trend import surface_trend_share
-from .tile_maps import filled_box
 from .tiled_labels import TiledLabels
+from .tiled_region_tasks import (
+    LOG_BINS,
+    LOG_RANGE,
+    CoreSums,
+    Seeds,
+    border_pairs,
+    box_payload,
+    edge_histograms,
+    region_core,
+)
 
 #: Bytes a pixel of the whole-image preparation and labelling beyond the pipeline's
 #: kept maps (measured: 134 on a 5 MP frame).
@@ -80,8 +92,6 @@ MAX_CORE = 2048
 #: in 1536 tiles against 66 s whole) while the memory they save is small beside the
 #: pipeline's full-size maps. At 8 halos the outer boxes hold 1.56× the pixels.
 MIN_CORE_HALOS = 8
-#: Bins of :func:`log_histogram` and the range of log₂ of the values they cover.
-LOG_BINS, LOG_RANGE = 1 << 16, (-40.0, 24.0)
 #: Pixels the Gaussian derivatives of the edge map read each way (σ = 1.5, truncated at 4σ).
 EDGE_REACH = 6
 
@@ -101,7 +111,9 @@ def region_tiles(
     :func:`~..limits.memory_limit`): H·W × (:data:`WHOLE_BYTES_PER_PIXEL` + 8 ×
     :data:`~..limits.KEPT_MAPS`) bytes. Tiled, the limit less the full-size arrays is
     the budget of one outer box at :data:`TILE_BYTES_PER_PIXEL` (core side at least
-    :data:`MIN_CORE_HALOS` halos, at most :data:`MAX_CORE`). Parameters with per-pixel
+    :data:`MIN_CORE_HALOS` halos, at most :data:`MAX_CORE`; with the tiles on a Dask
+    cluster, :func:`~..tile_map.tiles_on`, the outer box at most the workers' share,
+    :func:`~..tile_map.worker_bytes`). Parameters with per-pixel
     feature scales or another boundary than the polarisation edges are never tiled."""
     cap = memory_limit(limit)
     pixels = int(shape[0]) * int(shape[1])
@@ -113,25 +125,19 @@ def region_tiles(
     budget = cap - kept - pixels * TILED_FIXED_BYTES
     grid = TileGrid.for_budget(shape, budget, TILE_BYTES_PER_PIXEL, tile_halo(shape, params))
     core = min(max(grid.core, MIN_CORE_HALOS * grid.halo), MAX_CORE)
+    worker = worker_bytes()
+    if worker is not None:  # the outer box within a Dask worker's share, whatever else
+        side = int(math.sqrt(worker / TILE_BYTES_PER_PIXEL)) - 2 * grid.halo
+        core = min(core, max(side, MIN_CORE))
     if core != grid.core:
         grid = TileGrid(grid.shape, core, grid.halo)
     return grid if len(grid) > 1 else None
 
 
-def log_histogram(values: np.ndarray) -> np.ndarray:
-    """Counts of the non-negative ``values`` in :data:`LOG_BINS` bins of log₂ v from
-    2^:data:`LOG_RANGE`[0] to 2^:data:`LOG_RANGE`[1] (smaller values, zero too, in the
-    first bin, larger in the last): bins 0.1 % wide."""
-    lo, hi = LOG_RANGE
-    with np.errstate(divide="ignore"):
-        x = (np.log2(values.ravel()) - lo) * (LOG_BINS / (hi - lo))
-    index = np.clip(np.nan_to_num(x, nan=0.0, neginf=0.0), 0, LOG_BINS - 1).astype(np.intp)
-    return np.bincount(index, minlength=LOG_BINS)
-
-
 def histogram_median(counts: np.ndarray) -> float:
-    """The median of the values counted by :func:`log_histogram`: the geometric centre
-    of the bin holding the middle value (to 0.05 %)."""
+    """The median of the values counted by
+    :func:`~.tiled_region_tasks.log_histogram`: the geometric centre of the bin holding
+    the middle value (to 0.05 %)."""
     lo, hi = LOG_RANGE
     middle = int(np.searchsorted(np.cumsum(counts), (int(counts.sum()) + 1) / 2.0))
     return float(2.0 ** (lo + (middle + 0.5) * (hi - lo) / LOG_BINS))
@@ -145,65 +151,24 @@ def edge_scales(
 ) -> tuple[float, tuple[float, float]]:
     """(centre of log Î, (m_log, m_s)): log of the median Î and the medians of the two
     gradient magnitudes of the edge map (:func:`~..features.superpixels.edge_gradients`)
-    over the whole image, from their :func:`log_histogram` over every core (each read
+    over the whole image, from their
+    :func:`~.tiled_region_tasks.log_histogram` over every core (each read
     with the edge map's reach around it): the whole image's medians to 0.05 %. (A
     sample of an eighth of the pixels missed the medians by up to 13 %, which moved
     the superpixels of 6 % of the pixels.)"""
     shape = maps[0].shape
+
+    def payloads() -> Iterator[tuple]:
+        for tile in grid:
+            outer = tile.grown(EDGE_REACH, shape)
+            yield (*box_payload(maps, valid, outer), Tile(tile.core, outer).inner, polarisation)
+
     counts = np.zeros((3, LOG_BINS), dtype=np.int64)
-    for tile in grid:
-        outer = tile.grown(EDGE_REACH, shape)
-        (i, d, ph), _, _ = filled_box(maps, valid, outer)
-        inner = Tile(tile.core, outer).inner
-        grad, pol = edge_gradients(i, d, ph, polarisation)
-        counts[0] += log_histogram(i[inner])
-        counts[1] += log_histogram(grad[inner])
-        if pol is not None:
-            counts[2] += log_histogram(pol[inner])
+    for add in current_tile_map()(edge_histograms, payloads()):
+        counts += add
     centre = math.log(max(histogram_median(counts[0]), EPS_INTENSITY))
     m_pol = histogram_median(counts[2]) if polarisation else 1.0
     return centre, (histogram_median(counts[1]), m_pol)
-
-
-@dataclass(frozen=True)
-class Seeds:
-    """The whole image's watershed seeds: scikit-image's ``regular_grid`` of ``n`` points
-    on ``shape``, numbered 1 … in raster order (as ``watershed(image, markers=n)``
-    numbers them)."""
-
-    rows: np.ndarray
-    cols: np.ndarray
-
-    @classmethod
-    def of(cls, shape: tuple[int, int], n: int) -> Seeds:
-        grid = regular_grid(shape, n)
-        return cls(np.arange(shape[0])[grid[0]], np.arange(shape[1])[grid[1]])
-
-    @property
-    def count(self) -> int:
-        return self.rows.size * self.cols.size
-
-    def markers(self, box: Box) -> np.ndarray:
-        """(h, w) int32: the seeds inside ``box`` with their numbers, 0 elsewhere."""
-        r0, r1, c0, c1 = box[0].start, box[0].stop, box[1].start, box[1].stop
-        out = np.zeros((r1 - r0, c1 - c0), dtype=np.int32)
-        ir = np.flatnonzero((self.rows >= r0) & (self.rows < r1))
-        ic = np.flatnonzero((self.cols >= c0) & (self.cols < c1))
-        ids = 1 + ir[:, None] * self.cols.size + ic[None, :]
-        out[np.ix_(self.rows[ir] - r0, self.cols[ic] - c0)] = ids
-        return out
-
-
-def border_pairs(
-    a: np.ndarray, b: np.ndarray, ea: np.ndarray, eb: np.ndarray, n: int
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(keys lo·n + hi, pair counts L, summed edge strengths Σ max(e_a, e_b)) of the
-    pixel pairs (a, b) of two regions that differ, one row per region pair."""
-    differ = a != b
-    a, b = a[differ].astype(np.int64), b[differ].astype(np.int64)
-    e = np.maximum(ea[differ], eb[differ]).astype(np.float64)
-    keys, inverse = np.unique(np.minimum(a, b) * n + np.maximum(a, b), return_inverse=True)
-    return keys, np.bincount(inverse).astype(np.float64), np.bincount(inverse, weights=e)
 
 
 class RegionSums:
@@ -217,21 +182,20 @@ class RegionSums:
         self.position = np.zeros((2, n))  # Σ row, Σ column
         self.pairs: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
 
-    def add_core(self, core: np.ndarray, box: Box, maps: tuple[np.ndarray, ...], centre: float):
-        """Add one core's regions (h, w) at ``box`` (image coordinates), its filled maps
-        Î, ρ, φ (h, w each) and its log Î centre."""
-        flat = core.ravel()
-        self.count += np.bincount(flat, minlength=self.n)
-        for name, term in pixel_terms(*maps, centre=centre).items():
-            add = np.bincount(flat, weights=term.ravel(), minlength=self.n)
-            self.terms[name] = self.terms[name] + add if name in self.terms else add
-        h, w = core.shape
-        rows = np.repeat(np.arange(box[0].start, box[0].stop, dtype=np.float64), w)
-        cols = np.tile(np.arange(box[1].start, box[1].stop, dtype=np.float64), h)
-        self.position += [np.bincount(flat, weights=v, minlength=self.n) for v in (rows, cols)]
+    def add(self, core: CoreSums) -> None:
+        """Add one core's sums and border pairs (:func:`~.tiled_region_tasks.region_core`),
+        in the order of the tiles (the sums are then the same to the bit wherever the
+        tiles ran)."""
+        ids = core.ids
+        self.count[ids] += core.count
+        for name, add in core.terms.items():
+            self.terms.setdefault(name, np.zeros(self.n))[ids] += add
+        self.position[:, ids] += core.position
+        self.pairs.extend(core.pairs)
 
     def add_borders(self, a: np.ndarray, b: np.ndarray, ea: np.ndarray, eb: np.ndarray):
-        """Add the pixel pairs (a, b) with edge values (ea, eb) (:func:`border_pairs`)."""
+        """Add the pixel pairs (a, b) with edge values (ea, eb)
+        (:func:`~.tiled_region_tasks.border_pairs`)."""
         if a.size:
             self.pairs.append(border_pairs(a, b, ea, eb, self.n))
 
@@ -244,26 +208,17 @@ class RegionSums:
         return merged // self.n, merged % self.n, length, strength / np.maximum(length, 1e-300)
 
 
-def _core_pairs(sums: RegionSums, core: np.ndarray, edges: np.ndarray) -> None:
-    """The pixel pairs inside one core (left-right, then up-down)."""
-    sums.add_borders(core[:, :-1], core[:, 1:], edges[:, :-1], edges[:, 1:])
-    sums.add_borders(core[:-1], core[1:], edges[:-1], edges[1:])
-
-
-def _keep_cut_lines(tile: Tile, edges: np.ndarray, lines: dict, shape: tuple[int, int]) -> None:
+def _keep_cut_lines(tile: Tile, core: CoreSums, lines: dict, shape: tuple[int, int]) -> None:
     """Keep the edge values on both sides of the cuts right of and below ``tile``'s core
-    (its box reads them: they are the whole image's)."""
+    (``core.right``, ``core.below``) in the full-length ``lines``."""
     (r0, r1), (c0, c1) = (
         (tile.core[0].start, tile.core[0].stop),
         (tile.core[1].start, tile.core[1].stop),
     )
-    o_r, o_c = tile.outer[0].start, tile.outer[1].start
-    if c1 < shape[1]:
-        line = lines.setdefault(("col", c1), np.zeros((2, shape[0])))
-        line[:, r0:r1] = edges[r0 - o_r : r1 - o_r, c1 - 1 - o_c : c1 + 1 - o_c].T
-    if r1 < shape[0]:
-        line = lines.setdefault(("row", r1), np.zeros((2, shape[1])))
-        line[:, c0:c1] = edges[r1 - 1 - o_r : r1 + 1 - o_r, c0 - o_c : c1 - o_c]
+    if core.right is not None:
+        lines.setdefault(("col", c1), np.zeros((2, shape[0])))[:, r0:r1] = core.right
+    if core.below is not None:
+        lines.setdefault(("row", r1), np.zeros((2, shape[1])))[:, c0:c1] = core.below
 
 
 def _cut_pairs(sums: RegionSums, regions: np.ndarray, lines: dict) -> None:
@@ -298,19 +253,17 @@ def _tile_pass(
     sums = RegionSums(outside + 1, shape)
     regions = np.empty(shape, dtype=np.int32)
     lines: dict = {}
-    for index, tile in enumerate(grid):
-        filled, v, _ = filled_box(maps, valid, tile.outer)
-        edges = superpixel_edges(*filled, weight, scales)
-        labels = watershed(edges, seeds.markers(tile.outer), compactness=COMPACTNESS)
-        inner = tile.inner
-        core = labels[inner] - 1
-        if v is not None:
-            core[~v[inner]] = outside
-        regions[tile.core] = core
-        sums.add_core(core, tile.core, tuple(m[inner] for m in filled), centre)
-        _core_pairs(sums, core, edges[inner])
-        _keep_cut_lines(tile, edges, lines, shape)
-        del filled, edges, labels
+
+    def payloads() -> Iterator[tuple]:
+        for tile in grid:
+            box = box_payload(maps, valid, tile.outer)
+            yield (*box, tile, seeds, weight, scales, centre, shape)
+
+    cores = current_tile_map()(region_core, payloads())
+    for index, (tile, core) in enumerate(zip(grid, cores, strict=True)):
+        regions[tile.core] = core.regions
+        sums.add(core)
+        _keep_cut_lines(tile, core, lines, shape)
         progress((index + 1) / len(grid))
     _cut_pairs(sums, regions, lines)
     return regions, sums, centre

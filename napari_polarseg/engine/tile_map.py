@@ -1,0 +1,180 @@
+"""Where the tiles of a large image are worked on: in this process, or on a Dask cluster.
+
+The tiled loops (:mod:`.unsupervised.tiled_regions`, :mod:`.unsupervised.tiled_labels`)
+hand every tile's work to the current *tile map*: a callable ``(task, payloads)`` that
+calls ``task(*payload)`` for every payload and yields the results **in the order of the
+payloads**. A payload holds only its tile's arrays (the outer box, with its halo) and a
+few small values; a result holds only what the whole image's step needs of the tile
+(sums per region, border pairs, the core's labels). So:
+
+- :func:`in_process` (the default) runs the tasks one after the other here, as a plain
+  loop would;
+- :class:`DaskTileMap` runs them on a ``dask.distributed`` cluster through its client:
+  each payload's arrays are scattered to one worker and the task submitted there, with
+  at most ``window`` tiles in flight (the client holds no more payloads than that and a
+  worker no more than its share); the results are gathered in order, so every sum is
+  added in the same order as in this process and the labels are the same to the bit;
+- the global steps (node features, clustering, choosing k) stay on the client.
+
+The map is a setting of this module (:func:`tiles_on`), not an argument of the methods:
+``polarseg segment --dask`` sets it around the run, every thread of the run reads it
+(:func:`current_tile_map`). The engine never imports Dask: the client is used through
+its ``scatter``, ``submit`` and ``scheduler_info`` methods only.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import itertools
+import threading
+import uuid
+from collections import deque
+from collections.abc import Callable, Generator, Iterable, Iterator
+from typing import Any, Protocol, TypeVar
+
+import numpy as np
+
+from .errors import PolarsegError
+
+R = TypeVar("R")
+
+#: Arrays smaller than this (bytes) travel inside the task; larger ones are scattered.
+SCATTER_BYTES = 1 << 20
+#: Share of a worker's memory limit one tile may use (the batch's share too).
+WORKER_SHARE = 0.8
+
+
+class TileMap(Protocol):
+    """Calls ``task(*payload)`` for every payload, yielding the results in order."""
+
+    def __call__(self, task: Callable[..., R], payloads: Iterable[tuple]) -> Iterator[R]: ...
+
+
+def in_process(task: Callable[..., R], payloads: Iterable[tuple]) -> Iterator[R]:
+    """The tile map of this process: the tasks one after the other, lazily (one payload
+    at a time is made)."""
+    for payload in payloads:
+        yield task(*payload)
+
+
+class DaskTileMap:
+    """A tile map on a ``dask.distributed`` cluster (module docstring).
+
+    Parameters
+    ----------
+    client : distributed.Client
+        The cluster's client (a local cluster's or a remote scheduler's).
+    window : int, optional
+        Tiles in flight at once [twice the cluster's threads]: the client holds at most
+        that many payloads and results.
+    """
+
+    def __init__(self, client: Any, window: int | None = None) -> None:
+        self.client = client
+        info = client.scheduler_info(n_workers=-1)["workers"]
+        self.workers = sorted(info)
+        self.threads = max(1, sum(int(w.get("nthreads", 1)) for w in info.values()))
+        self.window = max(1, int(window or 2 * self.threads))
+        limits = [float(w.get("memory_limit") or 0) for w in info.values()]
+        limits = [v for v in limits if v > 0]
+        #: The largest memory (bytes) one tile's work may take on a worker: the share
+        #: :data:`WORKER_SHARE` of the smallest worker limit (None: no limit).
+        self.worker_bytes = WORKER_SHARE * min(limits) if limits else None
+        self._turn = itertools.count()
+        #: Tasks submitted so far.
+        self.tasks = 0
+
+    def _submit(self, task: Callable[..., Any], payload: tuple) -> tuple[Any, list[Any]]:
+        """The future of ``task(*payload)`` on the next worker (round robin), its large
+        arrays scattered there first; and the futures of those arrays."""
+        worker = [self.workers[next(self._turn) % len(self.workers)]] if self.workers else None
+        large = [i for i, a in enumerate(payload) if _nbytes(a) > SCATTER_BYTES]
+        args = list(payload)
+        held: list[Any] = []
+        if large:
+            arrays = [payload[i] for i in large]
+            try:
+                held = self.client.scatter(arrays, workers=worker, hash=False)
+            except Exception:  # that worker gone: wherever the scheduler puts them
+                held = self.client.scatter(arrays, hash=False)
+            for i, future in zip(large, held, strict=True):
+                args[i] = future
+        self.tasks += 1
+        key = f"polarseg-tile-{getattr(task, '__name__', 'task')}-{uuid.uuid4().hex}"
+        future = self.client.submit(
+            task, *args, key=key, pure=False, workers=worker, allow_other_workers=True
+        )
+        return future, held
+
+    def __call__(self, task: Callable[..., R], payloads: Iterable[tuple]) -> Iterator[R]:
+        return self._results(task, iter(payloads))
+
+    def _results(
+        self, task: Callable[..., R], payloads: Iterator[tuple]
+    ) -> Generator[R, None, None]:
+        flight: deque[tuple[Any, list[Any]]] = deque()
+        try:
+            for payload in itertools.islice(payloads, self.window):
+                flight.append(self._submit(task, payload))
+            while flight:
+                future, held = flight.popleft()
+                result = _result(future)
+                del future, held  # released: the worker drops the tile's arrays
+                for payload in itertools.islice(payloads, 1):
+                    flight.append(self._submit(task, payload))
+                yield result
+        finally:
+            if flight:
+                with contextlib.suppress(Exception):
+                    self.client.cancel([f for f, _ in flight], force=True)
+
+
+def _result(future: Any) -> Any:
+    """The future's result; a worker that died (``KilledWorker``: out of memory, killed)
+    as a :class:`~.errors.PolarsegError` that says so."""
+    try:
+        return future.result()
+    except Exception as exc:
+        if type(exc).__name__ != "KilledWorker":
+            raise
+        raise PolarsegError(
+            f"a Dask worker died while working on a tile of the image ({exc}); give the "
+            "workers more memory (--memory-limit) or use a lower --max-memory"
+        ) from None
+
+
+def _nbytes(value: Any) -> int:
+    """Bytes of the arrays in ``value`` (an array, or a tuple or list of them)."""
+    if isinstance(value, np.ndarray):
+        return int(value.nbytes)
+    if isinstance(value, (tuple, list)):
+        return sum(_nbytes(v) for v in value)
+    return 0
+
+
+_lock = threading.Lock()
+_current: list[TileMap | None] = [None]
+
+
+def current_tile_map() -> TileMap:
+    """The tile map set by :func:`tiles_on`, else :func:`in_process`."""
+    return _current[0] or in_process
+
+
+def worker_bytes() -> float | None:
+    """The memory (bytes) one tile may take on the current map's workers (None: this
+    process's limit holds)."""
+    return getattr(_current[0], "worker_bytes", None)
+
+
+@contextlib.contextmanager
+def tiles_on(tile_map: TileMap | None) -> Iterator[TileMap]:
+    """Run the tiles of every tiled loop started inside the block with ``tile_map``
+    (None: in this process); the previous map is restored after."""
+    with _lock:
+        previous, _current[0] = _current[0], tile_map
+    try:
+        yield current_tile_map()
+    finally:
+        with _lock:
+            _current[0] = previous
