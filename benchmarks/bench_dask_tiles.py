@@ -2,7 +2,7 @@
 in one process (issue 39, point 3): wall time, peak RSS of the client and of every
 worker, and whether the labels are equal.
 
-Inputs as ``benchmarks/bench_scale_default.py`` builds them (the real fruits frame tiled:
+Inputs as ``benchmarks/bench_scale.py`` builds them (the real fruits frame tiled:
 5 MP by default, 100 MP with ``--sizes 100``). Every run is its own subprocess
 (``--child``) with the memory limit just below the whole image's estimate (or
 ``--max-memory``, whichever is smaller), so the image is tiled the same way in both
@@ -38,7 +38,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from bench_scale_default import SIZES, frame_input  # noqa: E402
+from bench_scale import SIZES, frame_input  # noqa: E402
 
 
 def _worker_rss() -> float:

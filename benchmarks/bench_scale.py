@@ -1,27 +1,35 @@
-"""Scale benchmark of the scribbles method (issue 39): wall time, time a pixel and
-peak RSS at 1.25, 5 and 24 MP (100 MP with ``--huge``), whole image against tiled.
+"""Scale benchmark (issue 39): wall time, time a pixel and peak RSS of the default method
+(preset ``auto``) and of the scribbles method at 1.25, 5 and 24 MP (100 MP with
+``--huge``), whole image against tiled.
 
-Inputs are built by tiling the real fruits frame (``../shared/data/polanalyser``,
-read as ``benchmarks/materials.py`` reads the hand-labelled frames: 4 × 1024 × 1224)
-and its hand-labelled truth; the strokes are one disc per material at its deepest
-point in every copy of the frame (``robot_user.initial_scribbles``: "a few discs per
-material"). Every run is its own subprocess (``--child``), which builds its input,
-then times ``Scene.segment`` with the strokes (the polarisation fit, the features,
-training and the prediction with the region walk; no thesis maps) and reports its
-peak RSS (``resource.getrusage(RUSAGE_SELF).ru_maxrss`` at its end; the parent also
-prints ``RUSAGE_CHILDREN``, the largest child's).
+Inputs are built by tiling the real fruits frame (``../shared/data/polanalyser``, read
+with its truth file's mosaic layout as ``robot_user.real_scenes`` reads the
+hand-labelled frames: 4 × 1024 × 1224, uint8); the scribbles are one disc per material
+at its deepest point in every copy (``robot_user.initial_scribbles``). Every run is a
+subprocess of its own (``--child``), which builds its input, then times
+``Scene(stack, angles).segment`` (no thesis maps):
 
-``whole``: the memory limit set far above the estimate (no tiles). ``tiled``: the
-limit ``--max-memory`` (default 2 GiB) or, where the whole image would fit it, half
-the whole-image estimate (``engine.limits.estimate_scribble_bytes``), so that the
-image is tiled at every size; the tile grid is printed. The tiled labels are compared
-with the whole image's (ARI) where both ran. Targets: peak RSS ≤ 2 GiB at 24 MP,
-time a pixel at 24 MP no worse than at 1.25 MP, 24 MP ≤ 20 s.
+- ``default``: ``PRESETS["auto"]`` (the polarisation fit, the object size estimate, the
+  superpixels, node features, k chosen, clustering, merge and border refinement);
+- ``scribbles``: the pixel classifier on the strokes (features, training, the
+  prediction with the region walk).
+
+Its peak RSS is the child's ``ru_maxrss`` as ``os.wait4`` reports it; the parent ends
+with ``RUSAGE_CHILDREN``, the largest child's.
+
+``whole``: the memory limit far above any estimate (no tiles). ``tiled``: the limit
+``--max-memory`` (default 2 GiB) or, where the whole image would fit it, a limit just
+below the whole image's estimate (the default) or half of it (scribbles), so that every
+size is tiled; the tile grid computed from that limit is printed (the run's own grid,
+from the limit less the stack, is a little smaller). Where both ran, the tiled labels
+are compared with the whole image's (ARI, share of equal pixels). Targets: peak RSS ≤
+2 GiB at 24 and 100 MP, time a pixel at 24 MP no worse than at 1.25 MP, 24 MP ≤ 20 s.
+The 100 MP run on a Dask cluster: ``bench_dask_tiles.py``.
 
 Usage::
 
-    python benchmarks/bench_scale.py [--sizes 1.25,5] [--modes whole,tiled]
-                                     [--max-memory 2G] [--huge]
+    python benchmarks/bench_scale.py [--methods default,scribbles] [--sizes 1.25,5,24]
+                                     [--modes whole,tiled] [--max-memory 2G] [--huge]
 """
 
 from __future__ import annotations
@@ -32,6 +40,7 @@ import os
 import resource
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -40,30 +49,65 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
-#: Megapixels of every size and the (rows, columns) copies of the 1224 × 1024 frame.
+#: Megapixels of every size and the (rows, columns) copies of the 1024 × 1224 frame.
 SIZES = {"1.25": (1, 1), "5": (2, 2), "24": (4, 5), "100": (8, 10)}
 FRAME = "fruits"
+DATA = HERE.parents[1] / "shared" / "data" / "polanalyser"
+METHODS = ("default", "scribbles")
 
 
-def frame_input(copies: tuple[int, int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(stack (4, H, W), angles (rad), strokes (H, W)): the fruits frame tiled
-    ``copies`` times, one disc per material at its deepest point in every copy."""
+def frame_input(copies: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+    """(stack (4, H, W), angles (rad)): the fruits frame tiled ``copies`` times (read
+    without the robot user's imports, which would add to the default's peak RSS)."""
+    from napari_polarseg import io as pio
+    from napari_polarseg.truth import read_truth_file, truth_files
+
+    truth = read_truth_file(next(p for p in truth_files() if FRAME in p.name))
+    data = pio.read_stack(DATA / truth.frame, mosaic=list(truth.mosaic))
+    return np.tile(data.stack, (1, *copies)), np.asarray(data.angles_rad)
+
+
+def frame_strokes(copies: tuple[int, int]) -> np.ndarray:
+    """(H, W) strokes: one disc per material at its deepest point in every copy."""
     from robot_user import disc_radius, initial_scribbles, real_scenes
 
     scene = next(s for s in real_scenes() if FRAME in s.name)
     strokes, _ = initial_scribbles(scene.truth, disc_radius(scene.truth.shape))
-    stack = np.tile(scene.stack, (1, *copies))
-    return stack, np.asarray(scene.angles_rad), np.tile(strokes, copies)
+    return np.tile(strokes, copies)
 
 
-def child(size: str, mode: str, limit: int, labels_out: str | None) -> dict:
-    """One run (in this process): the result's figures as a dict."""
+def default_run(stack: np.ndarray, angles: np.ndarray, mode: str, limit: int) -> dict:
+    """The default method at the mode's limit: labels, figures."""
+    from napari_polarseg.engine import PRESETS, Scene
+    from napari_polarseg.engine.limits import ENV_VAR, KEPT_MAPS
+    from napari_polarseg.engine.methods.surface_superpixels import SurfaceSuperpixels
+    from napari_polarseg.engine.unsupervised.tiled_regions import (
+        WHOLE_BYTES_PER_PIXEL,
+        region_tiles,
+    )
+
+    shape = stack.shape[1:]
+    whole = int(np.prod(shape)) * (WHOLE_BYTES_PER_PIXEL + 8 * KEPT_MAPS)
+    cap = 2**50 if mode == "whole" else min(limit, whole - 1)
+    os.environ[ENV_VAR] = str(cap)
+    grid = region_tiles(shape, SurfaceSuperpixels().params, cap)
+    t0 = time.perf_counter()
+    result = Scene(stack, angles).segment(PRESETS["auto"], maps=False, reconstruction=False)
+    wall = time.perf_counter() - t0
+    seconds = {k: round(v, 2) for k, v in result.timings.items()}
+    return {"labels": result.labels, "wall_s": wall, "whole": whole, "cap": cap,
+            "grid": grid, "seconds": seconds}  # fmt: skip
+
+
+def scribbles_run(
+    stack: np.ndarray, angles: np.ndarray, strokes: np.ndarray, mode: str, limit: int
+) -> dict:
+    """The scribbles method at the mode's limit: labels, figures."""
     from napari_polarseg.engine import Scene
     from napari_polarseg.engine.limits import ENV_VAR, estimate_scribble_bytes
     from napari_polarseg.engine.methods.pixel_classification import scribble_session
     from napari_polarseg.engine.params import SegmentParams
 
-    stack, angles, strokes = frame_input(SIZES[size])
     whole = estimate_scribble_bytes(stack.shape[1:])
     cap = 2**50 if mode == "whole" else min(limit, whole // 2)
     os.environ[ENV_VAR] = str(cap)
@@ -72,94 +116,109 @@ def child(size: str, mode: str, limit: int, labels_out: str | None) -> dict:
     scene.segment(SegmentParams(), {"scribbles": strokes}, maps=False, reconstruction=False)
     wall = time.perf_counter() - t0
     session = scribble_session(scene)
-    labels = session.prediction.labels
-    if labels_out:
-        np.save(labels_out, labels.astype(np.uint8))
     grid = getattr(session.cached_features, "grid", None)
-    pixels = int(np.prod(stack.shape[1:]))
+    seconds = {k: round(v, 2) for k, v in session.seconds.items()}
+    return {"labels": session.prediction.labels, "wall_s": wall, "whole": whole, "cap": cap,
+            "grid": grid, "seconds": seconds}  # fmt: skip
+
+
+def child(method: str, size: str, mode: str, limit: int, labels_out: str | None) -> dict:
+    """One run (in this process): its figures as a dict."""
+    stack, angles = frame_input(SIZES[size])
+    if method == "default":
+        r = default_run(stack, angles, mode, limit)
+    else:
+        r = scribbles_run(stack, angles, frame_strokes(SIZES[size]), mode, limit)
+    if labels_out:
+        np.save(labels_out, r["labels"].astype(np.uint8))
+    grid = r["grid"]
     return {
+        "method": method,
         "size": size,
         "mode": mode,
-        "shape": list(stack.shape),
-        "wall_s": wall,
-        "us_per_pixel": 1e6 * wall / pixels,
-        "peak_rss_gib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20,
-        "estimate_gib": whole / 2**30,
-        "limit_gib": cap / 2**30,
+        "wall_s": r["wall_s"],
+        "us_per_pixel": 1e6 * r["wall_s"] / int(np.prod(stack.shape[1:])),
+        "estimate_gib": r["whole"] / 2**30,
         "tiles": None if grid is None else f"{len(grid)} of {grid.core} px, halo {grid.halo}",
-        "seconds": {k: round(v, 2) for k, v in session.seconds.items()},
+        "seconds": r["seconds"],
     }
 
 
-def run(size: str, mode: str, limit: int, labels_out: str) -> dict:
-    """``child`` in a fresh subprocess (one thread for BLAS/OpenMP beyond the engine's)."""
-    cmd = [sys.executable, __file__, "--child", size, mode, str(limit), labels_out]
+def run(method: str, size: str, mode: str, limit: int, labels_out: str) -> dict:
+    """``child`` in a fresh subprocess (one thread for BLAS/OpenMP); its peak RSS from
+    ``os.wait4``."""
+    cmd = [sys.executable, __file__, "--child", method, size, mode, str(limit), labels_out]
     env = {**os.environ, "OMP_NUM_THREADS": "1"}
-    out = subprocess.run(cmd, capture_output=True, text=True, env=env, check=False)
-    if out.returncode != 0:
-        return {"size": size, "mode": mode, "error": out.stderr.strip().splitlines()[-1:]}
-    return json.loads(out.stdout.strip().splitlines()[-1])
+    with tempfile.TemporaryFile() as err:  # a file: a full pipe would stall the child
+        proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=err, env=env)
+        out = proc.stdout.read()  # type: ignore[union-attr]
+        _, status, usage = os.wait4(proc.pid, 0)  # the child's own peak, before it is reaped
+        proc.returncode = os.waitstatus_to_exitcode(status)
+        err.seek(0)
+        text = err.read().decode()
+    if proc.returncode != 0:
+        return {"size": size, "mode": mode, "error": text.strip().splitlines()[-1:]}
+    row = json.loads(out.decode().strip().splitlines()[-1])
+    row["peak_rss_gib"] = usage.ru_maxrss / 2**20
+    return row
 
 
-def parse_size(text: str) -> int:
-    from napari_polarseg.engine.limits import parse_bytes
+def compare(paths: dict[str, str]) -> str:
+    """ARI and share of equal pixels of the tiled labels against the whole image's."""
+    from sklearn.metrics import adjusted_rand_score
 
-    return parse_bytes(text)
+    x, y = (np.load(paths[m]).ravel() for m in ("whole", "tiled"))
+    return f"ARI {adjusted_rand_score(x, y):.4f}, {float(np.mean(x == y)):.4%} equal"
 
 
 def main(argv: list[str] | None = None) -> int:
     args = sys.argv[1:] if argv is None else argv
     if args and args[0] == "--child":
-        size, mode, limit, out = args[1:5]
-        print(json.dumps(child(size, mode, int(limit), out)))
+        method, size, mode, limit, out = args[1:6]
+        print(json.dumps(child(method, size, mode, int(limit), out)))
         return 0
+    from napari_polarseg.engine.limits import parse_bytes
+
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--methods", default=",".join(METHODS))
     ap.add_argument("--sizes", default="1.25,5,24", help="megapixels: 1.25,5,24[,100]")
     ap.add_argument("--modes", default="whole,tiled")
     ap.add_argument("--max-memory", default="2G", help="the tiled runs' memory limit")
     ap.add_argument("--huge", action="store_true", help="also 100 MP (tiled only)")
     a = ap.parse_args(args)
     sizes = [s.strip() for s in a.sizes.split(",")] + (["100"] if a.huge else [])
-    limit = parse_size(a.max_memory)
-    rows = []
+    limit = parse_bytes(a.max_memory)
     tmp = Path(os.environ.get("TMPDIR", "/tmp"))
-    header = (
-        f"{'MP':>5} {'mode':>6} {'wall s':>7} {'µs/px':>6} {'peak GiB':>8} {'est GiB':>7}  tiles"
-    )
-    print(header)
-    for size in sizes:
-        labels = {}
-        for mode in a.modes.split(","):
-            if size == "100" and mode == "whole":
-                continue
-            path = str(tmp / f"bench_scale_{size}_{mode}.npy")
-            r = run(size, mode, limit, path)
-            rows.append(r)
-            if "error" in r:
-                print(f"{size:>5} {mode:>6} failed: {r['error']}")
-                continue
-            labels[mode] = path
-            print(
-                f"{size:>5} {mode:>6} {r['wall_s']:7.1f} {r['us_per_pixel']:6.2f} "
-                f"{r['peak_rss_gib']:8.2f} {r['estimate_gib']:7.2f}  {r['tiles'] or '-'} "
-                f"{r['seconds']}",
-                flush=True,
-            )
-        if len(labels) == 2:
-            from sklearn.metrics import adjusted_rand_score
-
-            x, y = (np.load(labels[m]).ravel() for m in ("whole", "tiled"))
-            same = float(np.mean(x == y))
-            print(
-                f"{size:>5} tiled vs whole: ARI {adjusted_rand_score(x, y):.4f}, {same:.4%} equal"
-            )
+    print(f"{'method':>9} {'MP':>5} {'mode':>6} {'wall s':>7} {'µs/px':>6} {'peak GiB':>8} "
+          f"{'est GiB':>7}  tiles")  # fmt: skip
+    per: dict[tuple[str, str, str], float] = {}
+    for method in a.methods.split(","):
+        for size in sizes:
+            paths = {}
+            for mode in a.modes.split(","):
+                if size == "100" and mode == "whole":
+                    continue
+                path = str(tmp / f"bench_scale_{method}_{size}_{mode}.npy")
+                r = run(method, size, mode, limit, path)
+                if "error" in r:
+                    print(f"{method:>9} {size:>5} {mode:>6} failed: {r['error']}", flush=True)
+                    continue
+                paths[mode] = path
+                per[method, size, mode] = r["us_per_pixel"]
+                print(
+                    f"{method:>9} {size:>5} {mode:>6} {r['wall_s']:7.1f} "
+                    f"{r['us_per_pixel']:6.2f} {r['peak_rss_gib']:8.2f} "
+                    f"{r['estimate_gib']:7.2f}  {r['tiles'] or '-'}  {r['seconds']}",
+                    flush=True,
+                )
+            if len(paths) == 2:
+                print(f"{method:>9} {size:>5} tiled vs whole: {compare(paths)}", flush=True)
     children = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 2**20
     print(f"largest child's peak RSS (RUSAGE_CHILDREN): {children:.2f} GiB")
-    ok = [r for r in rows if "error" not in r]
-    per = {(r["size"], r["mode"]): r["us_per_pixel"] for r in ok}
-    if ("1.25", "tiled") in per and ("24", "tiled") in per:
-        ratio = per["24", "tiled"] / per["1.25", "tiled"]
-        print(f"time a pixel, 24 MP / 1.25 MP (tiled): {ratio:.2f} (target ≤ 1)")
+    for (method, size, mode), value in per.items():
+        if size != "1.25" and (method, "1.25", mode) in per:
+            ratio = value / per[method, "1.25", mode]
+            print(f"{method}: time a pixel, {size} MP / 1.25 MP ({mode}): {ratio:.2f} (target ≤ 1)")
     return 0
 
 
