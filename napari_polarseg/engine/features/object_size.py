@@ -271,6 +271,43 @@ def noise_energy(sigma: float) -> float:
     return float(sigma**4 * np.sum(kernel**2))
 
 
+def _raw_channels(
+    i: np.ndarray, rho: np.ndarray, phi: np.ndarray, valid: np.ndarray
+) -> list[np.ndarray]:
+    """ln Î, ρ cos 2φ, ρ sin 2φ on the usable pixels (1, 0, 0 elsewhere), float64."""
+    with np.errstate(invalid="ignore"):
+        return [
+            np.log(np.where(valid, i, 1.0)),
+            np.where(valid, rho * np.cos(2.0 * phi), 0.0),
+            np.where(valid, rho * np.sin(2.0 * phi), 0.0),
+        ]
+
+
+#: Pixels of one band of rows whose channels are made and block-averaged at once in
+#: :func:`_reduced_channels` (bounds their float64 temporaries on large images).
+BAND_PIXELS = 1 << 21
+
+
+def _reduced_channels(
+    i: np.ndarray, rho: np.ndarray, phi: np.ndarray, valid: np.ndarray, f: int
+) -> tuple[list[np.ndarray], np.ndarray]:
+    """The channels of :func:`_raw_channels` block-averaged by f (:func:`_block_mean`)
+    and the blocks that are mostly usable, made band by band of whole block rows: the
+    same values as on the whole image, without its full-size float64 temporaries."""
+    rows = max(1, BAND_PIXELS // max(valid.shape[1] * f, 1)) * f
+    parts: list[list[np.ndarray]] = [[], [], []]
+    weights = []
+    for r0 in range(0, (valid.shape[0] // f) * f, rows):
+        band = slice(r0, min(r0 + rows, (valid.shape[0] // f) * f))
+        v = valid[band]
+        weight = v.astype(np.float64)
+        for part, c in zip(parts, _raw_channels(i[band], rho[band], phi[band], v), strict=True):
+            mean, share = _block_mean(c, weight, f)
+            part.append(mean)
+        weights.append(share)
+    return [np.concatenate(p) for p in parts], np.concatenate(weights) >= 0.5
+
+
 def _block_mean(x: np.ndarray, weight: np.ndarray, f: int) -> tuple[np.ndarray, np.ndarray]:
     """Weighted f × f block means of ``x`` and the blocks' mean weight (edge rows and
     columns that do not fill a block are dropped). Written by hand: a reshape-mean is
@@ -445,18 +482,10 @@ def _work_channels(
     f = max(1, math.ceil(math.sqrt(valid.size / WORK_PIXELS)))
     if min(valid.shape) // f < MIN_SIDE:
         return "too few usable pixels for a scale space"
-    weight = valid.astype(np.float64)
-    with np.errstate(invalid="ignore"):
-        raw = [
-            np.log(np.where(valid, i, 1.0)),
-            np.where(valid, rho * np.cos(2.0 * phi), 0.0),
-            np.where(valid, rho * np.sin(2.0 * phi), 0.0),
-        ]
-    work_valid = valid
     if f > 1:
-        reduced = [_block_mean(c, weight, f) for c in raw]
-        raw = [r[0] for r in reduced]
-        work_valid = reduced[0][1] >= 0.5
+        raw, work_valid = _reduced_channels(i, rho, phi, valid, f)
+    else:
+        raw, work_valid = _raw_channels(i, rho, phi, valid), valid
     if min(work_valid.shape) < MIN_SIDE or work_valid.sum() < MIN_SIDE * MIN_SIDE:
         return "too few usable pixels for a scale space"
     # invalid pixels take the nearest usable pixel's value (one distance transform for
