@@ -112,7 +112,7 @@ def region_tiles(
     :data:`~..limits.KEPT_MAPS`) bytes. Tiled, the limit less the full-size arrays is
     the budget of one outer box at :data:`TILE_BYTES_PER_PIXEL` (core side at most
     :data:`MAX_CORE`, and at least :data:`MIN_CORE_HALOS` halos where that box fits the
-    budget: the limit first, then the speed; with the tiles on a Dask
+    budget or where no tile can: the limit first, then the speed; with the tiles on a Dask
     cluster, :func:`~..tile_map.tiles_on`, the outer box at most the workers' share,
     :func:`~..tile_map.worker_bytes`). Parameters with per-pixel
     feature scales or another boundary than the polarisation edges are never tiled."""
@@ -125,8 +125,10 @@ def region_tiles(
         return None
     budget = cap - kept - pixels * TILED_FIXED_BYTES
     grid = TileGrid.for_budget(shape, budget, TILE_BYTES_PER_PIXEL, tile_halo(shape, params))
-    floor = MIN_CORE_HALOS * grid.halo  # for speed, only where its box fits the budget
-    fits = (floor + 2 * grid.halo) ** 2 * TILE_BYTES_PER_PIXEL <= budget
+    # the speed floor where its box fits the budget, or where nothing can (the
+    # full-size arrays alone exceed the limit: smaller tiles would only cost time)
+    floor = MIN_CORE_HALOS * grid.halo
+    fits = budget <= 0 or (floor + 2 * grid.halo) ** 2 * TILE_BYTES_PER_PIXEL <= budget
     core = min(max(grid.core, floor) if fits else grid.core, MAX_CORE)
     worker = worker_bytes()
     if worker is not None:  # the outer box within a Dask worker's share, whatever else
