@@ -53,6 +53,11 @@ def prediction_margin(stride: int, smoothing: float) -> int:
     return 2 * max(1, int(stride)) + 2 * r
 
 
+#: Core side, in halos, when no tile can meet the limit (the full-size arrays alone
+#: exceed it): 128 px cores with 136 px halos read 10 × the pixels (24 MP: 147 s).
+UNBOUNDED_CORE_HALOS = 4
+
+
 def scribble_tiles(
     shape: tuple[int, int],
     feature_params: Any,
@@ -69,7 +74,8 @@ def scribble_tiles(
     :func:`~..limits.scribble_bytes_per_pixel` plus the pipeline's
     :data:`~..limits.KEPT_MAPS` float64 maps. Tiled: the limit less the full-size
     arrays is the budget of one outer box of (c + 2h)² pixels at the work's bytes a
-    pixel (:meth:`TileGrid.for_budget`; at least its smallest core).
+    pixel (:meth:`TileGrid.for_budget`; at least its smallest core). When the full-size
+    arrays alone exceed the limit, cores of :data:`UNBOUNDED_CORE_HALOS` halos.
     """
     cap = memory_limit(limit)
     pixels = int(shape[0]) * int(shape[1])
@@ -78,6 +84,9 @@ def scribble_tiles(
         return None
     _, fixed = scribble_bytes_per_pixel(feature_params, channels, n_classes, tiled=True)
     budget = cap - pixels * (fixed + 8 * KEPT_MAPS)
+    if budget <= 0:  # the full-size arrays alone exceed the limit: no tile can meet it,
+        # and cores under a few halos would only multiply the halos' work
+        budget = (UNBOUNDED_CORE_HALOS + 2) ** 2 * halo * halo * work
     return TileGrid.for_budget(shape, budget, work, halo, align)
 
 
