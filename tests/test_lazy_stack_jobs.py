@@ -10,6 +10,7 @@ from typing import Any
 import dask.array as da
 import numpy as np
 import pytest
+from job_helpers import drive
 
 from napari_polarseg.engine import PolarsegError, Scene
 from napari_polarseg.engine.params import AUTO
@@ -17,16 +18,6 @@ from napari_polarseg.engine.synthetic.scenes import make_scene
 from napari_polarseg.widgets.session import PipelineStore, features_job, segment_request
 
 ANGLES_DEG = [0, 45, 90, 135]
-
-
-def drive(gen: Generator[Any, None, Any]) -> tuple[list[Any], Any]:
-    """What a job yields, and what it returns (as the worker would run it)."""
-    items = []
-    while True:
-        try:
-            items.append(next(gen))
-        except StopIteration as stop:
-            return items, stop.value
 
 
 @pytest.fixture(scope="module")

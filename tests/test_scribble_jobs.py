@@ -4,11 +4,9 @@ partial results, its features are the scene's session's, kept between strokes.""
 
 from __future__ import annotations
 
-from collections.abc import Generator
-from typing import Any
-
 import numpy as np
 import pytest
+from job_helpers import drive
 
 from napari_polarseg.engine import Pipeline, Scene, validity_mask
 from napari_polarseg.engine.classifier.pixel_segmentation import PixelSegmenter
@@ -23,16 +21,6 @@ from napari_polarseg.widgets.session import (
 )
 
 ANGLES_DEG = [0, 45, 90, 135]
-
-
-def drive(gen: Generator[Any, None, Any]) -> tuple[list[Any], Any]:
-    """What a job yields, and what it returns (as the worker would run it)."""
-    items = []
-    while True:
-        try:
-            items.append(next(gen))
-        except StopIteration as stop:
-            return items, stop.value
 
 
 @pytest.fixture(scope="module")

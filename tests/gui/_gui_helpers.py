@@ -22,6 +22,18 @@ SAMPLES = {
 TIMEOUT_MS = 120_000
 
 
+#: Every dock widget of the plugin's manifest, by the name the Plugins menu shows, the
+#: Segment dock first.
+PLUGIN_DOCKS = (
+    "Segment by material",
+    "Polarisation image",
+    "Polarisation plots",
+    "Parameter sweep",
+    "Batch over a folder",
+    "Time series change map",
+)
+
+
 def click(qtbot: Any, button: Any) -> None:
     """Click a magicgui push button with the mouse."""
     qtbot.mouseClick(button.native, Qt.MouseButton.LeftButton)

@@ -3,20 +3,12 @@ controls, and *Segment by material* shows the few a user touches first."""
 
 from __future__ import annotations
 
+from _gui_helpers import PLUGIN_DOCKS as DOCKS
 from qtpy.QtWidgets import QScrollArea
 
 from napari_polarseg.widgets._base import _dock_of
 from napari_polarseg.widgets.segment import CONTROLLED, FIRST_CONTROLS
 
-#: Every dock widget of the plugin's manifest.
-DOCKS = (
-    "Segment by material",
-    "Polarisation image",
-    "Polarisation plots",
-    "Parameter sweep",
-    "Batch over a folder",
-    "Time series change map",
-)
 SCREEN = (1600, 1000)
 
 

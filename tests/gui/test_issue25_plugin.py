@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+from _gui_helpers import PLUGIN_DOCKS as DOCKS
 from _gui_helpers import run_and_wait
 from napari.layers import Labels
 
@@ -38,17 +39,6 @@ def test_polarisation_status_speaks_to_a_user():
     assert "ceiling" not in text
     assert "ρ is above" not in polarisation_status("leaves", 0, "diffuse")
     assert "ρ is above" not in polarisation_status("leaves", 12, "specular")
-
-
-#: Every dock widget of the plugin's manifest, the Segment dock first.
-DOCKS = (
-    "Segment by material",
-    "Polarisation image",
-    "Polarisation plots",
-    "Parameter sweep",
-    "Batch over a folder",
-    "Time series change map",
-)
 
 
 def _in_view(widget, dock) -> bool:

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from _gui_helpers import PLUGIN_DOCKS as DOCKS
 from _gui_helpers import engine_result, error_messages, run_and_wait, wait_idle
 from qtpy.QtWidgets import QApplication, QTabBar
 
@@ -19,16 +20,6 @@ from napari_polarseg.widgets._base import _dock_of
 from napari_polarseg.widgets.dock_layout import MAX_DOCK_WIDTH
 
 pytestmark = pytest.mark.gui
-
-#: Every dock of the plugin's manifest, by the name the Plugins menu shows.
-DOCKS = (
-    "Segment by material",
-    "Polarisation image",
-    "Polarisation plots",
-    "Parameter sweep",
-    "Batch over a folder",
-    "Time series change map",
-)
 
 
 def _show(viewer, qtbot) -> None:
