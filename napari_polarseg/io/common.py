@@ -42,6 +42,18 @@ def input_error(path: PathLike, problem: str) -> PolarsegError:
     return PolarsegError(f"{os.fspath(path)}: {problem}")
 
 
+def metadata_angles(path: PathLike, values: Any, what: str = "the 'angles' metadata") -> Any:
+    """The polariser angles a file's metadata (``what``) gives, as a float64 vector
+    (degrees, as written), or None when it gives none; an input error when they are not
+    numbers."""
+    if values is None:
+        return None
+    try:
+        return np.asarray(values, dtype=np.float64).ravel()
+    except (TypeError, ValueError):
+        raise input_error(path, f"{what} is not a list of numbers: {values!r}") from None
+
+
 def first_line(exc: BaseException) -> str:
     """The first non-blank line of an exception's message (its type's name if none)."""
     lines = [line.strip() for line in str(exc).splitlines() if line.strip()]

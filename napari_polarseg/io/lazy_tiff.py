@@ -21,7 +21,7 @@ import tifffile
 
 from ..engine.errors import PolarsegError
 from ..tiff_angles import FROM_JSON, tiff_angles
-from .common import first_line, input_error, saturation_level
+from .common import first_line, input_error, metadata_angles, saturation_level
 from .lazy_stack import LazyReader, lazy_blocks, lazy_grey_frames, lazy_subtract
 from .read_options import ReadOptions
 from .stack_data import BlackLevel, StackData
@@ -94,16 +94,9 @@ def read_lazy_tiff_stack(path: Path, opts: ReadOptions, black: BlackLevel) -> St
     info["block_shape"] = [int(c[0]) for c in stack.chunks]
     if bits is not None:
         info["bits_per_sample"] = bits
-    values = angles.get("angles")
     if angles.get("angles_from") not in (None, FROM_JSON):
         info["angles_from"] = angles["angles_from"]
-    if values is not None:
-        try:
-            values = np.asarray(values, dtype=np.float64).ravel()
-        except (TypeError, ValueError):
-            raise input_error(
-                path, f"the 'angles' metadata is not a list of numbers: {values!r}"
-            ) from None
+    values = metadata_angles(path, angles.get("angles"))
     return StackData(stack, values, os.fspath(path), info, saturated=saturated)
 
 

@@ -32,7 +32,7 @@ from ..engine.physics.mosaic import demosaic, demosaic_flags
 from ..tiff_angles import FROM_JSON
 from .angles import angle_from_name, enough_angles
 from .arrays import read_arrays
-from .common import dims, first_line, input_error, saturation_level
+from .common import dims, first_line, input_error, metadata_angles, saturation_level
 from .frames import grey_frames, load_frame
 from .lazy_stack import LazyReader
 from .lazy_tiff import LAZY_TIFF
@@ -41,19 +41,6 @@ from .read_options import ReadOptions
 from .stack_data import BlackLevel, StackData
 from .tiff import SINGLE_IMAGE, colour_last, frame_axes, read_tiff, tifffile_messages
 from .zarr_stack import LAZY_ZARR, read_zarr_stack, zarr_carries_angles
-
-
-def _metadata_angles(path: Path, angles: Any) -> np.ndarray | None:
-    """The angles found in a file's metadata as float64 (None if there are none)."""
-    if angles is None:
-        return None
-    try:
-        values = np.asarray(angles, dtype=np.float64).ravel()
-    except (TypeError, ValueError):
-        raise input_error(
-            path, f"the 'angles' metadata is not a list of numbers: {angles!r}"
-        ) from None
-    return values
 
 
 def read_tiff_stack(path: Path, opts: ReadOptions, black: BlackLevel) -> StackData:
@@ -68,7 +55,7 @@ def read_tiff_stack(path: Path, opts: ReadOptions, black: BlackLevel) -> StackDa
     stack = black.subtract(path, stack)
     info = {"format": "tiff", **{k: v for k, v in meta.items() if k != "description"}}
     info["saturation_level"] = level
-    angles = _metadata_angles(path, meta["description"].get("angles"))
+    angles = metadata_angles(path, meta["description"].get("angles"))
     if meta["description"].get("angles_from") not in (None, FROM_JSON):
         info["angles_from"] = meta["description"]["angles_from"]
     return StackData(stack, angles, os.fspath(path), info, saturated=saturated)
@@ -101,7 +88,7 @@ def read_array_stack(path: Path, opts: ReadOptions, black: BlackLevel) -> StackD
             raise input_error(
                 path, f"the 'angles' array must hold numbers, got dtype {angles.dtype}"
             )
-        angles = _metadata_angles(path, angles.tolist())
+        angles = metadata_angles(path, angles.tolist())
     if ground_truth is not None and ground_truth.shape != stack.shape[1:]:
         raise input_error(
             path,

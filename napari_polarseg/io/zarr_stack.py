@@ -30,7 +30,13 @@ import numpy as np
 
 from ..engine.limits import memory_limit
 from .angles import enough_angles
-from .common import check_read_size, first_line, input_error, saturation_level
+from .common import (
+    check_read_size,
+    first_line,
+    input_error,
+    metadata_angles,
+    saturation_level,
+)
 from .lazy_stack import LazyReader, in_memory, lazy_blocks, lazy_grey_frames, lazy_subtract
 from .read_options import ReadOptions
 from .stack_data import BlackLevel, StackData
@@ -118,17 +124,6 @@ def zarr_carries_angles(path: Path) -> bool:
         return False
 
 
-def _angles(path: Path, found: Any) -> np.ndarray | None:
-    if found is None:
-        return None
-    try:
-        return np.asarray(found, dtype=np.float64).ravel()
-    except (TypeError, ValueError):
-        raise input_error(
-            path, f"the '{ANGLES_ATTR}' attribute is not a list of numbers: {found!r}"
-        ) from None
-
-
 def read_lazy_zarr_stack(path: Path, opts: ReadOptions, black: BlackLevel) -> StackData:
     """A Zarr / OME-Zarr stack left on disk: :attr:`StackData.stack` is a Dask array
     (N, H, W) whose blocks hold all frames (whole Zarr chunks)."""
@@ -148,7 +143,7 @@ def read_lazy_zarr_stack(path: Path, opts: ReadOptions, black: BlackLevel) -> St
     info["block_shape"] = [int(c[0]) for c in stack.chunks]
     if axes is not None:
         info["ome_axes"] = axes
-    angles = _angles(path, zarr_angles(array, attrs))
+    angles = metadata_angles(path, zarr_angles(array, attrs), f"the '{ANGLES_ATTR}' attribute")
     return StackData(stack, angles, os.fspath(path), info, saturated=saturated)
 
 
