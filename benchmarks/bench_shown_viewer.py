@@ -27,8 +27,9 @@ final ones). Every time is counted from the mouse release (or click), the live-u
 debounce included. "gap" is the longest interval between two ticks of a 10 ms ``QTimer``
 from the release to the labels on screen: how long the window froze. Each row is printed
 with the 1-minute load average when it was measured (the host has 2 cores shared with
-other jobs). ``--profile FILE`` writes a cProfile of the GUI thread during the
-corrections (``python -m pstats FILE``).
+other jobs), and the CPU seconds of the process (all its threads: GUI, engine, Mesa)
+from the release until the run ended, which depend less on the load. ``--profile FILE``
+writes a cProfile of the GUI thread during the corrections (``python -m pstats FILE``).
 """
 
 from __future__ import annotations
@@ -231,6 +232,7 @@ class Row:
     load: float
     engine: dict[str, float] = field(default_factory=dict)
     held: float | None = None
+    cpu: float | None = None
 
 
 def timed(user: User, label: str, action: Callable[[], float]) -> Row:
@@ -238,10 +240,14 @@ def timed(user: User, label: str, action: Callable[[], float]) -> Row:
     watch, widget = user.watch, user.widget
     user.idle(SETTLE)
     watch.clear()
+    c0 = time.process_time()
     t0 = action()
     user.wait(lambda: not widget_idle(widget) or time.perf_counter() - t0 > 5)
     user.wait(lambda: widget_idle(widget))
+    cpu = time.process_time() - c0
     user.idle(0.3)  # the last frame gets swapped
+    # a run of an earlier stroke may show its labels while this stroke is painted
+    watch.shows[:] = [shown for shown in watch.shows if shown.when >= t0]
     final_show = watch.first(preview=False)
     times = [
         watch.on_screen(shown) for shown in (watch.first(), final_show, watch.first(complete=True))
@@ -257,6 +263,7 @@ def timed(user: User, label: str, action: Callable[[], float]) -> Row:
         sum(shown.seconds for shown in watch.shows),
         load(),
         {} if final_show is None else final_show.engine,
+        cpu=cpu,
     )
 
 
@@ -330,17 +337,18 @@ def report(rows: list[Row], frame: Path, shape: tuple[int, ...]) -> None:
     print(f"gap: the longest the event loop stalled meanwhile ({TICK_MS} ms timer); load: 1-min")
     print("preview: the first labels (the classifier's 8 px grid); final: the final labels;")
     print("complete: the whole result (error map); show: the widget's handler (GUI thread);")
-    print("engine: train, preview, predict of the final labels")
+    print("engine: train, preview, predict of the final labels; cpu: the process's CPU")
+    print("seconds (all its threads) from the release until the run ended (less load-bound)")
     print(
         f"{'action':<32}| preview |  final | complete | gap prev | gap final | show  "
-        "| engine            | load"
+        "| engine            |   cpu  | load"
     )
     for r in rows:
         engine = ", ".join(f"{r.engine.get(k, 0.0):.2f}" for k in ("train", "preview", "predict"))
         print(
             f"{r.label:<32}|  {fmt(r.preview)} | {fmt(r.final)} |   {fmt(r.complete)} |"
             f"   {r.gap_preview:6.3f} |    {r.gap_final:6.3f} | {r.show:5.3f} | "
-            f"{engine:<17} | {r.load:4.2f}"
+            f"{engine:<17} | {fmt(r.cpu)} | {r.load:4.2f}"
         )
         if r.held is not None:
             print(f"    the click held the GUI thread {r.held:.3f} s")
@@ -362,6 +370,8 @@ def report(rows: list[Row], frame: Path, shape: tuple[int, ...]) -> None:
         med, top = stat(values)
         verdict = "met" if top <= target else ("median met" if med <= target else "MISSED")
         print(f"  {name:<34} {med:6.3f} ({top:.3f})  target {target} s: {verdict}")
+    med, top = stat([r.cpu for r in fixes])
+    print(f"  {'CPU seconds of the process':<34} {med:6.3f} ({top:.3f})")
 
 
 def main(argv: list[str] | None = None) -> None:

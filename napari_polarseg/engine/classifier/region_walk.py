@@ -49,6 +49,7 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sps
 
+from ..chunks import in_background
 from ..features.pixel_features import MAX_REGION_AREA, PIXELS_PER_REGION_SEED
 from ..features.superpixels import auto_region_area, relabel
 from ..unsupervised.region_diffusion import border_strength, border_weights, symmetric
@@ -245,11 +246,12 @@ def node_prediction(
     node's x (m, K)."""
     ordered = np.sort(x, axis=1)
     margin = ordered[:, -1] - (ordered[:, -2] if x.shape[1] > 1 else 0.0)
+    index = nodes.astype(np.intp, copy=False)  # converted once, not by every take
     proba = np.empty((x.shape[1], *nodes.shape), dtype=np.float32)
     for k in range(x.shape[1]):
-        np.take(x[:, k].astype(np.float32), nodes, out=proba[k])
-    labels = np.take(np.argmax(x, axis=1).astype(np.int32), nodes)
-    uncertainty = np.take((1.0 - margin).astype(np.float32), nodes)
+        np.take(x[:, k].astype(np.float32), index, out=proba[k])
+    labels = np.take(np.argmax(x, axis=1).astype(np.int32), index)
+    uncertainty = np.take((1.0 - margin).astype(np.float32), index)
     return PixelPrediction(labels, proba, uncertainty, classes, n_predicted)
 
 
@@ -276,7 +278,8 @@ def walked_prediction(
     prior = refined.probabilities
     classes = classifier.classes
     nodes = graph.nodes(most_probable(prior), classes.size)
+    adjacency = in_background(lambda: graph.adjacency(nodes))  # beside the means (GIL-free sorts)
     means = node_means(nodes, prior)
     seeds = with_scribbles(confident_seeds(means), nodes, scribbles, classes)
-    x = walk(graph.adjacency(nodes), means, seeds, classifier.params.region_walk)
+    x = walk(adjacency(), means, seeds, classifier.params.region_walk)
     return node_prediction(x, nodes, classes, refined.n_predicted)

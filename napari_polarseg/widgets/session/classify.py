@@ -48,6 +48,44 @@ def scribble_problem(scribbles: np.ndarray) -> str | None:
     return f"paint at least 2 materials (label 1 on one material, 2 on another, …); found {found}"
 
 
+@dataclass(frozen=True)
+class ShownParts:
+    """What showing a classifier's output computes from its whole-image arrays, made
+    in the worker (:func:`shown_parts`) so that the GUI thread's show does no
+    whole-image numpy work (10-25 ms of each show): the result's summary, every pixel's
+    probability of its class (``confidence``), the labels as the strokes' values and
+    the mean probability and uncertainty. ``result`` and ``prediction`` are those they
+    were made of (:meth:`fits`)."""
+
+    result: SegmentationResult
+    prediction: PixelPrediction
+    summary: dict[str, Any]
+    confidence: np.ndarray
+    labels: np.ndarray
+    mean_confidence: float
+    mean_uncertainty: float
+
+    def fits(self, result: SegmentationResult, prediction: PixelPrediction) -> bool:
+        """Whether these parts were made of this very ``result`` and ``prediction``."""
+        return self.result is result and self.prediction is prediction
+
+
+def shown_parts(segmentation: PixelSegmentation) -> ShownParts:
+    """The :class:`ShownParts` of a classifier's ``segmentation`` (any thread)."""
+    result, prediction = segmentation.result, segmentation.prediction
+    confidence = prediction.probabilities.max(axis=0).astype(np.float32)
+    labels = np.asarray(prediction.classes, dtype=np.int32)[result.labels]
+    return ShownParts(
+        result,
+        prediction,
+        result.summary(),
+        confidence,
+        labels,
+        float(confidence.mean()),
+        float(prediction.uncertainty.mean()),
+    )
+
+
 @dataclass
 class ClassifierOutput:
     """What a scribble-mode job returns (or yields as a :class:`Partial`).
@@ -61,13 +99,16 @@ class ClassifierOutput:
     classifier (e.g. every pixel of a material is masked) or the classifier does not
     fit the stack, ``problem`` says why and ``segmentation`` is None. ``preview``: the
     labels of the classifier's grid alone, before the borders are predicted
-    (:meth:`~napari_polarseg.engine.ScribbleSession.preview`).
+    (:meth:`~napari_polarseg.engine.ScribbleSession.preview`). ``parts``: what
+    showing it computes, made in the worker (:func:`shown_parts`; None: made when
+    shown).
     """
 
     segmentation: PixelSegmentation | None
     trained: bool = True
     problem: str | None = None
     preview: bool = False
+    parts: ShownParts | None = None
 
     @property
     def result(self) -> SegmentationResult:
@@ -117,9 +158,13 @@ def classify_scene(
     """
     trained = inputs.get("classifier") is None
 
+    def output(result: SegmentationResult, out: MethodOutput, final: bool) -> ClassifierOutput:
+        seg = classifier_segmentation(result, out)
+        return ClassifierOutput(seg, trained, preview=not final, parts=shown_parts(seg))
+
     def forward(result: SegmentationResult, out: MethodOutput, final: bool) -> None:
         assert partial is not None
-        partial(ClassifierOutput(classifier_segmentation(result, out), trained, preview=not final))
+        partial(output(result, out, final))
 
     try:
         result = scene.segment(
@@ -134,7 +179,7 @@ def classify_scene(
     except ClassifierInputError as exc:
         return ClassifierOutput(None, trained, problem=str(exc))
     out = scene.method_output(params, inputs)  # kept by the scene: not computed again
-    return ClassifierOutput(classifier_segmentation(result, out), trained)
+    return output(result, out, True)
 
 
 def named_output(out: ClassifierOutput, names: dict[int, str]) -> ClassifierOutput:
@@ -146,7 +191,11 @@ def named_output(out: ClassifierOutput, names: dict[int, str]) -> ClassifierOutp
     seg = out.segmentation
     classifier = seg.classifier.named(names)
     result = replace(seg.result, materials=classifier.materials())
-    return replace(out, segmentation=replace(seg, result=result, classifier=classifier))
+    parts = out.parts
+    if parts is not None and parts.fits(seg.result, seg.prediction):
+        parts = replace(parts, result=result)  # the names are not in what it holds
+    segmentation = replace(seg, result=result, classifier=classifier)
+    return replace(out, segmentation=segmentation, parts=parts)
 
 
 def classifier_text(classifier: PixelClassifier) -> str:

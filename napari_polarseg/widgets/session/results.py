@@ -17,7 +17,7 @@ import numpy as np
 
 from ...engine import SegmentationResult
 from ...engine.registered import computes_block_maps
-from .classify import ClassifierOutput, classifier_parts
+from .classify import ClassifierOutput, classifier_parts, shown_parts
 from .text import close_up_text, degenerate_text, k_choice_text, mask_text, object_size_text
 
 #: The inputs of a run without mask, scribbles or classifier file.
@@ -110,16 +110,20 @@ def shown_result(
     out = value if isinstance(value, ClassifierOutput) else None
     result = out.result if out is not None else value
     assert isinstance(result, SegmentationResult)
-    summary = result.summary()
     confidence = None
-    if out is not None:
-        confidence = out.prediction.probabilities.max(axis=0).astype(np.float32)
+    if out is None:
+        summary = result.summary()
+    else:
+        parts = out.parts
+        if parts is None or not parts.fits(result, out.prediction):
+            parts = shown_parts(out.segmentation)  # not made in the worker
+        summary, confidence = dict(parts.summary), parts.confidence
         summary["classifier"] = {
             "labels_from": "scribbles" if out.trained else "classifier",
             "classes": [int(c) for c in out.prediction.classes],
             "training_pixels": out.classifier.n_training_pixels,
-            "mean_class_probability": float(confidence.mean()),
-            "mean_uncertainty": float(out.prediction.uncertainty.mean()),
+            "mean_class_probability": parts.mean_confidence,
+            "mean_uncertainty": parts.mean_uncertainty,
         }
     meta = {
         "polarseg_params": {**result.params.to_dict(), "angles_deg": angles_deg.tolist()},
@@ -127,7 +131,7 @@ def shown_result(
         "polarseg_inputs": inputs,
     }
     if out is not None:  # the scribble value of the chosen class: strokes' colours
-        labels = np.asarray(out.prediction.classes, dtype=np.int32)[result.labels]
+        labels = parts.labels
     else:
         labels = np.asarray(result.labels, dtype=np.int32) + 1  # a copy: painting is safe
     return ShownResult(result, out, summary, meta, labels, confidence, inputs, partial)
