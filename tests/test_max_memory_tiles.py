@@ -121,9 +121,16 @@ def test_the_estimate_counts_the_tiles_and_refuses_only_what_cannot_fit():
     work = limit - 2 * big[0] * 4096 * 6120 - RUNTIME_BYTES
     grid = region_tiles(big[1:], SurfaceSuperpixels().params, work)
     assert grid is not None and len(grid) > 1
-    # 100 MP at 3 GiB: the full-size maps alone exceed it
+    # 100 MP at 2 GiB: its full-size arrays go to temporary files (disk_arrays), the
+    # tiles and the stack stay in memory, within the limit
+    huge, two = SIZES[3], 2 * 2**30
+    assert estimate_pipeline_bytes(huge, AUTO, limit=two, itemsize=1) <= two
+    check_pipeline_memory(huge, AUTO, two, itemsize=1)
+    # in memory the same run would need several times as much
+    assert estimate_pipeline_bytes(huge, AUTO, limit=2**40, itemsize=1) > 3 * two
+    # below what the stack alone holds it is refused
     with pytest.raises(PolarsegError, match="segmenting 4 frames of 8160 x 12240 pixels"):
-        check_pipeline_memory(SIZES[3], AUTO, limit, itemsize=1)
+        check_pipeline_memory(huge, AUTO, 2**29, itemsize=1)
 
 
 def test_the_superpixel_methods_compute_the_normals_after_their_work():

@@ -19,6 +19,7 @@ the cached cut tree and never recomputes harmonics.
 
 from __future__ import annotations
 
+import contextlib
 import threading
 from collections import Counter
 from collections.abc import Callable, Iterator
@@ -26,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from . import disk_arrays
 from .errors import Cancelled, PolarsegError
 from .features import harmonics
 from .graph import affinity, ncut
@@ -107,8 +109,14 @@ class Pipeline:
         if not isinstance(params, SegmentParams):
             raise PolarsegError("params must be a SegmentParams")
         self._params = params
+        #: memory limit of the runs, bytes (None: :func:`~.limits.memory_limit`)
+        self.max_bytes = None if max_bytes is None else memory_limit(max_bytes)
         if not isinstance(mask, PixelMask):
-            mask = pixel_mask.validity_mask(raw, region=mask)
+            # the flags (1 byte a sample) in a temporary file when the full-size
+            # arrays do not fit the work limit (the stack's flags counted as made)
+            limit = self.held_limit(self.stack.nbytes + self.stack.size)
+            with disk_arrays.full_size_limit(limit):
+                mask = pixel_mask.validity_mask(raw, region=mask)
         elif mask.flags.shape != self.stack.shape:
             raise PolarsegError(
                 f"the pixel mask covers {mask.flags.shape} samples but the stack is "
@@ -116,8 +124,6 @@ class Pipeline:
             )
         self.mask: PixelMask = mask
         pixel_mask.check_usable(self.stack, self.mask)
-        #: memory limit of the runs, bytes (None: :func:`~.limits.memory_limit`)
-        self.max_bytes = None if max_bytes is None else memory_limit(max_bytes)
         #: how often each stage was computed
         self.calls: Counter = Counter()
         #: memory for the dense n × n matrices, and the kept distances (stages.py)
@@ -134,8 +140,18 @@ class Pipeline:
         :func:`~.limits.memory_limit`) less the stack, the mask's flags and the
         libraries (:data:`~.limits.RUNTIME_BYTES`), which the methods' own estimates
         (over :data:`~.limits.KEPT_MAPS`) do not count; at least 1 byte."""
-        held = self.stack.nbytes + self.mask.flags.nbytes + RUNTIME_BYTES
-        return max(memory_limit(self.max_bytes) - held, 1)
+        return self.held_limit(self.stack.nbytes + self.mask.flags.nbytes)
+
+    def held_limit(self, held: int) -> int:
+        """:attr:`max_bytes` (or :func:`~.limits.memory_limit`) less ``held`` bytes and
+        the libraries (:data:`~.limits.RUNTIME_BYTES`), bytes; at least 1."""
+        return max(memory_limit(self.max_bytes) - held - RUNTIME_BYTES, 1)
+
+    def full_size_arrays(self) -> contextlib.AbstractContextManager[None]:
+        """The context in which the full-size arrays of a run (the fit's maps, the
+        superpixels, the labels) are made: in memory, or in temporary files when they do
+        not fit :meth:`work_limit` (:func:`~.disk_arrays.full_size_limit`)."""
+        return disk_arrays.full_size_limit(self.work_limit())
 
     # -- parameters -------------------------------------------------------------------
     @property
@@ -219,8 +235,10 @@ class Pipeline:
             entry = self._cache.get(stage)
             if entry is not None and entry[0] == key:
                 return entry[1]
-            with timed(self._seconds, stage):
+            with timed(self._seconds, stage), self.full_size_arrays():
                 value = STAGE_FUNCTIONS[stage](self, run)
+                # kept in temporary files when the full-size arrays do not fit
+                value = disk_arrays.kept(value, self.stack.shape[1:])
             self.calls[stage] += 1
             run.recomputed.append(stage)
             done_for, names = self._recomputed

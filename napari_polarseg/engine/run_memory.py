@@ -34,6 +34,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from .chunks import CHUNK_BYTES, MIN_PARALLEL_POINTS, N_THREADS
+from .disk_arrays import TRIM_BYTES, on_disk_at
 from .limits import (
     KEPT_MAPS,
     RUNTIME_BYTES,
@@ -50,6 +51,14 @@ from .tiles import TileGrid
 #: float64 temporaries a sample of the weighted fit's chunk holds at once (the samples,
 #: their weights, the state means, the misfit and its square, the usable flags).
 FIT_CHUNK_TEMPORARIES = 6
+#: Full-size bytes a pixel a tiled superpixel run keeps in memory when its full-size
+#: arrays are in temporary files (:func:`~.disk_arrays.on_disk_at`): the clustered-pixel
+#: mask and one boolean comparison of the labels' renumbering.
+DISK_FULL_BYTES = 2
+#: Pages of the temporary files resident at once: what the release thread lets the
+#: resident memory grow by (:data:`~.disk_arrays.TRIM_BYTES`) and the band a copy
+#: touches, with room for both.
+DISK_RESIDENT_BYTES = 8 * TRIM_BYTES
 
 
 @dataclass(frozen=True)
@@ -68,14 +77,18 @@ def stack_bytes(shape: tuple[int, int, int], itemsize: int = 8) -> int:
     return n * h * w * (int(itemsize) + 1)
 
 
-def fit_bytes(shape: tuple[int, int, int]) -> int:
-    """Peak bytes of the chunked fit beyond the stack: the maps, the boolean sample
-    weights and one chunk of the weighted fit a thread (:func:`~.chunks.run_chunks`)."""
+def fit_bytes(shape: tuple[int, int, int], on_disk: bool = False) -> int:
+    """Peak bytes of the chunked fit beyond the stack: the maps (none ``on_disk``: in
+    temporary files, :mod:`.disk_arrays`), the boolean sample weights and one chunk of
+    the weighted fit a thread (:func:`~.chunks.run_chunks`)."""
     n, h, w = (int(v) for v in shape)
     pixels = h * w
     chunk = min(pixels, FIT_CHUNK_PIXELS) * n * 8 * FIT_CHUNK_TEMPORARIES
     threads = N_THREADS if pixels >= MIN_PARALLEL_POINTS else 1
-    return pixels * (FIT_MAP_BYTES + n) + threads * chunk
+    maps = pixels * FIT_MAP_BYTES
+    if on_disk:  # no more of the files resident than they hold
+        maps = min(maps, DISK_RESIDENT_BYTES)
+    return maps + pixels * n + threads * chunk
 
 
 def box_pixels(grid: TileGrid) -> int:
@@ -112,8 +125,12 @@ def superpixel_bytes(
     grid = region_tiles(shape, unsupervised, limit)
     if grid is None:
         return MethodMemory(kept + whole)
-    full = pixels * TILED_FIXED_BYTES
-    return MethodMemory(kept + full + box_pixels(grid) * TILE_BYTES_PER_PIXEL, grid)
+    box = box_pixels(grid) * TILE_BYTES_PER_PIXEL
+    full = kept + pixels * TILED_FIXED_BYTES
+    if on_disk_at(pixels, limit):  # the kept maps, superpixels and labels in files
+        resident = min(full, DISK_RESIDENT_BYTES)  # no more than the files hold
+        return MethodMemory(pixels * DISK_FULL_BYTES + resident + box, grid)
+    return MethodMemory(full + box, grid)
 
 
 def scribble_method_bytes(
@@ -179,7 +196,8 @@ def estimate_run_bytes(
     method = method_bytes(
         (h, w), params, work, scribbles=scribbles, channels=channels, n_classes=n_classes
     )
-    return held + max(fit_bytes(shape), method.bytes)
+    on_disk = not scribbles and on_disk_at(h * w, work)
+    return held + max(fit_bytes(shape, on_disk), method.bytes)
 
 
 def _graph_kind(blocks: int, params: SegmentParams) -> str:

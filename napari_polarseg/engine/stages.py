@@ -17,6 +17,7 @@ from typing import Any, Protocol
 import numpy as np
 from scipy import ndimage
 
+from . import disk_arrays
 from .chunks import chunk_bounds, run_chunks
 from .errors import PolarsegError
 from .features import harmonics, polstats
@@ -233,9 +234,10 @@ def normals_stage(pipe: StageHost, run: StageRun) -> Normals:
     p = run.params
     pol = pipe.stage_value("polarisation", run)
     h, w = pol.dop.shape
-    zenith, clamped = np.empty((h, w)), np.empty((h, w), dtype=bool)
+    # in temporary files when a large image's full-size arrays do not fit (disk_arrays)
+    zenith, clamped = disk_arrays.empty((h, w)), disk_arrays.empty((h, w), dtype=bool)
     diffuse = p.model == "diffuse"
-    azimuth = pol.phase.view() if diffuse else np.empty((h, w))
+    azimuth = pol.phase.view() if diffuse else disk_arrays.empty((h, w))
 
     def work(a: int, b: int) -> None:
         est = fresnel.zenith_from_dop(pol.dop[a:b], p.refractive_index, p.model, p.specular_branch)

@@ -186,15 +186,18 @@ def lazy_read_error(path: Path, exc: BaseException) -> Exception:
 
 def in_memory(data: StackData, limit: int) -> StackData:
     """``data`` with its lazy arrays read into memory (NumPy), after checking that the
-    stack and its float64 copy fit in ``limit`` bytes; ``data`` itself if nothing is lazy."""
+    stack fits in ``limit`` bytes, with its float64 copy when it is not of integers (the
+    engine keeps camera counts as they are: :func:`~..engine.run_memory.stack_bytes`);
+    ``data`` itself if nothing is lazy."""
     lazy = [name for name in ("stack", "saturated") if is_lazy(getattr(data, name))]
     if not lazy:
         return data
     import dask
 
-    shape = data.stack.shape
+    shape, dtype = data.stack.shape, data.stack.dtype
+    copy = 0 if np.issubdtype(dtype, np.integer) else 8
     check_bytes(
-        float(np.prod(shape)) * (data.stack.dtype.itemsize + 8),
+        float(np.prod(shape)) * (dtype.itemsize + copy),
         f"{data.source}: reading {dims(shape)} values of {data.stack.dtype.name}",
         limit,
     )

@@ -15,10 +15,12 @@ from __future__ import annotations
 import threading
 import time
 from collections.abc import Callable
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
 
+from .. import disk_arrays
 from ..features.harmonics import top_left_block_labels
 from ..features.object_size import ObjectSize, estimate_object_size
 from ..limits import memory_limit
@@ -27,6 +29,7 @@ from ..physics import polarimage
 from ..physics.pixel_mask import PixelMask
 from ..pipeline import Pipeline
 from ..result import SegmentationResult
+from ..unsupervised.params import UnsupervisedResult
 from .base import MethodOutput, MethodRun, PartialOutput, Progress, Segmenter
 from .registry import get_method, method_names
 
@@ -241,7 +244,7 @@ class Scene:
         timings: dict[str, float] = {}  # the stages computed in this call
         if on_partial is not None:
             run.on_partial = self._forward(p, method, run, timings, on_partial)
-        with self._lock:
+        with self._lock, self.pipeline.full_size_arrays():
             self.pipeline.snapshot(p)
             for stage in early_stages(method):
                 self._thesis_stage(stage, p, run, timings)
@@ -261,7 +264,7 @@ class Scene:
         inputs = {k: v for k, v in (inputs or {}).items() if v is not None}
         method = self.method_for(params, inputs)
         run = MethodRun(list(method.stages(params)))
-        with self._lock:
+        with self._lock, self.pipeline.full_size_arrays():
             return self._method_output(method, params, inputs, run, {})
 
     def _thesis_stage(
@@ -290,7 +293,7 @@ class Scene:
                 run.begin(stage)
             return entry[1]
         t0 = time.perf_counter()
-        out = method.segment(self, p, inputs, run)
+        out = labels_kept(method.segment(self, p, inputs, run), self.shape)
         timings.update(out.seconds or {method.name: time.perf_counter() - t0})
         self.method_calls[method.name] = self.method_calls.get(method.name, 0) + 1
         self._cache[name] = (key, out)
@@ -330,11 +333,15 @@ class Scene:
     ) -> SegmentationResult:
         """The result of a run (:meth:`Pipeline.assemble_result
         <napari_polarseg.engine.Pipeline.assemble_result>` around the method's output)."""
-        labels = np.asarray(out.labels).astype(np.int64)
+        # int64, in a temporary file when the full-size arrays do not fit the limit
+        labels = disk_arrays.copy_of(np.asarray(out.labels), np.int64)
         stages = [*names, method.name]
         seconds = {**self._seconds, **timings}  # this call's too (a partial result's)
+        # the block labels from the method's own labels, the same values (a strided
+        # read maps most pages of an array on disk: of the int32 labels, not the copy)
+        blocks = top_left_block_labels(np.asarray(out.labels), p.window).astype(np.int64)
         return self.pipeline.assemble_result(
-            top_left_block_labels(labels, p.window).astype(np.int32),
+            blocks.astype(np.int32),
             labels,
             list(out.ncut_values),
             reconstruction,
@@ -349,6 +356,27 @@ class Scene:
             materials=out.extra.get("materials"),  # a classifier's classes: value and name
             on_blocks=maps or bool(getattr(method, "block_maps", False)),
         )
+
+
+def labels_kept(out: MethodOutput, shape: tuple[int, int]) -> MethodOutput:
+    """``out`` of an unsupervised method with its (H, W) labels in a temporary file
+    when the run's full-size arrays do not fit its limit
+    (:func:`~..disk_arrays.pixels_on_disk`; the same values), in its unsupervised
+    result (``extra["unsupervised"]``, which holds the same array) too: the scene keeps
+    the output while the normals and the result are made. Other outputs (a
+    classifier's, whose prediction its session shares) as they are."""
+    labels, seg = out.labels, out.extra.get("unsupervised")
+    if (
+        not isinstance(seg, UnsupervisedResult)
+        or seg.labels is not labels
+        or labels.shape != tuple(shape)
+        or disk_arrays.is_on_disk(labels)
+        or not disk_arrays.pixels_on_disk(int(shape[0]) * int(shape[1]))
+    ):
+        return out
+    moved = disk_arrays.copy_of(labels)
+    extra = {**out.extra, "unsupervised": replace(seg, labels=moved)}
+    return replace(out, labels=moved, extra=extra)
 
 
 def early_stages(method: Segmenter) -> tuple[str, ...]:

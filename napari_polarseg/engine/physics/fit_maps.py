@@ -7,7 +7,8 @@ The sinusoid of thesis eq. 3.14, I(α) = c0 + c1 cos 2α + c2 sin 2α, is fitted
 
 Î in the input's units, ρ dimensionless, φ in radians. :class:`FitMaps` holds the four
 float64 maps (Î, ρ, φ and the RMS residual of the fit, input units) and the invalid
-mask, allocated once for the whole image; each chunk of pixels writes its own slice
+mask, allocated once for the whole image (in temporary files when they do not fit the
+run's memory limit: :mod:`..disk_arrays`); each chunk of pixels writes its own slice
 (:meth:`FitMaps.write`), so no whole-image coefficient array or float64 temporary is
 ever made: the fit's memory is the maps (33 bytes a pixel) plus one chunk's. Every
 pixel goes through the same operations as in one whole-image pass, in the same order,
@@ -19,6 +20,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+
+from .. import disk_arrays
 
 #: Bytes a pixel of the maps of :class:`FitMaps`: four float64 maps and the invalid mask.
 FIT_MAP_BYTES = 4 * 8 + 1
@@ -37,9 +40,11 @@ class FitMaps:
 
     @classmethod
     def empty(cls, pixels: int) -> FitMaps:
-        """Uninitialised maps of ``pixels`` pixels (pages are touched as chunks write)."""
-        maps = [np.empty(pixels) for _ in range(4)]
-        return cls(*maps, invalid=np.empty(pixels, dtype=bool))
+        """Uninitialised maps of ``pixels`` pixels (pages are touched as chunks write):
+        in memory, or in temporary files when the run's full-size arrays do not fit its
+        work limit (:func:`~..disk_arrays.empty`)."""
+        maps = [disk_arrays.empty((pixels,)) for _ in range(4)]
+        return cls(*maps, invalid=disk_arrays.empty((pixels,), dtype=bool))
 
     def write(
         self,

@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 
+from .. import disk_arrays
 from ..errors import PolarsegError
 
 #: The word for each excluded-pixel count of :meth:`PixelMask.counts` (and of a result's
@@ -264,7 +265,8 @@ def validity_mask(
     dark = finite_level(dark_level, "dark level")
     # uint8 flags set in place (no int64 temporaries of the stack's size); an integer
     # stack is finite everywhere
-    flags = np.zeros(stack.shape, dtype=np.uint8)
+    # (in a temporary file when the run's full-size arrays do not fit its limit)
+    flags = disk_arrays.zeros(stack.shape, dtype=np.uint8)
     finite = np.isfinite(stack) if stack.dtype.kind == "f" else None
 
     def flag(bit: int, where: np.ndarray) -> None:
@@ -312,6 +314,26 @@ def _region_pixels(region: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
     return region.astype(bool) if region.dtype.kind != "f" else np.nan_to_num(region) != 0
 
 
+def usable_extremes(stack: np.ndarray, valid: np.ndarray) -> tuple[float, float]:
+    """(lowest, highest) sample of the ``valid`` (H, W) pixels of ``stack`` (N, H, W),
+    in the stack's units: reduced where they are valid, without a copy of the samples
+    or their indices (a boolean index of a 100 MP frame made two int64 index arrays,
+    1.6 GB)."""
+    if valid.all():
+        return float(np.min(stack)), float(np.max(stack))
+    kind = stack.dtype.kind
+    if kind not in "iuf":  # pragma: no cover - check_stack gives numbers
+        used = stack[:, valid]
+        return float(np.min(used)), float(np.max(used))
+    info = np.iinfo(stack.dtype) if kind in "iu" else None
+    top = info.max if info is not None else np.inf
+    bottom = info.min if info is not None else -np.inf
+    where = valid[None]
+    lo = np.min(stack, where=where, initial=top)
+    hi = np.max(stack, where=where, initial=bottom)
+    return float(lo), float(hi)
+
+
 def check_usable(stack: np.ndarray, mask: PixelMask) -> None:
     """Refuse a stack with nothing to segment: no usable pixel, or all samples equal.
 
@@ -335,9 +357,7 @@ def check_usable(stack: np.ndarray, mask: PixelMask) -> None:
             f"no usable pixel: all {valid.size} pixels are excluded ({', '.join(reasons)})"
         )
     if valid.size > 1:
-        stack = np.asarray(stack)
-        used = stack if valid.all() else stack[:, valid]
-        lo, hi = float(np.min(used)), float(np.max(used))
+        lo, hi = usable_extremes(np.asarray(stack), valid)
         if lo == hi:
             raise PolarsegError(
                 f"the angle stack is constant (every usable sample is {lo:g}): "

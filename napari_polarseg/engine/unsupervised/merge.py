@@ -158,5 +158,5 @@ def merged_clustering(
         direct = cluster_regions(model, k)
         if largest_share(direct.node_labels, model.weight) < GUARD_SHARE:
             return direct
-    labels, node_labels = first_appearance(target[seg.labels], target[seg.node_labels])
+    labels, node_labels = first_appearance(seg.labels, seg.node_labels, target)
     return replace(seg, labels=labels, node_labels=node_labels)

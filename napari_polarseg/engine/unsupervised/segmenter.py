@@ -83,6 +83,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 import scipy.sparse as sps
 
+from .. import disk_arrays
 from ..chunks import call_stoppable
 from ..degenerate import degenerate_result
 from ..errors import PolarsegError
@@ -187,17 +188,37 @@ def _cluster_graph(
     return SpectralClustering(W).labels(k)
 
 
-def first_appearance(labels: np.ndarray, node_labels: np.ndarray) -> tuple[np.ndarray, ...]:
-    """Segments renumbered in order of first appearance in ``labels`` (row-major)."""
+def first_appearance(
+    labels: np.ndarray, node_labels: np.ndarray, table: np.ndarray | None = None
+) -> tuple[np.ndarray, ...]:
+    """Segments renumbered in order of first appearance in ``labels`` (row-major), after
+    the lookup ``table`` (segment → segment, e.g. a merge's; None: none): the labels of
+    ``table[labels]`` renumbered, and of ``table[node_labels]``.
+
+    The lookup is composed with the renumbering on the few segments, so the only
+    full-size array made is the int32 result, placed by :func:`~..disk_arrays.empty`
+    (in a temporary file when a large image's full-size arrays do not fit).
+    """
     flat = labels.ravel()
     # the first index of each of the few labels: one comparison pass per label is
     # several times faster than sorting every pixel (np.unique)
     present = np.flatnonzero(np.bincount(flat))
     first = np.array([np.argmax(flat == v) for v in present], dtype=np.int64)
-    values = flat[np.sort(first)]
-    order = np.zeros(int(max(flat.max(), node_labels.max())) + 1, dtype=np.int32)
+    if table is None:
+        table = np.arange(int(max(flat.max(), node_labels.max())) + 1, dtype=np.int64)
+    table = np.asarray(table, dtype=np.int64)
+    # each looked-up segment first appears where the first of its labels does
+    mapped = table[present]
+    firsts = np.full(int(table.max()) + 1, flat.size, dtype=np.int64)
+    np.minimum.at(firsts, mapped, first)
+    values = np.unique(mapped)
+    values = values[np.argsort(firsts[values], kind="stable")]
+    order = np.zeros(int(table.max()) + 1, dtype=np.int32)
     order[values] = np.arange(values.size, dtype=np.int32)
-    return order[labels], order[node_labels]
+    lookup = order[table]
+    out = disk_arrays.empty(labels.shape, dtype=np.int32)
+    np.take(lookup, labels, out=out, mode="clip")  # "raise" would buffer a copy
+    return out, lookup[node_labels]
 
 
 def _region_features(

@@ -28,6 +28,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from .. import disk_arrays
 from ..tile_map import current_tile_map
 from ..tiles import Tile, TileGrid
 from .boundaries import SegmentStats, refine_maps, refined_labels, segment_stats
@@ -133,7 +134,7 @@ class TiledLabels:
                 regions = model.regions[tile.outer]
                 yield regions, lookup, maps, valid, tile, m, stats, shape[1]
 
-        labels = np.empty(shape, dtype=np.int32)
+        labels = disk_arrays.empty(shape, dtype=np.int32)  # on disk when it does not fit
         first = np.full(m, np.iinfo(np.int64).max)
         cores = current_tile_map()(core_labels, payloads())
         for tile, (core, tile_first) in zip(self.grid, cores, strict=True):

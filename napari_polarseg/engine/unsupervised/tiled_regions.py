@@ -28,8 +28,10 @@ So (:func:`tiled_prepare_regions`):
    the whole image's functions of those sums (:func:`~.region_features.features_of_sums`,
    :func:`~.segmenter.project_features`).
 
-The superpixels themselves are kept as one int32 image (4 bytes a pixel); the labels are
-written tile by tile by node lookup and border refinement (:mod:`.tiled_labels`).
+The superpixels themselves are kept as one int32 image (4 bytes a pixel; in a temporary
+file when the run's full-size arrays do not fit its limit, :mod:`..disk_arrays`, as the
+maps they are read from may be); the labels are written tile by tile by node lookup and
+border refinement (:mod:`.tiled_labels`).
 
 Every tile's work (:mod:`.tiled_region_tasks`) reads only its outer box and returns only
 its sums, border pairs and core; it runs on the current tile map
@@ -52,6 +54,7 @@ from collections.abc import Callable, Iterator
 import numpy as np
 import scipy.sparse as sps
 
+from .. import disk_arrays
 from ..features.pixel_features import EPS_INTENSITY
 from ..limits import KEPT_MAPS, memory_limit
 from ..tile_map import current_tile_map, worker_bytes
@@ -256,7 +259,7 @@ def _tile_pass(
     seeds = Seeds.of(shape, max(2, int(round(shape[0] * shape[1] / p.area_of(shape)))))
     outside = seeds.count
     sums = RegionSums(outside + 1, shape)
-    regions = np.empty(shape, dtype=np.int32)
+    regions = disk_arrays.empty(shape, dtype=np.int32)  # on disk when they do not fit
     lines: dict = {}
 
     def payloads() -> Iterator[tuple]:
