@@ -26,10 +26,17 @@ are compared with the whole image's (ARI, share of equal pixels). Targets: peak 
 2 GiB at 24 and 100 MP, time a pixel at 24 MP no worse than at 1.25 MP, 24 MP ≤ 20 s.
 The 100 MP run on a Dask cluster: ``bench_dask_tiles.py``.
 
+``--kernel-limit`` (Linux, as root): each child runs in a memory cgroup of its own
+limited to ``--max-memory``, counting the page cache of the temporary files that hold a
+large image's full-size arrays (``engine/disk_arrays.py``), with their pages left
+mapped (``disk_arrays.RELEASE_PAGES = False``): whether the run finishes under a limit
+the kernel enforces, and how often the kernel had to reclaim pages to keep it.
+
 Usage::
 
     python benchmarks/bench_scale.py [--methods default,scribbles] [--sizes 1.25,5,24]
                                      [--modes whole,tiled] [--max-memory 2G] [--huge]
+                                     [--kernel-limit]
 """
 
 from __future__ import annotations
@@ -122,8 +129,52 @@ def scribbles_run(
             "grid": grid, "seconds": seconds}  # fmt: skip
 
 
+#: Environment variable telling a child to leave the disk arrays' pages mapped.
+KEEP_PAGES = "POLARSEG_BENCH_KEEP_PAGES"
+#: Memory cgroups (v1 controller, v2 hierarchy) a child of ``--kernel-limit`` runs in.
+CGROUP_ROOTS = (
+    Path("/sys/fs/cgroup/memory"),
+    Path("/sys/fs/cgroup/unified"),
+    Path("/sys/fs/cgroup"),
+)
+
+
+def memory_cgroup(limit: int) -> Path:
+    """A new memory cgroup limited to ``limit`` bytes (page cache counted): v1's
+    ``memory.limit_in_bytes`` or v2's ``memory.max``."""
+    for root in CGROUP_ROOTS:
+        controllers = root / "cgroup.controllers"
+        if (root / "memory.limit_in_bytes").exists():
+            name = "memory.limit_in_bytes"
+        elif controllers.exists() and "memory" in controllers.read_text().split():
+            (root / "cgroup.subtree_control").write_text("+memory")
+            name = "memory.max"
+        else:
+            continue
+        group = root / f"polarseg-bench-{os.getpid()}"
+        group.mkdir(exist_ok=True)
+        (group / name).write_text(str(int(limit)))
+        return group
+    raise SystemExit("--kernel-limit: no memory cgroup to make (Linux, as root)")
+
+
+def cgroup_report(group: Path) -> str:
+    """How often the kernel hit the group's limit and whether it killed the run."""
+    if (group / "memory.failcnt").exists():  # v1
+        oom = (group / "memory.oom_control").read_text().split()
+        killed = oom[oom.index("oom_kill") + 1] if "oom_kill" in oom else "?"
+        reached = (group / "memory.failcnt").read_text().strip()
+        return f"limit reached {reached} times, oom kills {killed}"
+    events = dict(line.split() for line in (group / "memory.events").read_text().splitlines())
+    return f"limit reached {events.get('max', '?')} times, oom kills {events.get('oom_kill', '?')}"
+
+
 def child(method: str, size: str, mode: str, limit: int, labels_out: str | None) -> dict:
     """One run (in this process): its figures as a dict."""
+    if os.environ.get(KEEP_PAGES) == "1":
+        from napari_polarseg.engine import disk_arrays
+
+        disk_arrays.RELEASE_PAGES = False
     stack, angles = frame_input(SIZES[size])
     if method == "default":
         r = default_run(stack, angles, mode, limit)
@@ -144,22 +195,35 @@ def child(method: str, size: str, mode: str, limit: int, labels_out: str | None)
     }
 
 
-def run(method: str, size: str, mode: str, limit: int, labels_out: str) -> dict:
-    """``child`` in a fresh subprocess (one thread for BLAS/OpenMP); its peak RSS from
+def run(
+    method: str, size: str, mode: str, limit: int, labels_out: str, group: Path | None = None
+) -> dict:
+    """``child`` in a fresh subprocess (one thread for BLAS/OpenMP), in the memory cgroup
+    ``group`` with the disk arrays' pages left mapped when given; its peak RSS from
     ``os.wait4``."""
     cmd = [sys.executable, __file__, "--child", method, size, mode, str(limit), labels_out]
-    env = {**os.environ, "OMP_NUM_THREADS": "1"}
+    env = {**os.environ, "OMP_NUM_THREADS": "1", **({KEEP_PAGES: "1"} if group else {})}
+
+    def enter() -> None:  # in the child, before it runs Python
+        if group is not None:
+            (group / "cgroup.procs").write_text(str(os.getpid()))
+
     with tempfile.TemporaryFile() as err:  # a file: a full pipe would stall the child
-        proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=err, env=env)
+        proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=err, env=env, preexec_fn=enter)
         out = proc.stdout.read()  # type: ignore[union-attr]
         _, status, usage = os.wait4(proc.pid, 0)  # the child's own peak, before it is reaped
         proc.returncode = os.waitstatus_to_exitcode(status)
         err.seek(0)
         text = err.read().decode()
     if proc.returncode != 0:
-        return {"size": size, "mode": mode, "error": text.strip().splitlines()[-1:]}
+        cgroup = [cgroup_report(group)] if group is not None else []
+        return {"size": size, "mode": mode, "error": text.strip().splitlines()[-1:] + cgroup}
     row = json.loads(out.decode().strip().splitlines()[-1])
     row["peak_rss_gib"] = usage.ru_maxrss / 2**20
+    if group is not None:
+        row["seconds"] = (
+            f"{row['seconds']}; in a {limit / 2**30:g} GiB cgroup: {cgroup_report(group)}"
+        )
     return row
 
 
@@ -185,6 +249,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--modes", default="whole,tiled")
     ap.add_argument("--max-memory", default="2G", help="the tiled runs' memory limit")
     ap.add_argument("--huge", action="store_true", help="also 100 MP (tiled only)")
+    ap.add_argument(
+        "--kernel-limit",
+        action="store_true",
+        help="run the tiled children in a memory cgroup of --max-memory, pages left mapped "
+        "(Linux, as root)",
+    )
     a = ap.parse_args(args)
     sizes = [s.strip() for s in a.sizes.split(",")] + (["100"] if a.huge else [])
     limit = parse_bytes(a.max_memory)
@@ -199,7 +269,12 @@ def main(argv: list[str] | None = None) -> int:
                 if size == "100" and mode == "whole":
                     continue
                 path = str(tmp / f"bench_scale_{method}_{size}_{mode}.npy")
-                r = run(method, size, mode, limit, path)
+                group = memory_cgroup(limit) if a.kernel_limit and mode == "tiled" else None
+                try:
+                    r = run(method, size, mode, limit, path, group)
+                finally:
+                    if group is not None:
+                        group.rmdir()
                 if "error" in r:
                     print(f"{method:>9} {size:>5} {mode:>6} failed: {r['error']}", flush=True)
                     continue

@@ -65,6 +65,10 @@ IDLE_SECONDS = 0.02
 TRIM_BYTES = 16 * 2**20
 #: Environment variable naming the directory of the temporary files.
 SCRATCH_ENV = "POLARSEG_SCRATCH_DIR"
+#: Whether a thread releases the disk arrays' resident pages (module docstring). Off,
+#: the pages stay mapped until the kernel reclaims them under memory pressure: what a
+#: memory limit enforced by the kernel (a cgroup) sees either way.
+RELEASE_PAGES = True
 #: Rows a band of :func:`copy_of` (bounds its temporaries).
 BAND_ROWS = 512
 
@@ -177,7 +181,10 @@ def is_on_disk(array: np.ndarray) -> bool:
 
 def release(*arrays: np.ndarray | None) -> None:
     """Give back the resident pages of the disk arrays among ``arrays`` now (their
-    values stay); arrays in memory are left alone."""
+    values stay); arrays in memory are left alone (all of them while
+    :data:`RELEASE_PAGES` is False)."""
+    if not RELEASE_PAGES:
+        return
     for array in arrays:
         mapping = None if array is None else mapping_of(array)
         if mapping is not None:
@@ -225,10 +232,11 @@ def _release(mapping: mmap.mmap) -> None:
 
 def _watch(mapping: mmap.mmap) -> None:
     """Release ``mapping``'s pages every :data:`TRIM_SECONDS` while it lives (one
-    daemon thread for every mapping, ending when none is left)."""
+    daemon thread for every mapping, ending when none is left; none while
+    :data:`RELEASE_PAGES` is False)."""
     with _state:
         _mapped.add(mapping)
-        if not _trimming[0]:
+        if RELEASE_PAGES and not _trimming[0]:
             _trimming[0] = True
             threading.Thread(target=_trim_loop, name="polarseg-trim", daemon=True).start()
 
