@@ -21,9 +21,10 @@ from typing import Any
 import numpy as np
 
 from . import io as pio
-from .engine import Scene
+from .engine import Scene, disk_arrays
 from .engine.analysis.evaluation import adjusted_rand_index, evaluate
 from .engine.errors import PolarsegError
+from .engine.limits import RUNTIME_BYTES, memory_limit
 from .engine.params import SegmentParams
 from .engine.physics.pixel_mask import PixelMask, validity_mask
 from .engine.registered import computes_block_maps
@@ -87,13 +88,17 @@ def pixel_mask(data: pio.StackData, read: ReadOptions) -> PixelMask:
         superpixel = data.metadata.get("demosaic") == "superpixel"
         raw_shape = data.metadata.get("raw_shape") if superpixel else None
         region = pio.read_mask(read.mask, data.stack.shape[1:], raw_shape)
-    return validity_mask(
-        data.stack,
-        saturation=data.metadata.get("saturation_level"),
-        dark_level=read.dark_level,
-        region=region,
-        saturated=data.saturated,
-    )
+    # the flags (1 byte a sample) in a temporary file when the run's full-size arrays
+    # do not fit its limit less the stack and the flags, as the pipeline places its own
+    held = data.stack.nbytes + data.stack.size + RUNTIME_BYTES
+    with disk_arrays.full_size_limit(max(memory_limit(read.max_bytes()) - held, 1)):
+        return validity_mask(
+            data.stack,
+            saturation=data.metadata.get("saturation_level"),
+            dark_level=read.dark_level,
+            region=region,
+            saturated=data.saturated,
+        )
 
 
 @dataclass

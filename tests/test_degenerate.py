@@ -158,3 +158,22 @@ def test_batch_warns_per_scene_and_lists_the_flag(tmp_path, capsys):
     scenes = json.loads((out / "batch_summary.json").read_text())["scenes"]
     assert {s["scene"]: s["degenerate"] for s in scenes} == {"leaves": True, "fruit": False}
     assert json.loads((out / "leaves" / "summary.json").read_text())["degenerate"] is True
+
+
+@pytest.mark.parametrize("dtype", [np.uint8, np.int32, np.int64])
+def test_used_segment_sizes_count_in_chunks_what_the_used_labels_hold(monkeypatch, dtype):
+    """The used pixels' segment sizes, counted a chunk at a time, equal the sizes of the
+    used labels copied out (what the check did before), and so does the verdict."""
+    from napari_polarseg.engine import degenerate
+
+    rng = np.random.default_rng(3)
+    labels = rng.integers(0, 5, (120, 130)).astype(dtype)
+    labels[labels == 3] = 4  # a label with no pixels
+    valid = rng.random(labels.shape) > 0.3
+    monkeypatch.setattr(degenerate, "COUNT_CHUNK", 1000)  # many chunks
+    got = degenerate.used_segment_sizes(labels, valid)
+    np.testing.assert_array_equal(got, degenerate.segment_sizes(labels[valid]))
+    assert got.sum() == valid.sum() and got.size == 4
+    labels[valid & (labels > 0)] = 0  # every used pixel in segment 0
+    check = degenerate.degenerate_result(labels, valid=valid)
+    assert check.degenerate and "every used pixel" in check.reason

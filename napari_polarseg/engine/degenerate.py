@@ -51,6 +51,26 @@ def segment_sizes(labels: np.ndarray) -> np.ndarray:
     return np.unique(flat, return_counts=True)[1]
 
 
+#: Pixels counted at once by :func:`used_segment_sizes` (bounds its temporaries).
+COUNT_CHUNK = 1 << 22
+
+
+def used_segment_sizes(labels: np.ndarray, valid: np.ndarray) -> np.ndarray:
+    """:func:`segment_sizes` of ``labels[valid]``, counted :data:`COUNT_CHUNK` pixels at
+    a time (no copy of the used labels: an image's labels may be larger than memory)."""
+    flat, keep = np.asarray(labels).ravel(), np.asarray(valid, dtype=bool).ravel()
+    if not (flat.size and flat.dtype.kind in "iu" and flat.min() >= 0):
+        return segment_sizes(flat[keep])
+    top = int(flat.max()) + 1
+    if top >= max(flat.size, 2**16):
+        return segment_sizes(flat[keep])
+    counts = np.zeros(top, dtype=np.int64)
+    for start in range(0, flat.size, COUNT_CHUNK):
+        part = slice(start, start + COUNT_CHUNK)
+        counts += np.bincount(flat[part][keep[part]], minlength=top)
+    return counts[counts > 0]
+
+
 def degenerate_result(
     labels: np.ndarray,
     min_pixels: int = 1,
@@ -95,8 +115,9 @@ def degenerate_result(
     labels = np.asarray(labels)
     pixels = "pixels"
     if valid is not None and not np.all(valid):
-        labels, pixels = labels[np.asarray(valid, dtype=bool)], "used pixels"
-    sizes = segment_sizes(labels)
+        sizes, pixels = used_segment_sizes(labels, np.asarray(valid, dtype=bool)), "used pixels"
+    else:
+        sizes = segment_sizes(labels)
     total = int(sizes.sum())
     if total == 0:
         return DegenerateCheck(False, 0.0, "")

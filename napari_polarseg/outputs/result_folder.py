@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import functools
 import os
 import shutil
 import time
@@ -40,7 +41,18 @@ from ..engine.analysis.views import CompositeParams, aolp_dolp_composite, auto_d
 from ..engine.errors import PolarsegError
 from ..engine.physics.pixel_mask import PixelMask
 from ..engine.physics.polarimage import duplicate_angle_frames
-from ..engine.physics.stokes import STOKES_CONVENTION, stokes_components
+from ..engine.physics.stokes import STOKES_CONVENTION
+from .band_statistics import banded_segment_statistics
+from .bands import (
+    as_dtype,
+    auto_dolp_max_banded,
+    composite_image,
+    is_large,
+    labels_image_banded,
+    stokes_image,
+    used_pixels_banded,
+    write_picture,
+)
 from .contract import (
     COMPOSITE_FILE,
     EVALUATION_SUMMARY_KEYS,
@@ -80,7 +92,8 @@ def segment_rows(result: SegmentationResult) -> list[dict[str, Any]]:
     block_valid = None
     if valid is not None and result.features is not None:  # blocks only with the maps
         block_valid = valid_blocks(valid, result.params.window)
-    rows = segment_statistics(
+    statistics = banded_segment_statistics if is_large(result.labels.shape) else segment_statistics
+    rows = statistics(
         result.labels,
         result.intensity,
         result.dop,
@@ -250,8 +263,12 @@ class _Folder:
         else:
             path.unlink(missing_ok=True)
 
-    def png(self, rel: str, image: np.ndarray) -> None:
-        pio.write_png(self.path(rel), image)
+    def png(self, rel: str, image: Any) -> None:
+        """The PNG named ``rel`` of an array or a Pillow image (:func:`.bands.write_picture`)."""
+        if isinstance(image, np.ndarray):
+            pio.write_png(self.path(rel), image)
+        else:  # a large image's composite, drawn now (bands.composite_image)
+            write_picture(self.path(rel), image() if callable(image) else image)
         self.written.append(rel)
 
     def json(self, rel: str, data: dict[str, Any]) -> None:
@@ -262,20 +279,31 @@ class _Folder:
 def _write_maps(
     folder: _Folder,
     result: SegmentationResult,
-    stokes: np.ndarray | None,
-    composite: np.ndarray | None,
+    stokes: Any,
+    composite: Any,
 ) -> None:
-    """``labels.tif``, the float maps, ``mask.tif`` and the polarisation views."""
+    """``labels.tif``, the float maps, ``mask.tif`` and the polarisation views (those
+    of a large image made band by band as they are written: :mod:`.bands`)."""
     materials = result.materials
-    labels = labels_image(result.labels, materials)
+    large = is_large(result.labels.shape)
+    if large:
+        labels = labels_image_banded(result.labels, materials)
+    else:
+        labels = labels_image(result.labels, materials)
     folder.tiff("labels.tif", labels, labels_meta(materials), labels=True)
     for fname, (attr, meta) in FLOAT_OUTPUTS.items():
         value = getattr(result, attr)
         if value is not None:  # the reconstruction error: the thesis maps, when computed
-            folder.tiff(fname, np.asarray(value, np.float32), meta)
-    folder.tiff("mask.tif", used_pixels(result), MASK_META)
+            folder.tiff(fname, as_dtype(value, np.float32), meta)
+    if large:
+        folder.tiff("mask.tif", used_pixels_banded(result.valid, result.labels.shape), MASK_META)
+    else:
+        folder.tiff("mask.tif", used_pixels(result), MASK_META)
     if stokes is not None:
-        folder.tiff(STOKES_FILE, np.asarray(stokes, np.float32), STOKES_CONVENTION)
+        lazy = pio.is_lazy(stokes)
+        folder.tiff(
+            STOKES_FILE, stokes if lazy else np.asarray(stokes, np.float32), STOKES_CONVENTION
+        )
     if composite is not None:
         folder.png(COMPOSITE_FILE, composite)
 
@@ -328,18 +356,20 @@ def write_outputs(
     uncertainty: np.ndarray | None = None,
     evaluation: dict[str, Any] | None = None,
     plots: dict[str, bytes] | None = None,
-    stokes: np.ndarray | None = None,
-    composite: np.ndarray | None = None,
+    stokes: Any = None,
+    composite: Any = None,
     image_format: str = "tiff",
 ) -> list[str]:
     """Write already computed outputs into ``out`` (created), each file atomically, the
     images as ``image_format`` (:data:`~napari_polarseg.outputs.image_formats.IMAGE_FORMATS`:
     ``tiff``, ``zarr``).
 
-    ``stokes`` (3, H, W) goes to :data:`~napari_polarseg.outputs.contract.STOKES_FILE`
-    (float32; its planes and sign convention in the JSON ImageDescription,
+    ``stokes`` (3, H, W; NumPy or Dask) goes to
+    :data:`~napari_polarseg.outputs.contract.STOKES_FILE` (float32; its planes and sign
+    convention in the JSON ImageDescription,
     :data:`napari_polarseg.engine.physics.stokes.STOKES_CONVENTION`), ``composite``
-    (H, W, 3) uint8 to :data:`~napari_polarseg.outputs.contract.COMPOSITE_FILE`.
+    ((H, W, 3) uint8, a Pillow image or a callable giving one: :mod:`.bands`) to
+    :data:`~napari_polarseg.outputs.contract.COMPOSITE_FILE`.
 
     Returns the files written, relative to ``out`` (``plots/<name>.png`` for plots), in
     the order written. Records the writing time in ``summary["io_seconds"]["write"]``.
@@ -450,22 +480,25 @@ def _pictures(
     """The images :func:`write_outputs` takes (``overview``, ``plots``, ``stokes``,
     ``composite``); records the composite's settings in ``params_json["aolp_dolp"]``."""
     composite = stokes = None
+    large = is_large(result.labels.shape)  # a Pillow image drawn band by band: .bands
     if views or overview:
         if composite_params is None:
-            composite_params = CompositeParams(dolp_max=auto_dolp_max(result.dop))
-        composite = aolp_dolp_composite(
-            result.intensity, result.dop, result.phase, composite_params
+            dolp_max = auto_dolp_max_banded if large else auto_dolp_max
+            composite_params = CompositeParams(dolp_max=dolp_max(result.dop))
+        maps = (result.intensity, result.dop, result.phase, composite_params)
+        composite = (
+            functools.partial(composite_image, *maps) if large else aolp_dolp_composite(*maps)
         )
         params_json["aolp_dolp"] = dataclasses.asdict(composite_params)
     if views:
-        stokes = stokes_components(result.intensity, result.dop, result.phase)
+        stokes = stokes_image(result.intensity, result.dop, result.phase)
     picture = None
     if overview:
         picture = render_overview(
             first_frame,
             result,
             truth=truth,
-            composite=composite,
+            composite=np.asarray(composite() if large else composite),
             dolp_max=composite_params.dolp_max,
         )
     pngs = None
