@@ -82,16 +82,17 @@ class FolderResult:
 def pixel_mask(data: pio.StackData, read: ReadOptions) -> PixelMask:
     """Validity mask: the reader's saturated samples, black samples, the user's region.
     A stack read lazily is read into memory here, once: the engine takes it whole."""
-    pio.in_memory(data, read.max_bytes())
     region = None
     if read.mask:
         superpixel = data.metadata.get("demosaic") == "superpixel"
         raw_shape = data.metadata.get("raw_shape") if superpixel else None
         region = pio.read_mask(read.mask, data.stack.shape[1:], raw_shape)
-    # the flags (1 byte a sample) in a temporary file when the run's full-size arrays
-    # do not fit its limit less the stack and the flags, as the pipeline places its own
+    # a lazy stack read and the flags (1 byte a sample) made in temporary files when the
+    # run's full-size arrays do not fit its limit less the stack and the flags, as the
+    # pipeline places its own
     held = data.stack.nbytes + data.stack.size + RUNTIME_BYTES
     with disk_arrays.full_size_limit(max(memory_limit(read.max_bytes()) - held, 1)):
+        pio.in_memory(data, read.max_bytes())
         return validity_mask(
             data.stack,
             saturation=data.metadata.get("saturation_level"),

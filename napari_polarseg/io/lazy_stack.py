@@ -31,6 +31,7 @@ from typing import Any
 
 import numpy as np
 
+from ..engine import disk_arrays
 from ..engine.errors import PolarsegError
 from ..engine.limits import check_bytes
 from .common import dims, first_line, input_error
@@ -192,7 +193,7 @@ def in_memory(data: StackData, limit: int) -> StackData:
     lazy = [name for name in ("stack", "saturated") if is_lazy(getattr(data, name))]
     if not lazy:
         return data
-    import dask
+    import dask.array
 
     shape, dtype = data.stack.shape, data.stack.dtype
     copy = 0 if np.issubdtype(dtype, np.integer) else 8
@@ -201,13 +202,18 @@ def in_memory(data: StackData, limit: int) -> StackData:
         f"{data.source}: reading {dims(shape)} values of {data.stack.dtype.name}",
         limit,
     )
+    sources = [getattr(data, name) for name in lazy]
+    # written block by block into arrays placed by the run's memory limit (in temporary
+    # files for an image whose full-size arrays do not fit it: disk_arrays), the file
+    # read once for all of them
+    targets = [disk_arrays.empty(a.shape, a.dtype) for a in sources]
     try:
-        values = dask.compute(*(getattr(data, name) for name in lazy))
+        dask.array.store(sources, targets, lock=False)
     except PolarsegError:
         raise
     except Exception as exc:
         raise lazy_read_error(Path(data.source), exc) from exc
-    for name, value in zip(lazy, values, strict=True):
-        setattr(data, name, np.asarray(value))
+    for name, value in zip(lazy, targets, strict=True):
+        setattr(data, name, value)
     data.metadata["lazy"] = False
     return data
