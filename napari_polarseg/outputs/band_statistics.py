@@ -14,8 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from ..engine.analysis.evaluation import segment_statistics
-from ..engine.errors import PolarsegError
+from ..engine.analysis.evaluation import segment_count, segment_pca_means, statistics_rows
 from .bands import read_band, row_bands
 
 
@@ -53,28 +52,6 @@ def _segment_sums(
     return pixels, total, sums
 
 
-def _pca_means(
-    k: int,
-    block_labels: np.ndarray | None,
-    features: np.ndarray | None,
-    block_valid: np.ndarray | None,
-) -> np.ndarray:
-    """(k, 3) means of the first three PCA features per segment (NaN where none), by
-    :func:`~napari_polarseg.engine.analysis.evaluation.segment_statistics` on the block
-    grid (small)."""
-    pca = np.full((k, 3), np.nan)
-    if block_labels is None or features is None:
-        return pca
-    grid = np.zeros(np.shape(block_labels))
-    rows = segment_statistics(
-        block_labels, grid, grid, grid, grid, block_labels=block_labels, features=features,
-        block_valid=block_valid,
-    )  # fmt: skip
-    for row in rows[:k]:
-        pca[row["segment"]] = [row[f"mean_pca_{j}"] for j in (1, 2, 3)]
-    return pca
-
-
 def banded_segment_statistics(
     labels: np.ndarray,
     intensity: np.ndarray,
@@ -90,31 +67,9 @@ def banded_segment_statistics(
     """:func:`~napari_polarseg.engine.analysis.evaluation.segment_statistics` (same
     arguments, same rows: Î in input units, ρ, θ and φ means in degrees) computed band by
     band of rows (module docstring)."""
-    shape = np.shape(labels)
-    for name, a in (("intensity", intensity), ("dop", dop), ("zenith", zenith), ("phase", phase)):
-        if np.shape(a) != shape:
-            raise PolarsegError(f"{name} is {np.shape(a)} but the labels are {shape}")
-    size = int(np.prod(shape))
-    if size and int(labels.min()) < 0:
-        raise PolarsegError("segment labels must be non-negative")
-    k = int(labels.max()) + 1 if size else 0
+    k = segment_count(labels, intensity, dop, zenith, phase)
     pixels, total, sums = _segment_sums(labels, (intensity, dop, zenith, phase), valid, k)
     with np.errstate(invalid="ignore", divide="ignore"):
         means = [np.where(total > 0, s / np.where(total > 0, total, 1), np.nan) for s in sums]
-    phase_mean = np.mod(np.rad2deg(0.5 * np.arctan2(means[3], means[4])), 180.0)
-    pca = _pca_means(k, block_labels, features, block_valid)
-    return [
-        {
-            "segment": i,
-            "pixels": int(pixels[i]),
-            "area_fraction": float(pixels[i] / size),
-            "mean_intensity": float(means[0][i]),
-            "mean_dop": float(means[1][i]),
-            "mean_zenith_deg": float(np.rad2deg(means[2][i])),
-            "circular_mean_phase_deg": float(phase_mean[i]),
-            "mean_pca_1": float(pca[i, 0]),
-            "mean_pca_2": float(pca[i, 1]),
-            "mean_pca_3": float(pca[i, 2]),
-        }
-        for i in range(k)
-    ]
+    pca = segment_pca_means(k, block_labels, features, block_valid)
+    return statistics_rows(pixels, int(np.prod(np.shape(labels))), means, pca)

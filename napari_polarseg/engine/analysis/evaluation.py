@@ -225,7 +225,7 @@ def _masked_means(values: np.ndarray, index: np.ndarray, weights: np.ndarray, k:
         return np.where(total > 0, sums / np.where(total > 0, total, 1), np.nan)
 
 
-def _segment_pca_means(
+def segment_pca_means(
     k: int,
     block_labels: np.ndarray | None,
     features: np.ndarray | None,
@@ -304,37 +304,52 @@ def segment_statistics(
         (NaN where the segment has no valid pixel or block, or fewer than 3 features).
     """
     labels = np.asarray(labels)
-    shape = labels.shape
-    for name, a in (("intensity", intensity), ("dop", dop), ("zenith", zenith), ("phase", phase)):
-        if np.shape(a) != shape:
-            raise PolarsegError(f"{name} is {np.shape(a)} but the labels are {shape}")
+    k = segment_count(labels, intensity, dop, zenith, phase)
     index = labels.ravel().astype(np.int64)
-    if index.size and index.min() < 0:
-        raise PolarsegError("segment labels must be non-negative")
-    k = int(index.max()) + 1 if index.size else 0
     maps = [np.asarray(a, dtype=np.float64).ravel() for a in (intensity, dop, zenith)]
     phi = np.asarray(phase, dtype=np.float64).ravel()
     with np.errstate(invalid="ignore"):  # φ not finite: left out of the means
         maps += [np.sin(2 * phi), np.cos(2 * phi)]
-    i_mean, d_mean, z_mean, s, c = _pixel_means(maps, index, k, valid)
-    means = (i_mean, d_mean, z_mean)
-    phase_mean = np.mod(np.rad2deg(0.5 * np.arctan2(s, c)), 180.0)
+    means = _pixel_means(maps, index, k, valid)
     pixels = np.bincount(index, minlength=k)
-    pca = _segment_pca_means(k, block_labels, features, block_valid)
-    rows = []
-    for i in range(k):
-        rows.append(
-            {
-                "segment": i,
-                "pixels": int(pixels[i]),
-                "area_fraction": float(pixels[i] / index.size),
-                "mean_intensity": float(means[0][i]),
-                "mean_dop": float(means[1][i]),
-                "mean_zenith_deg": float(np.rad2deg(means[2][i])),
-                "circular_mean_phase_deg": float(phase_mean[i]),
-                "mean_pca_1": float(pca[i, 0]),
-                "mean_pca_2": float(pca[i, 1]),
-                "mean_pca_3": float(pca[i, 2]),
-            }
-        )
-    return rows
+    pca = segment_pca_means(k, block_labels, features, block_valid)
+    return statistics_rows(pixels, index.size, means, pca)
+
+
+def segment_count(labels: np.ndarray, *maps: np.ndarray) -> int:
+    """The number of segments k of :func:`segment_statistics`' ``labels`` (ids 0..k−1),
+    after checking that they are non-negative and that every map has their shape."""
+    shape = np.shape(labels)
+    for name, a in zip(("intensity", "dop", "zenith", "phase"), maps, strict=True):
+        if np.shape(a) != shape:
+            raise PolarsegError(f"{name} is {np.shape(a)} but the labels are {shape}")
+    if not np.size(labels):
+        return 0
+    if int(np.min(labels)) < 0:
+        raise PolarsegError("segment labels must be non-negative")
+    return int(np.max(labels)) + 1
+
+
+def statistics_rows(
+    pixels: np.ndarray, size: int, means: list[np.ndarray], pca: np.ndarray
+) -> list[dict[str, Any]]:
+    """The rows of :func:`segment_statistics` from each segment's pixel count, the image's
+    ``size`` (pixels), the per-segment means of Î, ρ, θ (radians), sin 2φ and cos 2φ over
+    the used pixels, and the (k, 3) PCA means."""
+    i_mean, d_mean, z_mean, s, c = means
+    phase_mean = np.mod(np.rad2deg(0.5 * np.arctan2(s, c)), 180.0)
+    return [
+        {
+            "segment": i,
+            "pixels": int(pixels[i]),
+            "area_fraction": float(pixels[i] / size),
+            "mean_intensity": float(i_mean[i]),
+            "mean_dop": float(d_mean[i]),
+            "mean_zenith_deg": float(np.rad2deg(z_mean[i])),
+            "circular_mean_phase_deg": float(phase_mean[i]),
+            "mean_pca_1": float(pca[i, 0]),
+            "mean_pca_2": float(pca[i, 1]),
+            "mean_pca_3": float(pca[i, 2]),
+        }
+        for i in range(len(pixels))
+    ]
