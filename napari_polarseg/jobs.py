@@ -24,7 +24,7 @@ from . import io as pio
 from .engine import Scene, disk_arrays
 from .engine.analysis.evaluation import adjusted_rand_index, evaluate
 from .engine.errors import PolarsegError
-from .engine.limits import RUNTIME_BYTES, memory_limit
+from .engine.limits import work_bytes
 from .engine.params import SegmentParams
 from .engine.physics.pixel_mask import PixelMask, validity_mask
 from .engine.registered import computes_block_maps
@@ -90,8 +90,8 @@ def pixel_mask(data: pio.StackData, read: ReadOptions) -> PixelMask:
     # a lazy stack read and the flags (1 byte a sample) made in temporary files when the
     # run's full-size arrays do not fit its limit less the stack and the flags, as the
     # pipeline places its own
-    held = data.stack.nbytes + data.stack.size + RUNTIME_BYTES
-    with disk_arrays.full_size_limit(max(memory_limit(read.max_bytes()) - held, 1)):
+    held = data.stack.nbytes + data.stack.size  # as Pipeline.held_limit counts them
+    with disk_arrays.full_size_limit(work_bytes(read.max_bytes(), held)):
         pio.in_memory(data, read.max_bytes())
         return validity_mask(
             data.stack,

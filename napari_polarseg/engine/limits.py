@@ -96,6 +96,13 @@ def memory_limit(limit: int | float | None = None) -> int:
     return default_max_bytes()
 
 
+def work_bytes(limit: int | float | None, held: int) -> int:
+    """The memory left to a run's work, bytes: :func:`memory_limit` of ``limit`` less
+    ``held`` bytes (its stack, flags, …) and the libraries (:data:`RUNTIME_BYTES`); at
+    least 1."""
+    return max(memory_limit(limit) - int(held) - RUNTIME_BYTES, 1)
+
+
 def format_bytes(n: float) -> str:
     """Human-readable size: ``format_bytes(3 * 2**30) == '3.0 GiB'``."""
     for unit in ("B", "KiB", "MiB", "GiB", "TiB", "PiB"):

@@ -31,7 +31,7 @@ from . import disk_arrays
 from .errors import Cancelled, PolarsegError
 from .features import harmonics
 from .graph import affinity, ncut
-from .limits import RUNTIME_BYTES, memory_limit
+from .limits import memory_limit, work_bytes
 from .matrix_pool import DenseDistances, MatrixPool
 from .params import SegmentParams
 from .physics import pixel_mask, polarimage
@@ -145,7 +145,7 @@ class Pipeline:
     def held_limit(self, held: int) -> int:
         """:attr:`max_bytes` (or :func:`~.limits.memory_limit`) less ``held`` bytes and
         the libraries (:data:`~.limits.RUNTIME_BYTES`), bytes; at least 1."""
-        return max(memory_limit(self.max_bytes) - held - RUNTIME_BYTES, 1)
+        return work_bytes(self.max_bytes, held)
 
     def full_size_arrays(self) -> contextlib.AbstractContextManager[None]:
         """The context in which the full-size arrays of a run (the fit's maps, the

@@ -41,6 +41,7 @@ from .limits import (
     check_bytes,
     memory_limit,
     scribble_bytes_per_pixel,
+    work_bytes,
 )
 from .params import SegmentParams
 from .physics.fit_maps import FIT_MAP_BYTES
@@ -191,13 +192,13 @@ def estimate_run_bytes(
     the result adds), the method's tiles chosen under ``limit`` less the stack, as the
     run chooses them (:meth:`~.pipeline.Pipeline.work_limit`)."""
     n, h, w = (int(v) for v in shape)
-    held = stack_bytes(shape, itemsize) + RUNTIME_BYTES
-    work = max(memory_limit(limit) - held, 1)  # the methods' limit (Pipeline.work_limit)
+    held = stack_bytes(shape, itemsize)
+    work = work_bytes(limit, held)  # the methods' limit (Pipeline.work_limit)
     method = method_bytes(
         (h, w), params, work, scribbles=scribbles, channels=channels, n_classes=n_classes
     )
     on_disk = not scribbles and on_disk_at(h * w, work)
-    return held + max(fit_bytes(shape, on_disk), method.bytes)
+    return held + RUNTIME_BYTES + max(fit_bytes(shape, on_disk), method.bytes)
 
 
 def _graph_kind(blocks: int, params: SegmentParams) -> str:

@@ -15,7 +15,6 @@ from __future__ import annotations
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -29,7 +28,6 @@ from ..physics import polarimage
 from ..physics.pixel_mask import PixelMask
 from ..pipeline import Pipeline
 from ..result import SegmentationResult
-from ..unsupervised.params import UnsupervisedResult
 from .base import MethodOutput, MethodRun, PartialOutput, Progress, Segmenter
 from .registry import get_method, method_names
 
@@ -293,7 +291,7 @@ class Scene:
                 run.begin(stage)
             return entry[1]
         t0 = time.perf_counter()
-        out = labels_kept(method.segment(self, p, inputs, run), self.shape)
+        out = method.segment(self, p, inputs, run)
         timings.update(out.seconds or {method.name: time.perf_counter() - t0})
         self.method_calls[method.name] = self.method_calls.get(method.name, 0) + 1
         self._cache[name] = (key, out)
@@ -356,27 +354,6 @@ class Scene:
             materials=out.extra.get("materials"),  # a classifier's classes: value and name
             on_blocks=maps or bool(getattr(method, "block_maps", False)),
         )
-
-
-def labels_kept(out: MethodOutput, shape: tuple[int, int]) -> MethodOutput:
-    """``out`` of an unsupervised method with its (H, W) labels in a temporary file
-    when the run's full-size arrays do not fit its limit
-    (:func:`~..disk_arrays.pixels_on_disk`; the same values), in its unsupervised
-    result (``extra["unsupervised"]``, which holds the same array) too: the scene keeps
-    the output while the normals and the result are made. Other outputs (a
-    classifier's, whose prediction its session shares) as they are."""
-    labels, seg = out.labels, out.extra.get("unsupervised")
-    if (
-        not isinstance(seg, UnsupervisedResult)
-        or seg.labels is not labels
-        or labels.shape != tuple(shape)
-        or disk_arrays.is_on_disk(labels)
-        or not disk_arrays.pixels_on_disk(int(shape[0]) * int(shape[1]))
-    ):
-        return out
-    moved = disk_arrays.copy_of(labels)
-    extra = {**out.extra, "unsupervised": replace(seg, labels=moved)}
-    return replace(out, labels=moved, extra=extra)
 
 
 def early_stages(method: Segmenter) -> tuple[str, ...]:
