@@ -6,13 +6,16 @@ most.
 A variant is the default method's class with some attributes changed (its node-feature
 parameters, how far its diffusion reaches in object sizes, how many superpixels span one
 object, whether it follows the estimated object size) or the default with the object
-size set to the truth's (``truth size``: what a perfect estimate would give). Only the
-development halves are read: the test halves are for reporting.
+size set to the truth's (``truth size``: what a perfect estimate would give). The
+development halves are read; ``--test-base B`` reads round B's test halves instead,
+only to check a choice on a test half already read and reported (a fresh round's is
+for reporting).
 
 Usage::
 
     cd benchmarks && OMP_NUM_THREADS=1 PYTHONPATH=.. python family_variants.py \\
         [--families objects,small,textured,diffuse,real] [--variants NAME,NAME]
+        [--test-base B]
 """
 
 from __future__ import annotations
@@ -43,6 +46,8 @@ class Variant:
     truth_size: bool = False
     #: a registered method read as it is instead of the default's class (a baseline)
     method: str = ""
+    #: segment again at the short reach above this largest-segment share (0: never)
+    collapse: float = 0.0
     #: follow the estimated object size only where it is at least this share of the
     #: frame's short side (0: wherever the class's ``follows_estimate`` says)
     gate: float = 0.0
@@ -60,6 +65,28 @@ class GatedSurface(SurfaceSuperpixels):
         if object_size < self.gate * min(shape):
             return self.params
         return super().scaled_params(object_size, shape)
+
+
+class CollapseFallback(SurfaceSuperpixels):
+    """The default's class that segments again with the shorter reach and narrower
+    border scale of ``superpixels`` (reach 0.07 of the side, τ 0.75) where its own
+    labels put more than :attr:`collapse` of the pixels in one segment: a criterion
+    computed without truth, for the long diffusion running many small objects of
+    different materials into one segment."""
+
+    collapse = 0.85
+
+    def segment(self, scene, params, inputs, run):
+        out = super().segment(scene, params, inputs, run)
+        largest = np.bincount(out.labels.ravel() - out.labels.min()).max() / out.labels.size
+        if largest <= self.collapse:
+            return out
+        long_reach = self.params
+        self.params = long_reach.replace(diffusion_range=0.07, diffusion_tau=0.75)
+        try:
+            return super().segment(scene, params, inputs, run)
+        finally:
+            self.params = long_reach
 
 
 #: The variants tried; ``default`` is the default as it is (its superpixels at their
@@ -98,6 +125,8 @@ VARIANTS: dict[str, Variant] = {
     ),
     "maf": Variant(params={"projection": "maf"}),
     "estimated size above 10 %": Variant(gate=0.10),
+    "short reach above 85 % in one segment": Variant(collapse=0.85),
+    "short reach above 80 % in one segment": Variant(collapse=0.80),
     "estimated size above 10 % reach 1": Variant({"reach_objects": 1.0}, gate=0.10),
     "estimated size above 10 % reach 1.5 side 4": Variant(
         {"reach_objects": 1.5, "regions_per_side": 4.0}, gate=0.10
@@ -112,6 +141,8 @@ def register(name: str, variant: Variant) -> str:
     base, attrs = SurfaceSuperpixels, dict(variant.attrs)
     if variant.gate:
         base, attrs["gate"] = GatedSurface, variant.gate
+    if variant.collapse:
+        base, attrs["collapse"] = CollapseFallback, variant.collapse
     cls = type("Variant", (base,), {"name": f"variant:{name}", "title": name, **attrs})
     method = cls()
     if variant.params:
@@ -139,21 +170,32 @@ def main(argv: list[str] | None = None) -> int:
         default=[],
         metavar="NAME=ATTR:VALUE[;ATTR:VALUE]",
         help="an extra variant: class attributes (numbers; follows_estimate:1 follows the "
-        "estimate) and 'truth:1' for the truth's size",
+        "estimate), 'truth:1' for the truth's size, 'collapse:S' for the short reach "
+        "above S in one segment",
+    )
+    ap.add_argument(
+        "--test-base",
+        type=int,
+        default=None,
+        help="read the test half of this round instead (a check of a test half read before)",
     )
     args = ap.parse_args(argv)
+    half = "dev" if args.test_base is None else "test"
     chosen = {n: VARIANTS[n] for n in args.variants.split(",") if n}
     for text in args.grid:
         name, spec = text.split("=", 1)
         attrs = dict(part.split(":", 1) for part in spec.split(";") if part)
         truth = attrs.pop("truth", "0") == "1"
-        chosen[name] = Variant({a: float(v) for a, v in attrs.items()}, truth_size=truth)
+        collapse = float(attrs.pop("collapse", 0))
+        chosen[name] = Variant(
+            {a: float(v) for a, v in attrs.items()}, truth_size=truth, collapse=collapse
+        )
     methods = {n: register(n, v) for n, v in chosen.items()}
     results: dict[str, dict[str, list[float]]] = {n: {} for n in chosen}
     names: dict[str, list[str]] = {}
     t0 = time.perf_counter()
     for family in args.families.split(","):
-        for frame in frames(family, "dev"):
+        for frame in frames(family, half, args.test_base or 0):
             pipe = Pipeline(frame.stack, frame.angles, PRESETS["auto"].replace(n_segments=frame.k))
             scene = Scene(pipeline=pipe)
             names.setdefault(family, []).append(frame.name)
