@@ -8,6 +8,7 @@ GIL in their loops, so the threads run in parallel.
 
 from __future__ import annotations
 
+import contextvars
 import os
 import threading
 from collections.abc import Callable, Iterator
@@ -136,13 +137,16 @@ def in_background(work: Callable[[], T]) -> Callable[..., T]:
 
     For numpy work that releases the GIL and is needed later in the same run (the
     second core works while the first draws the superpixels). Written by hand: a
-    one-off thread with a result, without an executor to shut down.
+    one-off thread with a result, without an executor to shut down. ``work`` runs in a
+    copy of the caller's context (its context variables: the memory limit that places
+    the full-size arrays, :func:`~.disk_arrays.full_size_limit`).
     """
     box: dict[str, Any] = {}
+    context = contextvars.copy_context()
 
     def target() -> None:
         try:
-            box["value"] = work()
+            box["value"] = context.run(work)
         except BaseException as exc:  # handed to the caller of the result
             box["error"] = exc
 

@@ -21,7 +21,10 @@ same tile decision the method makes with the same limit:
   (``superpixels``, the consensus of several sizes) the whole image once a size;
 - the pixel classifier on scribbles:
   :func:`~.classifier.tiled_prediction.scribble_tiles` with the bytes of
-  :func:`~.limits.scribble_bytes_per_pixel`, whole or tiled alike.
+  :func:`~.limits.scribble_bytes_per_pixel`, whole or tiled alike; tiled with its
+  full-size arrays in temporary files (the kept maps, edge map, superpixels, nodes,
+  probabilities and labels: :func:`~.disk_arrays.on_disk_at`), H·W ×
+  ``SCRIBBLE_DISK_FULL_BYTES`` in memory, the files' resident pages and one outer box.
 
 So a run that tiles to fit is estimated at its tiled peak, and exceeds the limit only
 when its full-size arrays alone do. The thesis block graph is
@@ -56,6 +59,10 @@ FIT_CHUNK_TEMPORARIES = 6
 #: arrays are in temporary files (:func:`~.disk_arrays.on_disk_at`): the clustered-pixel
 #: mask and one boolean comparison of the labels' renumbering.
 DISK_FULL_BYTES = 2
+#: Full-size bytes a pixel a tiled scribbles run keeps in memory when its full-size
+#: arrays are in temporary files: the boolean comparisons of the borders between
+#: superpixels (one a direction at a time) and of the stroke pixels while training.
+SCRIBBLE_DISK_FULL_BYTES = 2
 #: Pages of the temporary files resident at once: what the release thread lets the
 #: resident memory grow by (:data:`~.disk_arrays.TRIM_BYTES`) and the band a copy
 #: touches, with room for both.
@@ -154,7 +161,12 @@ def scribble_method_bytes(
     work, fixed = scribble_bytes_per_pixel(features, channels, n_classes, tiled=grid is not None)
     if grid is None:
         return MethodMemory(int(kept + pixels * (work + fixed)))
-    return MethodMemory(int(kept + pixels * fixed + box_pixels(grid) * work), grid)
+    box = box_pixels(grid) * work
+    full = kept + pixels * fixed
+    if on_disk_at(pixels, limit):  # the kept maps and the method's planes in files
+        resident = min(full, DISK_RESIDENT_BYTES)  # no more than the files hold
+        return MethodMemory(int(pixels * SCRIBBLE_DISK_FULL_BYTES + resident + box), grid)
+    return MethodMemory(int(full + box), grid)
 
 
 def method_bytes(
@@ -197,7 +209,7 @@ def estimate_run_bytes(
     method = method_bytes(
         (h, w), params, work, scribbles=scribbles, channels=channels, n_classes=n_classes
     )
-    on_disk = not scribbles and on_disk_at(h * w, work)
+    on_disk = on_disk_at(h * w, work)
     return held + RUNTIME_BYTES + max(fit_bytes(shape, on_disk), method.bytes)
 
 

@@ -239,9 +239,13 @@ class PixelPrediction:
     n_predicted: int = 0
 
 
-def check_scribbles(scribbles: Any, shape: tuple[int, int] | None = None) -> np.ndarray:
+def check_scribbles(
+    scribbles: Any, shape: tuple[int, int] | None = None, convert: bool = True
+) -> np.ndarray:
     """Validate a scribble image (of ``shape`` when given): one 2-D image of integers
-    >= 0 (0 = unlabelled) → int64. Raises :class:`PolarsegError` naming the problem."""
+    >= 0 (0 = unlabelled) → int64 (without ``convert``: an integer image whose values
+    int64 holds as it is, no full-size copy). Raises :class:`PolarsegError` naming the
+    problem."""
     s = np.asarray(scribbles)
     if s.ndim != 2:
         raise PolarsegError(f"scribbles must be one 2-D labels image, got shape {s.shape}")
@@ -252,8 +256,9 @@ def check_scribbles(scribbles: Any, shape: tuple[int, int] | None = None) -> np.
             raise PolarsegError("scribbles must hold integer labels")
     elif s.dtype.kind not in "biu":
         raise PolarsegError(f"scribbles must hold integer labels, got dtype {s.dtype}")
-    s = s.astype(np.int64)
-    if np.any(s < 0):
+    if convert or not np.can_cast(s.dtype, np.int64):  # floats, uint64
+        s = s.astype(np.int64)
+    if s.dtype.kind == "i" and np.any(s < 0):
         raise PolarsegError("scribble labels must be >= 0 (0 = unlabelled)")
     return s
 
@@ -263,7 +268,7 @@ def training_pixels(
     params: ClassifierParams,
     valid: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Flat indices and scribble values of the pixels the model is fitted on.
+    """Flat indices and scribble values (int64) of the pixels the model is fitted on.
 
     Scribbled pixels inside ``valid`` (all when None); at most
     ``max_pixels_per_class`` of each class, sampled evenly along the class's pixels in
@@ -277,7 +282,7 @@ def training_pixels(
     if valid is not None:
         marked &= np.asarray(valid, dtype=bool).ravel()
     index = np.flatnonzero(marked)
-    values = flat[index]
+    values = flat[index].astype(np.int64)
     classes = np.unique(values)
     if classes.size < 2:
         found = "none" if classes.size == 0 else f"only label {int(classes[0])}"
@@ -292,7 +297,7 @@ def training_pixels(
             mine = index[values == c]
             keep.append(mine if mine.size <= cap else np.sort(rng.choice(mine, cap, False)))
         index = np.concatenate(keep)
-        values = flat[index]
+        values = flat[index].astype(np.int64)
     return index, values
 
 
@@ -345,7 +350,7 @@ def train_pixel_classifier(
     PixelClassifier
     """
     params = params or ClassifierParams()
-    s = check_scribbles(scribbles, features.shape)
+    s = check_scribbles(scribbles, features.shape, convert=False)  # no int64 copy
     index, values = training_pixels(s, params, valid)
     marked = s.ravel() > 0
     if valid is not None:

@@ -20,13 +20,16 @@ can tell materials apart by the colour of their polarised reflection as well.
 
 from __future__ import annotations
 
+import contextlib
 import threading
 from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
 
+from .. import disk_arrays
 from ..chunks import in_background
+from ..features.banded_edges import add_banded, banded_superpixel_edges, banded_superpixels
 from ..features.harmonics import top_left_block_labels
 from ..features.pixel_features import (
     EPS_INTENSITY,
@@ -211,7 +214,7 @@ class PixelSegmenter:
         align = tile_align(params, self.stride)
         margin = prediction_margin(self.stride, TILED_SMOOTHING)
         halo = tile_halo(params, margin)
-        limit = self.max_bytes if self.max_bytes is not None else self.pipeline.work_limit()
+        limit = self.work_limit()
         grid = scribble_tiles(shape, params, halo, align, len(channels), limit=limit)
         if grid is None:
             return None
@@ -222,18 +225,37 @@ class PixelSegmenter:
         images += [(c.intensity, c.dop, c.phase) for c in self.colour_images(segment_params)]
         return tiled_features(images[: len(channels)], channels, params, grid, regions)
 
+    def work_limit(self) -> int:
+        """The memory limit of the method's work, bytes: :attr:`max_bytes`, else the
+        pipeline's ``work_limit()``."""
+        return self.max_bytes if self.max_bytes is not None else self.pipeline.work_limit()
+
+    def full_size_arrays(self) -> contextlib.AbstractContextManager[None]:
+        """The context in which the method's full-size arrays (edge map, superpixels,
+        the prediction's planes) are made: in memory, or in temporary files when the
+        image's full-size arrays do not fit :meth:`work_limit`
+        (:func:`~..disk_arrays.full_size_limit`)."""
+        return disk_arrays.full_size_limit(self.work_limit())
+
     def edges(self, segment_params: SegmentParams | None = None, colour: bool = True) -> np.ndarray:
         """The superpixels' edge map: :func:`superpixel_edges` of the maps of
         :meth:`maps` plus, with ``colour`` and a colour stack, every colour's
         polarisation image's (a border seen in one colour only is an edge too); kept
-        while the polarisation image stays."""
+        while the polarisation image stays. When the image's full-size arrays go to
+        temporary files (:func:`~..disk_arrays.pixels_on_disk`), made band by band
+        into one (:func:`~..features.banded_edges.banded_superpixel_edges`: the same
+        values)."""
         colour = colour and self.colour_stack is not None
-        with self._lock:
+        with self._lock, self.full_size_arrays():
             kept = self._kept_for(segment_params)
             if ("edges", colour) not in kept:
-                edges = superpixel_edges(*self.maps(segment_params))
-                for c in self.colour_images(segment_params) if colour else []:
-                    edges += superpixel_edges(c.intensity, c.dop, c.phase)
+                maps = self.maps(segment_params)
+                colours = self.colour_images(segment_params) if colour else []
+                banded = disk_arrays.pixels_on_disk(maps[0].size)
+                make = banded_superpixel_edges if banded else superpixel_edges
+                edges = make(*maps)
+                for c in colours:
+                    add_banded(edges, make(c.intensity, c.dop, c.phase))
                 kept["edges", colour] = edges
             return kept["edges", colour]
 
@@ -245,15 +267,23 @@ class PixelSegmenter:
         :func:`watershed_grid` for large regions), kept while the polarisation image
         stays: the pixel features' regions and the region walk's graph share
         them when their areas agree (a camera frame). Thread-safe: a second caller
-        waits for the first one's watershed."""
+        waits for the first one's watershed. When the image's full-size arrays go to
+        temporary files, in one (on the coarser grid every pixel given its block's
+        region band by band, :func:`~..features.banded_edges.banded_superpixels`: the
+        same superpixels)."""
         colour = colour and self.colour_stack is not None
-        with self._lock:
+        with self._lock, self.full_size_arrays():
             kept = self._kept_for(segment_params)
             if ("regions", area, colour) not in kept:
                 i, d, p = self.maps(segment_params)
                 edges = self.edges(segment_params, colour)
                 grid = watershed_grid(area)
-                regions = polarisation_superpixels(i, d, p, area, edges=edges, grid=grid)
+                disk = disk_arrays.pixels_on_disk(edges.size)
+                if disk and grid > 1:
+                    regions = banded_superpixels(edges, area, grid)
+                else:
+                    regions = polarisation_superpixels(i, d, p, area, edges=edges, grid=grid)
+                    regions = disk_arrays.copy_of(regions) if disk else regions
                 kept["regions", area, colour] = regions
             return kept["regions", area, colour]
 
@@ -314,21 +344,22 @@ class PixelSegmenter:
         ``stride``: the grid step (default :attr:`stride`); ``coarse``: its
         probabilities when already predicted."""
         s = self.stride if stride is None else int(stride)
-        if isinstance(features, TiledFeatures):
-            check_feature_names(classifier, features.names)
+        with self.full_size_arrays():  # the planes in temporary files when they do not fit
+            if isinstance(features, TiledFeatures):
+                check_feature_names(classifier, features.names)
+                if classifier.params.region_walk > 0:
+                    graph = self.graph(segment_params)
+                    return tiled_walk(classifier, features, graph, s, scribbles, cancel)
+                guide = None
+                if classifier.params.smoothing > 0:
+                    g = self.guide(segment_params)
+                    guide = (g, guide_stats(g))
+                return tiled_pixels(classifier, features, s, guide, cancel)
             if classifier.params.region_walk > 0:
                 graph = self.graph(segment_params)
-                return tiled_walk(classifier, features, graph, s, scribbles, cancel)
-            guide = None
-            if classifier.params.smoothing > 0:
-                g = self.guide(segment_params)
-                guide = (g, guide_stats(g))
-            return tiled_pixels(classifier, features, s, guide, cancel)
-        if classifier.params.region_walk > 0:
-            graph = self.graph(segment_params)
-            return walked_prediction(classifier, features, graph, s, scribbles, cancel, coarse)
-        guide = self.guide(segment_params) if classifier.params.smoothing > 0 else None
-        return predict_pixels(classifier, features, guide, cancel, s, coarse)
+                return walked_prediction(classifier, features, graph, s, scribbles, cancel, coarse)
+            guide = self.guide(segment_params) if classifier.params.smoothing > 0 else None
+            return predict_pixels(classifier, features, guide, cancel, s, coarse)
 
     def guide(self, segment_params: SegmentParams | None = None) -> np.ndarray:
         """Guide image of the edge-aware smoothing: log Î."""

@@ -43,16 +43,18 @@ classifier's own (``region_walk`` = 0).
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 import scipy.sparse as sps
 
+from .. import disk_arrays
 from ..chunks import in_background
 from ..features.pixel_features import MAX_REGION_AREA, PIXELS_PER_REGION_SEED
 from ..features.superpixels import auto_region_area, relabel
-from ..unsupervised.region_diffusion import border_strength, border_weights, symmetric
+from ..unsupervised.region_diffusion import border_weights, symmetric
 from .pixel_classifier import PixelClassifier, PixelPrediction, most_probable
 from .refined_prediction import (
     grid_index,
@@ -70,6 +72,9 @@ EDGE_PAIR = np.minimum
 CONFIDENT = 0.8
 #: Smallest automatic superpixel area of the walk, pixels (a 240 × 320 scene: 25 px).
 MIN_REGION_AREA = 16
+#: Rows of the nodes every pixel's answer is looked up for at once
+#: (:func:`node_prediction`; bounds the int64 index).
+NODE_BAND_ROWS = 512
 
 
 @dataclass(frozen=True)
@@ -107,9 +112,59 @@ class RegionGraph:
     def adjacency(self, nodes: np.ndarray) -> sps.csr_matrix:
         """Symmetric (m, m) weights w_ab / :attr:`norm` between the ``nodes`` (module
         docstring)."""
-        rows, cols, length, strength = border_strength(nodes, self.edges, EDGE_PAIR)
+        rows, cols, length, strength = banded_border_strength(nodes, self.edges)
         w = border_weights(length, strength, self.scale) / self.norm
         return symmetric(rows, cols, w, int(nodes.max()) + 1)
+
+
+def pixel_pairs(
+    a: np.ndarray, b: np.ndarray, ea: np.ndarray, eb: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(smaller region, larger region, edge value :data:`EDGE_PAIR`) int64, int64,
+    float64 of the pixel pairs (``a``, ``b``) of two regions, edge values ``ea``,
+    ``eb``, that differ, in raster order."""
+    differ = a != b
+    a, b = a[differ].astype(np.int64), b[differ].astype(np.int64)
+    e = EDGE_PAIR(ea[differ], eb[differ]).astype(np.float64)
+    return np.minimum(a, b), np.maximum(a, b), e
+
+
+def border_pixel_pairs(
+    regions: np.ndarray, edges: np.ndarray
+) -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """:func:`pixel_pairs` of the 4-neighbour pixels of ``regions`` (H, W) across their
+    borders, :data:`NODE_BAND_ROWS` rows at a time: the pairs along the rows, then those
+    along the columns, each in raster order (the order of
+    :func:`~..unsupervised.region_diffusion.border_strength`)."""
+    h = regions.shape[0]
+    for top in range(0, h, NODE_BAND_ROWS):
+        r = slice(top, min(top + NODE_BAND_ROWS, h))
+        yield pixel_pairs(regions[r, :-1], regions[r, 1:], edges[r, :-1], edges[r, 1:])
+    for top in range(0, h - 1, NODE_BAND_ROWS):
+        r = slice(top, min(top + NODE_BAND_ROWS, h - 1))
+        s = slice(top + 1, r.stop + 1)
+        yield pixel_pairs(regions[r], regions[s], edges[r], edges[s])
+
+
+def banded_border_strength(
+    regions: np.ndarray, edges: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`~..unsupervised.region_diffusion.border_strength` of ``regions`` (H, W;
+    0 … n − 1) on the edge map ``edges`` with :data:`EDGE_PAIR`, the pixel pairs read
+    band by band (:func:`border_pixel_pairs`), twice: once for the borders, once for
+    their lengths and the sums of their pairs' edge values, added pair by pair in the
+    same order (the same values to the bit, without the image's full-size pair arrays)."""
+    n = int(regions.max()) + 1
+    found = [np.unique(lo * n + hi) for lo, hi, _ in border_pixel_pairs(regions, edges)]
+    keys = np.unique(np.concatenate(found)) if found else np.zeros(0, dtype=np.int64)
+    count = np.zeros(keys.size, dtype=np.int64)
+    total = np.zeros(keys.size)
+    for lo, hi, e in border_pixel_pairs(regions, edges):
+        at = np.searchsorted(keys, lo * n + hi)
+        count += np.bincount(at, minlength=keys.size)
+        np.add.at(total, at, e)
+    length = count.astype(np.float64)
+    return keys // n, keys % n, length, total / length
 
 
 def node_means(nodes: np.ndarray, planes: np.ndarray) -> np.ndarray:
@@ -166,7 +221,7 @@ def region_graph(regions: np.ndarray, edges: np.ndarray) -> RegionGraph:
     :func:`~napari_polarseg.engine.features.superpixels.superpixel_edges` of a
     polarisation image, summed with every colour's so a border seen in one colour only
     is an edge too), weights of τ = :data:`EDGE_TAU`."""
-    rows, cols, length, strength = border_strength(regions, edges, EDGE_PAIR)
+    rows, cols, length, strength = banded_border_strength(regions, edges)
     n = int(regions.max()) + 1
     if length.size == 0:
         return RegionGraph(regions, edges, 1.0, 1.0, sps.csr_matrix((n, n)))
@@ -243,15 +298,25 @@ def node_prediction(
     x: np.ndarray, nodes: np.ndarray, classes: np.ndarray, n_predicted: int
 ) -> PixelPrediction:
     """Every pixel's probabilities, label and uncertainty 1 − (x_(1) − x_(2)) from its
-    node's x (m, K)."""
+    node's x (m, K), looked up :data:`NODE_BAND_ROWS` rows of ``nodes`` (H, W) at a time
+    into arrays placed by :func:`~..disk_arrays.empty` (in temporary files when the
+    image's full-size arrays do not fit the run's limit)."""
     ordered = np.sort(x, axis=1)
     margin = ordered[:, -1] - (ordered[:, -2] if x.shape[1] > 1 else 0.0)
-    index = nodes.astype(np.intp, copy=False)  # converted once, not by every take
-    proba = np.empty((x.shape[1], *nodes.shape), dtype=np.float32)
-    for k in range(x.shape[1]):
-        np.take(x[:, k].astype(np.float32), index, out=proba[k])
-    labels = np.take(np.argmax(x, axis=1).astype(np.int32), index)
-    uncertainty = np.take((1.0 - margin).astype(np.float32), index)
+    planes = [x[:, k].astype(np.float32) for k in range(x.shape[1])]
+    best = np.argmax(x, axis=1).astype(np.int32)
+    sure = (1.0 - margin).astype(np.float32)
+    proba = disk_arrays.empty((x.shape[1], *nodes.shape), dtype=np.float32)
+    labels = disk_arrays.empty(nodes.shape, dtype=np.int32)
+    uncertainty = disk_arrays.empty(nodes.shape, dtype=np.float32)
+    for top in range(0, nodes.shape[0], NODE_BAND_ROWS):
+        band = slice(top, top + NODE_BAND_ROWS)
+        index = nodes[band].astype(np.intp, copy=False)  # converted once, not by every take
+        for k, plane in enumerate(planes):  # "clip": "raise" would buffer a copy
+            np.take(plane, index, out=proba[k, band], mode="clip")
+        np.take(best, index, out=labels[band], mode="clip")
+        np.take(sure, index, out=uncertainty[band], mode="clip")
+        disk_arrays.release(proba, labels, uncertainty)
     return PixelPrediction(labels, proba, uncertainty, classes, n_predicted)
 
 

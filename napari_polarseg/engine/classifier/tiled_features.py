@@ -9,8 +9,8 @@ features of a box are computed when a reader asks for them
 
 - every filter reads at most :func:`~..features.pixel_features.feature_reach` pixels
   (the largest σ × truncate of the filter chains, on its pyramid grid);
-- log Î is centred on the whole image's median (:func:`log_intensity_centre`), not the
-  box's;
+- log Î is centred on the whole image's median
+  (:func:`~..features.banded_edges.banded_log_centre`, band by band), not the box's;
 - the ``regions`` group averages the σ ≤ 4 features over each superpixel of the
   whole image's superpixels (drawn once over the image: the compact watershed floods
   from a grid of seeds over the whole edge map, which no tile reproduces). A
@@ -33,6 +33,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from ..features.banded_edges import band_counts, banded_log_centre
 from ..features.feature_stack import FeatureStack, RegionBlock
 from ..features.pixel_features import (
     REGION_MAX_SIGMA,
@@ -40,7 +41,6 @@ from ..features.pixel_features import (
     feature_names,
     feature_reach,
     largest_factor,
-    log_intensity_centre,
     pixel_features,
 )
 from ..tiles import Box, TileGrid, round_up
@@ -109,7 +109,7 @@ class TiledFeatures:
 
     def __post_init__(self) -> None:
         if not self.log_centres:
-            self.log_centres = [float(log_intensity_centre(im[0])) for im in self.images]
+            self.log_centres = [float(banded_log_centre(im[0])) for im in self.images]
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -161,7 +161,7 @@ class TiledFeatures:
                     f = pixel_features(i[o], d[o], p[o], small, log_centre=self.log_centres[k])
                     add = core_sums(f, tile.inner, core, n)
                     sums[k] = add if sums[k] is None else sums[k] + add
-            counts = np.maximum(np.bincount(self.regions.ravel(), minlength=n), 1)
+            counts = np.maximum(band_counts(self.regions, n), 1)
             self._region_values = [(v / counts).astype(np.float32) for v in sums]
         return self._region_values
 

@@ -29,6 +29,7 @@ from typing import Any
 
 import numpy as np
 
+from .. import disk_arrays
 from ..limits import KEPT_MAPS, memory_limit, scribble_bytes_per_pixel
 from ..tiles import Box, TileGrid
 from .pixel_classifier import (
@@ -126,12 +127,14 @@ def tiled_pixels(
     cancel: Any = None,
 ) -> PixelPrediction:
     """:func:`~.pixel_classifier.predict_pixels` tile by tile (no walk): every core's
-    probabilities (:func:`core_probabilities`), label and uncertainty stitched."""
+    probabilities (:func:`core_probabilities`), label and uncertainty stitched into
+    arrays placed by :func:`~..disk_arrays.empty` (in temporary files when the image's
+    full-size arrays do not fit the run's limit)."""
     k = classifier.classes.size
     h, w = features.shape
-    proba = np.empty((k, h, w), dtype=np.float32)
-    labels = np.empty((h, w), dtype=np.int32)
-    uncertainty = np.empty((h, w), dtype=np.float32)
+    proba = disk_arrays.empty((k, h, w), dtype=np.float32)
+    labels = disk_arrays.empty((h, w), dtype=np.int32)
+    uncertainty = disk_arrays.empty((h, w), dtype=np.float32)
     predicted = 0
     for tile in features.grid:
         p, n = core_probabilities(classifier, features, tile, stride, guide, cancel)
@@ -139,6 +142,7 @@ def tiled_pixels(
         labels[tile.core] = most_probable(p)
         uncertainty[tile.core] = margin_uncertainty(p)
         predicted += n
+        disk_arrays.release(proba, labels, uncertainty)
     return PixelPrediction(labels, proba, uncertainty, classifier.classes, predicted)
 
 
@@ -152,12 +156,13 @@ def tiled_walk(
 ) -> PixelPrediction:
     """:func:`~.region_walk.walked_prediction` with the prior made tile by tile (module
     docstring): the node counts and probability sums gathered over the cores, then the
-    walk over the nodes of the whole image."""
+    walk over the nodes of the whole image. The classifier's labels and the nodes
+    (H, W) are placed by :func:`~..disk_arrays.empty`."""
     k = classifier.classes.size
     keys = (int(graph.regions.max()) + 1) * k
     counts = np.zeros(keys)
     sums = np.zeros((keys, k))
-    labels = np.empty(features.shape, dtype=np.uint8 if k < 256 else np.int32)
+    labels = disk_arrays.empty(features.shape, dtype=np.uint8 if k < 256 else np.int32)
     predicted = 0
     for tile in features.grid:
         prior, n = core_probabilities(classifier, features, tile, stride, None, cancel)
@@ -170,10 +175,12 @@ def tiled_walk(
         predicted += n
     present = counts > 0
     node_of = (np.cumsum(present) - 1).astype(np.int32)
-    nodes = np.empty(features.shape, dtype=np.int32)
+    nodes = disk_arrays.empty(features.shape, dtype=np.int32)
     for start in range(0, nodes.shape[0], BAND_ROWS):
         band = slice(start, start + BAND_ROWS)
         nodes[band] = node_of[graph.regions[band].astype(np.int64) * k + labels[band]]
+        disk_arrays.release(nodes)
+    del labels
     means = sums[present] / counts[present][:, None]
     seeds = with_scribbles(confident_seeds(means), nodes, scribbles, classifier.classes)
     x = walk(graph.adjacency(nodes), means, seeds, classifier.params.region_walk)
