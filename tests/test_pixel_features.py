@@ -11,6 +11,7 @@ from napari_polarseg.engine.features.feature_stack import upsample
 from napari_polarseg.engine.features.pixel_features import (
     GROUPS,
     PixelFeatureParams,
+    block_mean,
     check_maps,
     gaussian_smooth,
     multichannel_features,
@@ -110,6 +111,22 @@ def test_coarse_grid_smoothing_matches_full_resolution(sigma):
     assert pyramid_factor(sigma) > 1
     inner = (slice(60, -60), slice(60, -60))
     assert np.abs(full - fast)[inner].max() < 0.005 * np.ptp(full)
+
+
+@pytest.mark.parametrize("f", [2, 3, 4, 8])
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_block_mean_is_the_mean_of_each_block_with_the_edge_repeated(f, dtype):
+    """The f × f block means equal numpy's mean over the blocks of the edge-padded image
+    to the bit (the strided sums add in its order), on a frame whose sides are not
+    multiples of f."""
+    rng = np.random.default_rng(f)
+    a = (rng.normal(size=(37, 50)) * 100).astype(dtype)
+    padded = np.pad(a, ((0, -37 % f), (0, -50 % f)), mode="edge")
+    h, w = padded.shape
+    want = padded.reshape(h // f, f, w // f, f).mean(axis=(1, 3), dtype=np.float32)
+    got = block_mean(a, f)
+    assert got.dtype == np.float32 and got.shape == (-(-37 // f), -(-50 // f))
+    assert np.array_equal(got, want)
 
 
 @pytest.mark.parametrize("f", [2, 4])

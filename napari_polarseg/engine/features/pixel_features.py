@@ -157,12 +157,32 @@ class PixelFeatureParams:
             raise PolarsegError(f"bad pixel feature parameters ({exc})") from None
 
 
-def _block_mean(a: np.ndarray, f: int) -> np.ndarray:
-    """Mean of f × f blocks; the edge blocks repeat their last row/column."""
+#: Largest block side :func:`block_mean` sums by strided slices (numpy sums fewer than
+#: 8 values one after the other, so up to there the slices add in its order).
+SLICED_BLOCK = 4
+
+
+def block_mean(a: np.ndarray, f: int) -> np.ndarray:
+    """Mean of f × f blocks (float32); the edge blocks repeat their last row/column.
+
+    Up to :data:`SLICED_BLOCK`, each block row's columns are added, then the rows, as
+    strided slices: the order of ``mean(axis=(1, 3))`` on the blocks, so the same values
+    to the bit, in a third of its time (numpy's reduction over two strided axes is slow).
+    """
     h, w = a.shape
     hh, ww = -(-h // f) * f, -(-w // f) * f
     padded = np.pad(a, ((0, hh - h), (0, ww - w)), mode="edge")
-    return padded.reshape(hh // f, f, ww // f, f).mean(axis=(1, 3), dtype=np.float32)
+    if f > SLICED_BLOCK:
+        return padded.reshape(hh // f, f, ww // f, f).mean(axis=(1, 3), dtype=np.float32)
+    padded = padded.astype(np.float32, copy=False)  # added in float32, as the mean does
+    total = None
+    for i in range(f):
+        rows = padded[i::f]
+        row = rows[:, 0::f].astype(np.float32)
+        for j in range(1, f):
+            row += rows[:, j::f]
+        total = row if total is None else total + row
+    return total / np.float32(f * f)
 
 
 def pyramid_factor(sigma: float) -> int:
@@ -188,7 +208,7 @@ def gaussian_smooth(a: np.ndarray, sigma: float) -> np.ndarray:
     """G_σ * a (float32), through a coarser grid for σ ≥ 8 (module docstring)."""
     f = pyramid_factor(sigma)
     a = np.asarray(a, dtype=np.float32)
-    small = a if f == 1 else _block_mean(a, f)
+    small = a if f == 1 else block_mean(a, f)
     out = ndimage.gaussian_filter(small, level_sigma(sigma, f), truncate=3.0)
     return upsample(out, f, a.shape)
 
@@ -404,7 +424,7 @@ def pixel_features(
         for f in sorted({pyramid_factor(s) for s in params.scales}):  # meanwhile: levels
             if f not in levels:  # coarsen from the finest level already built that divides f
                 base = max(q for q in levels if f % q == 0)
-                levels[f] = {q: _block_mean(v, f // base) for q, v in levels[base].items()}
+                levels[f] = {q: block_mean(v, f // base) for q, v in levels[base].items()}
         made.update({s: submit(s) for s in params.scales if s not in made})
         parts = []
         for n, sigma in enumerate(params.scales):
