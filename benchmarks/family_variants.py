@@ -177,7 +177,8 @@ def main(argv: list[str] | None = None) -> int:
         "--test-base",
         type=int,
         default=None,
-        help="read the test half of this round instead (a check of a test half read before)",
+        metavar="B",
+        help="read the test halves of round B instead (a check of a test half read before)",
     )
     args = ap.parse_args(argv)
     half = "dev" if args.test_base is None else "test"
