@@ -166,3 +166,22 @@ def test_cli_segment_dask(tmp_path: Path, scene, forced_tiles, capsys):
     assert "ran whole" not in err
     here, there = (tifffile.imread(tmp_path / d / "labels.tif") for d in ("here", "there"))
     assert np.array_equal(here, there)
+
+
+def test_cli_segment_dask_scribbles_say_where_their_tiles_ran(tmp_path: Path, capsys):
+    """With strokes, ``--dask`` does not claim the image ran whole for fitting the limit:
+    the scribbles method's tiles stay in this process, and the line says so."""
+    s = make_scene("leaves", shape=(120, 130), seed=1)
+    stack = tmp_path / "scene.npz"
+    np.savez(stack, stack=s.stack, angles=s.angles_deg)
+    strokes = np.zeros(s.labels.shape, dtype=np.uint8)
+    for c in range(int(s.labels.max()) + 1):
+        rows, cols = np.nonzero(s.labels == c)
+        strokes[rows[::40], cols[::40]] = c + 1
+    tifffile.imwrite(tmp_path / "strokes.tif", strokes)
+    flags = ["--dask", "local:1", "--memory-limit", "1GiB"]
+    args = ["segment", str(stack), "--scribbles", str(tmp_path / "strokes.tif"), *flags]
+    assert cli.main([*args, "--out", str(tmp_path / "out")]) == 0
+    err = capsys.readouterr().err
+    assert "the scribbles method's tiles ran in this process" in err
+    assert "fits the memory limit" not in err
