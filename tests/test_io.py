@@ -727,19 +727,27 @@ def test_a_text_file_named_png_is_refused_in_one_clean_line(tmp_path):
 @pytest.mark.parametrize("n", [3, 4])
 def test_planar_stack_from_tifffile_imwrite_is_an_angle_stack(tmp_path, n):
     """``tifffile.imwrite(path, stack)`` stores a (3|4, H, W) array as one planar RGB(A)
-    page (axes SYX): each sample is read as one angle's frame, in order."""
+    page (axes SYX; spelled out here, as tifffile's default is to become one page a
+    frame): each sample is read as one angle's frame, in order; so are the pages of the
+    coming default (axes QYX)."""
     rng = np.random.default_rng(n)
     stack = rng.integers(0, 4000, (n, 9, 11), dtype=np.uint16)
     angles = [0.0, 60.0, 120.0] if n == 3 else [0.0, 45.0, 90.0, 135.0]
+    planar = {"photometric": "rgb", "planarconfig": "separate"}
     path = tmp_path / "planar.tif"
-    tifffile.imwrite(path, stack, metadata={"angles": angles})
+    tifffile.imwrite(path, stack, metadata={"angles": angles}, **planar)
     with tifffile.TiffFile(path) as tif:  # the layout this test is about
         assert len(tif.pages) == 1 and tif.series[0].axes == "SYX"
     data = pio.read_stack(path)
     np.testing.assert_array_equal(data.stack, stack)
     assert data.angles_deg.tolist() == angles
+    pages = tmp_path / "pages.tif"
+    tifffile.imwrite(pages, stack, metadata={"angles": angles}, photometric="minisblack")
+    with tifffile.TiffFile(pages) as tif:
+        assert len(tif.pages) == n
+    np.testing.assert_array_equal(pio.read_stack(pages).stack, stack)
     bare = tmp_path / "bare.tif"
-    tifffile.imwrite(bare, stack)
+    tifffile.imwrite(bare, stack, **planar)
     with pytest.raises(PolarsegError, match="no polariser angles"):
         pio.read_stack(bare)
     np.testing.assert_array_equal(pio.read_stack(bare, angles_deg=angles).stack, stack)
