@@ -168,10 +168,14 @@ def test_cli_segment_dask(tmp_path: Path, scene, forced_tiles, capsys):
     assert np.array_equal(here, there)
 
 
-def test_cli_segment_dask_scribbles_say_where_their_tiles_ran(tmp_path: Path, capsys):
-    """With strokes, ``--dask`` does not claim the image ran whole for fitting the limit:
-    the scribbles method's tiles stay in this process, and the line says so."""
-    s = make_scene("leaves", shape=(120, 130), seed=1)
+def test_cli_segment_dask_scribbles(tmp_path: Path, capsys, monkeypatch):
+    """``polarseg segment --scribbles --dask`` runs the scribbles method's tiles on the
+    cluster (no line that the image ran whole) and writes the labels of the same tiles
+    in one process."""
+    from napari_polarseg.engine.classifier.pixel_segmentation import PixelSegmenter
+
+    monkeypatch.setattr(PixelSegmenter, "work_limit", lambda self: int(40e6))  # tiled
+    s = make_scene("leaves", shape=(360, 420), seed=1)
     stack = tmp_path / "scene.npz"
     np.savez(stack, stack=s.stack, angles=s.angles_deg)
     strokes = np.zeros(s.labels.shape, dtype=np.uint8)
@@ -179,9 +183,43 @@ def test_cli_segment_dask_scribbles_say_where_their_tiles_ran(tmp_path: Path, ca
         rows, cols = np.nonzero(s.labels == c)
         strokes[rows[::40], cols[::40]] = c + 1
     tifffile.imwrite(tmp_path / "strokes.tif", strokes)
-    flags = ["--dask", "local:1", "--memory-limit", "1GiB"]
-    args = ["segment", str(stack), "--scribbles", str(tmp_path / "strokes.tif"), *flags]
-    assert cli.main([*args, "--out", str(tmp_path / "out")]) == 0
+    args = ["segment", str(stack), "--scribbles", str(tmp_path / "strokes.tif"), "--quiet"]
+    assert cli.main([*args, "--out", str(tmp_path / "here")]) == 0
+    flags = ["--dask", "local:2", "--memory-limit", "1GiB"]
+    assert cli.main([*args[:-1], *flags, "--out", str(tmp_path / "there")]) == 0
     err = capsys.readouterr().err
-    assert "the scribbles method's tiles ran in this process" in err
-    assert "fits the memory limit" not in err
+    assert "tiles on local cluster (2 worker process(es)" in err
+    assert "ran whole" not in err
+    here, there = (tifffile.imread(tmp_path / d / "labels.tif") for d in ("here", "there"))
+    assert np.array_equal(here, there)
+
+
+@pytest.mark.parametrize("walk", [0.0, 0.03])
+def test_scribbles_tiles_on_cluster_equal_single_process(cluster, walk):
+    """The scribbles method's tiles (features, prediction coarse to fine, the walk's
+    sums) on the cluster give the labels, probabilities and uncertainty of the same
+    tiles in this process, to the bit, and every tile ran there."""
+    from napari_polarseg.engine import ScribbleSession
+    from napari_polarseg.engine.classifier.pixel_classifier import ClassifierParams
+    from napari_polarseg.engine.synthetic.scenes import scribble_strokes
+
+    angles = [0, 45, 90, 135]
+    s = make_scene("leaves", shape=(360, 420), angles_deg=angles)
+    strokes = scribble_strokes(s.labels, seed=0)
+
+    def run(tile_map):
+        session = ScribbleSession(
+            s.stack, angles, classifier_params=ClassifierParams(region_walk=walk)
+        )
+        session.segmenter.max_bytes = 40e6  # tiled: far below the whole-image estimate
+        with tiles_on(tile_map):
+            session.update(strokes)
+        return session.prediction
+
+    here = run(None)
+    tile_map = DaskTileMap(cluster.client)
+    there = run(tile_map)
+    assert tile_map.tasks > 1
+    np.testing.assert_array_equal(here.labels, there.labels)
+    np.testing.assert_array_equal(here.probabilities, there.probabilities)
+    np.testing.assert_array_equal(here.uncertainty, there.uncertainty)

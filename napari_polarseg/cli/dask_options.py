@@ -62,19 +62,9 @@ def dask_tiles(args: argparse.Namespace) -> Iterator[Any]:
             print(f"{PROG}: large images' tiles on {cluster.label}", file=sys.stderr, flush=True)
         yield cluster
         if not quiet and cluster.tile_map is not None and cluster.tile_map.tasks == 0:
-            print(f"{PROG}: {not_on_cluster(args)}", file=sys.stderr, flush=True)
-
-
-def not_on_cluster(args: argparse.Namespace) -> str:
-    """Why no tile of the run went to the cluster: the pixel classifier's tiles
-    (``--scribbles``, ``--classifier``) run in this process; else the image fit the
-    memory limit."""
-    if getattr(args, "scribbles", None) or getattr(args, "classifier", None):
-        return (
-            "the scribbles method's tiles ran in this process: only the unsupervised "
-            "methods' tiles run on the cluster"
-        )
-    return (
-        "the image fits the memory limit and ran whole in this process "
-        "(a lower --max-memory tiles it)"
-    )
+            print(
+                f"{PROG}: the image fits the memory limit and ran whole in this process "
+                "(a lower --max-memory tiles it)",
+                file=sys.stderr,
+                flush=True,
+            )

@@ -1,11 +1,12 @@
 """Where the tiles of a large image are worked on: in this process, or on a Dask cluster.
 
-The tiled loops (:mod:`.unsupervised.tiled_regions`, :mod:`.unsupervised.tiled_labels`)
-hand every tile's work to the current *tile map*: a callable ``(task, payloads)`` that
-calls ``task(*payload)`` for every payload and yields the results **in the order of the
-payloads**. A payload holds only its tile's arrays (the outer box, with its halo) and a
-few small values; a result holds only what the whole image's step needs of the tile
-(sums per region, border pairs, the core's labels). So:
+The tiled loops (:mod:`.unsupervised.tiled_regions`, :mod:`.unsupervised.tiled_labels`,
+:mod:`.classifier.tiled_prediction`) hand every tile's work to the current *tile map*:
+a callable ``(task, payloads)`` that calls ``task(*payload)`` for every payload and
+yields the results **in the order of the payloads**. A payload holds only its tile's
+arrays (the outer box, with its halo) and a few small values; a result holds only what
+the whole image's step needs of the tile (sums per region, border pairs, the core's
+labels or class probabilities). So:
 
 - :func:`in_process` (the default) runs the tasks one after the other here, as a plain
   loop would;

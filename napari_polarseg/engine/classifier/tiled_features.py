@@ -129,19 +129,17 @@ class TiledFeatures:
         """The features of the pixels of ``outer`` (a box starting on the grid's
         alignment); they equal the whole image's at least a halo inside its cut edges
         (the region means: everywhere)."""
-        own = without_regions(self.params)
+        return box_features(*self.box_inputs(outer))
+
+    def box_inputs(self, outer: Box) -> tuple:
+        """What :func:`box_features` reads for the box ``outer``: every channel's maps of
+        the box (views), the box's superpixels and the whole image's region means (None
+        without the ``regions`` group), the channels, parameters and log Î centres. A
+        tile task's payload: its arrays are all the box needs of the image."""
+        maps = [tuple(m[outer] for m in image) for image in self.images]
+        regions = self.regions[outer] if self.regions is not None else None
         means = self.region_values() if self.regions is not None else None
-        stacks = []
-        for n, (c, (i, d, p)) in enumerate(zip(self.channels, self.images, strict=True)):
-            f = pixel_features(
-                i[outer], d[outer], p[outer], own, channel=c, log_centre=self.log_centres[n]
-            )
-            if means is not None:
-                block = RegionBlock(means[n], self.regions[outer])
-                names = [f"{c}:{x}" if c else x for x in region_names(self.params)]
-                f = FeatureStack((*f.blocks, block), (*f.names, *names), self.params)
-            stacks.append(f)
-        return stacks[0] if len(stacks) == 1 else FeatureStack.joined(stacks)
+        return maps, regions, means, self.channels, self.params, self.log_centres
 
     def region_values(self) -> list[np.ndarray]:
         """Every channel's (F_r, n) float32 means of its σ ≤ 4 features over each
@@ -191,6 +189,29 @@ class TiledFeatures:
             local = (rr - outer[0].start) * width + (cc - outer[1].start)
             out[mine] = feats.take(local)
         return out
+
+
+def box_features(
+    maps: list[Maps],
+    regions: np.ndarray | None,
+    means: list[np.ndarray] | None,
+    channels: list[str],
+    params: PixelFeatureParams,
+    log_centres: list[float],
+) -> FeatureStack:
+    """The features of a box (:meth:`TiledFeatures.box`) from what it reads
+    (:meth:`TiledFeatures.box_inputs`): every channel's own features of its ``maps``,
+    then, with ``regions``, that channel's region ``means`` on the box's superpixels."""
+    own = without_regions(params)
+    stacks = []
+    for n, (c, (i, d, p)) in enumerate(zip(channels, maps, strict=True)):
+        f = pixel_features(i, d, p, own, channel=c, log_centre=log_centres[n])
+        if means is not None and regions is not None:
+            block = RegionBlock(means[n], regions)
+            names = [f"{c}:{x}" if c else x for x in region_names(params)]
+            f = FeatureStack((*f.blocks, block), (*f.names, *names), params)
+        stacks.append(f)
+    return stacks[0] if len(stacks) == 1 else FeatureStack.joined(stacks)
 
 
 def tiled_features(

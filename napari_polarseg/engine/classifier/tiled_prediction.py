@@ -10,7 +10,11 @@ Every tile's features are computed on its outer box
 (:class:`~.tiled_features.TiledFeatures`), the classifier predicts the core grown by a
 margin coarse to fine (:func:`~.refined_prediction.window_probabilities`: two grid cells,
 what the interpolation and the border test read, plus the guided filter's 2 r), and the
-core is kept. So the probabilities equal the whole image's to float rounding.
+core is kept. So the probabilities equal the whole image's to float rounding. Each tile
+is a task of the current tile map (:mod:`..tile_map`: this process, or a Dask cluster
+with ``polarseg segment --dask``): :func:`tile_prior` reads only its payload (the box's
+maps, superpixels and the superpixels' feature means, the forest), so the results are
+the same wherever it runs.
 
 The region walk (:mod:`.region_walk`) is global — one linear system over every node of
 the image — but it reads the pixels only through sums: for every superpixel and class
@@ -25,13 +29,16 @@ takes its node's answer: the same system as the whole image's.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 from typing import Any
 
 import numpy as np
 
 from .. import disk_arrays
+from ..errors import Cancelled
 from ..limits import KEPT_MAPS, memory_limit, scribble_bytes_per_pixel
-from ..tiles import Box, TileGrid
+from ..tile_map import current_tile_map, in_process
+from ..tiles import Box, Tile, TileGrid
 from .pixel_classifier import (
     PixelClassifier,
     PixelPrediction,
@@ -41,7 +48,7 @@ from .pixel_classifier import (
 )
 from .refined_prediction import window_probabilities
 from .region_walk import RegionGraph, confident_seeds, node_prediction, walk, with_scribbles
-from .tiled_features import TiledFeatures
+from .tiled_features import TiledFeatures, box_features
 
 #: Rows of the full-size node image renumbered at once (bounds the int64 keys).
 BAND_ROWS = 512
@@ -97,26 +104,69 @@ def _local(box: Box, outer: Box) -> Box:
     return slice(box[0].start - r0, box[0].stop - r0), slice(box[1].start - c0, box[1].stop - c0)
 
 
-def core_probabilities(
+def prior_payloads(
     classifier: PixelClassifier,
     features: TiledFeatures,
-    tile: Any,
     stride: int,
     guide: tuple[np.ndarray, tuple[float, float]] | None,
     cancel: Any = None,
-) -> tuple[np.ndarray, int]:
-    """p_k (K, h, w) of a tile's core and the pixels predicted on their own features:
-    its box's features, the window around the core coarse to fine, smoothed with the
-    ``guide`` (the whole image's guide and its (mean, std)) when given."""
+) -> Iterator[tuple]:
+    """Every tile's payload of :func:`tile_prior`, in the grid's order: the classifier's
+    model, what the tile's outer box reads (:meth:`~.tiled_features.TiledFeatures.box_inputs`),
+    the window (the core grown by :func:`prediction_margin`) within that box and the core
+    within the window, the stride and, with the ``guide`` (the whole image's guide and
+    its (mean, std)), the guide's window, its statistics and the smoothing radius.
+    ``cancel()`` is asked before every tile, and within a tile when the tiles run in
+    this process."""
     smoothing = classifier.params.smoothing if guide is not None else 0.0
-    window = tile.grown(prediction_margin(stride, smoothing), features.shape)
-    feats = features.box(tile.outer)
-    out = window_probabilities(classifier.model, feats, _local(window, tile.outer), stride, cancel)
+    inside = cancel if current_tile_map() is in_process else None
+    for tile in features.grid:
+        if cancel is not None and cancel():
+            raise Cancelled("prediction cancelled")
+        window = tile.grown(prediction_margin(stride, smoothing), features.shape)
+        smooth = None
+        if guide is not None and smoothing > 0:
+            smooth = (guide[0][window], guide[1], smoothing)
+        inputs = features.box_inputs(tile.outer)
+        local = _local(window, tile.outer)
+        yield classifier.model, inputs, local, _local(tile.core, window), stride, smooth, inside
+
+
+def tile_prior(
+    model: Any,
+    inputs: tuple,
+    window: Box,
+    core: Box,
+    stride: int,
+    smooth: tuple[np.ndarray, tuple[float, float], float] | None = None,
+    cancel: Any = None,
+) -> tuple[np.ndarray, int]:
+    """p_k (K, h, w) of a tile's core and the pixels predicted on their own features
+    (a task of the current tile map, :mod:`..tile_map`): the box's features
+    (:func:`~.tiled_features.box_features` of ``inputs``), the ``window`` (rows, columns
+    of the box) coarse to fine, smoothed by the guide's window when ``smooth`` =
+    (guide, (mean, std), radius) is given; the ``core`` of the window kept."""
+    out = window_probabilities(model, box_features(*inputs), window, stride, cancel)
     proba = out.probabilities
-    if guide is not None and smoothing > 0:
-        proba = smooth_probabilities(proba, guide[0][window], smoothing, guide[1])
-    core = _local(tile.core, window)
+    if smooth is not None:
+        proba = smooth_probabilities(proba, smooth[0], smooth[2], smooth[1])
     return np.ascontiguousarray(proba[:, core[0], core[1]]), out.n_predicted
+
+
+def tile_priors(
+    classifier: PixelClassifier,
+    features: TiledFeatures,
+    stride: int,
+    guide: tuple[np.ndarray, tuple[float, float]] | None,
+    cancel: Any = None,
+) -> Iterator[tuple[Tile, np.ndarray, int]]:
+    """(tile, its core's p_k, pixels predicted on their own features) of every tile in
+    the grid's order, the tiles on the current tile map (this process, or a Dask
+    cluster: ``polarseg segment --dask``)."""
+    payloads = prior_payloads(classifier, features, stride, guide, cancel)
+    results = current_tile_map()(tile_prior, payloads)
+    for tile, (proba, n) in zip(features.grid, results, strict=True):
+        yield tile, proba, n
 
 
 def tiled_pixels(
@@ -127,7 +177,7 @@ def tiled_pixels(
     cancel: Any = None,
 ) -> PixelPrediction:
     """:func:`~.pixel_classifier.predict_pixels` tile by tile (no walk): every core's
-    probabilities (:func:`core_probabilities`), label and uncertainty stitched into
+    probabilities (:func:`tile_priors`), label and uncertainty stitched into
     arrays placed by :func:`~..disk_arrays.empty` (in temporary files when the image's
     full-size arrays do not fit the run's limit)."""
     k = classifier.classes.size
@@ -136,8 +186,7 @@ def tiled_pixels(
     labels = disk_arrays.empty((h, w), dtype=np.int32)
     uncertainty = disk_arrays.empty((h, w), dtype=np.float32)
     predicted = 0
-    for tile in features.grid:
-        p, n = core_probabilities(classifier, features, tile, stride, guide, cancel)
+    for tile, p, n in tile_priors(classifier, features, stride, guide, cancel):
         proba[:, tile.core[0], tile.core[1]] = p
         labels[tile.core] = most_probable(p)
         uncertainty[tile.core] = margin_uncertainty(p)
@@ -164,8 +213,7 @@ def tiled_walk(
     sums = np.zeros((keys, k))
     labels = disk_arrays.empty(features.shape, dtype=np.uint8 if k < 256 else np.int32)
     predicted = 0
-    for tile in features.grid:
-        prior, n = core_probabilities(classifier, features, tile, stride, None, cancel)
+    for tile, prior, n in tile_priors(classifier, features, stride, None, cancel):
         lab = most_probable(prior)
         key = (graph.regions[tile.core].astype(np.int64) * k + lab).ravel()
         counts += np.bincount(key, minlength=keys)
