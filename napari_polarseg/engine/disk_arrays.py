@@ -47,6 +47,7 @@ from typing import Any
 import numpy as np
 
 from .errors import PolarsegError
+from .tiles import row_bands
 
 #: Bytes a pixel of the full-size arrays a run keeps beside its stack: the pipeline's
 #: kept maps (:data:`~.limits.KEPT_MAPS` = 6 float64; not imported: the limits module
@@ -198,8 +199,8 @@ def copy_of(array: np.ndarray, dtype: np.typing.DTypeLike | None = None) -> np.n
     if out.ndim < 2:
         out[...] = array
         return out
-    for top in range(0, out.shape[0], BAND_ROWS):
-        out[top : top + BAND_ROWS] = array[top : top + BAND_ROWS]
+    for band in row_bands(out.shape[0], BAND_ROWS):
+        out[band] = array[band]
         release(out)  # a band's pages at a time, faster than the background release
     return out
 

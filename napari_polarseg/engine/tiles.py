@@ -34,6 +34,14 @@ MIN_CORE = 128
 Box = tuple[slice, slice]
 
 
+def row_bands(height: int, rows: int) -> Iterator[slice]:
+    """The row ranges of the bands of ``rows`` rows (at least 1; the last one shorter) of
+    an image ``height`` rows high, top to bottom."""
+    step, height = max(int(rows), 1), int(height)
+    for top in range(0, height, step):
+        yield slice(top, min(top + step, height))
+
+
 @dataclass(frozen=True)
 class Tile:
     """One tile of a :class:`TileGrid`.

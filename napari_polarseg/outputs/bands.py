@@ -25,6 +25,7 @@ from .. import io as pio
 from ..engine import disk_arrays
 from ..engine.analysis.views import CompositeParams, auto_dolp_max, hsv_to_rgb
 from ..engine.physics.stokes import stokes_components
+from ..engine.tiles import row_bands as tile_bands
 from ..io.tiff_tiles import TILED_PIXELS
 
 #: Rows of a band: the images of a large result are computed this many rows at a time
@@ -42,10 +43,8 @@ def is_large(shape: tuple[int, ...]) -> bool:
 
 def row_bands(height: int, rows: int | None = None) -> Iterator[slice]:
     """The row ranges of the bands of ``rows`` rows (default :data:`BAND_ROWS`) of an
-    image ``height`` rows high, top to bottom."""
-    step = BAND_ROWS if rows is None else max(int(rows), 1)
-    for top in range(0, int(height), step):
-        yield slice(top, min(top + step, int(height)))
+    image ``height`` rows high, top to bottom (:func:`~napari_polarseg.engine.tiles.row_bands`)."""
+    return tile_bands(height, BAND_ROWS if rows is None else rows)
 
 
 def banded(

@@ -54,6 +54,7 @@ from .. import disk_arrays
 from ..chunks import in_background
 from ..features.pixel_features import MAX_REGION_AREA, PIXELS_PER_REGION_SEED
 from ..features.superpixels import auto_region_area, relabel
+from ..tiles import row_bands
 from ..unsupervised.region_diffusion import border_weights, symmetric
 from .pixel_classifier import PixelClassifier, PixelPrediction, most_probable
 from .refined_prediction import (
@@ -137,12 +138,10 @@ def border_pixel_pairs(
     along the columns, each in raster order (the order of
     :func:`~..unsupervised.region_diffusion.border_strength`)."""
     h = regions.shape[0]
-    for top in range(0, h, NODE_BAND_ROWS):
-        r = slice(top, min(top + NODE_BAND_ROWS, h))
+    for r in row_bands(h, NODE_BAND_ROWS):
         yield pixel_pairs(regions[r, :-1], regions[r, 1:], edges[r, :-1], edges[r, 1:])
-    for top in range(0, h - 1, NODE_BAND_ROWS):
-        r = slice(top, min(top + NODE_BAND_ROWS, h - 1))
-        s = slice(top + 1, r.stop + 1)
+    for r in row_bands(h - 1, NODE_BAND_ROWS):
+        s = slice(r.start + 1, r.stop + 1)
         yield pixel_pairs(regions[r], regions[s], edges[r], edges[s])
 
 
@@ -309,8 +308,7 @@ def node_prediction(
     proba = disk_arrays.empty((x.shape[1], *nodes.shape), dtype=np.float32)
     labels = disk_arrays.empty(nodes.shape, dtype=np.int32)
     uncertainty = disk_arrays.empty(nodes.shape, dtype=np.float32)
-    for top in range(0, nodes.shape[0], NODE_BAND_ROWS):
-        band = slice(top, top + NODE_BAND_ROWS)
+    for band in row_bands(nodes.shape[0], NODE_BAND_ROWS):
         index = nodes[band].astype(np.intp, copy=False)  # converted once, not by every take
         for k, plane in enumerate(planes):  # "clip": "raise" would buffer a copy
             np.take(plane, index, out=proba[k, band], mode="clip")

@@ -38,7 +38,7 @@ from .. import disk_arrays
 from ..errors import Cancelled
 from ..limits import KEPT_MAPS, memory_limit, scribble_bytes_per_pixel
 from ..tile_map import current_tile_map, in_process
-from ..tiles import Box, Tile, TileGrid
+from ..tiles import Box, Tile, TileGrid, row_bands
 from .pixel_classifier import (
     PixelClassifier,
     PixelPrediction,
@@ -224,8 +224,7 @@ def tiled_walk(
     present = counts > 0
     node_of = (np.cumsum(present) - 1).astype(np.int32)
     nodes = disk_arrays.empty(features.shape, dtype=np.int32)
-    for start in range(0, nodes.shape[0], BAND_ROWS):
-        band = slice(start, start + BAND_ROWS)
+    for band in row_bands(nodes.shape[0], BAND_ROWS):
         nodes[band] = node_of[graph.regions[band].astype(np.int64) * k + labels[band]]
         disk_arrays.release(nodes)
     del labels

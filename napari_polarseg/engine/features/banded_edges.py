@@ -27,7 +27,7 @@ import numpy as np
 from skimage.segmentation import watershed
 from skimage.util import regular_seeds
 
-from .. import disk_arrays
+from .. import disk_arrays, tiles
 from .pixel_features import EPS_INTENSITY
 from .superpixels import COMPACTNESS, EDGE_SIGMA, edge_gradients
 
@@ -54,10 +54,8 @@ def band_rows(width: int) -> int:
 def row_bands(shape: tuple[int, ...], rows: int | None = None) -> Iterator[slice]:
     """Slices of ``rows`` rows (default :func:`band_rows` of the width ``shape[1]``; the
     last one shorter) covering the ``shape[0]`` rows of an image of ``shape``."""
-    height = int(shape[0])
-    step = band_rows(shape[1] if len(shape) > 1 else 1) if rows is None else int(rows)
-    for top in range(0, height, step):
-        yield slice(top, min(top + step, height))
+    step = band_rows(shape[1] if len(shape) > 1 else 1) if rows is None else rows
+    return tiles.row_bands(shape[0], step)
 
 
 def ordered_keys(values: np.ndarray) -> np.ndarray:
