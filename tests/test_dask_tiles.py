@@ -21,7 +21,7 @@ from napari_polarseg.engine import PRESETS, PolarsegError, Scene
 from napari_polarseg.engine.limits import KEPT_MAPS
 from napari_polarseg.engine.methods.surface_superpixels import SurfaceSuperpixels
 from napari_polarseg.engine.synthetic.scenes import make_scene
-from napari_polarseg.engine.tile_map import DaskTileMap, current_tile_map, in_process, tiles_on
+from napari_polarseg.engine.tile_map import DEFAULT_MAP, DaskTileMap, current_tile_map, tiles_on
 from napari_polarseg.engine.tiles import TileGrid
 from napari_polarseg.engine.unsupervised.merge import merged_clustering, weakest_border
 from napari_polarseg.engine.unsupervised.tiled_regions import (
@@ -88,7 +88,7 @@ def test_cluster_labels_equal_single_process(cluster, pol, valid):
         there, model_there = _tiled_labels(pol, valid)
     # every tile of the three passes (histograms, superpixels, labels) ran on the cluster
     assert tile_map.tasks == 3 * 9
-    assert current_tile_map() is in_process
+    assert current_tile_map() is DEFAULT_MAP
     assert np.array_equal(model_here.regions, model_there.regions)
     assert np.array_equal(model_here.z, model_there.z)
     assert len(np.unique(here)) == 3

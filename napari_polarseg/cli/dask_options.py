@@ -22,7 +22,8 @@ def add_dask_options(parser: argparse.ArgumentParser) -> None:
         "Dask cluster: 'local' (a new local cluster of single-threaded worker processes), "
         "'local:N' (of N workers) or the address of a running dask.distributed scheduler "
         "(tcp://host:8786; its workers need napari-polarseg installed). An image that fits "
-        "the limit runs whole in this process [no Dask: the tiles one after the other here]",
+        "the limit runs whole in this process [no Dask: the tiles on this process's "
+        "threads, one a core]",
     )
     group.add_argument(
         "--workers",

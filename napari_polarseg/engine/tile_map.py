@@ -8,8 +8,12 @@ arrays (the outer box, with its halo) and a few small values; a result holds onl
 the whole image's step needs of the tile (sums per region, border pairs, the core's
 labels or class probabilities). So:
 
-- :func:`in_process` (the default) runs the tasks one after the other here, as a plain
-  loop would;
+- :func:`in_process` runs the tasks one after the other here, as a plain loop would;
+- :class:`ThreadTileMap` (the default on a machine of more than one core,
+  :data:`~.chunks.N_THREADS`) runs them here on that many threads, at most one tile a
+  thread in flight: the filters, the forest and numpy release the GIL, so the tiles'
+  work runs on every core; the tile choices give each tile in flight its share of the
+  memory limit (:func:`tiles_in_flight`);
 - :class:`DaskTileMap` runs them on a ``dask.distributed`` cluster through its client:
   each payload's arrays are scattered to one worker and the task submitted there, with
   at most ``window`` tiles in flight (the client holds no more payloads than that and a
@@ -26,15 +30,18 @@ its ``scatter``, ``submit`` and ``scheduler_info`` methods only.
 from __future__ import annotations
 
 import contextlib
+import contextvars
 import itertools
 import threading
 import uuid
 from collections import deque
 from collections.abc import Callable, Generator, Iterable, Iterator
+from concurrent.futures import Future, ThreadPoolExecutor
 from typing import Any, Protocol, TypeVar
 
 import numpy as np
 
+from .chunks import N_THREADS
 from .errors import PolarsegError
 
 R = TypeVar("R")
@@ -56,6 +63,47 @@ def in_process(task: Callable[..., R], payloads: Iterable[tuple]) -> Iterator[R]
     at a time is made)."""
     for payload in payloads:
         yield task(*payload)
+
+
+class ThreadTileMap:
+    """A tile map of this process on ``threads`` threads (module docstring): at most
+    ``threads`` tiles in flight, each task run in a copy of the caller's context (so it
+    sees the run's memory limit), the results yielded in the order of the payloads, so
+    every sum is added in the same order as by :func:`in_process` and the results are
+    the same to the bit."""
+
+    def __init__(self, threads: int) -> None:
+        self.threads = max(1, int(threads))
+
+    @property
+    def tiles_in_flight(self) -> int:
+        """Tiles worked on at once: one a thread."""
+        return self.threads
+
+    def __call__(self, task: Callable[..., R], payloads: Iterable[tuple]) -> Iterator[R]:
+        return self._results(task, iter(payloads))
+
+    def _results(
+        self, task: Callable[..., R], payloads: Iterator[tuple]
+    ) -> Generator[R, None, None]:
+        flight: deque[Future[R]] = deque()
+        with ThreadPoolExecutor(self.threads, thread_name_prefix="polarseg-tile") as pool:
+
+            def submit(payload: tuple) -> None:
+                context = contextvars.copy_context()
+                flight.append(pool.submit(context.run, task, *payload))
+
+            try:
+                for payload in itertools.islice(payloads, self.threads):
+                    submit(payload)
+                while flight:
+                    result = flight.popleft().result()
+                    for payload in itertools.islice(payloads, 1):
+                        submit(payload)
+                    yield result
+            finally:  # stopped or failed: drop the tiles not started yet
+                for future in flight:
+                    future.cancel()
 
 
 class DaskTileMap:
@@ -157,9 +205,27 @@ _lock = threading.Lock()
 _current: list[TileMap | None] = [None]
 
 
+#: The tile map of a run that sets none: :data:`~.chunks.N_THREADS` threads of this
+#: process (:func:`in_process` on one core).
+DEFAULT_MAP: TileMap = ThreadTileMap(N_THREADS) if N_THREADS > 1 else in_process
+
+
 def current_tile_map() -> TileMap:
-    """The tile map set by :func:`tiles_on`, else :func:`in_process`."""
-    return _current[0] or in_process
+    """The tile map set by :func:`tiles_on`, else :data:`DEFAULT_MAP`."""
+    return _current[0] or DEFAULT_MAP
+
+
+def in_this_process(tile_map: TileMap) -> bool:
+    """Whether ``tile_map`` runs its tasks in this process (a stop callback may be
+    handed to them)."""
+    return tile_map is in_process or isinstance(tile_map, ThreadTileMap)
+
+
+def tiles_in_flight() -> int:
+    """Tiles the current map works on at once in this process, each holding its share
+    of the process's memory limit (1 on a Dask cluster: there the workers' limit
+    bounds a tile, :func:`worker_bytes`)."""
+    return int(getattr(current_tile_map(), "tiles_in_flight", 1))
 
 
 def worker_bytes() -> float | None:

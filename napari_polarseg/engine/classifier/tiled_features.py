@@ -43,6 +43,7 @@ from ..features.pixel_features import (
     largest_factor,
     pixel_features,
 )
+from ..tile_map import current_tile_map
 from ..tiles import Box, TileGrid, round_up
 
 Maps = tuple[np.ndarray, np.ndarray, np.ndarray]
@@ -69,6 +70,29 @@ def core_sums(features: FeatureStack, inner: Box, regions: np.ndarray, n: int) -
     0 … n − 1)."""
     planes = (features.plane(j)[inner].ravel() for j in range(features.n_features))
     return np.stack([np.bincount(regions, p, n) for p in planes])
+
+
+def region_sums(
+    maps: list[Maps],
+    inner: Box,
+    core: np.ndarray,
+    params: PixelFeatureParams,
+    log_centres: list[float],
+) -> tuple[np.ndarray, list[np.ndarray]]:
+    """A tile's share of :meth:`TiledFeatures.region_values` (a task of the current tile
+    map, :mod:`..tile_map`): the superpixels of its ``core`` (their ids, ascending) and
+    every channel's (F_r, m) float64 sums of its features of ``params`` over each of
+    them, the features computed on the channel's ``maps`` of the tile's outer box
+    (``inner``: the core within it)."""
+    flat = core.ravel()
+    present = np.bincount(flat) > 0
+    ids = np.flatnonzero(present)
+    local = (np.cumsum(present) - 1)[flat]
+    sums = []
+    for (i, d, p), centre in zip(maps, log_centres, strict=True):
+        f = pixel_features(i, d, p, params, log_centre=centre)
+        sums.append(core_sums(f, inner, local, ids.size))
+    return ids, sums
 
 
 def region_names(params: PixelFeatureParams) -> tuple[str, ...]:
@@ -143,22 +167,30 @@ class TiledFeatures:
 
     def region_values(self) -> list[np.ndarray]:
         """Every channel's (F_r, n) float32 means of its σ ≤ 4 features over each
-        superpixel, gathered over the tiles' cores (sums per superpixel, then divided
-        by its pixels); made once."""
+        superpixel, gathered over the tiles' cores on the current tile map
+        (:func:`region_sums`, added in the grid's order, then divided by each
+        superpixel's pixels); made once."""
         if self._region_values is None:
             assert self.regions is not None
             small = without_regions(self.params, REGION_MAX_SIGMA)
             halo = round_up(feature_reach(small), self.grid.align)
             grid = TileGrid(self.shape, self.grid.core, halo, self.grid.align)
             n = int(self.regions.max()) + 1
-            sums: list[np.ndarray | None] = [None] * len(self.images)
-            for tile in grid:
-                core = self.regions[tile.core].ravel()
-                for k, (i, d, p) in enumerate(self.images):
-                    o = tile.outer
-                    f = pixel_features(i[o], d[o], p[o], small, log_centre=self.log_centres[k])
-                    add = core_sums(f, tile.inner, core, n)
-                    sums[k] = add if sums[k] is None else sums[k] + add
+            sums: list[np.ndarray] = []
+            payloads = (
+                (
+                    [tuple(m[tile.outer] for m in image) for image in self.images],
+                    tile.inner,
+                    self.regions[tile.core],
+                    small,
+                    self.log_centres,
+                )
+                for tile in grid
+            )
+            for ids, adds in current_tile_map()(region_sums, payloads):
+                sums = sums or [np.zeros((a.shape[0], n)) for a in adds]
+                for total, add in zip(sums, adds, strict=True):
+                    total[:, ids] += add
             counts = np.maximum(band_counts(self.regions, n), 1)
             self._region_values = [(v / counts).astype(np.float32) for v in sums]
         return self._region_values
@@ -174,21 +206,33 @@ class TiledFeatures:
 
     def take(self, index: np.ndarray) -> np.ndarray:
         """(n, F) float32 rows of the pixels at flat ``index``: for every tile's share of
-        them, the features of the box around those pixels only."""
+        them, the features of the box around those pixels only (:func:`box_rows`, on
+        the current tile map)."""
         index = np.asarray(index, dtype=np.int64).ravel()
         out = np.empty((index.size, self.n_features), dtype=np.float32)
         r, c = np.divmod(index, self.shape[1])
         tile = (r // self.grid.core) * self.grid.counts[1] + c // self.grid.core
-        for t in np.unique(tile):
-            mine = np.flatnonzero(tile == t)
-            rr, cc = r[mine], c[mine]
-            rows, cols = (int(rr.min()), int(rr.max()) + 1), (int(cc.min()), int(cc.max()) + 1)
-            outer = self.around(rows, cols)
-            feats = self.box(outer)
-            width = outer[1].stop - outer[1].start
-            local = (rr - outer[0].start) * width + (cc - outer[1].start)
-            out[mine] = feats.take(local)
+        shares = [np.flatnonzero(tile == t) for t in np.unique(tile)]
+
+        def payloads():
+            for mine in shares:
+                rr, cc = r[mine], c[mine]
+                rows, cols = (int(rr.min()), int(rr.max()) + 1), (int(cc.min()), int(cc.max()) + 1)
+                outer = self.around(rows, cols)
+                width = outer[1].stop - outer[1].start
+                local = (rr - outer[0].start) * width + (cc - outer[1].start)
+                yield self.box_inputs(outer), local
+
+        for mine, rows in zip(shares, current_tile_map()(box_rows, payloads()), strict=True):
+            out[mine] = rows
         return out
+
+
+def box_rows(inputs: tuple, local: np.ndarray) -> np.ndarray:
+    """(n, F) float32 rows of the pixels at the flat indices ``local`` of a box (a task
+    of the current tile map): :func:`box_features` of ``inputs``
+    (:meth:`TiledFeatures.box_inputs`), those rows taken."""
+    return box_features(*inputs).take(local)
 
 
 def box_features(

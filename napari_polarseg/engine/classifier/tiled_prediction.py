@@ -37,7 +37,7 @@ import numpy as np
 from .. import disk_arrays
 from ..errors import Cancelled
 from ..limits import KEPT_MAPS, memory_limit, scribble_bytes_per_pixel
-from ..tile_map import current_tile_map, in_process
+from ..tile_map import current_tile_map, in_this_process, tiles_in_flight
 from ..tiles import Box, Tile, TileGrid, row_bands
 from .pixel_classifier import (
     PixelClassifier,
@@ -82,8 +82,9 @@ def scribble_tiles(
     :func:`~..limits.scribble_bytes_per_pixel` plus the pipeline's
     :data:`~..limits.KEPT_MAPS` float64 maps. Tiled: the limit less the full-size
     arrays is the budget of one outer box of (c + 2h)² pixels at the work's bytes a
-    pixel (:meth:`TileGrid.for_budget`; at least its smallest core). When the full-size
-    arrays alone exceed the limit, cores of :data:`UNBOUNDED_CORE_HALOS` halos.
+    pixel (:meth:`TileGrid.for_budget`; at least its smallest core), shared by the tiles
+    worked on at once (:func:`~..tile_map.tiles_in_flight`). When the full-size arrays
+    alone exceed the limit, cores of :data:`UNBOUNDED_CORE_HALOS` halos.
     """
     cap = memory_limit(limit)
     pixels = int(shape[0]) * int(shape[1])
@@ -91,7 +92,7 @@ def scribble_tiles(
     if pixels * (work + fixed + 8 * KEPT_MAPS) <= cap:
         return None
     _, fixed = scribble_bytes_per_pixel(feature_params, channels, n_classes, tiled=True)
-    budget = cap - pixels * (fixed + 8 * KEPT_MAPS)
+    budget = (cap - pixels * (fixed + 8 * KEPT_MAPS)) / tiles_in_flight()
     if budget <= 0:  # the full-size arrays alone exceed the limit: no tile can meet it,
         # and cores under a few halos would only multiply the halos' work
         budget = (UNBOUNDED_CORE_HALOS + 2) ** 2 * halo * halo * work
@@ -119,7 +120,7 @@ def prior_payloads(
     ``cancel()`` is asked before every tile, and within a tile when the tiles run in
     this process."""
     smoothing = classifier.params.smoothing if guide is not None else 0.0
-    inside = cancel if current_tile_map() is in_process else None
+    inside = cancel if in_this_process(current_tile_map()) else None
     for tile in features.grid:
         if cancel is not None and cancel():
             raise Cancelled("prediction cancelled")

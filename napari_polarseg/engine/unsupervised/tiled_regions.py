@@ -35,7 +35,7 @@ border refinement (:mod:`.tiled_labels`).
 
 Every tile's work (:mod:`.tiled_region_tasks`) reads only its outer box and returns only
 its sums, border pairs and core; it runs on the current tile map
-(:func:`~..tile_map.current_tile_map`): one tile after the other here, or on a Dask
+(:func:`~..tile_map.current_tile_map`): on this process's threads, or on a Dask
 cluster (``polarseg segment --dask``), the results added in the tiles' order either way
 (the same labels to the bit).
 
@@ -57,7 +57,7 @@ import scipy.sparse as sps
 from .. import disk_arrays
 from ..features.pixel_features import EPS_INTENSITY
 from ..limits import KEPT_MAPS, memory_limit
-from ..tile_map import current_tile_map, worker_bytes
+from ..tile_map import current_tile_map, tiles_in_flight, worker_bytes
 from ..tiles import MIN_CORE, Tile, TileGrid
 from .params import UnsupervisedParams
 from .pixel_maps import edge_weight
@@ -113,7 +113,8 @@ def region_tiles(
     when the whole image fits the memory ``limit`` (default
     :func:`~..limits.memory_limit`): H·W × (:data:`WHOLE_BYTES_PER_PIXEL` + 8 ×
     :data:`~..limits.KEPT_MAPS`) bytes. Tiled, the limit less the full-size arrays is
-    the budget of one outer box at :data:`TILE_BYTES_PER_PIXEL` (core side at most
+    the budget of the outer boxes worked on at once (:func:`~..tile_map.tiles_in_flight`)
+    at :data:`TILE_BYTES_PER_PIXEL` each (core side at most
     :data:`MAX_CORE`, and at least :data:`MIN_CORE_HALOS` halos where that box fits the
     budget or where no tile can: the limit first, then the speed; with the tiles on a Dask
     cluster, :func:`~..tile_map.tiles_on`, the outer box at most the workers' share,
@@ -126,7 +127,7 @@ def region_tiles(
         return None
     if params.pixel_scales or params.boundary != "polarisation":
         return None
-    budget = cap - kept - pixels * TILED_FIXED_BYTES
+    budget = (cap - kept - pixels * TILED_FIXED_BYTES) / tiles_in_flight()
     grid = TileGrid.for_budget(shape, budget, TILE_BYTES_PER_PIXEL, tile_halo(shape, params))
     # the speed floor where its box fits the budget, or where nothing can (the
     # full-size arrays alone exceed the limit: smaller tiles would only cost time)

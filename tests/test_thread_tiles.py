@@ -1,0 +1,116 @@
+"""The tile map of this process on threads (engine/tile_map.ThreadTileMap): results in
+the payloads' order, at most one tile a thread in flight, the caller's context in every
+task, a task's error raised to the caller, and tiles that share the memory limit."""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from napari_polarseg.engine import disk_arrays
+from napari_polarseg.engine.classifier.tiled_prediction import scribble_tiles
+from napari_polarseg.engine.features.pixel_features import PixelFeatureParams
+from napari_polarseg.engine.methods.surface_superpixels import SurfaceSuperpixels
+from napari_polarseg.engine.tile_map import (
+    ThreadTileMap,
+    in_process,
+    in_this_process,
+    tiles_in_flight,
+    tiles_on,
+)
+from napari_polarseg.engine.unsupervised.tiled_regions import region_tiles
+
+
+def _slow_square(i: int, delay: float) -> tuple[int, int, str]:
+    time.sleep(delay)
+    return i, i * i, threading.current_thread().name
+
+
+def test_results_in_order_from_several_threads():
+    tile_map = ThreadTileMap(2)
+    # the first tile is the slowest: its result still comes first
+    payloads = [(i, 0.05 if i == 0 else 0.001) for i in range(8)]
+    results = list(tile_map(_slow_square, payloads))
+    assert [r[:2] for r in results] == [(i, i * i) for i in range(8)]
+    assert {r[2] for r in results} <= {f"polarseg-tile_{j}" for j in range(2)}
+    assert len({r[2] for r in results}) == 2  # both threads worked
+
+
+def test_at_most_one_tile_a_thread_in_flight():
+    made: list[int] = []
+
+    def payloads():
+        for i in range(6):
+            made.append(i)
+            yield i, 0.0
+
+    results = ThreadTileMap(3)(_slow_square, payloads())
+    first = next(results)
+    assert first[:2] == (0, 0)
+    assert made == [0, 1, 2, 3]  # three in flight, then one more as the first is taken
+    assert [r[0] for r in results] == [1, 2, 3, 4, 5]
+
+
+def _limit_in_task() -> bool:
+    return disk_arrays.pixels_on_disk(10**6)
+
+
+def test_tasks_see_the_callers_memory_limit():
+    with disk_arrays.full_size_limit(1):  # every full-size array on disk
+        seen = list(ThreadTileMap(2)(_limit_in_task, [()] * 4))
+    assert seen == [True] * 4
+    assert list(ThreadTileMap(2)(_limit_in_task, [()] * 2)) == [False, False]
+
+
+def _fails(i: int) -> int:
+    if i == 2:
+        raise ValueError("tile 2")
+    return i
+
+
+def test_a_tasks_error_reaches_the_caller():
+    got: list[int] = []
+    with pytest.raises(ValueError, match="tile 2"):
+        for value in ThreadTileMap(2)(_fails, [(i,) for i in range(6)]):
+            got.append(value)
+    assert got == [0, 1]
+
+
+def test_tiles_share_the_limit():
+    """Two tiles at once on threads: each outer box gets about half the budget of one
+    tile alone (the same limit), so the run's peak stays within it."""
+    shape, limit = (8000, 8000), 5 * 2**30  # cores between the speed floor and MAX_CORE
+    params = SurfaceSuperpixels().params
+    with tiles_on(in_process):
+        alone = region_tiles(shape, params, limit)
+        assert tiles_in_flight() == 1 and in_this_process(in_process)
+    with tiles_on(ThreadTileMap(2)):
+        shared = region_tiles(shape, params, limit)
+        assert tiles_in_flight() == 2
+    assert alone is not None and shared is not None
+    box = (alone.core + 2 * alone.halo) ** 2
+    shared_box = (shared.core + 2 * shared.halo) ** 2
+    assert shared.core < alone.core and shared_box <= 0.55 * box
+
+    feature_params, limit, shape = PixelFeatureParams(), 8 * 2**30, (6000, 8000)
+    with tiles_on(in_process):
+        one = scribble_tiles(shape, feature_params, 136, 8, limit=limit)
+    with tiles_on(ThreadTileMap(2)):
+        two = scribble_tiles(shape, feature_params, 136, 8, limit=limit)
+    assert one is not None and two is not None and two.core < one.core
+
+
+def test_threads_give_the_same_sums_as_one_after_the_other():
+    rng = np.random.default_rng(0)
+    arrays = [rng.random((300, 300)) for _ in range(7)]
+    payloads = [(a, i) for i, a in enumerate(arrays)]
+
+    def total(a: np.ndarray, i: int) -> float:
+        return float((a * (i + 1)).sum())
+
+    here = list(in_process(total, payloads))
+    threads = list(ThreadTileMap(2)(total, payloads))
+    assert here == threads
