@@ -28,6 +28,7 @@ from skimage.segmentation import watershed
 from skimage.util import regular_seeds
 
 from .. import disk_arrays, tiles
+from ..chunks import chunk_bounds, run_chunks
 from .pixel_features import EPS_INTENSITY
 from .superpixels import COMPACTNESS, EDGE_SIGMA, edge_gradients
 
@@ -160,18 +161,25 @@ def banded_gradients(
 ) -> tuple[np.ndarray, np.ndarray | None]:
     """:func:`~.superpixels.edge_gradients` (H, W) float64 each, placed by
     :func:`~..disk_arrays.empty`, computed a band of rows at a time (:func:`row_bands`) on the band
-    grown by :data:`EDGE_REACH` rows: the same values to the bit."""
+    grown by :data:`EDGE_REACH` rows: the same values to the bit. The bands are
+    independent: they run on the CPU cores (:func:`~..chunks.run_chunks`; SciPy's
+    filters release the GIL), each writing its own rows."""
     h, w = intensity.shape
     grad = disk_arrays.empty((h, w))
     pol = disk_arrays.empty((h, w)) if polarisation else None
-    for band in row_bands((h, w)):
-        top, stop = max(band.start - EDGE_REACH, 0), min(band.stop + EDGE_REACH, h)
-        rows = slice(band.start - top, band.stop - top)
-        g, p = edge_gradients(intensity[top:stop], dop[top:stop], phase[top:stop], polarisation)
-        grad[band] = g[rows]
-        if pol is not None and p is not None:
-            pol[band] = p[rows]
-        disk_arrays.release(grad, pol)
+    bands = list(row_bands((h, w)))
+
+    def work(first: int, stop: int) -> None:
+        for band in bands[first:stop]:
+            top, end = max(band.start - EDGE_REACH, 0), min(band.stop + EDGE_REACH, h)
+            rows = slice(band.start - top, band.stop - top)
+            g, p = edge_gradients(intensity[top:end], dop[top:end], phase[top:end], polarisation)
+            grad[band] = g[rows]
+            if pol is not None and p is not None:
+                pol[band] = p[rows]
+            disk_arrays.release(grad, pol)
+
+    run_chunks(chunk_bounds(len(bands), 1), work, h * w)
     return grad, pol
 
 
