@@ -138,3 +138,31 @@ def test_the_normals_stage_in_chunks_equals_the_whole_image_functions(model):
     assert nrm.azimuth.tobytes() == azimuth.tobytes()
     if model == "diffuse":  # φ itself, read-only: no copy
         assert np.shares_memory(nrm.azimuth, pol.phase) and not nrm.azimuth.flags.writeable
+
+
+def test_the_mask_counts_band_by_band_equal_the_whole_masks(monkeypatch):
+    """``PixelMask.counts`` counts a band at a time; the counts equal those of the whole
+    (H, W) masks, with and without a region, whatever the band height."""
+    from napari_polarseg.engine.physics import pixel_mask
+
+    rng = np.random.default_rng(3)
+    flags = (rng.random((4, 61, 47)) < 0.05).astype(np.uint8) * rng.choice(
+        [1, 2, 4, 3], (4, 61, 47)
+    )
+    region = rng.random((61, 47)) < 0.7
+    for reg in (None, region):
+        mask = PixelMask(flags.astype(np.uint8), region=reg)
+        valid = np.all(flags == 0, axis=0) & (True if reg is None else reg)
+        whole = {
+            "valid_pixels": int(valid.sum()),
+            "masked_pixels": int(valid.size - valid.sum()),
+            "saturated_pixels": int(np.any(flags & 1, axis=0).sum()),
+            "dark_pixels": int(np.any(flags & 2, axis=0).sum()),
+            "nonfinite_pixels": int(np.any(flags & 4, axis=0).sum()),
+            "outside_region_pixels": 0 if reg is None else int((~reg).sum()),
+        }
+        for band_pixels in (1, 47 * 5, 1 << 20):
+            monkeypatch.setattr(pixel_mask, "COUNT_ROWS_PIXELS", band_pixels)
+            got = mask.counts()
+            assert {k: got[k] for k in whole} == whole
+        assert whole["saturated_pixels"] > 0 and whole["nonfinite_pixels"] > 0
