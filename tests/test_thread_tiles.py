@@ -114,3 +114,20 @@ def test_threads_give_the_same_sums_as_one_after_the_other():
     here = list(in_process(total, payloads))
     threads = list(ThreadTileMap(2)(total, payloads))
     assert here == threads
+
+
+def test_one_tile_at_a_time_where_the_limit_holds_no_more():
+    """The scribbles method's tiles where its full-size arrays alone exceed the limit:
+    cores of a few halos, worked on one at a time (the threads narrowed to one tile);
+    where the limit holds them, as many as the map runs."""
+    from napari_polarseg.engine.tile_map import tile_map_for
+
+    params = PixelFeatureParams()
+    with tiles_on(ThreadTileMap(2)):
+        tight = scribble_tiles((6000, 8000), params, 136, 8, limit=2 * 2**30)
+        roomy = scribble_tiles((6000, 8000), params, 136, 8, limit=8 * 2**30)
+        assert tight is not None and roomy is not None
+        assert tight.at_once == 1 and tile_map_for(tight) is in_process
+        assert roomy.at_once == 0 and isinstance(tile_map_for(roomy), ThreadTileMap)
+    with tiles_on(ThreadTileMap(3)):
+        assert tile_map_for(roomy.__class__(roomy.shape, roomy.core, roomy.halo, 8, 2)).threads == 2

@@ -215,6 +215,17 @@ def current_tile_map() -> TileMap:
     return _current[0] or DEFAULT_MAP
 
 
+def tile_map_for(grid: Any) -> TileMap:
+    """The current tile map for the tiles of ``grid`` (a :class:`~.tiles.TileGrid`):
+    this process's threads narrowed to ``grid.at_once`` tiles at once when it sets
+    fewer (one: :func:`in_process`); any other map as it is."""
+    current = current_tile_map()
+    at_once = int(getattr(grid, "at_once", 0) or 0)
+    if isinstance(current, ThreadTileMap) and 0 < at_once < current.threads:
+        return in_process if at_once == 1 else ThreadTileMap(at_once)
+    return current
+
+
 def in_this_process(tile_map: TileMap) -> bool:
     """Whether ``tile_map`` runs its tasks in this process (a stop callback may be
     handed to them)."""

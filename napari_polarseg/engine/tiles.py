@@ -103,12 +103,17 @@ class TileGrid:
         Pixels read beyond a core on every side (a multiple of ``align``).
     align : int
         Cores and halos are multiples of it (module docstring).
+    at_once : int
+        Most tiles worked on at once (0: as many as the tile map runs,
+        :func:`~.tile_map.tile_map_for`): 1 where the memory limit was not found to
+        hold more than one tile.
     """
 
     shape: tuple[int, int]
     core: int
     halo: int
     align: int = 1
+    at_once: int = 0
 
     def __post_init__(self) -> None:
         if self.core < 1 or self.halo < 0 or self.align < 1:

@@ -43,7 +43,7 @@ from ..features.pixel_features import (
     largest_factor,
     pixel_features,
 )
-from ..tile_map import current_tile_map
+from ..tile_map import tile_map_for
 from ..tiles import Box, TileGrid, round_up
 
 Maps = tuple[np.ndarray, np.ndarray, np.ndarray]
@@ -174,7 +174,7 @@ class TiledFeatures:
             assert self.regions is not None
             small = without_regions(self.params, REGION_MAX_SIGMA)
             halo = round_up(feature_reach(small), self.grid.align)
-            grid = TileGrid(self.shape, self.grid.core, halo, self.grid.align)
+            grid = replace(self.grid, halo=halo)
             n = int(self.regions.max()) + 1
             sums: list[np.ndarray] = []
             payloads = (
@@ -187,7 +187,7 @@ class TiledFeatures:
                 )
                 for tile in grid
             )
-            for ids, adds in current_tile_map()(region_sums, payloads):
+            for ids, adds in tile_map_for(grid)(region_sums, payloads):
                 sums = sums or [np.zeros((a.shape[0], n)) for a in adds]
                 for total, add in zip(sums, adds, strict=True):
                     total[:, ids] += add
@@ -223,7 +223,8 @@ class TiledFeatures:
                 local = (rr - outer[0].start) * width + (cc - outer[1].start)
                 yield self.box_inputs(outer), local
 
-        for mine, rows in zip(shares, current_tile_map()(box_rows, payloads()), strict=True):
+        rows_of = tile_map_for(self.grid)(box_rows, payloads())
+        for mine, rows in zip(shares, rows_of, strict=True):
             out[mine] = rows
         return out
 

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterator
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -37,7 +38,7 @@ import numpy as np
 from .. import disk_arrays
 from ..errors import Cancelled
 from ..limits import KEPT_MAPS, memory_limit, scribble_bytes_per_pixel
-from ..tile_map import current_tile_map, in_this_process, tiles_in_flight
+from ..tile_map import in_this_process, tile_map_for, tiles_in_flight
 from ..tiles import Box, Tile, TileGrid, row_bands
 from .pixel_classifier import (
     PixelClassifier,
@@ -84,7 +85,8 @@ def scribble_tiles(
     arrays is the budget of one outer box of (c + 2h)² pixels at the work's bytes a
     pixel (:meth:`TileGrid.for_budget`; at least its smallest core), shared by the tiles
     worked on at once (:func:`~..tile_map.tiles_in_flight`). When the full-size arrays
-    alone exceed the limit, cores of :data:`UNBOUNDED_CORE_HALOS` halos.
+    alone exceed the limit, cores of :data:`UNBOUNDED_CORE_HALOS` halos, one tile at a
+    time (``at_once`` = 1: :func:`~..tile_map.tile_map_for`).
     """
     cap = memory_limit(limit)
     pixels = int(shape[0]) * int(shape[1])
@@ -93,10 +95,12 @@ def scribble_tiles(
         return None
     _, fixed = scribble_bytes_per_pixel(feature_params, channels, n_classes, tiled=True)
     budget = (cap - pixels * (fixed + 8 * KEPT_MAPS)) / tiles_in_flight()
-    if budget <= 0:  # the full-size arrays alone exceed the limit: no tile can meet it,
-        # and cores under a few halos would only multiply the halos' work
-        budget = (UNBOUNDED_CORE_HALOS + 2) ** 2 * halo * halo * work
-    return TileGrid.for_budget(shape, budget, work, halo, align)
+    if budget > 0:
+        return TileGrid.for_budget(shape, budget, work, halo, align)
+    # the full-size arrays alone exceed the limit: no tile can meet it, and cores under
+    # a few halos would only multiply the halos' work; one tile at a time
+    budget = (UNBOUNDED_CORE_HALOS + 2) ** 2 * halo * halo * work
+    return replace(TileGrid.for_budget(shape, budget, work, halo, align), at_once=1)
 
 
 def _local(box: Box, outer: Box) -> Box:
@@ -120,7 +124,7 @@ def prior_payloads(
     ``cancel()`` is asked before every tile, and within a tile when the tiles run in
     this process."""
     smoothing = classifier.params.smoothing if guide is not None else 0.0
-    inside = cancel if in_this_process(current_tile_map()) else None
+    inside = cancel if in_this_process(tile_map_for(features.grid)) else None
     for tile in features.grid:
         if cancel is not None and cancel():
             raise Cancelled("prediction cancelled")
@@ -165,7 +169,7 @@ def tile_priors(
     the grid's order, the tiles on the current tile map (this process, or a Dask
     cluster: ``polarseg segment --dask``)."""
     payloads = prior_payloads(classifier, features, stride, guide, cancel)
-    results = current_tile_map()(tile_prior, payloads)
+    results = tile_map_for(features.grid)(tile_prior, payloads)
     for tile, (proba, n) in zip(features.grid, results, strict=True):
         yield tile, proba, n
 
