@@ -12,8 +12,8 @@ labels or class probabilities). So:
 - :class:`ThreadTileMap` (the default on a machine of more than one core,
   :data:`~.chunks.N_THREADS`) runs them here on that many threads, at most one tile a
   thread in flight: the filters, the forest and numpy release the GIL, so the tiles'
-  work runs on every core; the tile choices give each tile in flight its share of the
-  memory limit (:func:`tiles_in_flight`);
+  work runs on every core, as many tiles at once as the memory limit holds
+  (:attr:`~.tiles.TileGrid.at_once`, :func:`tile_map_for`);
 - :class:`DaskTileMap` runs them on a ``dask.distributed`` cluster through its client:
   each payload's arrays are scattered to one worker and the task submitted there, with
   at most ``window`` tiles in flight (the client holds no more payloads than that and a
@@ -74,11 +74,6 @@ class ThreadTileMap:
 
     def __init__(self, threads: int) -> None:
         self.threads = max(1, int(threads))
-
-    @property
-    def tiles_in_flight(self) -> int:
-        """Tiles worked on at once: one a thread."""
-        return self.threads
 
     def __call__(self, task: Callable[..., R], payloads: Iterable[tuple]) -> Iterator[R]:
         return self._results(task, iter(payloads))
@@ -230,13 +225,6 @@ def in_this_process(tile_map: TileMap) -> bool:
     """Whether ``tile_map`` runs its tasks in this process (a stop callback may be
     handed to them)."""
     return tile_map is in_process or isinstance(tile_map, ThreadTileMap)
-
-
-def tiles_in_flight() -> int:
-    """Tiles the current map works on at once in this process, each holding its share
-    of the process's memory limit (1 on a Dask cluster: there the workers' limit
-    bounds a tile, :func:`worker_bytes`)."""
-    return int(getattr(current_tile_map(), "tiles_in_flight", 1))
 
 
 def worker_bytes() -> float | None:

@@ -104,9 +104,9 @@ class TileGrid:
     align : int
         Cores and halos are multiples of it (module docstring).
     at_once : int
-        Most tiles worked on at once (0: as many as the tile map runs,
-        :func:`~.tile_map.tile_map_for`): 1 where the memory limit was not found to
-        hold more than one tile.
+        Most tiles worked on at once: as many outer boxes as the memory limit holds
+        (0: as many as the tile map runs; :func:`~.tile_map.tile_map_for`). It never
+        changes the tiles themselves.
     """
 
     shape: tuple[int, int]

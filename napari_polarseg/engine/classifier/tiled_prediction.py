@@ -38,7 +38,7 @@ import numpy as np
 from .. import disk_arrays
 from ..errors import Cancelled
 from ..limits import KEPT_MAPS, memory_limit, scribble_bytes_per_pixel
-from ..tile_map import in_this_process, tile_map_for, tiles_in_flight
+from ..tile_map import in_this_process, tile_map_for
 from ..tiles import Box, Tile, TileGrid, row_bands
 from .pixel_classifier import (
     PixelClassifier,
@@ -83,10 +83,10 @@ def scribble_tiles(
     :func:`~..limits.scribble_bytes_per_pixel` plus the pipeline's
     :data:`~..limits.KEPT_MAPS` float64 maps. Tiled: the limit less the full-size
     arrays is the budget of one outer box of (c + 2h)² pixels at the work's bytes a
-    pixel (:meth:`TileGrid.for_budget`; at least its smallest core), shared by the tiles
-    worked on at once (:func:`~..tile_map.tiles_in_flight`). When the full-size arrays
-    alone exceed the limit, cores of :data:`UNBOUNDED_CORE_HALOS` halos, one tile at a
-    time (``at_once`` = 1: :func:`~..tile_map.tile_map_for`).
+    pixel (:meth:`TileGrid.for_budget`; at least its smallest core), as many at once
+    as the budget holds (``at_once``: :func:`~..tile_map.tile_map_for`). When the
+    full-size arrays alone exceed the limit, cores of :data:`UNBOUNDED_CORE_HALOS`
+    halos, one tile at a time (``at_once`` = 1).
     """
     cap = memory_limit(limit)
     pixels = int(shape[0]) * int(shape[1])
@@ -94,9 +94,11 @@ def scribble_tiles(
     if pixels * (work + fixed + 8 * KEPT_MAPS) <= cap:
         return None
     _, fixed = scribble_bytes_per_pixel(feature_params, channels, n_classes, tiled=True)
-    budget = (cap - pixels * (fixed + 8 * KEPT_MAPS)) / tiles_in_flight()
+    budget = cap - pixels * (fixed + 8 * KEPT_MAPS)
     if budget > 0:
-        return TileGrid.for_budget(shape, budget, work, halo, align)
+        grid = TileGrid.for_budget(shape, budget, work, halo, align)
+        box = (grid.core + 2 * grid.halo) ** 2 * work
+        return replace(grid, at_once=max(1, int(budget // box)))
     # the full-size arrays alone exceed the limit: no tile can meet it, and cores under
     # a few halos would only multiply the halos' work; one tile at a time
     budget = (UNBOUNDED_CORE_HALOS + 2) ** 2 * halo * halo * work

@@ -29,7 +29,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .. import disk_arrays
-from ..tile_map import current_tile_map
+from ..tile_map import tile_map_for
 from ..tiles import Tile, TileGrid
 from .boundaries import SegmentStats, refine_maps, refined_labels, segment_stats
 from .tile_maps import filled_box
@@ -116,7 +116,7 @@ class TiledLabels:
     ) -> tuple[np.ndarray, np.ndarray]:
         """(labels (H, W) int32, node labels (n,)) of ``model`` whose superpixels are
         labelled ``node_labels``: :func:`~.segmenter.pixel_labels` tile by tile, each
-        tile on the current tile map (:func:`~..tile_map.current_tile_map`)."""
+        tile on the current tile map (:func:`~..tile_map.tile_map_for`)."""
         node_labels = np.asarray(node_labels, dtype=np.int32)
         m = int(node_labels.max()) + 1 if node_labels.size else 1
         lookup = node_labels if model.valid is None else np.append(node_labels, 0)
@@ -136,7 +136,7 @@ class TiledLabels:
 
         labels = disk_arrays.empty(shape, dtype=np.int32)  # on disk when it does not fit
         first = np.full(m, np.iinfo(np.int64).max)
-        cores = current_tile_map()(core_labels, payloads())
+        cores = tile_map_for(self.grid)(core_labels, payloads())
         for tile, (core, tile_first) in zip(self.grid, cores, strict=True):
             labels[tile.core] = core
             np.minimum(first, tile_first, out=first)

@@ -35,7 +35,7 @@ border refinement (:mod:`.tiled_labels`).
 
 Every tile's work (:mod:`.tiled_region_tasks`) reads only its outer box and returns only
 its sums, border pairs and core; it runs on the current tile map
-(:func:`~..tile_map.current_tile_map`): on this process's threads, or on a Dask
+(:func:`~..tile_map.tile_map_for`): on this process's threads, or on a Dask
 cluster (``polarseg segment --dask``), the results added in the tiles' order either way
 (the same labels to the bit).
 
@@ -57,7 +57,7 @@ import scipy.sparse as sps
 from .. import disk_arrays
 from ..features.pixel_features import EPS_INTENSITY
 from ..limits import KEPT_MAPS, memory_limit
-from ..tile_map import current_tile_map, tiles_in_flight, worker_bytes
+from ..tile_map import tile_map_for, worker_bytes
 from ..tiles import MIN_CORE, Tile, TileGrid
 from .params import UnsupervisedParams
 from .pixel_maps import edge_weight
@@ -113,8 +113,7 @@ def region_tiles(
     when the whole image fits the memory ``limit`` (default
     :func:`~..limits.memory_limit`): H·W × (:data:`WHOLE_BYTES_PER_PIXEL` + 8 ×
     :data:`~..limits.KEPT_MAPS`) bytes. Tiled, the limit less the full-size arrays is
-    the budget of the outer boxes worked on at once (:func:`~..tile_map.tiles_in_flight`)
-    at :data:`TILE_BYTES_PER_PIXEL` each (core side at most
+    the budget of one outer box at :data:`TILE_BYTES_PER_PIXEL` (core side at most
     :data:`MAX_CORE`, and at least :data:`MIN_CORE_HALOS` halos where that box fits the
     budget or where no tile can: the limit first, then the speed; with the tiles on a Dask
     cluster, :func:`~..tile_map.tiles_on`, the outer box at most the workers' share,
@@ -127,7 +126,7 @@ def region_tiles(
         return None
     if params.pixel_scales or params.boundary != "polarisation":
         return None
-    budget = (cap - kept - pixels * TILED_FIXED_BYTES) / tiles_in_flight()
+    budget = cap - kept - pixels * TILED_FIXED_BYTES
     grid = TileGrid.for_budget(shape, budget, TILE_BYTES_PER_PIXEL, tile_halo(shape, params))
     # the speed floor where its box fits the budget, or where nothing can (the
     # full-size arrays alone exceed the limit: smaller tiles would only cost time)
@@ -138,9 +137,21 @@ def region_tiles(
     if worker is not None:  # the outer box within a Dask worker's share, whatever else
         side = int(math.sqrt(worker / TILE_BYTES_PER_PIXEL)) - 2 * grid.halo
         core = min(core, max(side, MIN_CORE))
-    if core != grid.core:
-        grid = TileGrid(grid.shape, core, grid.halo)
+    at_once = boxes_at_once(cap, pixels, kept + pixels * TILED_FIXED_BYTES, core, grid.halo)
+    grid = TileGrid(grid.shape, core, grid.halo, at_once=at_once)
     return grid if len(grid) > 1 else None
+
+
+def boxes_at_once(cap: float, pixels: int, full_size: float, core: int, halo: int) -> int:
+    """How many outer boxes of a ``core`` + 2 ``halo`` side (at
+    :data:`TILE_BYTES_PER_PIXEL`) the limit ``cap`` holds at once beside the run's
+    ``full_size`` bytes of full-size arrays, which count as none where they go to
+    temporary files (:func:`~..disk_arrays.on_disk_at`: their pages are given back as
+    they are written); at least 1. The tile choice itself never depends on it, so the
+    tiles and the labels are the same however many run at once."""
+    resident = 0.0 if disk_arrays.on_disk_at(pixels, int(cap)) else full_size
+    box = (core + 2 * halo) ** 2 * TILE_BYTES_PER_PIXEL
+    return max(1, int((cap - resident) // box))
 
 
 def histogram_median(counts: np.ndarray) -> float:
@@ -173,7 +184,7 @@ def edge_scales(
             yield (*box_payload(maps, valid, outer), Tile(tile.core, outer).inner, polarisation)
 
     counts = np.zeros((3, LOG_BINS), dtype=np.int64)
-    for add in current_tile_map()(edge_histograms, payloads()):
+    for add in tile_map_for(grid)(edge_histograms, payloads()):
         counts += add
     centre = math.log(max(histogram_median(counts[0]), EPS_INTENSITY))
     m_pol = histogram_median(counts[2]) if polarisation else 1.0
@@ -268,7 +279,7 @@ def _tile_pass(
             box = box_payload(maps, valid, tile.outer)
             yield (*box, tile, seeds, weight, scales, centre, shape)
 
-    cores = current_tile_map()(region_core, payloads())
+    cores = tile_map_for(grid)(region_core, payloads())
     for index, (tile, core) in enumerate(zip(grid, cores, strict=True)):
         regions[tile.core] = core.regions
         sums.add(core)
