@@ -307,9 +307,15 @@ def main(argv: list[str] | None = None) -> int:
     children = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 2**20
     print(f"largest child's peak RSS (RUSAGE_CHILDREN): {children:.2f} GiB")
     for (method, size, mode), value in per.items():
-        if size != "1.25" and (method, "1.25", mode) in per:
-            ratio = value / per[method, "1.25", mode]
-            print(f"{method}: time a pixel, {size} MP / 1.25 MP ({mode}): {ratio:.2f} (target ≤ 1)")
+        # the reference is the 1.25 MP frame as a user runs it: whole (a tiled
+        # 1.25 MP run, forced by a limit below its estimate, reads its halos 2-5 times)
+        reference = next((r for r in ("whole", mode) if (method, "1.25", r) in per), None)
+        if size != "1.25" and reference is not None:
+            ratio = value / per[method, "1.25", reference]
+            print(
+                f"{method}: time a pixel, {size} MP {mode} / 1.25 MP {reference}: "
+                f"{ratio:.2f} (target ≤ 1)"
+            )
     return 0
 
 
