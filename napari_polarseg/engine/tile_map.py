@@ -43,6 +43,7 @@ import numpy as np
 
 from .chunks import N_THREADS
 from .errors import PolarsegError
+from .tiles import TileGrid
 
 R = TypeVar("R")
 
@@ -65,6 +66,32 @@ def in_process(task: Callable[..., R], payloads: Iterable[tuple]) -> Iterator[R]
         yield task(*payload)
 
 
+def in_order(
+    payloads: Iterator[tuple],
+    window: int,
+    submit: Callable[[tuple], Any],
+    result: Callable[[Any], R],
+    drop: Callable[[list[Any]], None],
+) -> Generator[R, None, None]:
+    """The results of the submitted payloads in their order, with at most ``window``
+    of them in flight: ``submit(payload)`` starts one (a handle), ``result(handle)``
+    waits for it, and one more payload is submitted as each result is taken;
+    ``drop(handles)`` is called with the handles left in flight when the consumer stops
+    or a task fails."""
+    flight: deque[Any] = deque()
+    try:
+        for payload in itertools.islice(payloads, window):
+            flight.append(submit(payload))
+        while flight:
+            value = result(flight.popleft())
+            for payload in itertools.islice(payloads, 1):
+                flight.append(submit(payload))
+            yield value
+    finally:
+        if flight:
+            drop(list(flight))
+
+
 class ThreadTileMap:
     """A tile map of this process on ``threads`` threads (module docstring): at most
     ``threads`` tiles in flight, each task run in a copy of the caller's context (so it
@@ -81,24 +108,17 @@ class ThreadTileMap:
     def _results(
         self, task: Callable[..., R], payloads: Iterator[tuple]
     ) -> Generator[R, None, None]:
-        flight: deque[Future[R]] = deque()
         with ThreadPoolExecutor(self.threads, thread_name_prefix="polarseg-tile") as pool:
 
-            def submit(payload: tuple) -> None:
+            def submit(payload: tuple) -> Future[R]:
                 context = contextvars.copy_context()
-                flight.append(pool.submit(context.run, task, *payload))
+                return pool.submit(context.run, task, *payload)
 
-            try:
-                for payload in itertools.islice(payloads, self.threads):
-                    submit(payload)
-                while flight:
-                    result = flight.popleft().result()
-                    for payload in itertools.islice(payloads, 1):
-                        submit(payload)
-                    yield result
-            finally:  # stopped or failed: drop the tiles not started yet
+            def drop(flight: list[Future[R]]) -> None:  # not started yet: not run
                 for future in flight:
                     future.cancel()
+
+            yield from in_order(payloads, self.threads, submit, Future.result, drop)
 
 
 class DaskTileMap:
@@ -156,21 +176,15 @@ class DaskTileMap:
     def _results(
         self, task: Callable[..., R], payloads: Iterator[tuple]
     ) -> Generator[R, None, None]:
-        flight: deque[tuple[Any, list[Any]]] = deque()
-        try:
-            for payload in itertools.islice(payloads, self.window):
-                flight.append(self._submit(task, payload))
-            while flight:
-                future, held = flight.popleft()
-                result = _result(future)
-                del future, held  # released: the worker drops the tile's arrays
-                for payload in itertools.islice(payloads, 1):
-                    flight.append(self._submit(task, payload))
-                yield result
-        finally:
-            if flight:
-                with contextlib.suppress(Exception):
-                    self.client.cancel([f for f, _ in flight], force=True)
+        # a result taken drops its future and its scattered arrays: the worker frees them
+        def drop(flight: list[tuple[Any, list[Any]]]) -> None:
+            with contextlib.suppress(Exception):
+                self.client.cancel([f for f, _ in flight], force=True)
+
+        def submit(payload: tuple) -> tuple[Any, list[Any]]:
+            return self._submit(task, payload)
+
+        yield from in_order(payloads, self.window, submit, lambda item: _result(item[0]), drop)
 
 
 def _result(future: Any) -> Any:
@@ -210,14 +224,13 @@ def current_tile_map() -> TileMap:
     return _current[0] or DEFAULT_MAP
 
 
-def tile_map_for(grid: Any) -> TileMap:
+def tile_map_for(grid: TileGrid) -> TileMap:
     """The current tile map for the tiles of ``grid`` (a :class:`~.tiles.TileGrid`):
     this process's threads narrowed to ``grid.at_once`` tiles at once when it sets
     fewer (one: :func:`in_process`); any other map as it is."""
     current = current_tile_map()
-    at_once = int(getattr(grid, "at_once", 0) or 0)
-    if isinstance(current, ThreadTileMap) and 0 < at_once < current.threads:
-        return in_process if at_once == 1 else ThreadTileMap(at_once)
+    if isinstance(current, ThreadTileMap) and 0 < grid.at_once < current.threads:
+        return in_process if grid.at_once == 1 else ThreadTileMap(grid.at_once)
     return current
 
 

@@ -160,10 +160,14 @@ class TiledFeatures:
         the box (views), the box's superpixels and the whole image's region means (None
         without the ``regions`` group), the channels, parameters and log Î centres. A
         tile task's payload: its arrays are all the box needs of the image."""
-        maps = [tuple(m[outer] for m in image) for image in self.images]
+        maps = self.box_maps(outer)
         regions = self.regions[outer] if self.regions is not None else None
         means = self.region_values() if self.regions is not None else None
         return maps, regions, means, self.channels, self.params, self.log_centres
+
+    def box_maps(self, outer: Box) -> list[Maps]:
+        """Every channel's Î, ρ, φ of the box ``outer`` (views)."""
+        return [tuple(m[outer] for m in image) for image in self.images]
 
     def region_values(self) -> list[np.ndarray]:
         """Every channel's (F_r, n) float32 means of its σ ≤ 4 features over each
@@ -179,7 +183,7 @@ class TiledFeatures:
             sums: list[np.ndarray] = []
             payloads = (
                 (
-                    [tuple(m[tile.outer] for m in image) for image in self.images],
+                    self.box_maps(tile.outer),
                     tile.inner,
                     self.regions[tile.core],
                     small,

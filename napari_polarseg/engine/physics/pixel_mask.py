@@ -70,13 +70,20 @@ class PixelMask:
         """(H, W) of the frames."""
         return tuple(self.flags.shape[1:])  # type: ignore[return-value]
 
-    def _any(self, bit: int) -> np.ndarray:
-        """(H, W) pixels with ``bit`` set in any frame, frame by frame (no (N, H, W)
-        temporary)."""
-        out = np.zeros(self.shape, dtype=bool)
+    def _any(self, bit: int, rows: slice = slice(None)) -> np.ndarray:
+        """(h, W) pixels of ``rows`` with ``bit`` set in any frame, frame by frame (no
+        (N, h, W) temporary)."""
+        out = np.zeros(self.flags[0, rows].shape, dtype=bool)
         for frame in self.flags:
-            out |= (frame & bit) != 0
+            out |= (frame[rows] & bit) != 0
         return out
+
+    def _valid(self, rows: slice = slice(None)) -> np.ndarray:
+        """(h, W) pixels of ``rows`` the fit and the features use."""
+        ok = np.ones(self.flags[0, rows].shape, dtype=bool)
+        for frame in self.flags:
+            ok &= frame[rows] == 0
+        return ok if self.region is None else ok & self.region[rows]
 
     @property
     def saturated(self) -> np.ndarray:
@@ -103,10 +110,7 @@ class PixelMask:
     @property
     def valid(self) -> np.ndarray:
         """(H, W) pixels the fit and the features use."""
-        ok = np.ones(self.shape, dtype=bool)
-        for frame in self.flags:
-            ok &= frame == 0
-        return ok if self.region is None else ok & self.region
+        return self._valid()
 
     @property
     def sample_weights(self) -> np.ndarray:
@@ -120,14 +124,11 @@ class PixelMask:
         given back after each band."""
         h, w = self.shape
         total = {"valid": 0, "saturated": 0, "dark": 0, "nonfinite": 0}
+        bits = {"saturated": SATURATED, "dark": DARK, "nonfinite": NONFINITE}
         for band in row_bands(h, max(1, COUNT_ROWS_PIXELS // max(w, 1))):
-            flags = self.flags[:, band]
-            ok = np.logical_and.reduce(flags == 0, axis=0)
-            if self.region is not None:
-                ok &= self.region[band]
-            total["valid"] += int(np.count_nonzero(ok))
-            for name, bit in (("saturated", SATURATED), ("dark", DARK), ("nonfinite", NONFINITE)):
-                total[name] += int(np.count_nonzero(np.any((flags & bit) != 0, axis=0)))
+            total["valid"] += int(np.count_nonzero(self._valid(band)))
+            for name, bit in bits.items():
+                total[name] += int(np.count_nonzero(self._any(bit, band)))
             disk_arrays.release(self.flags)
         outside = (
             0 if self.region is None else int(self.region.size - np.count_nonzero(self.region))
