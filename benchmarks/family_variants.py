@@ -6,7 +6,9 @@ most.
 A variant is the default method's class with some attributes changed (its node-feature
 parameters, how far its diffusion reaches in object sizes, how many superpixels span one
 object, whether it follows the estimated object size) or the default with the object
-size set to the truth's (``truth size``: what a perfect estimate would give). The
+size set to the truth's (``truth size``: what a perfect estimate would give), or the
+consensus of the default's run and runs with other node parameters on the same
+superpixels (``consensus …``: :class:`ReachConsensus`). The
 development halves are read; ``--test-base B`` reads round B's test halves instead,
 only to check a choice on a test half already read and reported (a fresh round's is
 for reporting).
@@ -31,9 +33,13 @@ from sklearn.metrics import adjusted_rand_score
 
 from napari_polarseg.engine import Pipeline, Scene
 from napari_polarseg.engine.methods import register_method
+from napari_polarseg.engine.methods.superpixel_consensus import SuperpixelConsensus
 from napari_polarseg.engine.methods.surface_superpixels import SurfaceSuperpixels
+from napari_polarseg.engine.methods.valid_superpixels import clustered_pixels
 from napari_polarseg.engine.params import PRESETS
 from napari_polarseg.engine.unsupervised.merge import closest_centroids
+from napari_polarseg.engine.unsupervised.pixel_maps import pixel_maps
+from napari_polarseg.engine.unsupervised.segmenter import prepare_regions
 
 
 @dataclass(frozen=True)
@@ -51,6 +57,9 @@ class Variant:
     #: follow the estimated object size only where it is at least this share of the
     #: frame's short side (0: wherever the class's ``follows_estimate`` says)
     gate: float = 0.0
+    #: node-parameter changes of further runs on the same superpixels; the labels are
+    #: the runs' consensus with the default (:class:`ReachConsensus`)
+    also: tuple[dict[str, Any], ...] = ()
 
 
 class GatedSurface(SurfaceSuperpixels):
@@ -88,6 +97,31 @@ class CollapseFallback(SurfaceSuperpixels):
         finally:
             self.params = long_reach
 
+
+class ReachConsensus(SuperpixelConsensus):
+    """The default's run and runs with other node parameters (:attr:`others`: another
+    reach, border scale or node features) on the same superpixels, the labels the runs
+    agree on (:func:`~napari_polarseg.engine.unsupervised.consensus.consensus_clustering`,
+    as ``superpixel_consensus`` combines superpixel sizes)."""
+
+    others: tuple[dict[str, Any], ...] = ()
+
+    def region_models(self, scene, pol, run, params):
+        runs = [params, *(params.replace(**o) for o in self.others)]
+
+        def prepare():
+            valid = clustered_pixels(scene.region, pol.invalid)
+            maps = (pol.intensity, pol.dop, pol.phase)
+            shared = pixel_maps(*maps, params, valid)
+            return [prepare_regions(*maps, p, pixels=shared) for p in runs]
+
+        return scene.cached(self.name, (id(pol), params), prepare)
+
+
+#: The node features of the default (``UnsupervisedParams().features``).
+NODE_FEATURES = ("log_intensity", "dop", "dop_spread", "dop_vs_log_intensity_slope")
+#: The node parameters of the short reach (``superpixels``' reach and border scale).
+SHORT_REACH = {"diffusion_range": 0.07, "diffusion_tau": 0.75}
 
 #: The variants tried; ``default`` is the default as it is (its superpixels at their
 #: share of the frame whatever the estimated object size).
@@ -131,6 +165,16 @@ VARIANTS: dict[str, Variant] = {
     "estimated size above 10 % reach 1.5 side 4": Variant(
         {"reach_objects": 1.5, "regions_per_side": 4.0}, gate=0.10
     ),
+    # polarisation texture as one more node feature, each alone
+    "+dolp": Variant(params={"features": (*NODE_FEATURES, "dolp")}),
+    "+aolp coherence": Variant(params={"features": (*NODE_FEATURES, "aolp_coherence")}),
+    "+dolp over dop": Variant(params={"features": (*NODE_FEATURES, "dolp_over_dop")}),
+    # the consensus of the long reach and the short one (and one between)
+    "consensus long short": Variant(also=(SHORT_REACH,)),
+    "consensus long mid short": Variant(also=({"diffusion_range": 0.12}, SHORT_REACH)),
+    "consensus long short short+coherence": Variant(
+        also=(SHORT_REACH, {**SHORT_REACH, "features": (*NODE_FEATURES, "aolp_coherence")})
+    ),
 }
 
 
@@ -143,6 +187,8 @@ def register(name: str, variant: Variant) -> str:
         base, attrs["gate"] = GatedSurface, variant.gate
     if variant.collapse:
         base, attrs["collapse"] = CollapseFallback, variant.collapse
+    if variant.also:
+        base, attrs["others"] = ReachConsensus, variant.also
     cls = type("Variant", (base,), {"name": f"variant:{name}", "title": name, **attrs})
     method = cls()
     if variant.params:
