@@ -13,6 +13,7 @@ import pytest
 from napari_polarseg.engine import disk_arrays
 from napari_polarseg.engine.classifier.tiled_prediction import scribble_tiles
 from napari_polarseg.engine.features.pixel_features import PixelFeatureParams
+from napari_polarseg.engine.limits import scribble_bytes_per_pixel
 from napari_polarseg.engine.methods.surface_superpixels import SurfaceSuperpixels
 from napari_polarseg.engine.tile_map import (
     ThreadTileMap,
@@ -115,19 +116,27 @@ def test_threads_give_the_same_sums_as_one_after_the_other():
     assert here == threads
 
 
-def test_one_tile_at_a_time_where_the_limit_holds_no_more():
+def test_scribble_tiles_at_once_follow_what_stays_in_memory():
     """The scribbles method's tiles where its full-size arrays alone exceed the limit:
-    cores of a few halos, worked on one at a time (the threads narrowed to one tile);
-    where the limit holds them, boxes as large as the budget, so one at a time too; a
-    grid that holds two runs on two of three threads."""
+    cores of a few halos; those arrays go to temporary files, so as many boxes run at
+    once as the limit holds beside the bytes a pixel that stay in memory (48 MP at
+    2 GiB: several; 100 MP: one, the threads narrowed to it). Where the limit holds the
+    arrays, boxes as large as the budget, so one at a time; a grid that holds two runs
+    on two of three threads."""
+    from napari_polarseg.engine.classifier.tiled_prediction import RESIDENT_BYTES_PER_PIXEL
     from napari_polarseg.engine.tile_map import tile_map_for
 
-    params = PixelFeatureParams()
+    params, limit = PixelFeatureParams(), 2 * 2**30
     with tiles_on(ThreadTileMap(2)):
-        tight = scribble_tiles((6000, 8000), params, 136, 8, limit=2 * 2**30)
+        tight = scribble_tiles((6000, 8000), params, 136, 8, limit=limit)
+        huge = scribble_tiles((8192, 12240), params, 136, 8, limit=limit)
         roomy = scribble_tiles((6000, 8000), params, 136, 8, limit=8 * 2**30)
-        assert tight is not None and roomy is not None
-        assert tight.at_once == 1 and tile_map_for(tight) is in_process
+        assert tight is not None and huge is not None and roomy is not None
+        assert tight.core == huge.core  # a few halos, whatever the size
+        box = (tight.core + 2 * tight.halo) ** 2 * scribble_bytes_per_pixel(params)[0]
+        assert tight.at_once == int((limit - 48e6 * RESIDENT_BYTES_PER_PIXEL) // box) >= 2
+        assert tile_map_for(tight).threads == 2
+        assert huge.at_once == 1 and tile_map_for(huge) is in_process
         assert roomy.core > tight.core and roomy.at_once == 1
     with tiles_on(ThreadTileMap(3)):
         assert tile_map_for(roomy.__class__(roomy.shape, roomy.core, roomy.halo, 8, 2)).threads == 2

@@ -17,14 +17,16 @@ same tile decision the method makes with the same limit:
 - the superpixel methods that tile (the default, ``valid_superpixels``):
   :func:`~.unsupervised.tiled_regions.region_tiles`; whole image H·W ×
   (``WHOLE_BYTES_PER_PIXEL`` + 8 ``KEPT_MAPS``), tiled H·W × (8 ``KEPT_MAPS`` +
-  ``TILED_FIXED_BYTES``) plus one outer box at ``TILE_BYTES_PER_PIXEL``; the others
-  (``superpixels``, the consensus of several sizes) the whole image once a size;
+  ``TILED_FIXED_BYTES``) plus the outer boxes that run at once at
+  ``TILE_BYTES_PER_PIXEL``; the others (``superpixels``, the consensus of several
+  sizes) the whole image once a size;
 - the pixel classifier on scribbles:
   :func:`~.classifier.tiled_prediction.scribble_tiles` with the bytes of
   :func:`~.limits.scribble_bytes_per_pixel`, whole or tiled alike; tiled with its
   full-size arrays in temporary files (the kept maps, edge map, superpixels, nodes,
   probabilities and labels: :func:`~.disk_arrays.on_disk_at`), H·W ×
-  ``SCRIBBLE_DISK_FULL_BYTES`` in memory, the files' resident pages and one outer box.
+  ``SCRIBBLE_DISK_FULL_BYTES`` in memory, the files' resident pages and the outer boxes
+  that run at once.
 
 So a run that tiles to fit is estimated at its tiled peak, and exceeds the limit only
 when its full-size arrays alone do. The thesis block graph is
@@ -100,9 +102,12 @@ def fit_bytes(shape: tuple[int, int, int], on_disk: bool = False) -> int:
 
 
 def box_pixels(grid: TileGrid) -> int:
-    """Pixels of the largest outer box of ``grid`` (a core grown by its halo, clipped)."""
+    """Pixels of the outer boxes of ``grid`` in memory at once: the largest box (a core
+    grown by its halo, clipped) times the tiles that run at once, ``grid.at_once`` on
+    this process's threads (:data:`~.chunks.N_THREADS`; :func:`~.tile_map.tile_map_for`)."""
     side = grid.core + 2 * grid.halo
-    return min(side, grid.shape[0]) * min(side, grid.shape[1])
+    in_flight = max(1, min(grid.at_once or 1, N_THREADS))
+    return min(side, grid.shape[0]) * min(side, grid.shape[1]) * in_flight
 
 
 def superpixel_bytes(

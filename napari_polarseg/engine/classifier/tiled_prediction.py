@@ -65,6 +65,24 @@ def prediction_margin(stride: int, smoothing: float) -> int:
 #: Core side, in halos, when no tile can meet the limit (the full-size arrays alone
 #: exceed it): 128 px cores with 136 px halos read 10 × the pixels (24 MP: 147 s).
 UNBOUNDED_CORE_HALOS = 4
+#: Bytes a pixel a tiled run holds in memory beside its tiles when its full-size arrays
+#: are in temporary files (:func:`~..disk_arrays.on_disk_at`): the caller's strokes,
+#: the comparisons of the superpixels' borders, the files' pages not yet given back.
+#: Measured: the peak RSS of one tile at a time grew by 11.6 bytes a pixel from 24 to
+#: 100 MP (0.87 and 1.68 GiB, ``benchmarks/bench_scale.py``); with room.
+RESIDENT_BYTES_PER_PIXEL = 16
+
+
+def boxes_at_once(cap: float, pixels: int, full_size: float, box: float) -> int:
+    """How many outer boxes of ``box`` bytes the limit ``cap`` holds at once beside the
+    run's ``full_size`` bytes of full-size arrays, which count as
+    :data:`RESIDENT_BYTES_PER_PIXEL` a pixel where they go to temporary files; at least
+    1. The tiles never depend on it, so the labels are the same however many run at
+    once."""
+    resident = full_size
+    if disk_arrays.on_disk_at(pixels, int(cap)):
+        resident = pixels * RESIDENT_BYTES_PER_PIXEL
+    return max(1, int((cap - resident) // box))
 
 
 def scribble_tiles(
@@ -83,10 +101,10 @@ def scribble_tiles(
     :func:`~..limits.scribble_bytes_per_pixel` plus the pipeline's
     :data:`~..limits.KEPT_MAPS` float64 maps. Tiled: the limit less the full-size
     arrays is the budget of one outer box of (c + 2h)² pixels at the work's bytes a
-    pixel (:meth:`TileGrid.for_budget`; at least its smallest core), as many at once
-    as the budget holds (``at_once``: :func:`~..tile_map.tile_map_for`). When the
+    pixel (:meth:`TileGrid.for_budget`; at least its smallest core); when the
     full-size arrays alone exceed the limit, cores of :data:`UNBOUNDED_CORE_HALOS`
-    halos, one tile at a time (``at_once`` = 1).
+    halos. As many tiles at once as :func:`boxes_at_once` says (``at_once``:
+    :func:`~..tile_map.tile_map_for`).
     """
     cap = memory_limit(limit)
     pixels = int(shape[0]) * int(shape[1])
@@ -94,15 +112,15 @@ def scribble_tiles(
     if pixels * (work + fixed + 8 * KEPT_MAPS) <= cap:
         return None
     _, fixed = scribble_bytes_per_pixel(feature_params, channels, n_classes, tiled=True)
-    budget = cap - pixels * (fixed + 8 * KEPT_MAPS)
-    if budget > 0:
-        grid = TileGrid.for_budget(shape, budget, work, halo, align)
-        box = (grid.core + 2 * grid.halo) ** 2 * work
-        return replace(grid, at_once=max(1, int(budget // box)))
-    # the full-size arrays alone exceed the limit: no tile can meet it, and cores under
-    # a few halos would only multiply the halos' work; one tile at a time
-    budget = (UNBOUNDED_CORE_HALOS + 2) ** 2 * halo * halo * work
-    return replace(TileGrid.for_budget(shape, budget, work, halo, align), at_once=1)
+    full_size = pixels * (fixed + 8 * KEPT_MAPS)
+    budget = cap - full_size
+    if budget <= 0:
+        # the full-size arrays alone exceed the limit: no tile can meet it, and cores
+        # under a few halos would only multiply the halos' work
+        budget = (UNBOUNDED_CORE_HALOS + 2) ** 2 * halo * halo * work
+    grid = TileGrid.for_budget(shape, budget, work, halo, align)
+    box = (grid.core + 2 * grid.halo) ** 2 * work
+    return replace(grid, at_once=boxes_at_once(cap, pixels, full_size, box))
 
 
 def _local(box: Box, outer: Box) -> Box:
