@@ -17,17 +17,23 @@ scene can compute by itself, each choosing the setting it scores higher:
 - ``shared``: the silhouette of both settings' labels on the *same* features, the short
   setting's node features (the two settings share their superpixels, so their node
   labels can be scored on one feature space; each setting's own silhouette reads a
-  space of its own).
+  space of its own);
+- ``agreement``: the mean ARI of the setting's labels with two pixel clusterings made
+  apart from both settings, on cues that do not change with the light: k-means into k
+  of the AoLP coherence |G_σ(ρ e^{2iφ})| / G_σ(ρ) and of log of the local spread of ρ,
+  each at σ = 2, 4, 8 px (:func:`panel_labels`); the short setting is chosen only where
+  it agrees more by :data:`AGREEMENT_MARGIN`.
 
 It prints each frame's ARI for both settings and the criteria, then the mean ARI by
 family of each setting, of each criterion's choice and of the better of the two on
 every frame (``either``: read from the truth, the most any choice between the two
-settings can give). Only development halves are read.
+settings can give). The development halves are read; ``--test-base B`` reads round B's
+test halves instead, only to check a criterion on a test half already read.
 
 Usage::
 
     cd benchmarks && OMP_NUM_THREADS=1 PYTHONPATH=.. python reach_selection.py \\
-        [--families objects,small,textured,diffuse,real]
+        [--families objects,small,textured,diffuse,real] [--test-base B]
 """
 
 from __future__ import annotations
@@ -39,6 +45,8 @@ from typing import Any
 
 import numpy as np
 from families import FAMILIES, Frame, frames
+from scipy import ndimage
+from sklearn.cluster import KMeans
 from sklearn.metrics import adjusted_rand_score, silhouette_score
 
 from napari_polarseg.engine import Pipeline, Scene
@@ -58,7 +66,12 @@ SETTINGS = {
     "long": (SurfaceSuperpixels().params, weakest_border),
     "short": (ValidSuperpixels().params, closest_centroids),
 }
-CRITERIA = ("stability", "silhouette", "separation", "shared")
+CRITERIA = ("stability", "silhouette", "separation", "shared", "agreement")
+#: How much more the short setting must agree with the pixel clusterings (ARI) to be
+#: chosen by ``agreement`` (chosen on the development halves among 0.02–0.2).
+AGREEMENT_MARGIN = 0.05
+#: Gaussian σ (px) of the pixel clusterings' features.
+PANEL_SIGMAS = (2.0, 4.0, 8.0)
 
 
 def separation(z: np.ndarray, weight: np.ndarray, labels: np.ndarray) -> float:
@@ -106,6 +119,7 @@ def read_setting(frame: Frame, name: str) -> dict[str, Any]:
         "separation": separation(model.z, model.weight, nodes),
         "nodes": nodes,
         "z": model.z,
+        "labels": result.labels,
     }
 
 
@@ -126,26 +140,77 @@ def add_shared(read: dict[str, dict[str, Any]]) -> None:
         r["shared"] = silhouette(z, r["nodes"]) if r["nodes"].size == z.shape[0] else -1.0
 
 
+def panel_labels(frame: Frame) -> tuple[list[np.ndarray], np.ndarray]:
+    """The ``agreement`` criterion's pixel clusterings of ``frame`` (module docstring)
+    and the clustered pixels (H, W) bool they and the settings are compared on."""
+    pipe = Pipeline(frame.stack, frame.angles, PRESETS["auto"].replace(n_segments=frame.k))
+    pol = Scene(pipeline=pipe).polarisation(pipe.params)
+    rho, phi = pol.dop.astype(np.float64), pol.phase.astype(np.float64)
+    valid = ~np.asarray(pol.invalid, bool)
+
+    def g(a: np.ndarray, s: float) -> np.ndarray:
+        return ndimage.gaussian_filter(a, s)
+
+    coherence = [
+        np.hypot(g(rho * np.cos(2 * phi), s), g(rho * np.sin(2 * phi), s))
+        / np.maximum(g(rho, s), 1e-4)
+        for s in PANEL_SIGMAS
+    ]
+    spread = [
+        np.log(np.sqrt(np.maximum(g(rho * rho, s) - g(rho, s) ** 2, 0)) + 1e-4)
+        for s in PANEL_SIGMAS
+    ]
+    labels = []
+    for planes in (coherence, spread):
+        x = np.stack(planes, axis=-1).reshape(-1, len(planes))
+        fit = x[valid.ravel()]
+        mean, std = fit.mean(axis=0), fit.std(axis=0) + 1e-6
+        km = KMeans(frame.k, n_init=10, random_state=0).fit((fit - mean) / std)
+        labels.append(km.predict((x - mean) / std).reshape(valid.shape))
+    return labels, valid
+
+
+def add_agreement(read: dict[str, dict[str, Any]], frame: Frame) -> None:
+    """Each setting's ``agreement``: the mean ARI of its labels with
+    :func:`panel_labels` over the clustered pixels."""
+    panel, valid = panel_labels(frame)
+    for r in read.values():
+        r["agreement"] = float(
+            np.mean([adjusted_rand_score(q[valid], r["labels"][valid]) for q in panel])
+        )
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--families", default=",".join(FAMILIES))
+    ap.add_argument(
+        "--test-base",
+        type=int,
+        default=None,
+        metavar="B",
+        help="read the test halves of round B instead (a check of a test half read before)",
+    )
     args = ap.parse_args(argv)
+    half = "dev" if args.test_base is None else "test"
     t0 = time.perf_counter()
     means: dict[str, dict[str, list[float]]] = {}
     for family in args.families.split(","):
         rows = means.setdefault(family, {})
-        for frame in frames(family, "dev"):
+        for frame in frames(family, half, args.test_base or 0):
             read = {name: read_setting(frame, name) for name in SETTINGS}
             add_shared(read)
+            add_agreement(read, frame)
             for name in SETTINGS:
                 rows.setdefault(name, []).append(read[name]["ari"])
             rows.setdefault("either", []).append(max(r["ari"] for r in read.values()))
             for c in CRITERIA:
-                pick = "short" if read["short"][c] > read["long"][c] else "long"
+                margin = AGREEMENT_MARGIN if c == "agreement" else 0.0
+                pick = "short" if read["short"][c] > read["long"][c] + margin else "long"
                 rows.setdefault(c, []).append(read[pick]["ari"])
             cells = ", ".join(
                 f"{n} ARI {r['ari']:.3f} stab {r['stability']:.2f} sil {r['silhouette']:.2f} "
-                f"R² {r['separation']:.2f} shared {r['shared']:.2f}"
+                f"R² {r['separation']:.2f} shared {r['shared']:.2f} "
+                f"agreement {r['agreement']:.2f}"
                 for n, r in read.items()
             )
             print(f"{family} {frame.name}: {cells}", flush=True)
