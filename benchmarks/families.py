@@ -29,6 +29,7 @@ where a render has them, else of the connected components of the object material
 
 from __future__ import annotations
 
+import argparse
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -172,3 +173,22 @@ def frames(family: str, half: str, test_base: int = 0) -> Iterator[Frame]:
     if family == "real":
         return real_frames() if half == "dev" else iter(())
     return render_frames(family, half, test_base)
+
+
+def add_check_round(ap: argparse.ArgumentParser) -> None:
+    """The option ``--test-base B`` of a bench that chooses on the development halves:
+    read round B's test halves instead, only to check a choice on a test half already
+    read and reported (:func:`read_half` gives the half)."""
+    ap.add_argument(
+        "--test-base",
+        type=int,
+        default=None,
+        metavar="B",
+        help="read the test halves of round B instead (a check of a test half read before)",
+    )
+
+
+def read_half(test_base: int | None) -> str:
+    """The half a bench with :func:`add_check_round` reads: ``"dev"`` without
+    ``--test-base``, else ``"test"``."""
+    return "dev" if test_base is None else "test"

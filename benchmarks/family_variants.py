@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from families import FAMILIES, Frame, frames
+from families import FAMILIES, Frame, add_check_round, frames, read_half
 from sklearn.metrics import adjusted_rand_score
 
 from napari_polarseg.engine import Pipeline, Scene
@@ -219,15 +219,9 @@ def main(argv: list[str] | None = None) -> int:
         "estimate), 'truth:1' for the truth's size, 'collapse:S' for the short reach "
         "above S in one segment",
     )
-    ap.add_argument(
-        "--test-base",
-        type=int,
-        default=None,
-        metavar="B",
-        help="read the test halves of round B instead (a check of a test half read before)",
-    )
+    add_check_round(ap)
     args = ap.parse_args(argv)
-    half = "dev" if args.test_base is None else "test"
+    half = read_half(args.test_base)
     chosen = {n: VARIANTS[n] for n in args.variants.split(",") if n}
     for text in args.grid:
         name, spec = text.split("=", 1)

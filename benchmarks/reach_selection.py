@@ -44,7 +44,7 @@ import time
 from typing import Any
 
 import numpy as np
-from families import FAMILIES, Frame, frames
+from families import FAMILIES, Frame, add_check_round, frames, read_half
 from scipy import ndimage
 from sklearn.cluster import KMeans
 from sklearn.metrics import adjusted_rand_score, silhouette_score
@@ -183,15 +183,9 @@ def add_agreement(read: dict[str, dict[str, Any]], frame: Frame) -> None:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--families", default=",".join(FAMILIES))
-    ap.add_argument(
-        "--test-base",
-        type=int,
-        default=None,
-        metavar="B",
-        help="read the test halves of round B instead (a check of a test half read before)",
-    )
+    add_check_round(ap)
     args = ap.parse_args(argv)
-    half = "dev" if args.test_base is None else "test"
+    half = read_half(args.test_base)
     t0 = time.perf_counter()
     means: dict[str, dict[str, list[float]]] = {}
     for family in args.families.split(","):
