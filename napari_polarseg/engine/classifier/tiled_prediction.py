@@ -68,8 +68,11 @@ UNBOUNDED_CORE_HALOS = 4
 #: Bytes a pixel a tiled run holds in memory beside its tiles when its full-size arrays
 #: are in temporary files (:func:`~..disk_arrays.on_disk_at`): the caller's strokes,
 #: the comparisons of the superpixels' borders, the files' pages not yet given back.
-#: Measured: the peak RSS of one tile at a time grew by 11.6 bytes a pixel from 24 to
-#: 100 MP (0.87 and 1.68 GiB, ``benchmarks/bench_scale.py``); with room.
+#: Measured: the process's peak with one tile at a time grew by 11.6 bytes a pixel
+#: from 24 to 100 MP (0.87 and 1.68 GiB, ``benchmarks/bench_scale.py``), the stack and
+#: its flags (8, already off the work limit) among them; with room for a tile's peak
+#: above its estimate (0.34 GiB measured, 0.26 estimated), 16: under 2 GiB two tiles
+#: at once at 24 MP, one at 100 MP (two there peaked at 2.02 GiB).
 RESIDENT_BYTES_PER_PIXEL = 16
 
 
