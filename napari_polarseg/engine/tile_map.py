@@ -41,6 +41,7 @@ from typing import Any, Protocol, TypeVar
 
 import numpy as np
 
+from . import disk_arrays
 from .chunks import N_THREADS
 from .errors import PolarsegError
 from .tiles import TileGrid
@@ -222,6 +223,20 @@ DEFAULT_MAP: TileMap = ThreadTileMap(N_THREADS) if N_THREADS > 1 else in_process
 def current_tile_map() -> TileMap:
     """The tile map set by :func:`tiles_on`, else :data:`DEFAULT_MAP`."""
     return _current[0] or DEFAULT_MAP
+
+
+def boxes_at_once(
+    cap: float, pixels: int, full_size: float, box: float, on_disk: float = 0.0
+) -> int:
+    """How many outer boxes of ``box`` bytes the memory limit ``cap`` holds at once
+    beside a run's ``full_size`` bytes of full-size arrays, which count as ``on_disk``
+    bytes a pixel (what stays in memory beside them) where they go to temporary files
+    (:func:`~.disk_arrays.on_disk_at`: their pages are given back as they are
+    written); at least 1 (:attr:`~.tiles.TileGrid.at_once`). It never changes the tiles
+    themselves, so the labels are the same however many run at once
+    (:func:`tile_map_for`)."""
+    resident = pixels * on_disk if disk_arrays.on_disk_at(pixels, int(cap)) else full_size
+    return max(1, int((cap - resident) // box))
 
 
 def tile_map_for(grid: TileGrid) -> TileMap:

@@ -38,7 +38,7 @@ import numpy as np
 from .. import disk_arrays
 from ..errors import Cancelled
 from ..limits import KEPT_MAPS, memory_limit, scribble_bytes_per_pixel
-from ..tile_map import in_this_process, tile_map_for
+from ..tile_map import boxes_at_once, in_this_process, tile_map_for
 from ..tiles import Box, Tile, TileGrid, row_bands
 from .pixel_classifier import (
     PixelClassifier,
@@ -76,18 +76,6 @@ UNBOUNDED_CORE_HALOS = 4
 RESIDENT_BYTES_PER_PIXEL = 16
 
 
-def boxes_at_once(cap: float, pixels: int, full_size: float, box: float) -> int:
-    """How many outer boxes of ``box`` bytes the limit ``cap`` holds at once beside the
-    run's ``full_size`` bytes of full-size arrays, which count as
-    :data:`RESIDENT_BYTES_PER_PIXEL` a pixel where they go to temporary files; at least
-    1. The tiles never depend on it, so the labels are the same however many run at
-    once."""
-    resident = full_size
-    if disk_arrays.on_disk_at(pixels, int(cap)):
-        resident = pixels * RESIDENT_BYTES_PER_PIXEL
-    return max(1, int((cap - resident) // box))
-
-
 def scribble_tiles(
     shape: tuple[int, int],
     feature_params: Any,
@@ -106,8 +94,8 @@ def scribble_tiles(
     arrays is the budget of one outer box of (c + 2h)² pixels at the work's bytes a
     pixel (:meth:`TileGrid.for_budget`; at least its smallest core); when the
     full-size arrays alone exceed the limit, cores of :data:`UNBOUNDED_CORE_HALOS`
-    halos. As many tiles at once as :func:`boxes_at_once` says (``at_once``:
-    :func:`~..tile_map.tile_map_for`).
+    halos. As many tiles at once as :func:`~..tile_map.boxes_at_once` says, the
+    full-size arrays on disk counted at :data:`RESIDENT_BYTES_PER_PIXEL`.
     """
     cap = memory_limit(limit)
     pixels = int(shape[0]) * int(shape[1])
@@ -123,7 +111,8 @@ def scribble_tiles(
         budget = (UNBOUNDED_CORE_HALOS + 2) ** 2 * halo * halo * work
     grid = TileGrid.for_budget(shape, budget, work, halo, align)
     box = (grid.core + 2 * grid.halo) ** 2 * work
-    return replace(grid, at_once=boxes_at_once(cap, pixels, full_size, box))
+    at_once = boxes_at_once(cap, pixels, full_size, box, RESIDENT_BYTES_PER_PIXEL)
+    return replace(grid, at_once=at_once)
 
 
 def _local(box: Box, outer: Box) -> Box:

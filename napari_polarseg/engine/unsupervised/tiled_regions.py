@@ -57,7 +57,7 @@ import scipy.sparse as sps
 from .. import disk_arrays
 from ..features.pixel_features import EPS_INTENSITY
 from ..limits import KEPT_MAPS, memory_limit
-from ..tile_map import tile_map_for, worker_bytes
+from ..tile_map import boxes_at_once, tile_map_for, worker_bytes
 from ..tiles import MIN_CORE, Tile, TileGrid
 from .params import UnsupervisedParams
 from .pixel_maps import edge_weight
@@ -137,21 +137,10 @@ def region_tiles(
     if worker is not None:  # the outer box within a Dask worker's share, whatever else
         side = int(math.sqrt(worker / TILE_BYTES_PER_PIXEL)) - 2 * grid.halo
         core = min(core, max(side, MIN_CORE))
-    at_once = boxes_at_once(cap, pixels, kept + pixels * TILED_FIXED_BYTES, core, grid.halo)
+    box = (core + 2 * grid.halo) ** 2 * TILE_BYTES_PER_PIXEL
+    at_once = boxes_at_once(cap, pixels, kept + pixels * TILED_FIXED_BYTES, box)
     grid = TileGrid(grid.shape, core, grid.halo, at_once=at_once)
     return grid if len(grid) > 1 else None
-
-
-def boxes_at_once(cap: float, pixels: int, full_size: float, core: int, halo: int) -> int:
-    """How many outer boxes of a ``core`` + 2 ``halo`` side (at
-    :data:`TILE_BYTES_PER_PIXEL`) the limit ``cap`` holds at once beside the run's
-    ``full_size`` bytes of full-size arrays, which count as none where they go to
-    temporary files (:func:`~..disk_arrays.on_disk_at`: their pages are given back as
-    they are written); at least 1. The tile choice itself never depends on it, so the
-    tiles and the labels are the same however many run at once."""
-    resident = 0.0 if disk_arrays.on_disk_at(pixels, int(cap)) else full_size
-    box = (core + 2 * halo) ** 2 * TILE_BYTES_PER_PIXEL
-    return max(1, int((cap - resident) // box))
 
 
 def histogram_median(counts: np.ndarray) -> float:
