@@ -128,6 +128,13 @@ SHORT_REACH = {"diffusion_range": 0.07, "diffusion_tau": 0.75}
 VARIANTS: dict[str, Variant] = {
     "default": Variant(),
     "superpixels": Variant(method="superpixels"),
+    # the default without its texture group; and without it nor the estimated size
+    # (the default before both: the previous default)
+    "no texture": Variant(params={"texture": ()}),
+    "previous default": Variant({"follows_estimate": False}, params={"texture": ()}),
+    "frame-share scales": Variant({"follows_estimate": False}),
+    "texture weight 0.5": Variant(params={"texture_weight": 0.5}),
+    "texture weight 1": Variant(params={"texture_weight": 1.0}),
     "estimated size": Variant({"follows_estimate": True}),
     "truth size": Variant(truth_size=True),
     "reach 0.25": Variant({"follows_estimate": True, "reach_objects": 0.25}),

@@ -204,13 +204,15 @@ def evaluation_message(evaluation: dict[str, Any]) -> Message:
 
 def object_size_text(record: dict[str, Any]) -> str:
     """What the superpixel methods did with the object size (their record): given and
-    applied, or estimated and (by default) only reported."""
+    applied, estimated and applied, or estimated and only reported (the default: below a
+    tenth of the frame's short side, where it is more likely a texture's grain)."""
     size, area = record["object_size"], record["region_areas"][0]
     if not record.get("object_size_found"):
         return f"object size {size:.0f} px (given): superpixel area {area} px"
     if record.get("object_size_applied"):
         return f"object size {size:.0f} px (estimated from the scene): superpixel area {area} px"
     return (
-        f"object size about {size:.0f} px (estimated from the scene; the superpixels keep "
-        f"their share of the frame, area {area} px; --object-size {size:.0f} applies it)"
+        f"object size about {size:.0f} px (estimated from the scene, not followed: the "
+        f"superpixels keep their share of the frame, area {area} px; --object-size "
+        f"{size:.0f} applies it)"
     )

@@ -81,8 +81,13 @@ def test_given_size_sets_the_scales_and_the_record_says_so():
     assert expected <= method.params.area_of(stack.shape[1:])
     assert record["object_size_applied"] is True
     found = scene.segment(AUTO.replace(n_segments=3)).method_record
-    assert found["object_size_found"] is True and found["object_size_applied"] is False
-    assert found["region_areas"] == [method.params.area_of(stack.shape[1:])]
+    # the estimate is followed where it is at least a tenth of the short side (160 px)
+    shape = stack.shape[1:]
+    followed = found["object_size"] >= method.estimate_floor * min(shape)
+    assert method.estimate_floor == pytest.approx(0.10)
+    assert found["object_size_found"] is True and found["object_size_applied"] is followed
+    used = method.scaled_params(found["object_size"], shape) if followed else method.params
+    assert found["region_areas"] == [used.area_of(shape)]
     pol = scene.polarisation(AUTO)
     estimate = estimate_object_size(pol.intensity, pol.dop, pol.phase, ~pol.invalid)
     assert found["object_size"] == pytest.approx(estimate.size_px, abs=0.05)
@@ -116,5 +121,10 @@ def test_cli_object_size_flag(tmp_path, capsys):
     assert json.loads((out / "params.json").read_text())["params"]["object_size"] == 20
     argv[argv.index("20")] = "auto"
     assert cli.main(argv) == 0
-    assert "(estimated from the scene; the superpixels keep" in capsys.readouterr().out
+    line = next(t for t in capsys.readouterr().out.splitlines() if "object size" in t)
+    size = float(line.split("object size")[1].split("px")[0].replace("about", ""))
+    if size >= 16:  # a tenth of the 160 px side: followed
+        assert "(estimated from the scene): superpixel area" in line
+    else:
+        assert "(estimated from the scene, not followed: the superpixels keep" in line
     assert json.loads((out / "params.json").read_text())["params"]["object_size"] == 0

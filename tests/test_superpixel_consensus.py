@@ -155,10 +155,11 @@ def test_progress_reaches_each_stage_in_order_while_the_sizes_are_drawn():
 
 
 @pytest.mark.skipif(not REAL_DIR.is_dir(), reason="real frames not found beside the repository")
-def test_the_sizes_agree_on_the_fruits_one_size_misses():
-    """The real fruits frame (apple, orange, banana on white paper, hand-labelled): one
-    superpixel size puts the orange with the paper (measured ARI 0.77); the three sizes'
-    consensus separates all four (measured 0.995)."""
+def test_the_sizes_agree_on_the_fruits_frame_like_the_default():
+    """The real fruits frame (apple, orange, banana on white paper, hand-labelled): the
+    three sizes' consensus separates all four (measured 0.995); so nearly does the
+    default with its texture group (measured 0.922; 0.77 without it, the orange with
+    the paper)."""
     truth_file = read_truth_file(TRUTH_DIR / "fruits_IMX250MZR.json")
     data = pio.read_stack(real_frame_path(truth_file, REAL_DIR), mosaic=truth_file.mosaic)
     truth, scored = truth_file.truth, truth_file.truth > 0
@@ -169,4 +170,4 @@ def test_the_sizes_agree_on_the_fruits_one_size_misses():
         labels = scene.segment(AUTO.replace(method=method, n_segments=k)).labels
         scores[method] = adjusted_rand_score(truth[scored], labels[scored])
     assert scores["superpixel_consensus"] > 0.95
-    assert scores["surface_superpixels"] < 0.85
+    assert scores["surface_superpixels"] > 0.9

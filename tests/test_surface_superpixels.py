@@ -16,6 +16,7 @@ from napari_polarseg.engine.methods.valid_superpixels import ValidSuperpixels
 from napari_polarseg.engine.params import AUTO
 from napari_polarseg.engine.unsupervised.choose_k import estimate_k
 from napari_polarseg.engine.unsupervised.params import UnsupervisedParams
+from napari_polarseg.engine.unsupervised.texture import TEXTURE_FEATURES
 
 
 def test_auto_preset_is_this_method_with_the_wider_diffusion():
@@ -24,7 +25,10 @@ def test_auto_preset_is_this_method_with_the_wider_diffusion():
     assert isinstance(method, ValidSuperpixels) and method.finds_k
     base = UnsupervisedParams()
     assert method.params == base.replace(
-        diffusion_range=surface_superpixels.REACH, diffusion_tau=surface_superpixels.BORDER_SCALE
+        diffusion_range=surface_superpixels.REACH,
+        diffusion_tau=surface_superpixels.BORDER_SCALE,
+        texture=TEXTURE_FEATURES,
+        texture_weight=surface_superpixels.TEXTURE_WEIGHT,
     )
     # it reaches further and crosses fainter borders than the valid-superpixel method
     assert method.params.diffusion_range > base.diffusion_range

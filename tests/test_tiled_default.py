@@ -29,7 +29,10 @@ CORE = 200
 
 @pytest.fixture(scope="module")
 def scene():
-    s = make_scene("scattered_leaves", shape=SHAPE, seed=4)
+    # a scene the default segments well above chance (ARI 0.47 whole): on one it cannot
+    # (seed 4, 0.08) the k-means optima lie so close that a feature moved by 1e-3 picks
+    # another, tiled or not
+    s = make_scene("scattered_leaves", shape=SHAPE, seed=5)
     pol = Scene(s.stack, s.angles).polarisation(PRESETS["auto"])
     return s, pol
 
@@ -70,6 +73,8 @@ def test_tiled_labels_agree_with_whole_image(scene):
     assert tiled.n == whole.n
     # the superpixels are the whole image's but for watershed decisions near the cuts
     assert np.mean(tiled.regions == whole.regions) > 0.99
+    # and so are their projected features, the texture group's too
+    assert np.median(np.abs(tiled.z - whole.z), axis=0).max() < 0.01 * whole.z.std(axis=0).min()
     a, b = _labels(whole), _labels(tiled)
     assert adjusted_rand_score(a.ravel(), b.ravel()) >= 0.98
 

@@ -55,6 +55,9 @@ class SuperpixelConsensus(SurfaceSuperpixels):
     name = "superpixel_consensus"
     title = "superpixels at three sizes, the segments they agree on (unsupervised)"
     area_factors = AREA_FACTORS
+    #: its sizes are multiples of the frame-share area, as measured: an estimated object
+    #: size is reported, not followed (a given one is)
+    follows_estimate = False
 
     def region_models(
         self, scene: Scene, pol: PolarisationImage, run: MethodRun, params: UnsupervisedParams

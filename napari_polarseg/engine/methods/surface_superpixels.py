@@ -38,6 +38,7 @@ from __future__ import annotations
 
 from ..unsupervised.merge import weakest_border
 from ..unsupervised.params import UnsupervisedParams
+from ..unsupervised.texture import TEXTURE_FEATURES
 from .valid_superpixels import ValidSuperpixels
 
 #: Reach of the node features' diffusion, a share of the image side √(H·W).
@@ -47,6 +48,12 @@ REACH = 0.20
 REACH_OBJECTS = 0.5
 #: τ of the diffusion's border weights, in units of the median border strength.
 BORDER_SCALE = 1.25
+#: Weight of the polarisation-texture node features (:mod:`..unsupervised.texture`)
+#: against the mean ones, which are diffused; the texture ones are not.
+TEXTURE_WEIGHT = 0.3
+#: The estimated object size is followed where it is at least this share of the short
+#: side (:attr:`~.valid_superpixels.ValidSuperpixels.estimate_floor`).
+ESTIMATE_FLOOR = 0.10
 #: With ``n_segments = 0``: the fewest k whose silhouette is within this share of the
 #: best (:func:`~napari_polarseg.engine.unsupervised.choose_k.estimate_k`).
 K_TOLERANCE = 0.10
@@ -61,8 +68,16 @@ class SurfaceSuperpixels(ValidSuperpixels):
     k_tolerance = K_TOLERANCE
     reach_objects = REACH_OBJECTS
     merge_rule = staticmethod(weakest_border)
+    follows_estimate = True
+    estimate_floor = ESTIMATE_FLOOR
 
     def __init__(self, params: UnsupervisedParams | None = None) -> None:
         super().__init__(
-            params or UnsupervisedParams(diffusion_range=REACH, diffusion_tau=BORDER_SCALE)
+            params
+            or UnsupervisedParams(
+                diffusion_range=REACH,
+                diffusion_tau=BORDER_SCALE,
+                texture=TEXTURE_FEATURES,
+                texture_weight=TEXTURE_WEIGHT,
+            )
         )

@@ -113,6 +113,10 @@ class ValidSuperpixels(SuperpixelClustering):
     #: objects (docs/quality.md, *Scene families*); the estimate is still made and
     #: reported
     follows_estimate = False
+    #: With :attr:`follows_estimate`, the estimate is followed only where it is at least
+    #: this share of the image's short side; a smaller one (a texture's grain, a
+    #: camouflage net's mesh, taken for objects) leaves the frame-share scales
+    estimate_floor = 0.0
     #: Reach of the node features' diffusion, in object sizes
     reach_objects = REACH_OBJECTS
     #: Superpixels across one object size (the superpixel side is the object size / this)
@@ -170,7 +174,8 @@ class ValidSuperpixels(SuperpixelClustering):
         shape = pol.intensity.shape
         record: dict[str, Any] = {"invalid_share": round(float(np.mean(pol.invalid)), 6)}
         size = scene.object_size(params)
-        applied = self.follows_estimate or not size.estimated
+        followed = self.follows_estimate and size.size_px >= self.estimate_floor * min(shape)
+        applied = followed or not size.estimated
         unsupervised = self.scaled_params(size.size_px, shape) if applied else self.params
         record.update(
             object_size=round(size.size_px, 1),

@@ -10,6 +10,7 @@ import numpy as np
 
 from ..errors import PolarsegError
 from ..features.superpixels import auto_region_area
+from .texture import TEXTURE_FEATURES
 
 #: Automatic superpixel area: the image's pixels / this, within the bounds below.
 REGIONS_PER_IMAGE = 3000
@@ -43,6 +44,10 @@ NODE_FEATURES = (
     "dop_vs_log_intensity_slope",  # least-squares slope of ρ against log Î
     "dop_vs_log_intensity_corr",  # correlation of ρ and log Î
     "log_dop_given_intensity",  # log mean ρ less its image-wide fit on mean log Î
+    # the texture group (:mod:`.texture`), each less its fit on the regions' mean log Î:
+    "dop_grain",  # γ of ρ at lag 1 px over (local variance + γ): fine against coarse relief
+    "aolp_grain",  # γ of the AoLP phasor e^{2iφ} at lag 1 px
+    "intensity_grain",  # log γ of log Î at lag 1 px
     "dop_over_shape_trend",  # polarisation / the trend of one smooth surface (close-up)
 )
 
@@ -73,6 +78,14 @@ class UnsupervisedParams:
     features : tuple of str
         Node features, names from :data:`NODE_FEATURES` (the default: the measured
         best of the module docstring).
+    texture : tuple of str
+        Node features of the texture group (:data:`.texture.TEXTURE_FEATURES`) added after
+        ``features``: standardised and clipped like them but not diffused (the
+        diffusion's borders follow the mean maps, which do not change where only the
+        relief does), then scaled by ``texture_weight``; () = none.
+    texture_weight : float
+        Weight of the texture columns against the others (each of unit variance before
+        the diffusion), >= 0.
     pixel_scales : tuple of float
         σ (pixels) of the :mod:`.pixel_features` stack averaged per region and added to
         the node features; () = none.
@@ -136,6 +149,8 @@ class UnsupervisedParams:
         "dop_spread",
         "dop_vs_log_intensity_slope",
     )
+    texture: tuple[str, ...] = ()
+    texture_weight: float = 1.0
     pixel_scales: tuple[float, ...] = ()
     pixel_groups: tuple[str, ...] = ("intensity", "polarisation", "invariant")
     variance: float = 0.95
@@ -172,6 +187,7 @@ class UnsupervisedParams:
             )
         features = tuple(str(f) for f in self.features)
         unknown = [f for f in features if f not in NODE_FEATURES]
+        self._check_texture()
         if unknown or (not features and not self.pixel_scales):
             raise PolarsegError(
                 f"features must be some of {', '.join(NODE_FEATURES)}; got {self.features!r}"
@@ -258,6 +274,17 @@ class UnsupervisedParams:
         reach = min(reach_objects * float(object_size) / math.sqrt(shape[0] * shape[1]), 1.0)
         return self.replace(region_area=area, diffusion_range=reach)
 
+    def _check_texture(self) -> None:
+        """Check and normalise ``texture`` and ``texture_weight``."""
+        texture = tuple(str(f) for f in self.texture)
+        if any(f not in TEXTURE_FEATURES for f in texture):
+            raise PolarsegError(
+                f"texture must be some of {', '.join(TEXTURE_FEATURES)}; got {self.texture!r}"
+            )
+        if not (math.isfinite(self.texture_weight) and self.texture_weight >= 0):
+            raise PolarsegError(f"texture_weight must be >= 0, got {self.texture_weight}")
+        object.__setattr__(self, "texture", texture)
+
     def close_up_params(self) -> UnsupervisedParams:
         """The parameters used on a close-up of one smooth surface
         (:mod:`.shape_trend`): the departure of the polarisation from the surface's
@@ -267,6 +294,7 @@ class UnsupervisedParams:
         ``benchmarks/evaluate_unsupervised.py`` (variants ``close-up-*``)."""
         return self.replace(
             features=CLOSE_UP_FEATURES,
+            texture=(),
             pixel_scales=(),
             diffusion=0.0,
             clip=0.0,

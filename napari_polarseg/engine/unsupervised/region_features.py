@@ -14,6 +14,7 @@ import numpy as np
 from ..features.pixel_features import EPS_DOP, EPS_INTENSITY
 from .params import NODE_FEATURES, TREND
 from .shape_trend import polarisation_over_trend, region_centroids
+from .texture import TEXTURE_FEATURES, given_intensity, grain_maps, texture_features
 
 #: Degree of the image-wide polynomial of :func:`dop_given_intensity`.
 RESIDUAL_DEGREE = 3
@@ -24,11 +25,16 @@ def _region_sums(flat: np.ndarray, n: int, maps: dict[str, np.ndarray]) -> dict[
 
 
 def pixel_terms(
-    intensity: np.ndarray, dop: np.ndarray, phase: np.ndarray, centre: float | None = None
+    intensity: np.ndarray,
+    dop: np.ndarray,
+    phase: np.ndarray,
+    centre: float | None = None,
+    texture: bool = True,
 ) -> dict[str, np.ndarray]:
     """The per-pixel maps whose region sums give :func:`node_features` (float64): Î, S1,
     S2, log Î (centred on its median, or on ``centre``: the same constant for every
-    tile of one image), (log Î)², ρ, ρ², ρ log Î, cos 2φ and sin 2φ.
+    tile of one image), (log Î)², ρ, ρ², ρ log Î, cos 2φ and sin 2φ; with ``texture``
+    also the grain maps of :func:`.texture.grain_maps` (float32).
 
     They do not depend on the regions, so :func:`~.pixel_maps.pixel_maps` computes them
     while the superpixels' edge map is drawn, once for every superpixel size.
@@ -37,7 +43,9 @@ def pixel_terms(
     log_i -= np.median(log_i) if centre is None else centre
     d = dop.astype(np.float64)
     c, s = np.cos(2 * phase.astype(np.float64)), np.sin(2 * phase.astype(np.float64))
+    grain = grain_maps(log_i, d, c, s) if texture else {}
     return {
+        **grain,
         "s0": intensity.astype(np.float64),
         "s1": intensity * d * c,
         "s2": intensity * d * s,
@@ -72,7 +80,8 @@ def node_features(
     flat = regions.ravel()
     n = int(flat.max()) + 1
     count = np.maximum(np.bincount(flat, minlength=n), 1).astype(float)
-    terms = pixel_terms(intensity, dop, phase) if terms is None else terms
+    if terms is None:
+        terms = pixel_terms(intensity, dop, phase, texture=bool(set(names) & set(TEXTURE_FEATURES)))
     sums = _region_sums(flat, n, terms)
     centroid = region_centroids(regions, count) if "dop_over_shape_trend" in names else None
     return features_of_sums(sums, count, names, trend, centroid, regions.shape)
@@ -89,7 +98,8 @@ def features_of_sums(
     """The features of :func:`node_features` (n, len(names)) from the region sums of the
     :func:`pixel_terms` (each (n,), keyed as they are) and the regions' pixel counts
     ``count`` (n,), at least 1; ``centroid`` (n, 2, pixels) and the frame's ``shape``
-    (H, W) are read by ``dop_over_shape_trend`` alone. Whatever adds the sums up (one
+    (H, W) are read by ``dop_over_shape_trend`` alone, the sums of the grain maps by the
+    texture features (:func:`.texture.texture_features`). Whatever adds the sums up (one
     image, or its tiles one after the other) gives the same features."""
     m = {k: v / count for k, v in sums.items()}
     var_l = np.maximum(m["ll"] - m["l"] ** 2, 0)
@@ -109,7 +119,8 @@ def features_of_sums(
         "log_dop_given_intensity": lambda: dop_given_intensity(m["l"], m["d"], count),
         "dop_over_shape_trend": lambda: _over_trend(sums, count, centroid, shape, trend),
     }
-    return np.stack([make[k]() for k in names], axis=1)
+    texture = texture_features(m, count, names)
+    return np.stack([texture[k] if k in texture else make[k]() for k in names], axis=1)
 
 
 def _over_trend(
@@ -136,8 +147,4 @@ def dop_given_intensity(
     relation, and a region of another material (other n, other depolarisation) lies off
     it at whatever tilt; ρ̄ and log Î are the regions' means.
     """
-    y = np.log(dop + EPS_DOP)
-    x = log_intensity - np.average(log_intensity, weights=weight)
-    scale = max(float(np.sqrt(np.average(x * x, weights=weight))), 1e-12)
-    coef = np.polynomial.polynomial.polyfit(x / scale, y, degree, w=np.sqrt(weight))
-    return y - np.polynomial.polynomial.polyval(x / scale, coef)
+    return given_intensity(np.log(dop + EPS_DOP), log_intensity, weight, degree)

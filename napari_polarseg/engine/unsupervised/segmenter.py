@@ -233,9 +233,9 @@ def _region_features(
     region features of :func:`node_features` (from ``terms``,
     :func:`.region_features.pixel_terms`, when made), then the region means of pixel
     features."""
-    names = list(p.features)
+    names = list(p.features + p.texture)
     trend = (p.trend_degree, p.trend_reach, p.trend_iterations)
-    cols = [node_features(i, d, ph, regions, p.features, trend, terms)] if p.features else []
+    cols = [node_features(i, d, ph, regions, tuple(names), trend, terms)] if names else []
     if p.pixel_scales:
         from ..features.pixel_features import PixelFeatureParams, pixel_features
 
@@ -259,13 +259,18 @@ def project_features(
     p: UnsupervisedParams,
 ) -> np.ndarray:
     """Projected node features z (n, c): standardised and clipped features, diffused over
-    the edge-aware region ``graph``, projected (PCA or MAF). Independent of k."""
+    the edge-aware region ``graph`` but for the texture group (``p.texture``, the
+    columns after ``p.features``), which is scaled by ``p.texture_weight``, projected
+    (PCA or MAF). Independent of k."""
     xs = _standardise(x, weight)
     if p.clip > 0:
         xs = np.clip(xs, -p.clip, p.clip)
+    texture = np.zeros(xs.shape[1], dtype=bool)  # the columns of _region_features' order
+    texture[len(p.features) : len(p.features) + len(p.texture)] = True
     steps = diffusion_steps(p.diffusion_range, x.shape[0], p.diffusion)
     if steps:  # after the standardising: a column of mere noise shrinks, not rescaled
-        xs = diffuse(xs, graph, p.diffusion, steps)
+        xs[:, ~texture] = diffuse(xs[:, ~texture], graph, p.diffusion, steps)
+    xs[:, texture] *= p.texture_weight
     if p.projection == "maf":
         return maf_features(xs, adjacency, weight, p.variance, p.components)
     return pca_features(xs, p.variance).features

@@ -139,16 +139,15 @@ class CoreSums:
     below: np.ndarray | None
 
 
-def _sums(core: np.ndarray, box: Box, maps: Maps, centre: float, n: int) -> tuple:
+def _sums(core: np.ndarray, box: Box, px: dict[str, np.ndarray], n: int) -> tuple:
     """(ids, count, terms, position) of the regions of ``core`` at ``box`` (image
-    coordinates) with the maps of its pixels: ``np.bincount`` over n regions, kept
-    for the regions present."""
+    coordinates) with the per-pixel terms ``px`` of its pixels: ``np.bincount`` over n
+    regions, kept for the regions present."""
     flat = core.ravel()
     full = np.bincount(flat, minlength=n).astype(np.float64)
     ids = np.flatnonzero(full)
     terms = {
-        name: np.bincount(flat, weights=term.ravel(), minlength=n)[ids]
-        for name, term in pixel_terms(*maps, centre=centre).items()
+        name: np.bincount(flat, weights=term.ravel(), minlength=n)[ids] for name, term in px.items()
     }
     h, w = core.shape
     rows = np.repeat(np.arange(box[0].start, box[0].stop, dtype=np.float64), w)
@@ -199,7 +198,10 @@ def region_core(
     if v is not None:
         core[~v[inner]] = outside
     n = outside + 1
-    ids, count, terms, position = _sums(core, tile.core, tuple(m[inner] for m in filled), centre, n)
+    # the terms of the outer box, cut to the core: the grain maps read a few pixels
+    # around each one (.texture.GRAIN_SIGMA), which the halo holds
+    px = {k: v[inner] for k, v in pixel_terms(*filled, centre=centre).items()}
+    ids, count, terms, position = _sums(core, tile.core, px, n)
     e = edges[inner]
     pairs = [
         border_pairs(a, b, ea, eb, n)

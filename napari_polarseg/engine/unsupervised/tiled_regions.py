@@ -65,6 +65,7 @@ from .region_diffusion import border_weights, symmetric
 from .region_features import features_of_sums
 from .segmenter import RegionModel, project_features
 from .shape_trend import surface_trend_share
+from .texture import GRAIN_REACH
 from .tiled_labels import TiledLabels
 from .tiled_region_tasks import (
     LOG_BINS,
@@ -101,9 +102,10 @@ EDGE_REACH = 6
 
 def tile_halo(shape: tuple[int, int], params: UnsupervisedParams) -> int:
     """Halo (pixels) of the tiles: :data:`HALO_SEEDS` spacings of the watershed's seeds
-    (√ of the superpixel area, pixels), at least the edge map's reach and the border
-    refinement's."""
-    return max(HALO_SEEDS * int(math.ceil(math.sqrt(params.area_of(shape)))), 4 * EDGE_REACH)
+    (√ of the superpixel area, pixels), at least the edge map's reach, the border
+    refinement's and the grain maps' (:data:`~.texture.GRAIN_REACH`)."""
+    seeds = HALO_SEEDS * int(math.ceil(math.sqrt(params.area_of(shape))))
+    return max(seeds, 4 * EDGE_REACH, GRAIN_REACH)
 
 
 def region_tiles(
@@ -344,7 +346,7 @@ def tiled_prepare_regions(
     close_up = share > p.close_up_share
     q = p.close_up_params() if close_up else p
     trend = (q.trend_degree, q.trend_reach, q.trend_iterations)
-    x = features_of_sums(terms, count, q.features, trend, centroid, shape)
+    x = features_of_sums(terms, count, q.features + q.texture, trend, centroid, shape)
     x = np.where(np.isfinite(x), x, 0.0)
     weight = raw[keep].astype(float)
     adjacency, borders = _graph(sums, old, n, q.diffusion_tau)
