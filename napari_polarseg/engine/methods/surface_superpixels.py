@@ -20,6 +20,20 @@ wall) ρ and the shading drift across the frame, and a short diffusion leaves th
 in the features, so k-means cuts the surface in two along it and merges two materials
 elsewhere.
 
+Two node-feature groups, and the object size:
+
+- **texture** (:mod:`~napari_polarseg.engine.unsupervised.texture`): how grainy ρ, the
+  AoLP and log Î are at the scale of one pixel, each less its image-wide fit on the
+  regions' brightness. These columns are not diffused (the walk's borders follow the
+  mean maps, which do not change where only the relief does) and weigh
+  :data:`TEXTURE_WEIGHT` against the diffused mean ones: coatings of one lacquer that
+  differ only in their relief, or a moulded leaf among waxy ones, are told apart where
+  the means are alike;
+- **object size**: the estimated size is followed (superpixels of side D / 8, a reach of
+  :data:`REACH_OBJECTS` · D, never coarser than the frame-share scales) where it is at
+  least :data:`ESTIMATE_FLOOR` of the short side; a smaller estimate, more often the
+  grain of a texture or a net than an object, keeps the frame-share scales.
+
 Of the k + 1 clusters, the two merged are those whose shared border is **weakest on
 average** (:func:`~napari_polarseg.engine.unsupervised.merge.weakest_border`), not the
 two closest in feature space: where the clustering still cuts one surface along its
