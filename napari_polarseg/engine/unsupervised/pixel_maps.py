@@ -18,6 +18,7 @@ from ..features.superpixels import superpixel_edges
 from ..physics.pixel_mask import nearest_valid
 from .params import UnsupervisedParams
 from .region_features import pixel_terms
+from .texture import TEXTURE_FEATURES
 
 
 def edge_weight(p: UnsupervisedParams) -> float:
@@ -92,6 +93,8 @@ def pixel_maps(
     is (numpy releases the GIL)."""
     p = params or UnsupervisedParams()
     (i, d, ph), valid, nearest = _filled_maps(intensity, dop, phase, valid)
-    terms = in_background(lambda: pixel_terms(i, d, ph))
+    # the grain maps only for parameters that read them (the other methods skip their cost)
+    grain = bool(set(p.features + p.texture) & set(TEXTURE_FEATURES))
+    terms = in_background(lambda: pixel_terms(i, d, ph, texture=grain))
     edges = superpixel_edges(i, d, ph, edge_weight(p))
     return PixelMaps((i, d, ph), valid, nearest, terms(), edges, edge_weight(p))
