@@ -45,7 +45,7 @@ NODE_FEATURES = (
     "dop_vs_log_intensity_corr",  # correlation of ρ and log Î
     "log_dop_given_intensity",  # log mean ρ less its image-wide fit on mean log Î
     # the texture group (:mod:`.texture`), each less its fit on the regions' mean log Î:
-    "dop_grain",  # γ of ρ at lag 1 px over (local variance + γ): fine against coarse relief
+    "dop_grain",  # γ of ρ at lag 1 px over γ at lags 1 + 2: fine against coarse relief
     "aolp_grain",  # γ of the AoLP phasor e^{2iφ} at lag 1 px
     "intensity_grain",  # log γ of log Î at lag 1 px
     "dop_over_shape_trend",  # polarisation / the trend of one smooth surface (close-up)

@@ -18,7 +18,7 @@ from ..features.superpixels import superpixel_edges
 from ..physics.pixel_mask import nearest_valid
 from .params import UnsupervisedParams
 from .region_features import pixel_terms
-from .texture import TEXTURE_FEATURES
+from .texture import reads_grain
 
 
 def edge_weight(p: UnsupervisedParams) -> float:
@@ -94,7 +94,7 @@ def pixel_maps(
     p = params or UnsupervisedParams()
     (i, d, ph), valid, nearest = _filled_maps(intensity, dop, phase, valid)
     # the grain maps only for parameters that read them (the other methods skip their cost)
-    grain = bool(set(p.features + p.texture) & set(TEXTURE_FEATURES))
+    grain = reads_grain(p.features + p.texture)
     terms = in_background(lambda: pixel_terms(i, d, ph, texture=grain))
     edges = superpixel_edges(i, d, ph, edge_weight(p))
     return PixelMaps((i, d, ph), valid, nearest, terms(), edges, edge_weight(p))

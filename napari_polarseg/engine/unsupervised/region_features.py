@@ -14,7 +14,7 @@ import numpy as np
 from ..features.pixel_features import EPS_DOP, EPS_INTENSITY
 from .params import NODE_FEATURES, TREND
 from .shape_trend import polarisation_over_trend, region_centroids
-from .texture import TEXTURE_FEATURES, given_intensity, grain_maps, texture_features
+from .texture import given_intensity, grain_maps, reads_grain, texture_features
 
 #: Degree of the image-wide polynomial of :func:`dop_given_intensity`.
 RESIDUAL_DEGREE = 3
@@ -29,7 +29,7 @@ def pixel_terms(
     dop: np.ndarray,
     phase: np.ndarray,
     centre: float | None = None,
-    texture: bool = True,
+    texture: bool = False,
 ) -> dict[str, np.ndarray]:
     """The per-pixel maps whose region sums give :func:`node_features` (float64): Î, S1,
     S2, log Î (centred on its median, or on ``centre``: the same constant for every
@@ -81,7 +81,7 @@ def node_features(
     n = int(flat.max()) + 1
     count = np.maximum(np.bincount(flat, minlength=n), 1).astype(float)
     if terms is None:
-        terms = pixel_terms(intensity, dop, phase, texture=bool(set(names) & set(TEXTURE_FEATURES)))
+        terms = pixel_terms(intensity, dop, phase, texture=reads_grain(names))
     sums = _region_sums(flat, n, terms)
     centroid = region_centroids(regions, count) if "dop_over_shape_trend" in names else None
     return features_of_sums(sums, count, names, trend, centroid, regions.shape)

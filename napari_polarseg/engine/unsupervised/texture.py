@@ -6,15 +6,17 @@ of their surface (a lacquer rolled, stippled or spattered; a moulded leaf agains
 waxy one): the facets' normals then vary from pixel to pixel, and with them ρ and φ.
 How fast they vary is a material cue that does not change with the amount of light.
 Each map is a Gaussian-weighted local statistic (σ = :data:`GRAIN_SIGMA` px) of the
-differences between 4-neighbours, the semivariogram at lag 1 px,
-γ_x = ½ E[(x(p) − x(p + 1))²] (unitless for ρ and the phasor; log Î in nepers²):
+semivariogram γ_x = ½ (x(p) − x(q))², q the one of p's four neighbours at the lag that
+differs least from it (:func:`neighbour_variogram`: an edge beside p leaves a neighbour
+on p's side, so its step does not count); unitless for ρ and the phasor, log Î in
+nepers²:
 
-- ``grain_dop``: γ_ρ / (σ²_ρ + γ_ρ), σ²_ρ the local variance of ρ: about ½ where ρ
-  varies from pixel to pixel (a fine relief, noise), near 0 where it varies smoothly
-  (a coarse relief, shading), whatever the amount of variation;
-- ``grain_aolp``: γ of the AoLP phasor e^{2iφ} (its cos and sin averaged), 0 for a
-  uniform AoLP, ½ for a random one;
-- ``grain_intensity``: log γ of log Î.
+- ``grain_dop``: γ_ρ(1) / (γ_ρ(1) + γ_ρ(2)), at lags 1 and 2 px: about ½ where ρ varies
+  from pixel to pixel (a relief finer than a pixel, noise), near 0 where it varies
+  smoothly (a coarse relief, shading), whatever the amount of variation;
+- ``grain_aolp``: γ(1) of the AoLP phasor e^{2iφ} (its cos and sin averaged), 0 for a
+  uniform AoLP and the larger the more the AoLP changes from pixel to pixel;
+- ``grain_intensity``: log γ(1) of log Î.
 
 Dark pixels are noisier, so every map rises in the shadows: the node features
 (:func:`texture_features`) are the region means less their image-wide cubic fit on the
@@ -39,6 +41,11 @@ EPS_GRAIN = 1e-8
 #: Pixels each grain map reads each way: the lag-2 neighbours and the Gaussian window
 #: (SciPy's default truncation, 4 σ).
 GRAIN_REACH = 2 + int(4 * GRAIN_SIGMA + 0.5)
+
+
+def reads_grain(names: tuple[str, ...]) -> bool:
+    """Whether node features ``names`` read the grain maps (any of :data:`TEXTURE_FEATURES`)."""
+    return any(name in TEXTURE_FEATURES for name in names)
 
 
 def neighbour_variogram(a: np.ndarray, lag: int = 1) -> np.ndarray:

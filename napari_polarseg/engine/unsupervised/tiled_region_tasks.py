@@ -182,12 +182,14 @@ def region_core(
     scales: tuple[float, float],
     centre: float,
     shape: tuple[int, int],
+    grain: bool = False,
 ) -> CoreSums:
     """One tile's superpixels and sums (:mod:`.tiled_regions`, steps 1–3): the compact
     watershed from the whole image's ``seeds`` on the edge map of its outer box
     (``maps`` and clustered pixels ``valid`` of ``tile.outer``; edge ``weight`` and
     ``scales``), kept on the core; the outside pixels numbered ``seeds.count``; the
-    sums of the per-pixel terms (log Î centred on ``centre``) over the regions."""
+    sums of the per-pixel terms (log Î centred on ``centre``; with ``grain`` the grain
+    maps too) over the regions."""
     filled, v, _ = filled_box(maps, valid, ALL)
     edges = superpixel_edges(*filled, weight, scales)
     labels = watershed(edges, seeds.markers(tile.outer), compactness=COMPACTNESS)
@@ -199,8 +201,9 @@ def region_core(
         core[~v[inner]] = outside
     n = outside + 1
     # the terms of the outer box, cut to the core: the grain maps read a few pixels
-    # around each one (.texture.GRAIN_SIGMA), which the halo holds
-    px = {k: v[inner] for k, v in pixel_terms(*filled, centre=centre).items()}
+    # around each one (.texture.GRAIN_REACH), which the halo holds
+    terms = pixel_terms(*filled, centre=centre, texture=grain)
+    px = {k: v[inner] for k, v in terms.items()}
     ids, count, terms, position = _sums(core, tile.core, px, n)
     e = edges[inner]
     pairs = [

@@ -65,7 +65,7 @@ from .region_diffusion import border_weights, symmetric
 from .region_features import features_of_sums
 from .segmenter import RegionModel, project_features
 from .shape_trend import surface_trend_share
-from .texture import GRAIN_REACH
+from .texture import GRAIN_REACH, reads_grain
 from .tiled_labels import TiledLabels
 from .tiled_region_tasks import (
     LOG_BINS,
@@ -258,6 +258,7 @@ def _tile_pass(
     of the module docstring. ``progress`` gets the share of tiles done."""
     shape = maps[0].shape
     weight = edge_weight(p)
+    grain = reads_grain(p.features + p.texture)
     centre, scales = edge_scales(maps, valid, grid, weight > 0)
     seeds = Seeds.of(shape, max(2, int(round(shape[0] * shape[1] / p.area_of(shape)))))
     outside = seeds.count
@@ -268,7 +269,7 @@ def _tile_pass(
     def payloads() -> Iterator[tuple]:
         for tile in grid:
             box = box_payload(maps, valid, tile.outer)
-            yield (*box, tile, seeds, weight, scales, centre, shape)
+            yield (*box, tile, seeds, weight, scales, centre, shape, grain)
 
     cores = tile_map_for(grid)(region_core, payloads())
     for index, (tile, core) in enumerate(zip(grid, cores, strict=True)):
