@@ -25,6 +25,7 @@ from __future__ import annotations
 import argparse
 import time
 from dataclasses import dataclass, field
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -37,7 +38,7 @@ from napari_polarseg.engine.methods.superpixel_consensus import SuperpixelConsen
 from napari_polarseg.engine.methods.surface_superpixels import SurfaceSuperpixels
 from napari_polarseg.engine.methods.valid_superpixels import clustered_pixels
 from napari_polarseg.engine.params import PRESETS
-from napari_polarseg.engine.unsupervised.merge import closest_centroids
+from napari_polarseg.engine.unsupervised.merge import closest_centroids, weakest_border
 from napari_polarseg.engine.unsupervised.pixel_maps import pixel_maps
 from napari_polarseg.engine.unsupervised.segmenter import prepare_regions
 
@@ -129,12 +130,29 @@ VARIANTS: dict[str, Variant] = {
     "default": Variant(),
     "superpixels": Variant(method="superpixels"),
     # the default without its texture group; and without it nor the estimated size
-    # (the default before both: the previous default)
+    # (the default before both and before the merge's cohesion rule: ``before texture``)
     "no texture": Variant(params={"texture": ()}),
-    "previous default": Variant({"follows_estimate": False}, params={"texture": ()}),
+    "before texture": Variant(
+        {
+            "follows_estimate": False,
+            "merge_rule": staticmethod(partial(weakest_border, cohesion_floor=0.0)),
+        },
+        params={"texture": ()},
+    ),
     "frame-share scales": Variant({"follows_estimate": False}),
     "texture weight 0.5": Variant(params={"texture_weight": 0.5}),
     "texture weight 1": Variant(params={"texture_weight": 1.0}),
+    # the merge without its cohesion rule (the weakest border alone decides; the default
+    # before it), and the rule's floor at other shares
+    "no cohesion rule": Variant(
+        {"merge_rule": staticmethod(partial(weakest_border, cohesion_floor=0.0))}
+    ),
+    "cohesion 0.3": Variant(
+        {"merge_rule": staticmethod(partial(weakest_border, cohesion_floor=0.3))}
+    ),
+    "cohesion 0.7": Variant(
+        {"merge_rule": staticmethod(partial(weakest_border, cohesion_floor=0.7))}
+    ),
     "estimated size": Variant({"follows_estimate": True}),
     "truth size": Variant(truth_size=True),
     "reach 0.25": Variant({"follows_estimate": True, "reach_objects": 0.25}),

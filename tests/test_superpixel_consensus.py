@@ -171,3 +171,21 @@ def test_the_sizes_agree_on_the_fruits_frame_like_the_default():
         scores[method] = adjusted_rand_score(truth[scored], labels[scored])
     assert scores["superpixel_consensus"] > 0.95
     assert scores["surface_superpixels"] > 0.9
+
+
+@pytest.mark.skipif(not REAL_DIR.is_dir(), reason="real frames not found beside the repository")
+def test_the_default_keeps_the_polariser_sheets_apart_on_the_real_frame():
+    """The real polarizer frame (a window's outdoor scene, a polariser filter over part of
+    it, the room's interior; hand-labelled): every border between the three is an edge,
+    and the k + 1 clusters hold a fourth, a scatter of superpixels straddling those
+    edges. The default gives it to a region instead of joining two regions (measured
+    1.000; 0.707 when the weakest of the edges decided)."""
+    truth_file = read_truth_file(TRUTH_DIR / "polarizer_IMX250MZR.json")
+    data = pio.read_stack(real_frame_path(truth_file, REAL_DIR), mosaic=truth_file.mosaic)
+    truth, scored = truth_file.truth, truth_file.truth > 0
+    labels = (
+        Scene(data.stack, np.asarray(data.angles_rad))
+        .segment(AUTO.replace(n_segments=int(truth.max())))
+        .labels
+    )
+    assert adjusted_rand_score(truth[scored], labels[scored]) > 0.95

@@ -196,14 +196,15 @@ def test_weakest_border_merges_across_the_faint_border_not_the_nearest_centroids
     """Three segments of one superpixel each: 0 and 1 meet along a long border with no
     edge (mean weight 0.9, one surface cut along its shading), 1 and 2 along an edge
     (mean 0.1) though their features are the closest; a short border 0–2 (0.1). Far
-    apart in features (a bruise on its fruit), a faint border is not enough."""
+    apart in features (a bruise on its fruit), a faint border is not enough. Each node
+    stands for a region of many superpixels: the diagonal is the border inside it."""
     from types import SimpleNamespace
 
     import scipy.sparse as sps
 
     from napari_polarseg.engine.unsupervised.merge import closest_centroids, weakest_border
 
-    lengths = sps.csr_matrix(np.array([[0, 10, 2], [10, 0, 10], [2, 10, 0]], float))
+    lengths = sps.csr_matrix(np.array([[100, 10, 2], [10, 100, 10], [2, 10, 100]], float))
     weights = sps.csr_matrix(np.array([[0, 9, 0.2], [9, 0, 1], [0.2, 1, 0]], float))
     z = np.array([[0.0], [0.6], [0.9]])  # whitened: within one standard deviation
     model = SimpleNamespace(z=z, weight=np.ones(3), adjacency=lengths, borders=weights)
@@ -233,3 +234,42 @@ def test_weakest_border_merges_across_the_faint_border_not_the_nearest_centroids
         ),
     )
     np.testing.assert_array_equal(weakest_border(many, np.array([0, 0, 1, 2]), 2), [0, 0, 2])
+
+
+def test_weakest_border_merges_a_scatter_of_superpixels_first():
+    """Two sheets (segments 0 and 1, cohesive) and a scatter of superpixels straddling
+    their edges (segment 2: superpixels 2 and 3 apart, all their border with the sheets),
+    every border an edge. The sheets' border is the least strong of the edges, so
+    without the cohesion rule they would be joined; the scatter goes to a sheet instead.
+    Once the scatter is cohesive (its superpixels share most of their border), the
+    weakest border decides again."""
+    from types import SimpleNamespace
+
+    import scipy.sparse as sps
+
+    from napari_polarseg.engine.unsupervised.merge import (
+        COHESION_FLOOR,
+        cohesion,
+        weakest_border,
+    )
+
+    def model(inside: float) -> SimpleNamespace:
+        lengths = np.array(
+            [[200, 40, 10, 10], [40, 200, 10, 10], [10, 10, 0, inside], [10, 10, inside, 0]],
+            float,
+        )
+        weights = 1e-3 * lengths  # every border an edge
+        weights[0, 1] = weights[1, 0] = 4e-3 * 40  # the sheets' edge the least strong
+        return SimpleNamespace(
+            z=np.array([[0.0], [3.0], [1.6], [1.6]]),
+            weight=np.array([1000.0, 1000.0, 20.0, 20.0]),
+            adjacency=sps.csr_matrix(lengths),
+            borders=sps.csr_matrix(weights),
+        )
+
+    nodes = np.array([0, 1, 2, 2])
+    member = np.eye(3)[nodes]
+    summed = member.T @ model(0.0).adjacency.toarray() @ member
+    assert cohesion(summed)[2] == 0.0 and cohesion(summed)[0] > COHESION_FLOOR
+    assert weakest_border(model(0.0), nodes, 2)[2] in (0, 1)  # the scatter joins a sheet
+    np.testing.assert_array_equal(weakest_border(model(100.0), nodes, 2), [0, 0, 2])

@@ -22,7 +22,14 @@ is the method's choice (``merge``):
   but an edge all along it, so the *mean* weight, not the share of the border, is
   what is compared; a bruise meets its fruit along a faint border too, and its
   distance in features is what keeps the two apart. Segments that share no border are
-  not merged this way (when no two do, the closest centroids).
+  not merged this way (when no two do, the closest centroids). A segment that is not a
+  region goes first: when less than :data:`COHESION_FLOOR` of its superpixels' border
+  length faces its own superpixels (:func:`cohesion`: a scatter of superpixels
+  straddling edges, which the clustering gathered as the extra segment because they fit
+  no material), only pairs with the least cohesive such segment are scored. Without
+  that, where every border in the frame is an edge (two polariser sheets and their
+  background), the weakest one chose between tails of exp(−(e / τ)²) and joined the two
+  sheets; the figures are in ``docs/quality.md``.
 
 Measured (``benchmarks/evaluate_unsupervised.py`` and the variants beside it, mean ARI,
 valid pixels only), closest centroids: on the rendered development half k + 1 → k
@@ -55,6 +62,10 @@ from .segmenter import RegionModel, cluster_regions, first_appearance
 EXTRA_SEGMENTS = 1
 #: A merge that leaves one segment with this share of the clustered pixels is undone.
 GUARD_SHARE = 0.90
+#: A segment with less than this share of its superpixels' border length inside itself
+#: (:func:`cohesion`) is merged first by :func:`weakest_border`: it has more border with
+#: other segments than within, a scatter rather than a region.
+COHESION_FLOOR = 0.5
 
 
 def largest_share(node_labels: np.ndarray, weight: np.ndarray) -> float:
@@ -103,19 +114,48 @@ def merge_closest(z: np.ndarray, weight: np.ndarray, node_labels: np.ndarray, k:
     return greedy_merge(node_labels, k, lambda labels, m: -centre_distances(z, weight, labels, m))
 
 
+def cohesion(lengths: np.ndarray) -> np.ndarray:
+    """(m,) the share of each segment's superpixels' border length that faces superpixels
+    of the same segment, Σ_{i,j∈a} L_ij / Σ_{i∈a} Σ_j L_ij, from the (m, m) border
+    lengths summed over the segments' superpixels (``lengths``, diagonal: inside each
+    segment); NaN for a segment with no border."""
+    total = lengths.sum(axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(total > 0, np.diag(lengths) / total, np.nan)
+
+
+def scatter_first(
+    score: np.ndarray, lengths: np.ndarray, alive: np.ndarray, floor: float = COHESION_FLOOR
+) -> np.ndarray:
+    """``score`` ((m, m), −inf where no merge) with only the pairs of the least cohesive
+    of the ``alive`` segments kept, when its :func:`cohesion` is below ``floor`` and it
+    has a pair to merge; ``score`` as it is otherwise."""
+    share = cohesion(lengths)[alive]
+    scattered = alive[np.nan_to_num(share, nan=1.0) < floor]
+    if scattered.size == 0:
+        return score
+    worst = scattered[np.argmin(cohesion(lengths)[scattered])]
+    kept = np.full_like(score, -np.inf)
+    kept[worst], kept[:, worst] = score[worst], score[:, worst]
+    return kept if np.isfinite(kept).any() else score
+
+
 def closest_centroids(model: RegionModel, node_labels: np.ndarray, k: int) -> np.ndarray:
     """(m,) int: :func:`merge_closest` of ``model``'s node features (module docstring)."""
     return merge_closest(model.z, model.weight, node_labels, k)
 
 
-def weakest_border(model: RegionModel, node_labels: np.ndarray, k: int) -> np.ndarray:
+def weakest_border(
+    model: RegionModel, node_labels: np.ndarray, k: int, cohesion_floor: float = COHESION_FLOOR
+) -> np.ndarray:
     """(m,) int: the segment each of the m = ``node_labels.max() + 1`` segments joins
     (its lowest-numbered member) after merging, one pair at a time until ``k`` are
     left, the two with the largest (Σ w_ab / Σ L_ab) / (1 + d²): the mean edge-aware
     weight along their shared border over one plus the squared distance of their
-    area-weighted centroids in the whitened node features ``z`` (module docstring); the
-    closest centroids when no two segments share a border, or when ``model`` has no
-    border weights."""
+    area-weighted centroids in the whitened node features ``z`` (module docstring), a
+    segment below ``cohesion_floor`` first (:func:`scatter_first`; 0: never); the closest
+    centroids when no two segments share a border, or when ``model`` has no border
+    weights."""
     if model.borders is None:
         return closest_centroids(model, node_labels, k)
 
@@ -129,7 +169,9 @@ def weakest_border(model: RegionModel, node_labels: np.ndarray, k: int) -> np.nd
         mean = weights / np.maximum(lengths, 1e-12)
         out = np.where(lengths > 0, mean / (1.0 + d2), -np.inf)
         np.fill_diagonal(out, -np.inf)
-        return out if np.isfinite(out).any() else -d2  # no two share a border
+        if not np.isfinite(out).any():
+            return -d2  # no two share a border
+        return scatter_first(out, lengths, np.unique(labels), cohesion_floor)
 
     return greedy_merge(node_labels, k, score)
 
