@@ -132,3 +132,28 @@ def test_scene_tiles_under_a_small_memory_limit(scene, monkeypatch):
     tiled = Scene(s.stack, s.angles).segment(params, maps=False, reconstruction=False)
     assert tiled.labels.shape == SHAPE
     assert adjusted_rand_score(whole.labels.ravel(), tiled.labels.ravel()) >= 0.98
+
+
+def test_large_superpixels_grow_on_blocks_alike_tiled_and_whole(scene):
+    """Superpixels of 1024 px (the frame-share area of frames of 3 MP and more) grow on
+    the 2 × 2 block means of the edge map from the whole image's seeds, tiled or not:
+    each superpixel is constant on the blocks, the tiles' superpixels are the whole
+    image's but near the cuts, and a tile grid off the blocks is refused."""
+    from napari_polarseg.engine.errors import PolarsegError
+    from napari_polarseg.engine.tiles import round_up
+
+    _, pol = scene
+    params = SurfaceSuperpixels().params.replace(region_area=1024)
+    assert params.watershed_grid_of(SHAPE) == 2
+    assert SurfaceSuperpixels().params.watershed_grid_of(SHAPE) == 1  # 96 px: full grid
+    maps = (pol.intensity, pol.dop, pol.phase)
+    whole = prepare_regions(*maps, params)
+    h, w = SHAPE
+    blocks = whole.regions.reshape(h // 2, 2, w // 2, 2)
+    assert (blocks == blocks[:, :1, :, :1]).all()
+    halo = round_up(tile_halo(SHAPE, params), 2)
+    tiled = tiled_prepare_regions(*maps, params, None, TileGrid(SHAPE, CORE, halo, 2))
+    assert tiled.n == whole.n
+    assert np.mean(tiled.regions == whole.regions) > 0.99
+    with pytest.raises(PolarsegError, match="aligned"):
+        tiled_prepare_regions(*maps, params, None, TileGrid(SHAPE, CORE + 1, halo + 1))

@@ -129,14 +129,35 @@ def polarisation_superpixels(
     if edges is None:
         edges = superpixel_edges(intensity, dop, phase, polarisation_edge_weight)
     n = max(2, int(round(intensity.size / region_area)))
+    return relabel(watershed_on_grid(edges, n, grid))
+
+
+def watershed_on_grid(edges: np.ndarray, markers: int | np.ndarray, grid: int = 1) -> np.ndarray:
+    """Compact watershed (:data:`COMPACTNESS`) of ``edges`` (H, W) from ``markers``, label
+    image (H, W): the markers' numbers, 1 … (scikit-image's ``watershed``).
+
+    ``grid`` > 1: on the ``grid`` × ``grid`` block means of ``edges`` (blocks from the
+    top-left pixel, the last row and column of blocks padded with the edge values; the
+    compactness scaled to the coarser pixels), every pixel taking its block's label.
+    ``markers``: a number n of seeds on scikit-image's regular grid of the image
+    watershed on (the coarser one when ``grid`` > 1), or an (H, W) int array of seeds
+    numbered ≥ 1 at full resolution, each moved to its block (so that a tile whose box
+    starts on a multiple of ``grid`` gets the labels of the whole image's blocks).
+    Written by hand around scikit-image: it has no block-wise watershed.
+    """
     if grid == 1:
-        return relabel(watershed(edges, markers=n, compactness=COMPACTNESS))
+        return watershed(edges, markers=markers, compactness=COMPACTNESS)
     h, w = edges.shape
     hh, ww = -(-h // grid) * grid, -(-w // grid) * grid
     padded = np.pad(edges, ((0, hh - h), (0, ww - w)), mode="edge")
     coarse = padded.reshape(hh // grid, grid, ww // grid, grid).mean(axis=(1, 3))
-    labels = watershed(coarse, markers=n, compactness=COMPACTNESS * grid)
-    return relabel(np.repeat(np.repeat(labels, grid, axis=0), grid, axis=1)[:h, :w])
+    if not np.isscalar(markers):
+        fine = np.asarray(markers)
+        rows, cols = np.nonzero(fine)
+        markers = np.zeros(coarse.shape, dtype=np.int32)
+        markers[rows // grid, cols // grid] = fine[rows, cols]
+    labels = watershed(coarse, markers=markers, compactness=COMPACTNESS * grid)
+    return np.repeat(np.repeat(labels, grid, axis=0), grid, axis=1)[:h, :w]
 
 
 def watershed_grid(region_area: int) -> int:

@@ -16,6 +16,10 @@ from .texture import TEXTURE_FEATURES
 REGIONS_PER_IMAGE = 3000
 MIN_REGION_AREA = 32
 MAX_REGION_AREA = 1024
+#: Superpixels of at least this area (px) grow on the 2 × 2 block means of the edge map
+#: (:meth:`UnsupervisedParams.watershed_grid_of`): the largest frame-share area, reached
+#: from about 3 MP; no frame of the quality benches is that large.
+COARSE_WATERSHED_AREA = MAX_REGION_AREA
 
 #: Superpixel side per object size: at an object size of D px the superpixel area is
 #: (D / :data:`REGIONS_PER_OBJECT_SIDE`)² px, within [:data:`MIN_OBJECT_REGION_AREA`,
@@ -256,6 +260,15 @@ class UnsupervisedParams:
         if self.region_area:
             return self.region_area
         return auto_region_area(shape, REGIONS_PER_IMAGE, MIN_REGION_AREA, MAX_REGION_AREA)
+
+    def watershed_grid_of(self, shape: tuple[int, int]) -> int:
+        """Block side of the superpixels' watershed on an image of ``shape``
+        (:func:`~..features.superpixels.watershed_on_grid`): 2 where the superpixel area
+        is at least :data:`COARSE_WATERSHED_AREA` (a region then spans 256 blocks and its
+        borders are placed again to the pixel by the border refinement), else 1.
+        Measured (``docs/performance.md``): at 5 MP the whole-image run 2.1 × faster,
+        ARI against the hand labels 0.8396 against 0.8400 at full resolution."""
+        return 2 if self.area_of(shape) >= COARSE_WATERSHED_AREA else 1
 
     def at_object_size(
         self,

@@ -88,7 +88,12 @@ from ..chunks import call_stoppable
 from ..degenerate import degenerate_result
 from ..errors import PolarsegError
 from ..features.pca import pca_features, whiten
-from ..features.superpixels import polarisation_superpixels, relabel, superpixel_edges
+from ..features.superpixels import (
+    polarisation_superpixels,
+    relabel,
+    superpixel_edges,
+    watershed_on_grid,
+)
 from .boundaries import refine_maps, refined_labels
 from .kmeans import squared_distances, weighted_kmeans
 from .params import UnsupervisedParams, UnsupervisedResult
@@ -100,6 +105,7 @@ from .shape_trend import (
     region_polarisation,
     surface_trend_share,
 )
+from .tiled_region_tasks import Seeds
 
 #: Seedings of the k-means (:func:`.kmeans.weighted_kmeans`; the lowest inertia wins).
 KMEANS_RESTARTS = 10
@@ -318,9 +324,15 @@ def _superpixels(
     if edges is None:
         edges = superpixel_edges(i, d, ph, edge_weight(p))
     if p.boundary == "polarisation":
+        grid = p.watershed_grid_of(i.shape)
 
         def work() -> np.ndarray:
-            return polarisation_superpixels(i, d, ph, area, edges=edges)
+            if grid == 1:
+                return polarisation_superpixels(i, d, ph, area, edges=edges)
+            # the tiled pass's seeds (.tiled_region_tasks), so both give the same blocks
+            n = max(2, int(round(i.size / area)))
+            seeds = Seeds.of(i.shape, n).markers((slice(0, i.shape[0]), slice(0, i.shape[1])))
+            return relabel(watershed_on_grid(edges, seeds, grid))
     else:
         from ..features.superpixels import superpixels
 

@@ -13,11 +13,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from skimage.segmentation import watershed
 from skimage.util import regular_grid
 
 from ..features.pixel_features import check_maps
-from ..features.superpixels import COMPACTNESS, edge_gradients, superpixel_edges
+from ..features.superpixels import edge_gradients, superpixel_edges, watershed_on_grid
 from ..tiles import Box, Tile
 from .region_features import pixel_terms
 from .tile_maps import filled_box
@@ -183,16 +182,18 @@ def region_core(
     centre: float,
     shape: tuple[int, int],
     grain: bool = False,
+    grid: int = 1,
 ) -> CoreSums:
     """One tile's superpixels and sums (:mod:`.tiled_regions`, steps 1–3): the compact
     watershed from the whole image's ``seeds`` on the edge map of its outer box
     (``maps`` and clustered pixels ``valid`` of ``tile.outer``; edge ``weight`` and
-    ``scales``), kept on the core; the outside pixels numbered ``seeds.count``; the
+    ``scales``; on its ``grid`` × ``grid`` blocks, the box starting on a multiple of
+    ``grid``), kept on the core; the outside pixels numbered ``seeds.count``; the
     sums of the per-pixel terms (log Î centred on ``centre``; with ``grain`` the grain
     maps too) over the regions."""
     filled, v, _ = filled_box(maps, valid, ALL)
     edges = superpixel_edges(*filled, weight, scales)
-    labels = watershed(edges, seeds.markers(tile.outer), compactness=COMPACTNESS)
+    labels = watershed_on_grid(edges, seeds.markers(tile.outer), grid)
     inner = tile.inner
     core = labels[inner] - 1
     del labels

@@ -55,6 +55,7 @@ import numpy as np
 import scipy.sparse as sps
 
 from .. import disk_arrays
+from ..errors import PolarsegError
 from ..features.pixel_features import EPS_INTENSITY
 from ..limits import KEPT_MAPS, memory_limit
 from ..tile_map import boxes_at_once, tile_map_for, worker_bytes
@@ -129,7 +130,9 @@ def region_tiles(
     if params.pixel_scales or params.boundary != "polarisation":
         return None
     budget = cap - kept - pixels * TILED_FIXED_BYTES
-    grid = TileGrid.for_budget(shape, budget, TILE_BYTES_PER_PIXEL, tile_halo(shape, params))
+    align = params.watershed_grid_of(shape)  # boxes start on the watershed's blocks
+    halo = tile_halo(shape, params)
+    grid = TileGrid.for_budget(shape, budget, TILE_BYTES_PER_PIXEL, halo, align)
     # the speed floor where its box fits the budget, or where nothing can (the
     # full-size arrays alone exceed the limit: smaller tiles would only cost time)
     floor = MIN_CORE_HALOS * grid.halo
@@ -141,7 +144,8 @@ def region_tiles(
         core = min(core, max(side, MIN_CORE))
     box = (core + 2 * grid.halo) ** 2 * TILE_BYTES_PER_PIXEL
     at_once = boxes_at_once(cap, pixels, kept + pixels * TILED_FIXED_BYTES, box)
-    grid = TileGrid(grid.shape, core, grid.halo, at_once=at_once)
+    core = max(core // align * align, align)
+    grid = TileGrid(grid.shape, core, grid.halo, align, at_once=at_once)
     return grid if len(grid) > 1 else None
 
 
@@ -261,6 +265,9 @@ def _tile_pass(
     grain = reads_grain(p.features + p.texture)
     centre, scales = edge_scales(maps, valid, grid, weight > 0)
     seeds = Seeds.of(shape, max(2, int(round(shape[0] * shape[1] / p.area_of(shape)))))
+    block = p.watershed_grid_of(shape)
+    if grid.align % block:
+        raise PolarsegError(f"tiles aligned to {grid.align} px, the watershed's blocks {block}")
     outside = seeds.count
     sums = RegionSums(outside + 1, shape)
     regions = disk_arrays.empty(shape, dtype=np.int32)  # on disk when they do not fit
@@ -269,7 +276,7 @@ def _tile_pass(
     def payloads() -> Iterator[tuple]:
         for tile in grid:
             box = box_payload(maps, valid, tile.outer)
-            yield (*box, tile, seeds, weight, scales, centre, shape, grain)
+            yield (*box, tile, seeds, weight, scales, centre, shape, grain, block)
 
     cores = tile_map_for(grid)(region_core, payloads())
     for index, (tile, core) in enumerate(zip(grid, cores, strict=True)):
