@@ -264,10 +264,13 @@ def main(argv: list[str] | None = None) -> int:
         for frame in frames(family, half, args.test_base or 0):
             pipe = Pipeline(frame.stack, frame.angles, PRESETS["auto"].replace(n_segments=frame.k))
             scene = Scene(pipeline=pipe)
+            # read once: a run leaves its parameters in the pipeline, and a variant read
+            # after ``truth size`` would be given the truth's size too
+            params = pipe.params
             names.setdefault(family, []).append(frame.name)
             line = []
             for n, v in chosen.items():
-                value = score(frame, scene, pipe.params, methods[n], v)
+                value = score(frame, scene, params, methods[n], v)
                 results[n].setdefault(family, []).append(value)
                 line.append(f"{n} {value:.3f}")
             print(f"{family} {frame.name}: " + ", ".join(line), flush=True)
