@@ -37,7 +37,9 @@ Two node-feature groups, and the object size:
 Of the k + 1 clusters, the two merged are those whose shared border is **weakest on
 average** (:func:`~napari_polarseg.engine.unsupervised.merge.weakest_border`), not the
 two closest in feature space: where the clustering still cuts one surface along its
-shading or a soft shadow, the two parts meet along a border with no edge.
+shading or a soft shadow, the two parts meet along a border with no edge. A segment
+with more border to the others than within itself (a scatter of superpixels straddling
+edges, :data:`~napari_polarseg.engine.unsupervised.merge.COHESION_FLOOR`) goes first.
 
 With ``n_segments = 0`` the number of segments is the fewest among 2..6 whose
 silhouette comes within :data:`K_TOLERANCE` of the best one: the diffused features
