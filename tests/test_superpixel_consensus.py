@@ -174,9 +174,9 @@ def test_the_sizes_agree_on_the_fruits_frame_like_the_default():
 
 
 @pytest.mark.skipif(not REAL_DIR.is_dir(), reason="real frames not found beside the repository")
-def test_the_default_keeps_the_polariser_sheets_apart_on_the_real_frame():
-    """The real polarizer frame (a window's outdoor scene, a polariser filter over part of
-    it, the room's interior; hand-labelled): every border between the three is an edge,
+def test_the_default_keeps_the_polariser_filters_apart_on_the_real_frame():
+    """The real polarizer frame (four polariser filters before a window's outdoor scene,
+    the room's interior below; hand-labelled): every border between the three is an edge,
     and the k + 1 clusters hold a fourth, a scatter of superpixels straddling those
     edges. The default gives it to a region instead of joining two regions (measured
     1.000; 0.707 when the weakest of the edges decided)."""

@@ -27,9 +27,9 @@ is the method's choice (``merge``):
   length faces its own superpixels (:func:`cohesion`: a scatter of superpixels
   straddling edges, which the clustering gathered as the extra segment because they fit
   no material), only pairs with the least cohesive such segment are scored. Without
-  that, where every border in the frame is an edge (two polariser sheets and their
-  background), the weakest one chose between tails of exp(−(e / τ)²) and joined the two
-  sheets; the figures are in ``docs/quality.md``.
+  that, where every border in the frame is an edge (polariser filters before a window,
+  the room below), the weakest one chose between tails of exp(−(e / τ)²) and joined the
+  filters with the outdoor scene; the figures are in ``docs/quality.md``.
 
 Measured (``benchmarks/evaluate_unsupervised.py`` and the variants beside it, mean ARI,
 valid pixels only), closest centroids: on the rendered development half k + 1 → k
