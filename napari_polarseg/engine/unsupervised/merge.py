@@ -130,11 +130,11 @@ def scatter_first(
     """``score`` ((m, m), −inf where no merge) with only the pairs of the least cohesive
     of the ``alive`` segments kept, when its :func:`cohesion` is below ``floor`` and it
     has a pair to merge; ``score`` as it is otherwise."""
-    share = cohesion(lengths)[alive]
-    scattered = alive[np.nan_to_num(share, nan=1.0) < floor]
+    share = cohesion(lengths)
+    scattered = alive[np.nan_to_num(share[alive], nan=1.0) < floor]
     if scattered.size == 0:
         return score
-    worst = scattered[np.argmin(cohesion(lengths)[scattered])]
+    worst = scattered[np.argmin(share[scattered])]
     kept = np.full_like(score, -np.inf)
     kept[worst], kept[:, worst] = score[worst], score[:, worst]
     return kept if np.isfinite(kept).any() else score

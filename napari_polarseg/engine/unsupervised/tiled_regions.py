@@ -142,9 +142,9 @@ def region_tiles(
     if worker is not None:  # the outer box within a Dask worker's share, whatever else
         side = int(math.sqrt(worker / TILE_BYTES_PER_PIXEL)) - 2 * grid.halo
         core = min(core, max(side, MIN_CORE))
+    core = max(core // align * align, align)
     box = (core + 2 * grid.halo) ** 2 * TILE_BYTES_PER_PIXEL
     at_once = boxes_at_once(cap, pixels, kept + pixels * TILED_FIXED_BYTES, box)
-    core = max(core // align * align, align)
     grid = TileGrid(grid.shape, core, grid.halo, align, at_once=at_once)
     return grid if len(grid) > 1 else None
 
