@@ -231,6 +231,18 @@ def score(frame: Frame, scene: Scene, params, method: str, variant: Variant) -> 
     return float(adjusted_rand_score(frame.truth[scored], labels[scored]))
 
 
+def frame_scores(
+    frame: Frame, chosen: dict[str, Variant], methods: dict[str, str]
+) -> dict[str, float]:
+    """The ARI of every chosen variant (registered as ``methods``) on one frame, each
+    run from the frame's own parameters: a run leaves its parameters in the pipeline,
+    so reading them there after ``truth size`` would give every later variant the
+    truth's size."""
+    pipe = Pipeline(frame.stack, frame.angles, PRESETS["auto"].replace(n_segments=frame.k))
+    scene, params = Scene(pipeline=pipe), pipe.params
+    return {n: score(frame, scene, params, methods[n], v) for n, v in chosen.items()}
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--families", default=",".join(FAMILIES))
@@ -262,15 +274,9 @@ def main(argv: list[str] | None = None) -> int:
     t0 = time.perf_counter()
     for family in args.families.split(","):
         for frame in frames(family, half, args.test_base or 0):
-            pipe = Pipeline(frame.stack, frame.angles, PRESETS["auto"].replace(n_segments=frame.k))
-            scene = Scene(pipeline=pipe)
-            # read once: a run leaves its parameters in the pipeline, and a variant read
-            # after ``truth size`` would be given the truth's size too
-            params = pipe.params
             names.setdefault(family, []).append(frame.name)
             line = []
-            for n, v in chosen.items():
-                value = score(frame, scene, params, methods[n], v)
+            for n, value in frame_scores(frame, chosen, methods).items():
                 results[n].setdefault(family, []).append(value)
                 line.append(f"{n} {value:.3f}")
             print(f"{family} {frame.name}: " + ", ".join(line), flush=True)
