@@ -42,15 +42,10 @@ outside the project's venv, and CI never runs it::
 
     python3.11 -m venv ../render-venv            # any venv outside the project
     ../render-venv/bin/pip install mitsuba==3.9.1 numpy
-    apt-get install libllvm19                    # Dr.Jit's CPU backend; see below
-    export DRJIT_LIBLLVM_PATH=/usr/lib/x86_64-linux-gnu/libLLVM-19.so
+    apt-get install libllvm19                    # the LLVM Dr.Jit compiles with (below)
     ../render-venv/bin/python benchmarks/render_scenes.py --seeds 100-123 \\
         --out benchmarks/renders [--layout objects|small|textured] [--spp 256] \\
         [--threads N] [--stats] [--from-json PATH] [--two-materials]
-
-Dr.Jit compiles with the system's LLVM. Debian 12's LLVM 14 and 15 (which Mesa
-installs) abort with ``LLVM ERROR: Cannot select: ... fminimum``; LLVM 19
-(``libllvm19``) renders, named by ``DRJIT_LIBLLVM_PATH``.
 
 ``--two-materials`` renders only the seeds whose objects all draw one material (the
 floor's and one more, as the shared set's two-material scenes were drawn; ``objects``
