@@ -60,6 +60,10 @@ SEED_STARTS = {
 }
 #: Seeds per Mitsuba half, and the stride between test rounds.
 SEEDS_PER_HALF = 12
+#: Development halves of more seeds: the small family's first 12 development scenes put
+#: the default 0.15 above ``superpixels`` where two test rounds had the two level, so
+#: its half is 24 scenes (seeds 5000–5023).
+DEV_SEEDS = {"small": 24}
 ROUND_STRIDE = 100
 #: Folders of the first draw (round 0) under their historical names.
 FIRST_FOLDERS = {
@@ -75,7 +79,8 @@ def seed_range(family: str, half: str, test_base: int = 0) -> str:
     """The seeds of a Mitsuba family's half, test round ``test_base``, as ``"A-B"``."""
     base = int(test_base) if half == "test" else 0
     first = SEED_STARTS[family][half] + ROUND_STRIDE * base
-    return f"{first}-{first + SEEDS_PER_HALF - 1}"
+    count = DEV_SEEDS.get(family, SEEDS_PER_HALF) if half == "dev" else SEEDS_PER_HALF
+    return f"{first}-{first + count - 1}"
 
 
 def make_command(family: str, half: str, name: str, test_base: int = 0) -> str:

@@ -59,7 +59,7 @@ shared with other work, ``nice -n 10 ... --threads 1``: ``small`` 20-43 s a scen
 ``textured`` 15-25 s, ``objects`` 11-19 s, all five sets 23 minutes; well under the
 90 s a scene that would have called for ``--spp 64``)::
 
-    render_scenes.py --layout small --seeds 5000-5011 --out benchmarks/renders_small_dev
+    render_scenes.py --layout small --seeds 5000-5023 --out benchmarks/renders_small_dev
     render_scenes.py --layout textured --seeds 6000-6011 \\
         --out benchmarks/renders_textured_dev
     render_scenes.py --layout small --seeds 5100-5111 --out benchmarks/renders_small_test
