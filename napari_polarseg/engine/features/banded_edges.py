@@ -30,7 +30,7 @@ from skimage.util import regular_seeds
 from .. import disk_arrays, tiles
 from ..chunks import chunk_bounds, run_chunks
 from .pixel_features import EPS_INTENSITY
-from .superpixels import COMPACTNESS, EDGE_SIGMA, edge_gradients
+from .superpixels import COMPACTNESS, EDGE_SIGMA, edge_gradients, seed_count
 
 #: Pixels of a band (bounds its temporaries: the gradients of a band hold about 40
 #: bytes a pixel, 80 MB).
@@ -253,7 +253,7 @@ def banded_superpixels(edges: np.ndarray, region_area: int, grid: int) -> np.nda
     holds are those the image does) band by band."""
     h, w = edges.shape
     g = int(grid)
-    n = max(2, int(round(h * w / region_area)))
+    n = seed_count((h, w), region_area)
     shape = (-(-h // g), -(-w // g))
     labels = watershed(
         block_means(edges, g),

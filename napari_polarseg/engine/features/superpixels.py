@@ -128,8 +128,13 @@ def polarisation_superpixels(
     """
     if edges is None:
         edges = superpixel_edges(intensity, dop, phase, polarisation_edge_weight)
-    n = max(2, int(round(intensity.size / region_area)))
-    return relabel(watershed_on_grid(edges, n, grid))
+    return relabel(watershed_on_grid(edges, seed_count(edges.shape, region_area), grid))
+
+
+def seed_count(shape: tuple[int, int], region_area: int) -> int:
+    """Watershed seeds of superpixels of ``region_area`` pixels on an image of ``shape``
+    (H, W): H·W / ``region_area`` rounded, at least 2."""
+    return max(2, int(round(shape[0] * shape[1] / region_area)))
 
 
 def watershed_on_grid(edges: np.ndarray, markers: int | np.ndarray, grid: int = 1) -> np.ndarray:

@@ -91,6 +91,7 @@ from ..features.pca import pca_features, whiten
 from ..features.superpixels import (
     polarisation_superpixels,
     relabel,
+    seed_count,
     superpixel_edges,
     watershed_on_grid,
 )
@@ -330,8 +331,8 @@ def _superpixels(
             if grid == 1:
                 return polarisation_superpixels(i, d, ph, area, edges=edges)
             # the tiled pass's seeds (.tiled_region_tasks), so both give the same blocks
-            n = max(2, int(round(i.size / area)))
-            seeds = Seeds.of(i.shape, n).markers((slice(0, i.shape[0]), slice(0, i.shape[1])))
+            whole = (slice(0, i.shape[0]), slice(0, i.shape[1]))
+            seeds = Seeds.of(i.shape, seed_count(i.shape, area)).markers(whole)
             return relabel(watershed_on_grid(edges, seeds, grid))
     else:
         from ..features.superpixels import superpixels

@@ -204,7 +204,7 @@ def region_core(
     # the terms of the outer box, cut to the core: the grain maps read a few pixels
     # around each one (.texture.GRAIN_REACH), which the halo holds
     terms = pixel_terms(*filled, centre=centre, texture=grain)
-    px = {k: v[inner] for k, v in terms.items()}
+    px = {name: term[inner] for name, term in terms.items()}
     ids, count, terms, position = _sums(core, tile.core, px, n)
     e = edges[inner]
     pairs = [

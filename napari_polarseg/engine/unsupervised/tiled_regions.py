@@ -57,6 +57,7 @@ import scipy.sparse as sps
 from .. import disk_arrays
 from ..errors import PolarsegError
 from ..features.pixel_features import EPS_INTENSITY
+from ..features.superpixels import seed_count
 from ..limits import KEPT_MAPS, memory_limit
 from ..tile_map import boxes_at_once, tile_map_for, worker_bytes
 from ..tiles import MIN_CORE, Tile, TileGrid
@@ -264,7 +265,7 @@ def _tile_pass(
     weight = edge_weight(p)
     grain = reads_grain(p.features + p.texture)
     centre, scales = edge_scales(maps, valid, grid, weight > 0)
-    seeds = Seeds.of(shape, max(2, int(round(shape[0] * shape[1] / p.area_of(shape)))))
+    seeds = Seeds.of(shape, seed_count(shape, p.area_of(shape)))
     block = p.watershed_grid_of(shape)
     if grid.align % block:
         raise PolarsegError(f"tiles aligned to {grid.align} px, the watershed's blocks {block}")
