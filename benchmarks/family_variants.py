@@ -194,6 +194,21 @@ VARIANTS: dict[str, Variant] = {
     "+dolp": Variant(params={"features": (*NODE_FEATURES, "dolp")}),
     "+aolp coherence": Variant(params={"features": (*NODE_FEATURES, "aolp_coherence")}),
     "+dolp over dop": Variant(params={"features": (*NODE_FEATURES, "dolp_over_dop")}),
+    # the clustering and the diffusion's border scale, tried for the small family
+    "gmm": Variant(params={"clustering": "gmm"}),
+    "gmm tied": Variant(params={"clustering": "gmm", "covariance": "tied"}),
+    "no smoothing": Variant(params={"smoothing": 0.0}),
+    "smoothing 0.15": Variant(params={"smoothing": 0.15}),
+    "tau 0.5": Variant(params={"diffusion_tau": 0.5}),
+    "tau 0.75": Variant(params={"diffusion_tau": 0.75}),
+    "tau 2": Variant(params={"diffusion_tau": 2.0}),
+    # each of the default's mean node features left out
+    **{
+        f"without {name}": Variant(
+            params={"features": tuple(f for f in NODE_FEATURES if f != name)}
+        )
+        for name in NODE_FEATURES
+    },
     # the consensus of the long reach and the short one (and one between)
     "consensus long short": Variant(also=(SHORT_REACH,)),
     "consensus long mid short": Variant(also=({"diffusion_range": 0.12}, SHORT_REACH)),
