@@ -344,7 +344,9 @@ def tiled_features(
     params: PixelFeatureParams,
     grid: TileGrid,
     regions: np.ndarray | None,
+    log_centres: Sequence[float] = (),
 ) -> TiledFeatures:
-    """A :class:`TiledFeatures` (``regions`` dropped without the ``regions`` group)."""
+    """A :class:`TiledFeatures` (``regions`` dropped without the ``regions`` group;
+    ``log_centres``: every channel's, when already known)."""
     keep = regions if "regions" in params.groups else None
-    return TiledFeatures(list(images), list(channels), params, grid, keep)
+    return TiledFeatures(list(images), list(channels), params, grid, keep, list(log_centres))
