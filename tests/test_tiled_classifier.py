@@ -128,36 +128,3 @@ def test_fine_scales_on_the_window_equal_the_whole_box(scene):
         got = made.take((rows - inner[0].start) * width + cols - inner[1].start)
         assert r0 >= inner[0].start and c0 >= inner[1].start
         np.testing.assert_array_equal(got, expected)
-
-
-def test_kept_fine_scales_give_the_same_features(scene):
-    """The σ ≤ 4 features kept in temporary files by the pass for the region means
-    (keep_fine) and read by the boxes are those the boxes compute, to the bit: the
-    region means, the training rows and every window's rows."""
-    from napari_polarseg.engine import disk_arrays
-    from napari_polarseg.engine.classifier.tiled_features import box_features, tiled_features
-
-    tiled, _ = _run(scene, SMALL)
-    f = tiled.cached_features
-    made = [
-        tiled_features(f.images, f.channels, f.params, f.grid, f.regions, f.log_centres, keep)
-        for keep in (False, True)
-    ]
-    means = [m.region_values() for m in made]
-    for a, b in zip(*means, strict=True):
-        np.testing.assert_array_equal(a, b)
-    assert made[0]._fine is None and made[1]._fine is not None
-    assert all(disk_arrays.is_on_disk(a) for fine in made[1]._fine for a in fine.values())
-    index = np.random.default_rng(1).choice(f.shape[0] * f.shape[1], 500, replace=False)
-    np.testing.assert_array_equal(made[0].take(index), made[1].take(index))
-    for tile in list(f.grid)[:6]:
-        window = tile.grown(24, f.shape)
-        rows, cols = np.mgrid[window[0], window[1]]
-        stacks = []
-        for m in made:
-            inner = m.fine_box(window, tile.outer)
-            top, left = tile.outer[0].start + inner[0].start, tile.outer[1].start + inner[1].start
-            width = inner[1].stop - inner[1].start
-            local = ((rows - top) * width + cols - left).ravel()
-            stacks.append(box_features(*m.box_inputs(tile.outer, inner)).take(local))
-        np.testing.assert_array_equal(*stacks)

@@ -211,10 +211,7 @@ class PixelSegmenter:
         """The image's features as tiles (:class:`~.tiled_features.TiledFeatures`) when
         its whole-image estimate exceeds the memory limit (:attr:`max_bytes`;
         :func:`~.tiled_prediction.scribble_tiles`), else None. The halo: the features'
-        reach and the prediction's margin (:func:`~.tiled_features.tile_halo`). Where
-        the image's full-size arrays go to temporary files, so do the σ ≤ 4 features
-        the pass for the region means makes, read there again by the training and the
-        prediction (:attr:`~.tiled_features.TiledFeatures.keep_fine`)."""
+        reach and the prediction's margin (:func:`~.tiled_features.tile_halo`)."""
         maps = self.maps(segment_params)
         shape = maps[0].shape
         colour = colour and self.colour_stack is not None
@@ -234,8 +231,7 @@ class PixelSegmenter:
         regions = None
         if "regions" in params.groups:
             regions = self.superpixels(params.regions_of(shape), segment_params, colour)
-        keep = disk_arrays.on_disk_at(shape[0] * shape[1], limit)
-        return tiled_features(images, channels, params, grid, regions, centres(), keep)
+        return tiled_features(images, channels, params, grid, regions, centres())
 
     def work_limit(self) -> int:
         """The memory limit of the method's work, bytes: :attr:`max_bytes`, else the

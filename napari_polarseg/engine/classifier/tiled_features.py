@@ -33,7 +33,6 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from .. import disk_arrays
 from ..features.banded_edges import band_counts, banded_log_centre
 from ..features.feature_stack import FeatureStack, GridBlock, RegionBlock
 from ..features.pixel_features import (
@@ -43,7 +42,6 @@ from ..features.pixel_features import (
     feature_reach,
     largest_factor,
     pixel_features,
-    pyramid_factor,
 )
 from ..tile_map import tile_map_for
 from ..tiles import Box, TileGrid, round_up
@@ -74,41 +72,27 @@ def core_sums(features: FeatureStack, inner: Box, regions: np.ndarray, n: int) -
     return np.stack([np.bincount(regions, p, n) for p in planes])
 
 
-def core_cells(features: FeatureStack, inner: Box) -> list[np.ndarray]:
-    """Every block's (k, h', w') float32 cells over the box ``inner`` of ``features``
-    (:class:`~..features.feature_stack.GridBlock` s only; ``inner`` starts on multiples
-    of their factors): a copy."""
-    out = []
-    for block in features.blocks:
-        assert isinstance(block, GridBlock)
-        out.append(cut_block(block, inner).values)
-    return out
-
-
 def region_sums(
     maps: list[Maps],
     inner: Box,
     core: np.ndarray,
     params: PixelFeatureParams,
     log_centres: list[float],
-    keep: bool = False,
-) -> tuple[np.ndarray, list[np.ndarray], list[list[np.ndarray]] | None]:
+) -> tuple[np.ndarray, list[np.ndarray]]:
     """A tile's share of :meth:`TiledFeatures.region_values` (a task of the current tile
-    map, :mod:`..tile_map`): the superpixels of its ``core`` (their ids, ascending),
+    map, :mod:`..tile_map`): the superpixels of its ``core`` (their ids, ascending) and
     every channel's (F_r, m) float64 sums of its features of ``params`` over each of
     them, the features computed on the channel's ``maps`` of the tile's outer box
-    (``inner``: the core within it), and with ``keep`` every channel's cells of those
-    features over the core, one array a scale (:func:`core_cells`; else None)."""
+    (``inner``: the core within it)."""
     flat = core.ravel()
     present = np.bincount(flat) > 0
     ids = np.flatnonzero(present)
     local = (np.cumsum(present) - 1)[flat]
-    sums, cells = [], []
+    sums = []
     for (i, d, p), centre in zip(maps, log_centres, strict=True):
         f = pixel_features(i, d, p, params, log_centre=centre)
         sums.append(core_sums(f, inner, local, ids.size))
-        cells.append(core_cells(f, inner) if keep else [])
-    return ids, sums, cells if keep else None
+    return ids, sums
 
 
 def region_names(params: PixelFeatureParams) -> tuple[str, ...]:
@@ -137,13 +121,6 @@ class TiledFeatures:
         The tiles the prediction runs on; its halo and alignment hold for any box.
     regions : ndarray (H, W) int or None
         The whole image's superpixels (with the ``regions`` group).
-    log_centres : list of float
-        Every channel's log Î centre (default: found here).
-    keep_fine : bool
-        Keep the features of the scales σ ≤ 4 the pass for the region means makes, in
-        temporary files (:meth:`region_values`), so every later box reads them there
-        instead of filtering the maps again (:meth:`box_inputs`); for an image whose
-        full-size arrays go to temporary files (:func:`~..disk_arrays.on_disk_at`).
     """
 
     images: list[Maps]
@@ -152,10 +129,7 @@ class TiledFeatures:
     grid: TileGrid
     regions: np.ndarray | None = None
     log_centres: list[float] = field(default_factory=list)
-    keep_fine: bool = False
     _region_values: list[np.ndarray] | None = field(default=None, init=False, repr=False)
-    #: Every channel's kept σ ≤ 4 features: σ → (k, ⌈H/f⌉, ⌈W/f⌉) float32 cells.
-    _fine: list[dict[float, np.ndarray]] | None = field(default=None, init=False, repr=False)
 
     def __post_init__(self) -> None:
         if not self.log_centres:
@@ -184,36 +158,24 @@ class TiledFeatures:
     def box_inputs(self, outer: Box, inner: Box | None = None) -> tuple:
         """What :func:`box_features` reads for the box ``outer``: every channel's maps of
         the box (views), the box's superpixels and the whole image's region means (None
-        without the ``regions`` group), the channels, parameters, log Î centres,
+        without the ``regions`` group), the channels, parameters, log Î centres and
         ``inner`` (rows, columns of ``outer``: the box the features are made for, e.g.
-        :meth:`fine_box`; None: all of ``outer``) and, with ``inner`` and the kept σ ≤ 4
-        features (:attr:`keep_fine`), every channel's blocks of them over ``inner``
-        (read from their files; else None). A tile task's payload: its arrays are all
-        the box needs of the image."""
+        :meth:`fine_box`; None: all of ``outer``). A tile task's payload: its arrays are
+        all the box needs of the image."""
         maps = self.box_maps(outer)
         regions = self.regions[outer] if self.regions is not None else None
         means = self.region_values() if self.regions is not None else None
-        given = None
-        if inner is not None and self._fine is not None:
-            rows, cols = (
-                slice(o.start + i.start, o.start + i.stop)
-                for o, i in zip(outer, inner, strict=True)
-            )
-            given = [kept_blocks(fine, (rows, cols)) for fine in self._fine]
-        return maps, regions, means, self.channels, self.params, self.log_centres, inner, given
+        return maps, regions, means, self.channels, self.params, self.log_centres, inner
 
     def fine_box(self, needed: Box, outer: Box) -> Box:
         """The box (rows, columns of ``outer``) on which a reader of the pixels
         ``needed`` (image coordinates, inside ``outer``) has the scales
         σ ≤ :data:`~..features.pixel_features.REGION_MAX_SIGMA` computed
         (:func:`own_features`): ``needed`` grown by their reach (24 MP's default: 32 px
-        against the 112 px of σ = 16), or where they are kept (:attr:`keep_fine`) by
-        the cell their interpolation reads, its start rounded down and its end up to
-        the grid's alignment, within ``outer``."""
+        against the 112 px of σ = 16), its start rounded down and its end up to the
+        grid's alignment, within ``outer``."""
         a = self.grid.align
         reach = feature_reach(self.params, REGION_MAX_SIGMA)
-        if self._fine is not None:
-            reach = max(pyramid_factor(s) for fine in self._fine for s in fine)
         out = []
         for want, box in zip(needed, outer, strict=True):
             start = max(box.start, (want.start - reach) // a * a)
@@ -244,18 +206,13 @@ class TiledFeatures:
                     self.regions[tile.core],
                     small,
                     self.log_centres,
-                    self.keep_fine,
                 )
                 for tile in grid
             )
-            results = tile_map_for(grid)(region_sums, payloads)
-            for tile, (ids, adds, cells) in zip(grid, results, strict=True):
+            for ids, adds in tile_map_for(grid)(region_sums, payloads):
                 sums = sums or [np.zeros((a.shape[0], n)) for a in adds]
                 for total, add in zip(sums, adds, strict=True):
                     total[:, ids] += add
-                if cells is not None:
-                    self._fine = self._fine or kept_arrays(cells, small.scales, self.shape)
-                    store_cells(self._fine, cells, tile.core)
             counts = np.maximum(band_counts(self.regions, n), 1)
             self._region_values = [(v / counts).astype(np.float32) for v in sums]
         return self._region_values
@@ -275,8 +232,6 @@ class TiledFeatures:
         the current tile map)."""
         index = np.asarray(index, dtype=np.int64).ravel()
         out = np.empty((index.size, self.n_features), dtype=np.float32)
-        if self.regions is not None:
-            self.region_values()  # first: it may keep the fine scales for the boxes
         r, c = np.divmod(index, self.shape[1])
         tile = (r // self.grid.core) * self.grid.counts[1] + c // self.grid.core
         shares = [np.flatnonzero(tile == t) for t in np.unique(tile)]
@@ -324,7 +279,6 @@ def own_features(
     channel: str,
     log_centre: float,
     inner: Box | None = None,
-    given: dict[float, GridBlock] | None = None,
 ) -> FeatureStack:
     """One channel's features of ``params`` but the ``regions`` group on its ``maps`` of a
     box, for the pixels of ``inner`` (rows, columns of the box, starting on multiples
@@ -333,26 +287,28 @@ def own_features(
     full or half resolution, computed on ``inner`` alone, the coarser ones on the box
     and cut to ``inner`` (:func:`cut_block`). So at least the σ ≤ 4 scales' reach
     (:func:`~..features.pixel_features.feature_reach`) inside ``inner``'s cut edges and
-    the whole reach inside the box's, they equal the features of the whole box.
-    ``given``: the blocks over ``inner`` of some scales, already made (σ → block,
-    :func:`kept_blocks`), taken as they are."""
+    the whole reach inside the box's, they equal the features of the whole box."""
     own = without_regions(params)
     i, d, p = maps
     if inner is None:
         return pixel_features(i, d, p, own, channel=channel, log_centre=log_centre)
-    blocks: dict[float, GridBlock] = dict(given or {})
+    parts: dict[float, tuple[GridBlock, tuple[str, ...]]] = {}
     for fine in (True, False):
-        scales = tuple(s for s in own.scales if (s <= REGION_MAX_SIGMA) == fine and s not in blocks)
-        if scales:
-            box = inner if fine else (slice(None), slice(None))
-            made = pixel_features(
-                i[box], d[box], p[box], replace(own, scales=scales), log_centre=log_centre
-            )
-            for sigma, block in zip(scales, made.blocks, strict=True):
-                blocks[sigma] = block if fine else cut_block(block, inner)
-    prefix = f"{channel}:" if channel else ""
-    names = tuple(f"{prefix}{n}" for n in feature_names(own))
-    return FeatureStack(tuple(blocks[s] for s in own.scales), names, own)
+        scales = tuple(s for s in own.scales if (s <= REGION_MAX_SIGMA) == fine)
+        if not scales:
+            continue
+        box = inner if fine else (slice(None), slice(None))
+        stack = pixel_features(
+            i[box], d[box], p[box], replace(own, scales=scales), channel=channel,
+            log_centre=log_centre,
+        )  # fmt: skip
+        start = 0
+        for sigma, block in zip(scales, stack.blocks, strict=True):
+            names = stack.names[start : start + block.n_features]
+            parts[sigma] = (block if fine else cut_block(block, inner), names)
+            start += block.n_features
+    blocks = tuple(parts[s][0] for s in own.scales)
+    return FeatureStack(blocks, tuple(n for s in own.scales for n in parts[s][1]), own)
 
 
 def box_features(
@@ -363,18 +319,17 @@ def box_features(
     params: PixelFeatureParams,
     log_centres: list[float],
     inner: Box | None = None,
-    given: list[dict[float, GridBlock]] | None = None,
 ) -> FeatureStack:
     """The features of a box (:meth:`TiledFeatures.box`) from what it reads
     (:meth:`TiledFeatures.box_inputs`), for the pixels of ``inner`` (rows, columns of
     the box; None: all of it): every channel's own features of its ``maps``
-    (:func:`own_features`, with its ``given`` blocks), then, with ``regions``, that
-    channel's region ``means`` on the superpixels there."""
+    (:func:`own_features`), then, with ``regions``, that channel's region ``means`` on
+    the superpixels there."""
     stacks = []
     if regions is not None and inner is not None:
         regions = regions[inner]
     for n, (c, m) in enumerate(zip(channels, maps, strict=True)):
-        f = own_features(m, params, c, log_centres[n], inner, given[n] if given else None)
+        f = own_features(m, params, c, log_centres[n], inner)
         if means is not None and regions is not None:
             block = RegionBlock(means[n], regions)
             names = [f"{c}:{x}" if c else x for x in region_names(params)]
@@ -390,57 +345,8 @@ def tiled_features(
     grid: TileGrid,
     regions: np.ndarray | None,
     log_centres: Sequence[float] = (),
-    keep_fine: bool = False,
 ) -> TiledFeatures:
     """A :class:`TiledFeatures` (``regions`` dropped without the ``regions`` group;
-    ``log_centres``: every channel's, when already known; ``keep_fine``: see
-    :attr:`TiledFeatures.keep_fine`)."""
+    ``log_centres``: every channel's, when already known)."""
     keep = regions if "regions" in params.groups else None
-    centres = list(log_centres)
-    return TiledFeatures(list(images), list(channels), params, grid, keep, centres, keep_fine)
-
-
-def kept_arrays(
-    cells: list[list[np.ndarray]], scales: Sequence[float], shape: tuple[int, int]
-) -> list[dict[float, np.ndarray]]:
-    """Every channel's arrays of the kept features (:attr:`TiledFeatures.keep_fine`) of
-    an image of ``shape``: σ → (k, ⌈H/f⌉, ⌈W/f⌉) float32 cells in a temporary file
-    (:func:`~..disk_arrays.disk_empty`; f = :func:`~..features.pixel_features.pyramid_factor`
-    of σ), k as a tile's ``cells`` (:func:`region_sums`) hold."""
-    out = []
-    for channel in cells:
-        arrays = {}
-        for sigma, part in zip(scales, channel, strict=True):
-            f = pyramid_factor(sigma)
-            cells_shape = (part.shape[0], -(-shape[0] // f), -(-shape[1] // f))
-            arrays[sigma] = disk_arrays.disk_empty(cells_shape, np.float32)
-        out.append(arrays)
-    return out
-
-
-def store_cells(
-    kept: list[dict[float, np.ndarray]], cells: list[list[np.ndarray]], core: Box
-) -> None:
-    """Write a tile's ``cells`` over its ``core`` (:func:`region_sums`) into the kept
-    arrays (:func:`kept_arrays`) and give their pages back."""
-    for arrays, channel in zip(kept, cells, strict=True):
-        for (sigma, array), part in zip(arrays.items(), channel, strict=True):
-            f = pyramid_factor(sigma)
-            top, left = core[0].start // f, core[1].start // f
-            array[:, top : top + part.shape[1], left : left + part.shape[2]] = part
-            disk_arrays.release(array)
-
-
-def kept_blocks(kept: dict[float, np.ndarray], box: Box) -> dict[float, GridBlock]:
-    """One channel's kept features over ``box`` (image coordinates, starting on
-    multiples of their factors): σ → :class:`~..features.feature_stack.GridBlock` of
-    the cells over it, read from their files (a copy; the pages given back)."""
-    h, w = box[0].stop - box[0].start, box[1].stop - box[1].start
-    out = {}
-    for sigma, array in kept.items():
-        f = pyramid_factor(sigma)
-        top, left = box[0].start // f, box[1].start // f
-        cells = np.array(array[:, top : top + -(-h // f), left : left + -(-w // f)])
-        disk_arrays.release(array)
-        out[sigma] = GridBlock(cells, f, (h, w))
-    return out
+    return TiledFeatures(list(images), list(channels), params, grid, keep, list(log_centres))
