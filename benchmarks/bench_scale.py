@@ -14,8 +14,10 @@ subprocess of its own (``--child``), which builds its input, then times
 - ``scribbles``: the pixel classifier on the strokes (features, training, the
   prediction with the region walk).
 
-Its peak RSS is the child's ``ru_maxrss`` as ``os.wait4`` reports it; the parent ends
-with ``RUSAGE_CHILDREN``, the largest child's.
+Its peak RSS is the child's ``ru_maxrss`` as ``os.wait4`` reports it, its CPU seconds
+(``cpu s``: user and system, every thread) from the same call, which depend less than
+the wall time on what else the machine runs; the parent ends with ``RUSAGE_CHILDREN``,
+the largest child's peak.
 
 ``whole``: the memory limit far above any estimate (no tiles). ``tiled``: the limit
 ``--max-memory`` (default 2 GiB) or, where the whole image would fit it, a limit just
@@ -236,6 +238,7 @@ def run(
         return {"size": size, "mode": mode, "error": text.strip().splitlines()[-1:] + cgroup}
     row = json.loads(out.decode().strip().splitlines()[-1])
     row["peak_rss_gib"] = usage.ru_maxrss / 2**20
+    row["cpu_s"] = usage.ru_utime + usage.ru_stime
     if group is not None:
         row["seconds"] = (
             f"{row['seconds']}; in a {limit / 2**30:g} GiB cgroup: {cgroup_report(group)}"
@@ -276,7 +279,7 @@ def main(argv: list[str] | None = None) -> int:
     limit = parse_bytes(a.max_memory)
     tmp = Path(os.environ.get("TMPDIR", "/tmp"))
     print(f"{'method':>9} {'MP':>5} {'mode':>6} {'wall s':>7} {'µs/px':>6} {'peak GiB':>8} "
-          f"{'est GiB':>7}  tiles")  # fmt: skip
+          f"{'est GiB':>7} {'cpu s':>6}  tiles")  # fmt: skip
     per: dict[tuple[str, str, str], float] = {}
     for method in a.methods.split(","):
         for size in sizes:
@@ -299,7 +302,8 @@ def main(argv: list[str] | None = None) -> int:
                 print(
                     f"{method:>9} {size:>5} {mode:>6} {r['wall_s']:7.1f} "
                     f"{r['us_per_pixel']:6.2f} {r['peak_rss_gib']:8.2f} "
-                    f"{r['estimate_gib']:7.2f}  {r['tiles'] or '-'}  {r['seconds']}",
+                    f"{r['estimate_gib']:7.2f} {r['cpu_s']:6.1f}  "
+                    f"{r['tiles'] or '-'}  {r['seconds']}",
                     flush=True,
                 )
             if len(paths) == 2:

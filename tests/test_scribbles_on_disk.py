@@ -170,3 +170,20 @@ def test_the_scribbles_estimate_counts_the_arrays_on_disk(monkeypatch, frame):
     assert on_disk <= two
     monkeypatch.setattr(disk_arrays, "DISK_SHARE", float("inf"))  # the same run in memory
     assert estimate_pipeline_bytes(frame, auto, limit=two, **kinds) > 2 * on_disk
+
+
+def test_the_watershed_in_bands_claims_the_pixels_as_one_watershed(monkeypatch):
+    from skimage.segmentation import watershed
+    from skimage.util import regular_seeds
+
+    from napari_polarseg.engine.features.superpixels import COMPACTNESS
+
+    maps = _maps((600, 300), seed=3)
+    edges = banded_edges.block_means(superpixel_edges(*maps), 2)
+    seeds = regular_seeds(edges.shape, edges.size // 64, dtype=np.int32)
+    whole = watershed(edges, markers=seeds, compactness=2 * COMPACTNESS)
+    monkeypatch.setattr(banded_edges, "WATERSHED_BAND_ROWS", 90)  # three bands
+    monkeypatch.setattr(banded_edges, "WATERSHED_OVERLAP", 32)
+    bands = banded_edges.banded_watershed(edges, seeds, 2 * COMPACTNESS)
+    assert bands.dtype == np.int32 and bands.shape == whole.shape
+    assert np.mean(bands == whole) > 0.999

@@ -103,3 +103,28 @@ def test_memory_estimates_follow_the_features():
     assert 0 < one < five
     assert feature_bytes_per_pixel(PixelFeatureParams(), channels=4) > five
     assert estimate_scribble_bytes((2000, 2000)) == 4 * estimate_scribble_bytes((1000, 1000))
+
+
+def test_fine_scales_on_the_window_equal_the_whole_box(scene):
+    """A tile's features made for its window (the σ ≤ 4 scales on the window grown by
+    their reach, the coarser ones cut from the whole box) are the whole box's there,
+    to the bit."""
+    from napari_polarseg.engine.classifier.tiled_features import box_features
+
+    tiled, _ = _run(scene, SMALL)
+    feats = tiled.cached_features
+    for tile in list(feats.grid)[:6]:
+        window = tile.grown(24, feats.shape)
+        inner = feats.fine_box(window, tile.outer)
+        assert inner != (slice(0, tile.outer_shape[0]), slice(0, tile.outer_shape[1]))
+        whole_box = box_features(*feats.box_inputs(tile.outer))
+        made = box_features(*feats.box_inputs(tile.outer, inner))
+        assert made.names == whole_box.names and made.shape != whole_box.shape
+        r0, c0 = window[0].start - tile.outer[0].start, window[1].start - tile.outer[1].start
+        rows, cols = np.mgrid[window[0], window[1]]
+        rows, cols = rows.ravel() - tile.outer[0].start, cols.ravel() - tile.outer[1].start
+        expected = whole_box.take(rows * tile.outer_shape[1] + cols)
+        width = inner[1].stop - inner[1].start
+        got = made.take((rows - inner[0].start) * width + cols - inner[1].start)
+        assert r0 >= inner[0].start and c0 >= inner[1].start
+        np.testing.assert_array_equal(got, expected)

@@ -29,7 +29,12 @@ import numpy as np
 
 from .. import disk_arrays
 from ..chunks import in_background
-from ..features.banded_edges import add_banded, banded_superpixel_edges, banded_superpixels
+from ..features.banded_edges import (
+    add_banded,
+    banded_log_centre,
+    banded_superpixel_edges,
+    banded_superpixels,
+)
 from ..features.harmonics import top_left_block_labels
 from ..features.pixel_features import (
     EPS_INTENSITY,
@@ -218,12 +223,15 @@ class PixelSegmenter:
         grid = scribble_tiles(shape, params, halo, align, len(channels), limit=limit)
         if grid is None:
             return None
+        images = [maps]
+        images += [(c.intensity, c.dop, c.phase) for c in self.colour_images(segment_params)]
+        images = images[: len(channels)]
+        # the second core finds the log Î centres while the first draws the superpixels
+        centres = in_background(lambda: [float(banded_log_centre(im[0])) for im in images])
         regions = None
         if "regions" in params.groups:
             regions = self.superpixels(params.regions_of(shape), segment_params, colour)
-        images = [maps]
-        images += [(c.intensity, c.dop, c.phase) for c in self.colour_images(segment_params)]
-        return tiled_features(images[: len(channels)], channels, params, grid, regions)
+        return tiled_features(images, channels, params, grid, regions, centres())
 
     def work_limit(self) -> int:
         """The memory limit of the method's work, bytes: :attr:`max_bytes`, else the

@@ -34,7 +34,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ..features.banded_edges import band_counts, banded_log_centre
-from ..features.feature_stack import FeatureStack, RegionBlock
+from ..features.feature_stack import FeatureStack, GridBlock, RegionBlock
 from ..features.pixel_features import (
     REGION_MAX_SIGMA,
     PixelFeatureParams,
@@ -155,15 +155,33 @@ class TiledFeatures:
         (the region means: everywhere)."""
         return box_features(*self.box_inputs(outer))
 
-    def box_inputs(self, outer: Box) -> tuple:
+    def box_inputs(self, outer: Box, inner: Box | None = None) -> tuple:
         """What :func:`box_features` reads for the box ``outer``: every channel's maps of
         the box (views), the box's superpixels and the whole image's region means (None
-        without the ``regions`` group), the channels, parameters and log Î centres. A
-        tile task's payload: its arrays are all the box needs of the image."""
+        without the ``regions`` group), the channels, parameters, log Î centres and
+        ``inner`` (rows, columns of ``outer``: the box the features are made for, e.g.
+        :meth:`fine_box`; None: all of ``outer``). A tile task's payload: its arrays are
+        all the box needs of the image."""
         maps = self.box_maps(outer)
         regions = self.regions[outer] if self.regions is not None else None
         means = self.region_values() if self.regions is not None else None
-        return maps, regions, means, self.channels, self.params, self.log_centres
+        return maps, regions, means, self.channels, self.params, self.log_centres, inner
+
+    def fine_box(self, needed: Box, outer: Box) -> Box:
+        """The box (rows, columns of ``outer``) on which a reader of the pixels
+        ``needed`` (image coordinates, inside ``outer``) has the scales
+        σ ≤ :data:`~..features.pixel_features.REGION_MAX_SIGMA` computed
+        (:func:`own_features`): ``needed`` grown by their reach (24 MP's default: 32 px
+        against the 112 px of σ = 16), its start rounded down and its end up to the
+        grid's alignment, within ``outer``."""
+        a = self.grid.align
+        reach = feature_reach(self.params, REGION_MAX_SIGMA)
+        out = []
+        for want, box in zip(needed, outer, strict=True):
+            start = max(box.start, (want.start - reach) // a * a)
+            stop = min(box.stop, round_up(want.stop + reach, a))
+            out.append(slice(start - box.start, stop - box.start))
+        return out[0], out[1]
 
     def box_maps(self, outer: Box) -> list[Maps]:
         """Every channel's Î, ρ, φ of the box ``outer`` (views)."""
@@ -223,9 +241,10 @@ class TiledFeatures:
                 rr, cc = r[mine], c[mine]
                 rows, cols = (int(rr.min()), int(rr.max()) + 1), (int(cc.min()), int(cc.max()) + 1)
                 outer = self.around(rows, cols)
-                width = outer[1].stop - outer[1].start
-                local = (rr - outer[0].start) * width + (cc - outer[1].start)
-                yield self.box_inputs(outer), local
+                inner = self.fine_box((slice(*rows), slice(*cols)), outer)
+                top, left = outer[0].start + inner[0].start, outer[1].start + inner[1].start
+                local = (rr - top) * (inner[1].stop - inner[1].start) + (cc - left)
+                yield self.box_inputs(outer, inner), local
 
         rows_of = tile_map_for(self.grid)(box_rows, payloads())
         for mine, rows in zip(shares, rows_of, strict=True):
@@ -240,6 +259,58 @@ def box_rows(inputs: tuple, local: np.ndarray) -> np.ndarray:
     return box_features(*inputs).take(local)
 
 
+def cut_block(block: GridBlock, box: Box) -> GridBlock:
+    """The block of the pixels of ``box`` (rows, columns of the block's image, starting
+    on multiples of its factor f) of a :class:`~..features.feature_stack.GridBlock`:
+    the coarse cells over them. Interpolated, it equals ``block`` at least f pixels
+    inside the box's cut edges (there the edge cell is held instead of read on)."""
+    f = block.factor
+    top, left = box[0].start, box[1].start
+    if top % f or left % f:
+        raise ValueError(f"a box cut from a block of factor {f} starts at ({top}, {left})")
+    h, w = box[0].stop - top, box[1].stop - left
+    cells = block.values[:, top // f : top // f + -(-h // f), left // f : left // f + -(-w // f)]
+    return GridBlock(np.ascontiguousarray(cells), f, (h, w))
+
+
+def own_features(
+    maps: Maps,
+    params: PixelFeatureParams,
+    channel: str,
+    log_centre: float,
+    inner: Box | None = None,
+) -> FeatureStack:
+    """One channel's features of ``params`` but the ``regions`` group on its ``maps`` of a
+    box, for the pixels of ``inner`` (rows, columns of the box, starting on multiples
+    of the coarsest grid factor; None: the whole box): the scales
+    σ ≤ :data:`~..features.pixel_features.REGION_MAX_SIGMA`, which filter every pixel at
+    full or half resolution, computed on ``inner`` alone, the coarser ones on the box
+    and cut to ``inner`` (:func:`cut_block`). So at least the σ ≤ 4 scales' reach
+    (:func:`~..features.pixel_features.feature_reach`) inside ``inner``'s cut edges and
+    the whole reach inside the box's, they equal the features of the whole box."""
+    own = without_regions(params)
+    i, d, p = maps
+    if inner is None:
+        return pixel_features(i, d, p, own, channel=channel, log_centre=log_centre)
+    parts: dict[float, tuple[GridBlock, tuple[str, ...]]] = {}
+    for fine in (True, False):
+        scales = tuple(s for s in own.scales if (s <= REGION_MAX_SIGMA) == fine)
+        if not scales:
+            continue
+        box = inner if fine else (slice(None), slice(None))
+        stack = pixel_features(
+            i[box], d[box], p[box], replace(own, scales=scales), channel=channel,
+            log_centre=log_centre,
+        )  # fmt: skip
+        start = 0
+        for sigma, block in zip(scales, stack.blocks, strict=True):
+            names = stack.names[start : start + block.n_features]
+            parts[sigma] = (block if fine else cut_block(block, inner), names)
+            start += block.n_features
+    blocks = tuple(parts[s][0] for s in own.scales)
+    return FeatureStack(blocks, tuple(n for s in own.scales for n in parts[s][1]), own)
+
+
 def box_features(
     maps: list[Maps],
     regions: np.ndarray | None,
@@ -247,14 +318,18 @@ def box_features(
     channels: list[str],
     params: PixelFeatureParams,
     log_centres: list[float],
+    inner: Box | None = None,
 ) -> FeatureStack:
     """The features of a box (:meth:`TiledFeatures.box`) from what it reads
-    (:meth:`TiledFeatures.box_inputs`): every channel's own features of its ``maps``,
-    then, with ``regions``, that channel's region ``means`` on the box's superpixels."""
-    own = without_regions(params)
+    (:meth:`TiledFeatures.box_inputs`), for the pixels of ``inner`` (rows, columns of
+    the box; None: all of it): every channel's own features of its ``maps``
+    (:func:`own_features`), then, with ``regions``, that channel's region ``means`` on
+    the superpixels there."""
     stacks = []
-    for n, (c, (i, d, p)) in enumerate(zip(channels, maps, strict=True)):
-        f = pixel_features(i, d, p, own, channel=c, log_centre=log_centres[n])
+    if regions is not None and inner is not None:
+        regions = regions[inner]
+    for n, (c, m) in enumerate(zip(channels, maps, strict=True)):
+        f = own_features(m, params, c, log_centres[n], inner)
         if means is not None and regions is not None:
             block = RegionBlock(means[n], regions)
             names = [f"{c}:{x}" if c else x for x in region_names(params)]
@@ -269,7 +344,9 @@ def tiled_features(
     params: PixelFeatureParams,
     grid: TileGrid,
     regions: np.ndarray | None,
+    log_centres: Sequence[float] = (),
 ) -> TiledFeatures:
-    """A :class:`TiledFeatures` (``regions`` dropped without the ``regions`` group)."""
+    """A :class:`TiledFeatures` (``regions`` dropped without the ``regions`` group;
+    ``log_centres``: every channel's, when already known)."""
     keep = regions if "regions" in params.groups else None
-    return TiledFeatures(list(images), list(channels), params, grid, keep)
+    return TiledFeatures(list(images), list(channels), params, grid, keep, list(log_centres))

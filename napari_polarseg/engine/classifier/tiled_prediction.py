@@ -130,9 +130,12 @@ def prior_payloads(
 ) -> Iterator[tuple]:
     """Every tile's payload of :func:`tile_prior`, in the grid's order: the classifier's
     model, what the tile's outer box reads (:meth:`~.tiled_features.TiledFeatures.box_inputs`),
-    the window (the core grown by :func:`prediction_margin`) within that box and the core
-    within the window, the stride and, with the ``guide`` (the whole image's guide and
-    its (mean, std)), the guide's window, its statistics and the smoothing radius.
+    the window (the core grown by :func:`prediction_margin`) within the box its features
+    are made for and the core within the window, the stride and, with the ``guide``
+    (the whole image's guide and its (mean, std)), the guide's window, its statistics
+    and the smoothing radius. The features are made for the window grown by the fine
+    scales' reach (:meth:`~.tiled_features.TiledFeatures.fine_box`): the scales σ ≤ 4
+    are not filtered over the whole halo, which only σ = 8 and 16 read.
     ``cancel()`` is asked before every tile, and within a tile when the tiles run in
     this process."""
     smoothing = classifier.params.smoothing if guide is not None else 0.0
@@ -144,8 +147,9 @@ def prior_payloads(
         smooth = None
         if guide is not None and smoothing > 0:
             smooth = (guide[0][window], guide[1], smoothing)
-        inputs = features.box_inputs(tile.outer)
-        local = _local(window, tile.outer)
+        inner = features.fine_box(window, tile.outer)
+        inputs = features.box_inputs(tile.outer, inner)
+        local = _local(_local(window, tile.outer), inner)
         yield classifier.model, inputs, local, _local(tile.core, window), stride, smooth, inside
 
 

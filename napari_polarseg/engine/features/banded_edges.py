@@ -243,22 +243,22 @@ def band_counts(labels: np.ndarray, n: int | None = None) -> np.ndarray:
 def banded_superpixels(edges: np.ndarray, region_area: int, grid: int) -> np.ndarray:
     """:func:`~.superpixels.polarisation_superpixels` of the edge map ``edges`` (H, W)
     on the watershed grid ``grid`` (> 1): (H, W) int32, 0 … n − 1, placed by
-    :func:`~..disk_arrays.empty` (the same superpixels to the bit).
+    :func:`~..disk_arrays.empty` (the same superpixels to the bit on one band; in
+    bands, :func:`banded_watershed`).
 
-    The watershed is given the block means (:func:`block_means`, held by the call
-    alone, so it frees them once it has its own copy) and its seeds as int32
+    The watershed is given the block means (:func:`block_means`) and its seeds as int32
     (scikit-image's ``regular_seeds``, which it makes itself from their number, there
-    int64: its labels are then int32); every pixel takes its block's region
-    renumbered (:func:`~.superpixels.relabel`'s numbers: the regions the coarse grid
-    holds are those the image does) band by band."""
+    int64: its labels are then int32), in bands (:func:`banded_watershed`); every pixel
+    takes its block's region renumbered (:func:`~.superpixels.relabel`'s numbers: the
+    regions the coarse grid holds are those the image does) band by band."""
     h, w = edges.shape
     g = int(grid)
     n = seed_count((h, w), region_area)
     shape = (-(-h // g), -(-w // g))
-    labels = watershed(
+    labels = banded_watershed(
         block_means(edges, g),
-        markers=regular_seeds(shape, n, dtype=np.int32),
-        compactness=COMPACTNESS * g,
+        regular_seeds(shape, n, dtype=np.int32),
+        COMPACTNESS * g,
     )
     number = (np.cumsum(band_counts(labels) > 0) - 1).astype(np.int32)
     out = disk_arrays.empty((h, w), dtype=np.int32)
@@ -266,4 +266,45 @@ def banded_superpixels(edges: np.ndarray, region_area: int, grid: int) -> np.nda
     for band in row_bands((h, w)):
         out[band] = number[labels[np.arange(band.start, band.stop) // g][:, columns]]
         disk_arrays.release(out)
+    return out
+
+
+#: Rows of the coarse grid a band of :func:`banded_watershed` holds at least.
+WATERSHED_BAND_ROWS = 1024
+#: Rows a band of :func:`banded_watershed` floods beyond each of its cut sides, at
+#: least; and at least this many seed spacings (√(pixels / seeds)).
+WATERSHED_OVERLAP = 64
+WATERSHED_OVERLAP_SPACINGS = 4
+
+
+def banded_watershed(values: np.ndarray, seeds: np.ndarray, compactness: float) -> np.ndarray:
+    """scikit-image's compact watershed of ``values`` (h, w) from ``seeds`` (h, w) int32
+    (≥ 1, 0 elsewhere): (h, w) int32, the seeds' numbers, in ⌊h /
+    :data:`WATERSHED_BAND_ROWS`⌋ bands of rows (at least one) flooded on the CPU cores
+    (:func:`~..chunks.run_chunks`; the watershed releases the GIL). A band floods its
+    rows and :data:`WATERSHED_OVERLAP` more beyond each cut side (or
+    :data:`WATERSHED_OVERLAP_SPACINGS` seed spacings, if more), with the seeds there,
+    and keeps its own rows: a compact region spans a few seed spacings (16 rows of the
+    coarse grid of 1024 px superpixels), so its pixels are claimed by the seeds of the
+    band and its overlap. Not the same by construction as one watershed of the whole
+    grid, but measured so: on the fruits frame tiled to 24 MP (two bands of 1024 of the
+    2048 × 3060 coarse rows) no pixel of the 6.3 M differs, in 2.7 s against 6.0 s. The
+    bands follow from the grid's size alone, not from the cores: the same regions on
+    any machine."""
+    h = values.shape[0]
+    n = max(1, h // WATERSHED_BAND_ROWS)
+    if n == 1:
+        return watershed(values, markers=seeds, compactness=compactness)
+    out = np.empty(values.shape, dtype=np.int32)
+    bands = list(tiles.row_bands(h, -(-h // n)))
+    spacing = np.sqrt(values.size / max(int(seeds.max()), 1))
+    overlap = max(WATERSHED_OVERLAP, int(np.ceil(WATERSHED_OVERLAP_SPACINGS * spacing)))
+
+    def work(first: int, stop: int) -> None:
+        for band in bands[first:stop]:
+            top, end = max(band.start - overlap, 0), min(band.stop + overlap, h)
+            labels = watershed(values[top:end], markers=seeds[top:end], compactness=compactness)
+            out[band] = labels[band.start - top : band.stop - top]
+
+    run_chunks(chunk_bounds(len(bands), 1), work, values.size)
     return out
