@@ -29,12 +29,7 @@ import numpy as np
 
 from .. import disk_arrays
 from ..chunks import in_background
-from ..features.banded_edges import (
-    add_banded,
-    banded_log_centre,
-    banded_superpixel_edges,
-    banded_superpixels,
-)
+from ..features.banded_edges import add_banded, banded_superpixel_edges, banded_superpixels
 from ..features.harmonics import top_left_block_labels
 from ..features.pixel_features import (
     EPS_INTENSITY,
@@ -61,7 +56,13 @@ from .pixel_classifier import (
     train_pixel_classifier,
 )
 from .region_walk import RegionGraph, region_graph, walk_region_area, walked_prediction
-from .tiled_features import TiledFeatures, tile_align, tile_halo, tiled_features
+from .tiled_features import (
+    TiledFeatures,
+    log_centres_of,
+    tile_align,
+    tile_halo,
+    tiled_features,
+)
 from .tiled_prediction import prediction_margin, scribble_tiles, tiled_pixels, tiled_walk
 
 #: Largest edge-aware smoothing radius (pixels) a tile's halo is grown for; a larger
@@ -227,7 +228,7 @@ class PixelSegmenter:
         images += [(c.intensity, c.dop, c.phase) for c in self.colour_images(segment_params)]
         images = images[: len(channels)]
         # the second core finds the log Î centres while the first draws the superpixels
-        centres = in_background(lambda: [float(banded_log_centre(im[0])) for im in images])
+        centres = in_background(lambda: log_centres_of(images))
         regions = None
         if "regions" in params.groups:
             regions = self.superpixels(params.regions_of(shape), segment_params, colour)

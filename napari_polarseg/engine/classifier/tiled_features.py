@@ -133,7 +133,7 @@ class TiledFeatures:
 
     def __post_init__(self) -> None:
         if not self.log_centres:
-            self.log_centres = [float(banded_log_centre(im[0])) for im in self.images]
+            self.log_centres = log_centres_of(self.images)
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -250,6 +250,13 @@ class TiledFeatures:
         for mine, rows in zip(shares, rows_of, strict=True):
             out[mine] = rows
         return out
+
+
+def log_centres_of(images: Sequence[Maps]) -> list[float]:
+    """Every channel's log Î centre, in the order of ``images`` ((Î, ρ, φ) each): the
+    centre of ln Î over the whole image (:func:`~..features.banded_edges.banded_log_centre`,
+    band by band)."""
+    return [float(banded_log_centre(im[0])) for im in images]
 
 
 def box_rows(inputs: tuple, local: np.ndarray) -> np.ndarray:
