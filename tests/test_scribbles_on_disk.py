@@ -13,7 +13,7 @@ from napari_polarseg.engine.classifier import region_walk
 from napari_polarseg.engine.classifier.classifier_settings import ClassifierSettings
 from napari_polarseg.engine.classifier.pixel_classifier import check_scribbles
 from napari_polarseg.engine.classifier.tiled_features import TiledFeatures
-from napari_polarseg.engine.features import banded_edges
+from napari_polarseg.engine.features import banded_edges, pixel_features
 from napari_polarseg.engine.features.pixel_features import (
     PixelFeatureParams,
     log_intensity_centre,
@@ -72,6 +72,29 @@ def test_the_banded_borders_are_the_whole_images(monkeypatch):
     np.testing.assert_array_equal(counts, np.bincount(regions.ravel()))
 
 
+def test_the_log_centre_of_an_image_is_its_features(monkeypatch):
+    """The centre a tiled run reads off the intensity (only the sampled pixels) is the
+    one the whole image's features take: the median of log Î, of every k-th pixel in
+    raster order on images above the sample size."""
+    rng = np.random.default_rng(5)
+    intensity = np.exp(rng.normal(size=(120, 31)) * 3)
+    intensity[0, :3] = (np.nan, np.inf, -1.0)
+    clean = np.where(np.isfinite(intensity), intensity, 0).astype(np.float32)
+    log_i = np.log(np.maximum(clean, pixel_features.EPS_INTENSITY))
+    assert log_intensity_centre(intensity) == np.float32(np.median(log_i))
+    monkeypatch.setattr(pixel_features, "LOG_CENTRE_SAMPLES", 1000)  # every 4th pixel
+    assert pixel_features.centre_sample_step(intensity.size) == 4
+    sampled = np.float32(np.median(log_i.ravel()[::4]))
+    assert log_intensity_centre(intensity) == sampled != np.float32(np.median(log_i))
+    assert pixel_features.log_centre_of_logs(log_i) == sampled
+    # so a tile's features centred on it are the whole image's
+    maps = (clean, rng.random(clean.shape, dtype=np.float32), rng.random(clean.shape) * 3)
+    params = PixelFeatureParams(scales=(1.0,), groups=("intensity", "invariant"))
+    whole = pixel_features.pixel_features(*maps, params)
+    centred = pixel_features.pixel_features(*maps, params, log_centre=sampled)
+    np.testing.assert_array_equal(whole.blocks[0].values, centred.blocks[0].values)
+
+
 def test_the_exact_median_is_numpys(monkeypatch):
     rng = np.random.default_rng(1)
     values = [
@@ -87,9 +110,6 @@ def test_the_exact_median_is_numpys(monkeypatch):
     single = rng.normal(size=(99, 4)).astype(np.float32)
     assert banded_edges.exact_median(single) == np.median(single)
     assert banded_edges.exact_median(single).dtype == np.float32
-    intensity = np.exp(rng.normal(size=(120, 31)) * 3)
-    intensity[0, :3] = (np.nan, np.inf, -1.0)
-    assert banded_edges.banded_log_centre(intensity) == log_intensity_centre(intensity)
     assert banded_edges.exact_median(np.zeros((30, 30))) == 0.0  # every bit the same
     values[0][5, 5] = np.nan
     assert np.isnan(banded_edges.exact_median(values[0]))

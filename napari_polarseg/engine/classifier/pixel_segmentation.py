@@ -227,12 +227,11 @@ class PixelSegmenter:
         images = [maps]
         images += [(c.intensity, c.dop, c.phase) for c in self.colour_images(segment_params)]
         images = images[: len(channels)]
-        # the second core finds the log Î centres while the first draws the superpixels
-        centres = in_background(lambda: log_centres_of(images))
+        centres = log_centres_of(images)
         regions = None
         if "regions" in params.groups:
             regions = self.superpixels(params.regions_of(shape), segment_params, colour)
-        return tiled_features(images, channels, params, grid, regions, centres())
+        return tiled_features(images, channels, params, grid, regions, centres)
 
     def work_limit(self) -> int:
         """The memory limit of the method's work, bytes: :attr:`max_bytes`, else the

