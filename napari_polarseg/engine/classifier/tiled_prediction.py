@@ -237,9 +237,13 @@ def tiled_walk(
     for tile, prior, n in tile_priors(classifier, features, stride, None, cancel):
         lab = most_probable(prior)
         key = (graph.regions[tile.core].astype(np.int64) * k + lab).ravel()
-        counts += np.bincount(key, minlength=keys)
+        # the core's keys are a short range of all of them: counted on that range
+        low = int(key.min())
+        key -= low
+        span = slice(low, low + int(key.max()) + 1)
+        counts[span] += np.bincount(key)
         for j in range(k):
-            sums[:, j] += np.bincount(key, weights=prior[j].ravel(), minlength=keys)
+            sums[span, j] += np.bincount(key, weights=prior[j].ravel())
         labels[tile.core] = lab
         predicted += n
     present = counts > 0
