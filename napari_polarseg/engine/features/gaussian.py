@@ -16,6 +16,8 @@ a box and of the whole image may differ in the last bit.
 
 from __future__ import annotations
 
+from functools import lru_cache
+
 import cv2
 import numpy as np
 
@@ -32,6 +34,15 @@ def gaussian_kernel(sigma: float, truncate: float = TRUNCATE) -> np.ndarray:
     return kernel / kernel.sum()
 
 
+@lru_cache(maxsize=64)
+def _cast_kernel(sigma: float, truncate: float, dtype: str) -> np.ndarray:
+    """:func:`gaussian_kernel` in ``dtype``, made once per (σ, truncate, dtype) and
+    read-only: a run filters thousands of boxes at the same few σ."""
+    kernel = gaussian_kernel(sigma, truncate).astype(dtype)
+    kernel.flags.writeable = False
+    return kernel
+
+
 def gaussian_filter(a: np.ndarray, sigma: float, truncate: float = TRUNCATE) -> np.ndarray:
     """G_σ * a of a 2-D map (σ in pixels, > 0): float32 in and out for float32 input,
     else float64; border mode ``reflect`` (module docstring)."""
@@ -42,6 +53,6 @@ def gaussian_filter(a: np.ndarray, sigma: float, truncate: float = TRUNCATE) -> 
     a = np.ascontiguousarray(a, dtype=dtype)
     if a.size == 0:
         return a.copy()
-    kernel = gaussian_kernel(sigma, truncate).astype(dtype)
+    kernel = _cast_kernel(float(sigma), float(truncate), np.dtype(dtype).name)
     depth = cv2.CV_32F if dtype == np.float32 else cv2.CV_64F
     return cv2.sepFilter2D(a, depth, kernel, kernel, borderType=cv2.BORDER_REFLECT)
