@@ -281,25 +281,29 @@ def centre_sample_step(n_pixels: int) -> int:
     return max(1, -(-int(n_pixels) // LOG_CENTRE_SAMPLES))
 
 
+def centre_sample(a: np.ndarray) -> np.ndarray:
+    """The pixels of ``a`` (H, W) the log Î centre reads, flat: every
+    :func:`centre_sample_step`-th one in raster order (a view where ``a`` is
+    contiguous, so a large image's map in a temporary file is read only there)."""
+    step = centre_sample_step(a.size)
+    flat = np.asarray(a).reshape(-1)
+    return flat if step == 1 else flat[::step]
+
+
 def log_centre_of_logs(log_i: np.ndarray) -> np.float32:
-    """The centre of log Î given its values (H, W): their median up to
-    :data:`LOG_CENTRE_SAMPLES` pixels, else the median of every
-    :func:`centre_sample_step`-th one in raster order. The centre only keeps the float32
-    moments of log Î near 0 (the features do not depend on it but for rounding), so a
-    sample serves, and an image and its tiles share it without reading it twice."""
-    step = centre_sample_step(log_i.size)
-    flat = np.asarray(log_i).reshape(-1)
-    return np.float32(np.median(flat if step == 1 else flat[::step]))
+    """The centre of log Î given its values (H, W): the median of their
+    :func:`centre_sample` (all of them up to :data:`LOG_CENTRE_SAMPLES` pixels). The
+    centre only keeps the float32 moments of log Î near 0 (the features do not depend
+    on it but for rounding), so a sample serves, and an image and its tiles share it
+    without reading it twice."""
+    return np.float32(np.median(centre_sample(log_i)))
 
 
 def log_intensity_centre(intensity: np.ndarray) -> np.float32:
     """:func:`log_centre_of_logs` of log Î over the image (float32; Î floored at
     :data:`EPS_INTENSITY`, non-finite Î as 0): what :func:`pixel_features` subtracts from
-    log Î before taking its moments. Reads only the sampled pixels (a large image's
-    maps may be in temporary files)."""
-    step = centre_sample_step(intensity.size)
-    flat = np.asarray(intensity).reshape(-1)
-    i = np.asarray(flat if step == 1 else flat[::step], dtype=np.float32)
+    log Î before taking its moments. Reads only the sampled pixels."""
+    i = np.asarray(centre_sample(intensity), dtype=np.float32)
     log_i = np.log(np.maximum(np.where(np.isfinite(i), i, 0), EPS_INTENSITY))
     return np.float32(np.median(log_i))
 
