@@ -274,7 +274,9 @@ def noise_energy(sigma: float) -> float:
 def _raw_channels(
     i: np.ndarray, rho: np.ndarray, phi: np.ndarray, valid: np.ndarray
 ) -> list[np.ndarray]:
-    """ln Î, ρ cos 2φ, ρ sin 2φ on the usable pixels (1, 0, 0 elsewhere), float64."""
+    """ln Î, ρ cos 2φ, ρ sin 2φ on the usable pixels (1, 0, 0 elsewhere), float64
+    (computed in float64 whatever the inputs' dtype)."""
+    i, rho, phi = (np.asarray(a, dtype=np.float64) for a in (i, rho, phi))
     with np.errstate(invalid="ignore"):
         return [
             np.log(np.where(valid, i, 1.0)),
@@ -369,7 +371,9 @@ def _level_noise(sigmas: np.ndarray) -> np.ndarray:
 def _check(
     intensity: np.ndarray, dop: np.ndarray, phase: np.ndarray, mask: np.ndarray | None
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    arrays = [np.asarray(a, dtype=np.float64) for a in (intensity, dop, phase)]
+    # kept in their own dtype: the channels convert to float64 band by band
+    # (:func:`_raw_channels`), without full-size float64 copies of a large image
+    arrays = [np.asarray(a) for a in (intensity, dop, phase)]
     shape = arrays[0].shape
     if len(shape) != 2 or any(a.shape != shape for a in arrays):
         raise PolarsegError(
@@ -470,16 +474,51 @@ def estimate_object_size(
     )
 
 
+def scene_object_size(
+    intensity: np.ndarray,
+    dop: np.ndarray,
+    phase: np.ndarray,
+    invalid: np.ndarray,
+    given: float = 0.0,
+    region: np.ndarray | None = None,
+) -> ObjectSize:
+    """The object size a run uses: ``given`` px when it is set (> 0), else
+    :func:`estimate_object_size` on the pixels that are not ``invalid`` (H, W bool) and
+    lie in ``region`` (H, W bool; None: everywhere)."""
+    if given > 0:
+        return ObjectSize.given(float(given))
+    valid = ~np.asarray(invalid, dtype=bool)
+    if region is not None:
+        valid &= np.asarray(region, dtype=bool)
+    return estimate_object_size(intensity, dop, phase, valid)
+
+
+def work_box(valid: np.ndarray) -> tuple[tuple[slice, slice], int]:
+    """The bounding box of the usable pixels ``valid`` (H, W bool, at least one True)
+    and the integer factor f that block-averages it to at most :data:`WORK_PIXELS`."""
+    rows, cols = np.nonzero(valid.any(axis=1))[0], np.nonzero(valid.any(axis=0))[0]
+    box = (slice(rows[0], rows[-1] + 1), slice(cols[0], cols[-1] + 1))
+    n = (rows[-1] + 1 - rows[0]) * (cols[-1] + 1 - cols[0])
+    return box, max(1, math.ceil(math.sqrt(n / WORK_PIXELS)))
+
+
+def smallest_estimate(valid: np.ndarray) -> float:
+    """The smallest diameter (px) :func:`estimate_object_size` can give on the usable
+    pixels ``valid`` (H, W bool): 2√2 f, the smallest scale of its grid (σ = 1 px of the
+    work grid, block-averaged by f) as a diameter. 0 when no pixel is usable."""
+    if not valid.any():
+        return 0.0
+    return float(DIAMETER_PER_SCALE * work_box(valid)[1])
+
+
 def _work_channels(
     i: np.ndarray, rho: np.ndarray, phi: np.ndarray, valid: np.ndarray
 ) -> tuple[list[np.ndarray], list[str], np.ndarray, int] | str:
     """The noise-normalised, plane-removed channels ln Î, ρ cos 2φ, ρ sin 2φ on the
     usable pixels' bounding box, block-averaged by f to at most :data:`WORK_PIXELS`:
     (channels, their names, the usable pixels there, f), or why there are none."""
-    rows, cols = np.nonzero(valid.any(axis=1))[0], np.nonzero(valid.any(axis=0))[0]
-    box = (slice(rows[0], rows[-1] + 1), slice(cols[0], cols[-1] + 1))
+    box, f = work_box(valid)
     i, rho, phi, valid = i[box], rho[box], phi[box], valid[box]
-    f = max(1, math.ceil(math.sqrt(valid.size / WORK_PIXELS)))
     if min(valid.shape) // f < MIN_SIDE:
         return "too few usable pixels for a scale space"
     if f > 1:

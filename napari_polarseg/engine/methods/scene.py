@@ -21,7 +21,7 @@ import numpy as np
 
 from .. import disk_arrays
 from ..features.harmonics import top_left_block_labels
-from ..features.object_size import ObjectSize, estimate_object_size
+from ..features.object_size import ObjectSize, scene_object_size
 from ..limits import memory_limit
 from ..params import DEFAULT_PRESET, PRESETS, SegmentParams
 from ..physics import polarimage
@@ -126,17 +126,16 @@ class Scene:
 
     def object_size(self, params: SegmentParams) -> ObjectSize:
         """The object size a run uses: ``params.object_size`` px when it is set (> 0),
-        else the scene's own estimate (:func:`estimate_object_size` on the valid pixels
-        of the region), made once per polarisation image and kept."""
+        else the scene's own estimate on the valid pixels of the region
+        (:func:`~..features.object_size.scene_object_size`), made once per polarisation
+        image and kept."""
         if params.object_size > 0:
             return ObjectSize.given(float(params.object_size))
         pol = self.polarisation(params)
 
         def estimate() -> ObjectSize:
-            valid = ~np.asarray(pol.invalid, dtype=bool)
-            if self.region is not None:
-                valid &= self.region
-            return estimate_object_size(pol.intensity, pol.dop, pol.phase, valid)
+            i, d, p = pol.intensity, pol.dop, pol.phase
+            return scene_object_size(i, d, p, pol.invalid, 0.0, self.region)
 
         return self.cached("object_size", id(pol), estimate)
 
