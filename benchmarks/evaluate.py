@@ -64,11 +64,8 @@ from napari_polarseg.engine import Pipeline, Scene, SegmentParams, intensity_bas
 from napari_polarseg.engine.classifier.pixel_classifier import ClassifierParams, make_model
 from napari_polarseg.engine.classifier.pixel_segmentation import PixelSegmenter
 from napari_polarseg.engine.classifier.scribbles import scribble_result
-from napari_polarseg.engine.features.pixel_features import (
-    GROUPS,
-    PixelFeatureParams,
-    pixel_features,
-)
+from napari_polarseg.engine.features.pixel_feature_params import GROUPS
+from napari_polarseg.engine.features.pixel_features import PixelFeatureParams, pixel_features
 from napari_polarseg.engine.params import AUTO, RECOMMENDED
 from napari_polarseg.engine.synthetic.scenes import SCENES, make_scene, scribble_strokes
 

@@ -106,6 +106,9 @@ def limit_lines(run: Run) -> list[str]:
         lines.append(f"{PROG}: {found} (k_scores in summary.json)")
     if "object_size" in record:
         lines.append(f"{PROG}: {object_size_text(record)}")
+    scales_text = feature_scales_text(run.result.method_record)
+    if scales_text:
+        lines.append(f"{PROG}: {scales_text}")
     if record.get("close_up"):
         lines.append(
             f"{PROG}: one smooth surface fills the frame (it explains "
@@ -200,6 +203,26 @@ def evaluation_message(evaluation: dict[str, Any]) -> Message:
         f"{PROG}: against the ground truth: adjusted Rand index "
         f"{evaluation['adjusted_rand_index']:.3f}, mean IoU {evaluation['mean_iou']:.3f}" + blocks
     )
+
+
+def feature_scales_text(record: dict[str, Any]) -> str:
+    """What a classifier trained on scribbles did with the object size (the method's
+    record): ``"object size about 9 px (estimated from the scene): feature scales σ = 1,
+    2, 4, 8 px"``, or on a large image ``"feature scales σ = 1, 2, 4, 8, 16 px, every
+    one: an object size estimated on this image is at least 40 px"``; "" for a record
+    without them (another method, an applied classifier, fixed scales)."""
+    if "feature_scales" not in record or not record.get("object_size_applied"):
+        return ""
+    scales = ", ".join(f"{s:g}" for s in record["feature_scales"])
+    if "object_size" not in record:
+        return (
+            f"feature scales σ = {scales} px, every one: an object size estimated on this "
+            f"image is at least {record['object_size_at_least']:.0f} px"
+        )
+    how = "estimated from the scene" if record.get("object_size_found") else "given"
+    about = "about " if record.get("object_size_found") else ""
+    size = record["object_size"]
+    return f"object size {about}{size:.0f} px ({how}): feature scales σ = {scales} px"
 
 
 def object_size_text(record: dict[str, Any]) -> str:

@@ -18,7 +18,7 @@ from napari_polarseg.engine.features.pixel_features import PixelFeatureParams
 
 
 def test_each_setting_is_described_by_its_dataclass():
-    assert setting_help("scales") == "Gaussian σ of every scale, pixels (> 0)."
+    assert setting_help("scales").startswith("Gaussian σ of every scale, pixels (> 0): the")
     assert setting_help("n_estimators").startswith("Trees of a forest")
     assert "GROUPS" in setting_help("groups") and ":data:" not in setting_help("groups")
     for name, (cls, attr) in SETTINGS.items():

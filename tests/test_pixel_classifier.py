@@ -84,8 +84,11 @@ def test_planted_materials_with_edges_are_recovered_exactly_with_the_defaults():
     materials whose albedo differs a little come out exactly away from the boundaries
     (the coarse scales blur the last few pixels of each side)."""
     stack, truth, strokes = planted_scene(albedo=(1.0, 0.9, 1.1))
-    out = PixelSegmenter(Pipeline(stack, ANGLES, SegmentParams(window=10))).segment(strokes)
-    assert out.classifier.feature_params == PixelFeatureParams()
+    seg = PixelSegmenter(Pipeline(stack, ANGLES, SegmentParams(window=10)))
+    out = seg.segment(strokes)
+    # the default scales at the scene's estimated object size, fixed in the classifier
+    sized = PixelFeatureParams().at_object_size(seg.object_size().size_px)
+    assert out.classifier.feature_params == sized and not sized.follows_object_size
     assert any(n.startswith("region:") for n in out.classifier.feature_names)
     edge = ndimage.morphological_gradient(truth, size=3) > 0
     near = ndimage.binary_dilation(edge, iterations=3)

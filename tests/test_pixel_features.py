@@ -8,8 +8,8 @@ from scipy import ndimage
 
 from napari_polarseg.engine.errors import PolarsegError
 from napari_polarseg.engine.features.feature_stack import upsample
+from napari_polarseg.engine.features.pixel_feature_params import GROUPS
 from napari_polarseg.engine.features.pixel_features import (
-    GROUPS,
     PixelFeatureParams,
     block_mean,
     check_maps,

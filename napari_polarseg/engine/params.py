@@ -151,9 +151,10 @@ class SegmentParams:
         0.0,
         help="Typical size (diameter) of one object in pixels, as cellpose's diameter. "
         "The superpixel methods take superpixels of side size / 8 and a feature diffusion "
-        "reaching half a size, never coarser than their share of the frame; 0 (the CLI "
-        "also takes auto) keeps those frame-share scales and only estimates the size from "
-        "the scene and reports it",
+        "reaching half a size, never coarser than their share of the frame; the pixel "
+        "classifier keeps the feature scales σ up to one size (at least 4 px). 0 (the CLI "
+        "also takes auto) estimates the size from the scene: the classifier follows it, "
+        "the superpixel methods keep their frame-share scales and report it",
         flag="--object-size",
         metavar="PX",
         label="object size (px)",

@@ -2,7 +2,7 @@
 and the region walk.
 
 :class:`ClassifierSettings` pairs the two parameter dataclasses the classifier is trained
-with (:class:`~napari_polarseg.engine.features.pixel_features.PixelFeatureParams`,
+with (:class:`~napari_polarseg.engine.features.pixel_feature_params.PixelFeatureParams`,
 :class:`~napari_polarseg.engine.classifier.pixel_classifier.ClassifierParams`);
 :data:`SETTINGS` names the fields a user sets and :func:`setting_help` gives each one's
 description from the ``Attributes`` section of its dataclass's docstring, so every
@@ -17,7 +17,7 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 from ..errors import PolarsegError
-from ..features.pixel_features import GROUPS, PixelFeatureParams
+from ..features.pixel_feature_params import GROUPS, PixelFeatureParams
 from .pixel_classifier import MODELS, ClassifierParams
 
 #: The settings a user chooses: name → (the dataclass holding it, its field).

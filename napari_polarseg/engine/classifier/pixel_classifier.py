@@ -197,7 +197,9 @@ class PixelClassifier:
         try:
             classes = np.asarray(meta["classes"], dtype=np.int64)
             names = tuple(str(n) for n in meta["feature_names"])
+            # a trained classifier's scales are fixed, whatever a new image's object size
             fparams = PixelFeatureParams.from_dict(dict(meta["feature_params"]))
+            fparams = replace(fparams, largest_scale_objects=0.0)
             training = dict(meta["training"])
             cparams = ClassifierParams.from_dict(dict(training["classifier_params"]))
             n_train = int(training["n_pixels"])

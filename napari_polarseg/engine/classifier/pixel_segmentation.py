@@ -21,6 +21,7 @@ can tell materials apart by the colour of their polarised reflection as well.
 from __future__ import annotations
 
 import contextlib
+import math
 import threading
 from dataclasses import dataclass, field, replace
 from typing import Any
@@ -31,6 +32,7 @@ from .. import disk_arrays
 from ..chunks import in_background
 from ..features.banded_edges import add_banded, banded_superpixel_edges, banded_superpixels
 from ..features.harmonics import top_left_block_labels
+from ..features.object_size import ObjectSize, scene_object_size, smallest_estimate
 from ..features.pixel_features import (
     EPS_INTENSITY,
     FeatureStack,
@@ -133,6 +135,9 @@ class PixelSegmenter:
     #: The edge maps and superpixels of the polarisation image of ``"image"`` (its id).
     _kept: dict[Any, Any] = field(default_factory=dict, init=False, repr=False)
     _lock: threading.RLock = field(default_factory=threading.RLock, init=False, repr=False)
+    #: The object size of the polarisation image and given size of the key (:meth:`object_size`).
+    _size: tuple[Any, ObjectSize] | None = field(default=None, init=False, repr=False)
+    _size_lock: threading.Lock = field(default_factory=threading.Lock, init=False, repr=False)
 
     def __post_init__(self) -> None:
         if self.colour_stack is not None:
@@ -172,13 +177,14 @@ class PixelSegmenter:
         segment_params: SegmentParams | None = None,
         progress: Any = None,
     ) -> FeatureStack:
-        """The feature stack for ``params`` (kept while the image and params stay):
+        """The feature stack for ``params`` at the scene's object size (:meth:`sized`;
+        kept while the image and params stay):
         the luminance image's features and, with ``colour`` and a colour stack, every
         colour's. ``segment_params``: the pipeline parameters of the polarisation image
         (default: the pipeline's last run's). The ``regions`` group's superpixels
         (:meth:`superpixels`) are drawn on a second thread meanwhile (the watershed
         releases the GIL)."""
-        params = params or PixelFeatureParams()
+        params = self.sized(params, segment_params)
         pol = self.pipeline.get("polarisation", segment_params)
         colour = colour and self.colour_stack is not None
         key = (id(pol), params, colour)
@@ -302,6 +308,62 @@ class PixelSegmenter:
         if self._kept.get("image") != id(pol):
             self._kept = {"image": id(pol)}
         return self._kept
+
+    def object_size(self, segment_params: SegmentParams | None = None) -> ObjectSize:
+        """The scene's object size D (px): ``segment_params.object_size`` when set, else
+        estimated from the polarisation image's valid pixels in the user's region
+        (:func:`~..features.object_size.scene_object_size`), kept while the image stays.
+        Thread-safe: a second caller waits for the first one's estimate."""
+        segment_params = segment_params or self.pipeline.params
+        given = float(segment_params.object_size)
+        pol = self.pipeline.get("polarisation", segment_params)
+        with self._size_lock:
+            if self._size is None or self._size[0] != (id(pol), given):
+                region = self.pipeline.mask.region
+                i, d, p = pol.intensity, pol.dop, pol.phase
+                size = scene_object_size(i, d, p, pol.invalid, given, region)
+                self._size = ((id(pol), given), size)
+            return self._size[1]
+
+    def sized(
+        self, params: PixelFeatureParams | None, segment_params: SegmentParams | None = None
+    ) -> PixelFeatureParams:
+        """``params`` (default ``PixelFeatureParams()``) at this scene's object size
+        (:meth:`~..features.pixel_feature_params.PixelFeatureParams.at_object_size`;
+        fixed parameters, e.g. a trained classifier's, are returned as they are). When no
+        size the estimate can give on this image would drop a scale (a large image:
+        its estimate works on a block-averaged grid), every scale is kept without
+        waiting for it."""
+        params = params or PixelFeatureParams()
+        if not params.follows_object_size:
+            return params
+        segment_params = segment_params or self.pipeline.params
+        if segment_params.object_size <= 0:
+            floor = self.smallest_object_size(segment_params)
+            if params.at_object_size(floor).scales == params.scales:
+                return params.at_object_size(math.inf)
+        return params.at_object_size(self.object_size(segment_params).size_px)
+
+    def smallest_object_size(self, segment_params: SegmentParams | None = None) -> float:
+        """The smallest object size (px) the estimate can give on this image's valid
+        pixels in the user's region (:func:`~..features.object_size.smallest_estimate`)."""
+        pol = self.pipeline.get("polarisation", segment_params)
+        usable = ~np.asarray(pol.invalid, dtype=bool)
+        region = self.pipeline.mask.region
+        if region is not None:
+            usable &= np.asarray(region, dtype=bool)
+        return smallest_estimate(usable)
+
+    def known_object_size(self, segment_params: SegmentParams | None = None) -> ObjectSize | None:
+        """The object size :meth:`object_size` has kept for this image and given size,
+        None when it was not needed (nothing is computed)."""
+        segment_params = segment_params or self.pipeline.params
+        pol = self.pipeline.get("polarisation", segment_params)
+        with self._size_lock:
+            kept = self._size
+        if kept is None or kept[0] != (id(pol), float(segment_params.object_size)):
+            return None
+        return kept[1]
 
     def maps(self, segment_params: SegmentParams | None = None) -> tuple[np.ndarray, ...]:
         """Î, ρ, φ the features are computed on: the pipeline's polarisation image, and

@@ -52,7 +52,7 @@ import scipy.sparse as sps
 
 from .. import disk_arrays
 from ..chunks import in_background
-from ..features.pixel_features import MAX_REGION_AREA, PIXELS_PER_REGION_SEED
+from ..features.pixel_feature_params import MAX_REGION_AREA, PIXELS_PER_REGION_SEED
 from ..features.superpixels import auto_region_area, relabel
 from ..tiles import row_bands
 from ..unsupervised.region_diffusion import border_weights, symmetric

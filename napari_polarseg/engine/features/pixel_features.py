@@ -15,8 +15,9 @@ Stokes components before taking the degree of linear polarisation,
 
 averages the noise out of the vector before its length is taken, so it carries no
 upward noise bias (unlike G_σ * ρ); the two together measure how coherent the
-polarisation is inside the window. Feature groups (:data:`GROUPS`), each at every
-scale σ (pixels):
+polarisation is inside the window. Feature groups
+(:data:`~.pixel_feature_params.GROUPS`; their parameters: :mod:`.pixel_feature_params`),
+each at every scale σ (pixels):
 
 - ``intensity``: log(G_σ * Î) and its local contrast √(G_σ(log² Î) − (G_σ log Î)²);
 - ``polarisation``: DoLP_σ (above), G_σ * ρ, the local spread of ρ and the AoLP
@@ -55,7 +56,6 @@ import os
 import threading
 from collections.abc import Callable, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
-from dataclasses import asdict, dataclass
 from typing import Any
 
 import numpy as np
@@ -64,15 +64,9 @@ from ..errors import PolarsegError
 from ..physics.fresnel import zenith_from_diffuse_dop
 from .feature_stack import FeatureStack, GridBlock, RegionBlock, upsample
 from .gaussian import gaussian_filter
-from .superpixels import auto_region_area, polarisation_superpixels
+from .pixel_feature_params import PixelFeatureParams
+from .superpixels import polarisation_superpixels
 
-#: Feature groups (module docstring), in the order their features appear.
-GROUPS = ("intensity", "polarisation", "zenith", "filters", "invariant", "regions")
-#: Automatic superpixel area: the image's pixels / this, within the two bounds below
-#: (a 1224 × 1024 frame: ~420 px regions; a 120 × 130 scene: 64 px).
-PIXELS_PER_REGION_SEED = 3000
-MIN_REGION_AREA = 64
-MAX_REGION_AREA = 1024
 #: Scales (σ ≤ this, pixels) whose features the ``regions`` group averages.
 REGION_MAX_SIGMA = 4.0
 #: Most threads :func:`pixel_features` computes scales on.
@@ -83,80 +77,6 @@ PYRAMID_MIN_SIGMA = 4.0
 EPS_DOP = 1e-4
 #: Floor of Î before its logarithm (units of the input).
 EPS_INTENSITY = 1e-6
-
-
-@dataclass(frozen=True)
-class PixelFeatureParams:
-    """What the pixel feature stack holds.
-
-    Attributes
-    ----------
-    scales : tuple of float
-        Gaussian σ of every scale, pixels (> 0).
-    groups : tuple of str
-        Feature groups from :data:`GROUPS`. The default is the set that measured best
-        on the rendered scenes and the hand-labelled real frames together
-        (``benchmarks/evaluate.py``); ``filters`` helped a real frame and hurt the
-        rendered scenes, ``zenith`` is redundant for trees.
-    refractive_index : float
-        n of the diffuse Fresnel model (eq. 3.13) for the zenith feature θ.
-    region_area : int
-        Mean superpixel area of the ``regions`` group, pixels; 0 = one region per
-        :data:`PIXELS_PER_REGION_SEED`-th of the image, within
-        [:data:`MIN_REGION_AREA`, :data:`MAX_REGION_AREA`].
-    """
-
-    scales: tuple[float, ...] = (1.0, 2.0, 4.0, 8.0, 16.0)
-    groups: tuple[str, ...] = ("intensity", "polarisation", "invariant", "regions")
-    refractive_index: float = 1.45
-    region_area: int = 0
-
-    def __post_init__(self) -> None:
-        scales = tuple(float(s) for s in self.scales)
-        if not scales or not all(math.isfinite(s) and s > 0 for s in scales):
-            raise PolarsegError(f"feature scales must be positive numbers, got {self.scales!r}")
-        groups = tuple(str(g) for g in self.groups)
-        unknown = [g for g in groups if g not in GROUPS]
-        if not groups or unknown:
-            raise PolarsegError(
-                f"feature groups must be some of {', '.join(GROUPS)}; got {self.groups!r}"
-            )
-        if not (math.isfinite(self.refractive_index) and self.refractive_index > 1):
-            raise PolarsegError(f"refractive_index must be > 1, got {self.refractive_index}")
-        object.__setattr__(self, "scales", scales)
-        object.__setattr__(self, "groups", groups)
-        object.__setattr__(self, "refractive_index", float(self.refractive_index))
-        if int(self.region_area) < 0 or (0 < int(self.region_area) < 4):
-            raise PolarsegError(f"region_area must be 0 (auto) or >= 4, got {self.region_area}")
-        object.__setattr__(self, "region_area", int(self.region_area))
-
-    def regions_of(self, shape: tuple[int, int]) -> int:
-        """Superpixel area (pixels) used on an image of ``shape``."""
-        if self.region_area:
-            return self.region_area
-        return auto_region_area(shape, PIXELS_PER_REGION_SEED, MIN_REGION_AREA, MAX_REGION_AREA)
-
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-ready form (lists for tuples)."""
-        d = asdict(self)
-        return {k: list(v) if isinstance(v, tuple) else v for k, v in d.items()}
-
-    @classmethod
-    def from_dict(cls, values: dict[str, Any]) -> PixelFeatureParams:
-        """Inverse of :meth:`to_dict`; unknown keys raise :class:`PolarsegError`."""
-        known = {"scales", "groups", "refractive_index", "region_area"}
-        extra = sorted(set(values) - known)
-        if extra:
-            raise PolarsegError(f"unknown pixel feature parameters: {', '.join(extra)}")
-        try:
-            return cls(
-                scales=tuple(values.get("scales", cls.scales)),
-                groups=tuple(values.get("groups", cls.groups)),
-                refractive_index=float(values.get("refractive_index", cls.refractive_index)),
-                region_area=int(values.get("region_area", cls.region_area)),
-            )
-        except (TypeError, ValueError) as exc:
-            raise PolarsegError(f"bad pixel feature parameters ({exc})") from None
 
 
 #: Largest block side :func:`block_mean` sums by strided slices (numpy sums fewer than

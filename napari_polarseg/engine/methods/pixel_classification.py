@@ -26,6 +26,7 @@ from ..classifier.classifier_settings import ClassifierSettings
 from ..classifier.pixel_segmentation import PixelSegmenter
 from ..classifier.scribble_session import ScribbleSession
 from ..errors import ClassifierInputError, PolarsegError
+from ..features.pixel_feature_params import PixelFeatureParams
 from ..params import SegmentParams
 from ..physics.pixel_mask import fill_from_nearest
 from ..timing import timed
@@ -90,7 +91,7 @@ class PixelClassification:
 
     name = "classifier"
     title = "pixel classifier (scribbles)"
-    reads = ("fit",)
+    reads = ("fit", "object_size")
     inputs = ("scribbles", "classifier")
 
     def stages(self, params: SegmentParams) -> tuple[str, ...]:
@@ -110,17 +111,23 @@ class PixelClassification:
         run.begin("classifier")
         if run.wants_partials:  # the coarser grid's labels first: shown while refining
             session.preview(run.cancel)
-            run.partial(self.output(scene, session, features))
+            run.partial(
+                self.output(scene, session, features, trained=inputs.get("classifier") is None)
+            )
         session.refine(run.cancel)
-        out = self.output(scene, session, features)
+        out = self.output(scene, session, features, trained=inputs.get("classifier") is None)
         run.partial(out, final=True)
         return out
 
-    def output(self, scene: Scene, session: ScribbleSession, features: float) -> MethodOutput:
+    def output(
+        self, scene: Scene, session: ScribbleSession, features: float, trained: bool = True
+    ) -> MethodOutput:
         """The session's last prediction as the method's output (labels outside the
         scene's region from the nearest pixel inside; ``features``: their seconds, 0
         when they were kept). ``extra`` holds the prediction, the classifier, its
-        materials and the session's seconds."""
+        materials and the session's seconds; the record the seconds and, for a
+        classifier ``trained`` here, the object size its feature scales followed
+        (:func:`size_record`)."""
         prediction, classifier = session.prediction, session.classifier
         assert prediction is not None and classifier is not None
         labels = prediction.labels
@@ -132,4 +139,27 @@ class PixelClassification:
             stages = {"features": features, **stages}
         extra = {"prediction": prediction, "classifier": classifier, "seconds": seconds}
         extra["materials"] = classifier.materials()
-        return MethodOutput(labels, seconds=stages, record={"seconds": seconds}, extra=extra)
+        record = {"seconds": seconds, **(size_record(session) if trained else {})}
+        return MethodOutput(labels, seconds=stages, record=record, extra=extra)
+
+
+def size_record(session: ScribbleSession) -> dict[str, Any]:
+    """``feature_scales`` (σ, px) of the session's trained classifier, the scales its
+    features kept at the scene's object size
+    (:meth:`~napari_polarseg.engine.features.pixel_feature_params.PixelFeatureParams.at_object_size`),
+    and ``object_size_applied`` (the scales followed it); with the size they followed
+    ``object_size`` (px) and ``object_size_found`` (estimated, not given), or, where no
+    estimate on this image could drop a scale and none was made,
+    ``object_size_at_least`` (px: the smallest the estimate can give here)."""
+    assert session.classifier is not None
+    scales = [float(s) for s in session.classifier.feature_params.scales]
+    followed = (session.features_params or PixelFeatureParams()).follows_object_size
+    record: dict[str, Any] = {"feature_scales": scales, "object_size_applied": followed}
+    if not followed:
+        return record
+    segmenter, params = session.segmenter, session.segment_params
+    size = segmenter.known_object_size(params)
+    if size is None:
+        record["object_size_at_least"] = round(segmenter.smallest_object_size(params), 1)
+        return record
+    return {**record, "object_size": round(size.size_px, 1), "object_size_found": size.estimated}

@@ -94,7 +94,7 @@ class UnsupervisedParams:
         σ (pixels) of the :mod:`.pixel_features` stack averaged per region and added to
         the node features; () = none.
     pixel_groups : tuple of str
-        Groups of that stack (:data:`~napari_polarseg.engine.features.pixel_features.GROUPS`,
+        Groups of that stack (:data:`~napari_polarseg.engine.features.pixel_feature_params.GROUPS`,
         without ``regions``).
     variance : float
         Share of the variance the PCA of the standardised node features keeps, (0, 1].

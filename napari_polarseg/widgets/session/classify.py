@@ -24,6 +24,7 @@ from ...engine import SegmentationResult, SegmentParams
 from ...engine.classifier.pixel_segmentation import PixelSegmentation
 from ...engine.errors import ClassifierInputError
 from ...engine.materials import default_name
+from ...messages import feature_scales_text
 
 if TYPE_CHECKING:
     from ...engine import Scene
@@ -239,5 +240,7 @@ def classifier_parts(
     parts = [f"{classes.size} materials {source} (labels {names})"]
     if out.trained:
         parts.append(out.classifier.training_text())
+        scales_text = feature_scales_text(out.result.method_record)
+        parts += [scales_text] if scales_text else []
     parts.append(f"mean class probability {float(confidence.mean()):.2f}")
     return parts
