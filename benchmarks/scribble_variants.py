@@ -6,7 +6,8 @@ difference to the classifier's defaults, with the frames that moved most.
 A variant changes the pixel features' parameters (``PixelFeatureParams``: the scales'
 cap in object sizes, the feature groups), the classifier's (``ClassifierParams``: the
 region walk's γ) or the region walk's superpixel side in object sizes D (its area
-(q · D)², within 16–1024 px, in place of the image's share). ``--test-base B`` reads
+(q · D)², within 16–1024 px, in place of the image's share), or turns the walk off
+where D is under a number of the walk superpixels' sides. ``--test-base B`` reads
 round B's test halves instead, only to check a choice on a test half already read and
 reported.
 
@@ -46,6 +47,9 @@ class Variant:
     features: dict[str, Any] = field(default_factory=dict)
     classifier: dict[str, Any] = field(default_factory=dict)
     walk_side: float = 0.0
+    #: no region walk where the object size is under this many walk superpixel sides
+    #: (0: the walk everywhere, the default)
+    walk_gate: float = 0.0
 
 
 VARIANTS = {
@@ -58,6 +62,7 @@ VARIANTS = {
     "no walk": Variant(classifier={"region_walk": 0.0}),
     "walk 0.3": Variant(classifier={"region_walk": 0.3}),
     "no region means": Variant({"groups": WITHOUT_REGIONS}),
+    "no walk under 3 walk superpixels": Variant(walk_gate=3.0),
 }
 
 
@@ -66,10 +71,16 @@ def frame_scores(frame: Frame, chosen: dict[str, Variant], rounds: int) -> dict[
     pipe = Pipeline(frame.stack, frame.angles, PRESETS["auto"].replace(n_segments=frame.k))
     out = {}
     for name, v in chosen.items():
+        classifier = dict(v.classifier)
+        if v.walk_gate > 0:
+            size = ScribbleSession.on_pipeline(pipe).segmenter.object_size(pipe.params).size_px
+            side = np.sqrt(pixel_segmentation.walk_region_area(frame.truth.shape))
+            if size < v.walk_gate * side:
+                classifier["region_walk"] = 0.0
         session = ScribbleSession.on_pipeline(
             pipe,
             features_params=PixelFeatureParams(**v.features),
-            classifier_params=ClassifierParams(**v.classifier),
+            classifier_params=ClassifierParams(**classifier),
         )
         area = 0
         if v.walk_side > 0:
