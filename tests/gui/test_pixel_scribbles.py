@@ -79,6 +79,9 @@ def test_painting_retrains_live_on_the_kept_features(viewer, open_sample, add_wi
     assert widget.classes.tolist() == [1, 2]
     assert "2 materials from scribbles (labels 1, 2)" in widget.status.value
     assert f"{first.classifier.n_training_pixels} training pixels" in widget.status.value
+    # the object size the feature scales followed, as the engine's classifier kept them
+    scales = ", ".join(f"{s:g}" for s in first.classifier.feature_params.scales)
+    assert f"(estimated from the scene): feature scales σ = {scales} px" in widget.status.value
     pipe = widget.pipeline
     segmenter = widget.store.segmenter(source_key(stack))
     features = segmenter.cached_features
