@@ -6,8 +6,9 @@ difference to the classifier's defaults, with the frames that moved most.
 A variant changes the pixel features' parameters (``PixelFeatureParams``: the scales'
 cap in object sizes, the feature groups), the classifier's (``ClassifierParams``: the
 region walk's γ) or the region walk's superpixel side in object sizes D (its area
-(q · D)², within 16–1024 px, in place of the image's share), or turns the walk off
-where D is under a number of the walk superpixels' sides. ``--test-base B`` reads
+(q · D)², within 16–1024 px, in place of the image's share), turns the walk off
+where D is under a number of the walk superpixels' sides, or sets the region means'
+superpixel side in object sizes. ``--test-base B`` reads
 round B's test halves instead, only to check a choice on a test half already read and
 reported.
 
@@ -47,6 +48,8 @@ class Variant:
     features: dict[str, Any] = field(default_factory=dict)
     classifier: dict[str, Any] = field(default_factory=dict)
     walk_side: float = 0.0
+    #: the region means' superpixel side in object sizes (0: the image's share)
+    means_side: float = 0.0
     #: no region walk where the object size is under this many walk superpixel sides
     #: (0: the walk everywhere, the default)
     walk_gate: float = 0.0
@@ -63,6 +66,8 @@ VARIANTS = {
     "walk 0.3": Variant(classifier={"region_walk": 0.3}),
     "no region means": Variant({"groups": WITHOUT_REGIONS}),
     "no walk under 3 walk superpixels": Variant(walk_gate=3.0),
+    "region means of side 0.25 D": Variant(means_side=0.25),
+    "region means of side 0.5 D": Variant(means_side=0.5),
 }
 
 
@@ -71,20 +76,21 @@ def frame_scores(frame: Frame, chosen: dict[str, Variant], rounds: int) -> dict[
     pipe = Pipeline(frame.stack, frame.angles, PRESETS["auto"].replace(n_segments=frame.k))
     out = {}
     for name, v in chosen.items():
-        classifier = dict(v.classifier)
+        classifier, features = dict(v.classifier), dict(v.features)
+        size = ScribbleSession.on_pipeline(pipe).segmenter.object_size(pipe.params).size_px
+        if v.means_side > 0:
+            features["region_area"] = int(np.clip((v.means_side * size) ** 2, 16, 1024))
         if v.walk_gate > 0:
-            size = ScribbleSession.on_pipeline(pipe).segmenter.object_size(pipe.params).size_px
             side = np.sqrt(pixel_segmentation.walk_region_area(frame.truth.shape))
             if size < v.walk_gate * side:
                 classifier["region_walk"] = 0.0
         session = ScribbleSession.on_pipeline(
             pipe,
-            features_params=PixelFeatureParams(**v.features),
+            features_params=PixelFeatureParams(**features),
             classifier_params=ClassifierParams(**classifier),
         )
         area = 0
         if v.walk_side > 0:
-            size = session.segmenter.object_size(pipe.params).size_px
             area = int(np.clip((v.walk_side * size) ** 2, 16, 1024))
         walk_area = pixel_segmentation.walk_region_area
         with mock.patch.object(
