@@ -32,7 +32,12 @@ from .. import disk_arrays
 from ..chunks import in_background
 from ..features.banded_edges import add_banded, banded_superpixel_edges, banded_superpixels
 from ..features.harmonics import top_left_block_labels
-from ..features.object_size import ObjectSize, scene_object_size, smallest_estimate
+from ..features.object_size import (
+    ObjectSize,
+    scene_object_size,
+    smallest_estimate,
+    usable_pixels,
+)
 from ..features.pixel_features import (
     EPS_INTENSITY,
     FeatureStack,
@@ -314,16 +319,21 @@ class PixelSegmenter:
         estimated from the polarisation image's valid pixels in the user's region
         (:func:`~..features.object_size.scene_object_size`), kept while the image stays.
         Thread-safe: a second caller waits for the first one's estimate."""
-        segment_params = segment_params or self.pipeline.params
-        given = float(segment_params.object_size)
-        pol = self.pipeline.get("polarisation", segment_params)
+        key, pol = self._size_key(segment_params)
         with self._size_lock:
-            if self._size is None or self._size[0] != (id(pol), given):
+            if self._size is None or self._size[0] != key:
                 region = self.pipeline.mask.region
                 i, d, p = pol.intensity, pol.dop, pol.phase
-                size = scene_object_size(i, d, p, pol.invalid, given, region)
-                self._size = ((id(pol), given), size)
+                size = scene_object_size(i, d, p, pol.invalid, key[1], region)
+                self._size = (key, size)
             return self._size[1]
+
+    def _size_key(self, segment_params: SegmentParams | None) -> tuple[tuple[int, float], Any]:
+        """What :meth:`object_size` is kept for (the polarisation image's id and the
+        given size) and that image."""
+        segment_params = segment_params or self.pipeline.params
+        pol = self.pipeline.get("polarisation", segment_params)
+        return (id(pol), float(segment_params.object_size)), pol
 
     def sized(
         self, params: PixelFeatureParams | None, segment_params: SegmentParams | None = None
@@ -348,22 +358,15 @@ class PixelSegmenter:
         """The smallest object size (px) the estimate can give on this image's valid
         pixels in the user's region (:func:`~..features.object_size.smallest_estimate`)."""
         pol = self.pipeline.get("polarisation", segment_params)
-        usable = ~np.asarray(pol.invalid, dtype=bool)
-        region = self.pipeline.mask.region
-        if region is not None:
-            usable &= np.asarray(region, dtype=bool)
-        return smallest_estimate(usable)
+        return smallest_estimate(usable_pixels(pol.invalid, self.pipeline.mask.region))
 
     def known_object_size(self, segment_params: SegmentParams | None = None) -> ObjectSize | None:
         """The object size :meth:`object_size` has kept for this image and given size,
         None when it was not needed (nothing is computed)."""
-        segment_params = segment_params or self.pipeline.params
-        pol = self.pipeline.get("polarisation", segment_params)
+        key, _ = self._size_key(segment_params)
         with self._size_lock:
             kept = self._size
-        if kept is None or kept[0] != (id(pol), float(segment_params.object_size)):
-            return None
-        return kept[1]
+        return kept[1] if kept is not None and kept[0] == key else None
 
     def maps(self, segment_params: SegmentParams | None = None) -> tuple[np.ndarray, ...]:
         """Î, ρ, φ the features are computed on: the pipeline's polarisation image, and

@@ -487,10 +487,16 @@ def scene_object_size(
     lie in ``region`` (H, W bool; None: everywhere)."""
     if given > 0:
         return ObjectSize.given(float(given))
-    valid = ~np.asarray(invalid, dtype=bool)
+    return estimate_object_size(intensity, dop, phase, usable_pixels(invalid, region))
+
+
+def usable_pixels(invalid: np.ndarray, region: np.ndarray | None = None) -> np.ndarray:
+    """(H, W) bool: the pixels that are not ``invalid`` and lie in ``region`` (None:
+    everywhere), the ones an object size is estimated on."""
+    usable = ~np.asarray(invalid, dtype=bool)
     if region is not None:
-        valid &= np.asarray(region, dtype=bool)
-    return estimate_object_size(intensity, dop, phase, valid)
+        usable &= np.asarray(region, dtype=bool)
+    return usable
 
 
 def work_box(valid: np.ndarray) -> tuple[tuple[slice, slice], int]:

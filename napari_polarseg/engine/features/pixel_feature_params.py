@@ -18,7 +18,7 @@ under 16 px.
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass, fields, replace
 from typing import Any
 
 from ..errors import PolarsegError
@@ -121,8 +121,7 @@ class PixelFeatureParams:
     @classmethod
     def from_dict(cls, values: dict[str, Any]) -> PixelFeatureParams:
         """Inverse of :meth:`to_dict`; unknown keys raise :class:`PolarsegError`."""
-        known = {"scales", "groups", "refractive_index", "region_area", "largest_scale_objects"}
-        extra = sorted(set(values) - known)
+        extra = sorted(set(values) - {f.name for f in fields(cls)})
         if extra:
             raise PolarsegError(f"unknown pixel feature parameters: {', '.join(extra)}")
         try:

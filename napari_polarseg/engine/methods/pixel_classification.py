@@ -109,13 +109,12 @@ class PixelClassification:
         session = scribble_session(scene, inputs.get("colour_stack"))
         features = fit_session(session, params, inputs, run.within)
         run.begin("classifier")
+        trained = inputs.get("classifier") is None
         if run.wants_partials:  # the coarser grid's labels first: shown while refining
             session.preview(run.cancel)
-            run.partial(
-                self.output(scene, session, features, trained=inputs.get("classifier") is None)
-            )
+            run.partial(self.output(scene, session, features, trained))
         session.refine(run.cancel)
-        out = self.output(scene, session, features, trained=inputs.get("classifier") is None)
+        out = self.output(scene, session, features, trained)
         run.partial(out, final=True)
         return out
 
