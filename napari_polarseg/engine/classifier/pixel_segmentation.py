@@ -239,10 +239,11 @@ class PixelSegmenter:
         images += [(c.intensity, c.dop, c.phase) for c in self.colour_images(segment_params)]
         images = images[: len(channels)]
         centres = log_centres_of(images)
-        regions = None
+        regions, block = None, 1
         if "regions" in params.groups:
-            regions = self.superpixels(params.regions_of(shape), segment_params, colour)
-        return tiled_features(images, channels, params, grid, regions, centres)
+            area = params.regions_of(shape)
+            regions, block = self.superpixels(area, segment_params, colour), watershed_grid(area)
+        return tiled_features(images, channels, params, grid, regions, centres, block)
 
     def work_limit(self) -> int:
         """The memory limit of the method's work, bytes: :attr:`max_bytes`, else the

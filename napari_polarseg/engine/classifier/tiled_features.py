@@ -65,12 +65,28 @@ def without_regions(params: PixelFeatureParams, largest: float | None = None) ->
     return replace(params, scales=scales or params.scales[:1], groups=groups)
 
 
-def core_sums(features: FeatureStack, inner: Box, regions: np.ndarray, n: int) -> np.ndarray:
+def block_sums(plane: np.ndarray, block: int) -> np.ndarray:
+    """Sums (h / b, w / b) of the b × b blocks of ``plane`` (h, w, both multiples of
+    b = ``block``), added in its precision by strided slices: ``reshape(…).sum`` over
+    two short axes runs numpy's reduction loop per block, 8 × slower."""
+    b = int(block)
+    columns = sum(plane[:, j::b] for j in range(1, b)) + plane[:, 0::b]
+    return sum(columns[i::b] for i in range(1, b)) + columns[0::b]
+
+
+def core_sums(
+    features: FeatureStack, inner: Box, regions: np.ndarray, n: int, block: int = 1
+) -> np.ndarray:
     """(F, n) float64 sums of every feature over the pixels of the box ``inner`` of
     ``features`` per region (``regions``: the flat region of each of those pixels,
-    0 … n − 1)."""
-    planes = (features.plane(j)[inner].ravel() for j in range(features.n_features))
-    return np.stack([np.bincount(regions, p, n) for p in planes])
+    0 … n − 1; with ``block`` b > 1, of each b × b block of them, the regions being
+    constant on those blocks and the box's sides multiples of b). Each plane's blocks
+    are summed first (:func:`block_sums`), so ``np.bincount``, which converts its
+    weights to float64, reads b² × fewer (3 × faster at b = 2)."""
+    planes = (features.plane(j)[inner] for j in range(features.n_features))
+    if block > 1:
+        planes = (block_sums(p, block) for p in planes)
+    return np.stack([np.bincount(regions, p.ravel(), n) for p in planes])
 
 
 def region_sums(
@@ -79,20 +95,25 @@ def region_sums(
     core: np.ndarray,
     params: PixelFeatureParams,
     log_centres: list[float],
+    block: int = 1,
 ) -> tuple[np.ndarray, list[np.ndarray]]:
     """A tile's share of :meth:`TiledFeatures.region_values` (a task of the current tile
     map, :mod:`..tile_map`): the superpixels of its ``core`` (their ids, ascending) and
     every channel's (F_r, m) float64 sums of its features of ``params`` over each of
     them, the features computed on the channel's ``maps`` of the tile's outer box
-    (``inner``: the core within it)."""
+    (``inner``: the core within it). ``block``: the superpixels are constant on the
+    ``block`` × ``block`` blocks of the core (it starts on a multiple of ``block`` in
+    the image), summed block by block (:func:`core_sums`) when its sides are multiples
+    of ``block``."""
+    b = int(block) if block > 1 and not (core.shape[0] % block or core.shape[1] % block) else 1
     flat = core.ravel()
     present = np.bincount(flat) > 0
     ids = np.flatnonzero(present)
-    local = (np.cumsum(present) - 1)[flat]
+    local = (np.cumsum(present) - 1)[core[::b, ::b].ravel()]
     sums = []
     for (i, d, p), centre in zip(maps, log_centres, strict=True):
         f = pixel_features(i, d, p, params, log_centre=centre)
-        sums.append(core_sums(f, inner, local, ids.size))
+        sums.append(core_sums(f, inner, local, ids.size, b))
     return ids, sums
 
 
@@ -122,6 +143,10 @@ class TiledFeatures:
         The tiles the prediction runs on; its halo and alignment hold for any box.
     regions : ndarray (H, W) int or None
         The whole image's superpixels (with the ``regions`` group).
+    region_block : int
+        The superpixels are constant on the ``region_block`` × ``region_block`` blocks
+        from the image's origin (drawn on the watershed's coarser grid,
+        :func:`~..features.superpixels.watershed_grid`); 1: no such blocks.
     """
 
     images: list[Maps]
@@ -130,6 +155,7 @@ class TiledFeatures:
     grid: TileGrid
     regions: np.ndarray | None = None
     log_centres: list[float] = field(default_factory=list)
+    region_block: int = 1
     _region_values: list[np.ndarray] | None = field(default=None, init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -207,6 +233,7 @@ class TiledFeatures:
                     self.regions[tile.core],
                     small,
                     self.log_centres,
+                    self.block_of(tile.core),
                 )
                 for tile in grid
             )
@@ -217,6 +244,12 @@ class TiledFeatures:
             counts = np.maximum(band_counts(self.regions, n), 1)
             self._region_values = [(v / counts).astype(np.float32) for v in sums]
         return self._region_values
+
+    def block_of(self, core: Box) -> int:
+        """:attr:`region_block` when the box ``core`` starts on a multiple of it, else 1:
+        the block :func:`region_sums` may sum ``core`` by."""
+        b = self.region_block
+        return b if core[0].start % b == 0 and core[1].start % b == 0 else 1
 
     def around(self, rows: tuple[int, int], cols: tuple[int, int]) -> Box:
         """The box read for the pixels rows[0]:rows[1] × cols[0]:cols[1]: grown by the
@@ -352,8 +385,12 @@ def tiled_features(
     grid: TileGrid,
     regions: np.ndarray | None,
     log_centres: Sequence[float] = (),
+    region_block: int = 1,
 ) -> TiledFeatures:
     """A :class:`TiledFeatures` (``regions`` dropped without the ``regions`` group;
-    ``log_centres``: every channel's, when already known)."""
+    ``log_centres``: every channel's, when already known; ``region_block``: the side of
+    the blocks the ``regions`` are constant on)."""
     keep = regions if "regions" in params.groups else None
-    return TiledFeatures(list(images), list(channels), params, grid, keep, list(log_centres))
+    return TiledFeatures(
+        list(images), list(channels), params, grid, keep, list(log_centres), region_block
+    )
