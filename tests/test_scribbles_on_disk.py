@@ -111,6 +111,12 @@ def test_the_exact_median_is_numpys(monkeypatch):
     assert banded_edges.exact_median(single) == np.median(single)
     assert banded_edges.exact_median(single).dtype == np.float32
     assert banded_edges.exact_median(np.zeros((30, 30))) == 0.0  # every bit the same
+    # the two middle ranks on different top digits (signs), and ranks apart
+    split = np.repeat([-1.0, 1.0], 50).reshape(10, 10)
+    assert banded_edges.exact_median(split) == np.median(split) == 0.0
+    for v in values:
+        ks = (0, 17, v.size - 1)
+        assert banded_edges.smallest_at(v, ks) == list(np.partition(v.ravel(), ks)[list(ks)])
     values[0][5, 5] = np.nan
     assert np.isnan(banded_edges.exact_median(values[0]))
 

@@ -105,9 +105,18 @@ def _gathered(values: np.ndarray, prefix: int, shift: int) -> np.ndarray:
 
 def kth_smallest(values: np.ndarray, k: int) -> float:
     """The ``k``-th smallest (0-based) of float32 or float64 ``values`` (H, W), of their
-    dtype: one digit of :data:`DIGIT_BITS` bits of their :func:`ordered_keys` counted a
-    pass (band by band), until at most :data:`GATHER` candidates are left, which are
-    gathered and partitioned (or every bit is known). No NaN among the values.
+    dtype (:func:`smallest_at`)."""
+    return smallest_at(values, (k,))[0]
+
+
+def smallest_at(values: np.ndarray, ranks: tuple[int, ...]) -> list[float]:
+    """The ``ranks``-th smallest (0-based) of float32 or float64 ``values`` (H, W), of
+    their dtype: one digit of :data:`DIGIT_BITS` bits of their :func:`ordered_keys`
+    counted a pass (band by band), until at most :data:`GATHER` candidates are left,
+    which are gathered and partitioned (or every bit is known). The ranks share the
+    passes while they fall on the same digit (the median's two middle ranks nearly
+    always do); where they part, each is looked for on its own. No NaN among the
+    values.
 
     Written by hand: ``np.median`` and ``np.partition`` work on a copy of the whole
     array (0.8 GB for a 100 MP float64 edge map), and a Dask median gathers it into one
@@ -120,25 +129,30 @@ def kth_smallest(values: np.ndarray, k: int) -> float:
         shift -= DIGIT_BITS
         counts = _digit_counts(values, prefix, shift)
         ends = np.cumsum(counts)
-        digit = int(np.searchsorted(ends, k - below, side="right"))
+        digits = {int(np.searchsorted(ends, k - below, side="right")) for k in ranks}
+        if len(digits) > 1:
+            return [smallest_at(values, (k,))[0] for k in ranks]
+        digit = digits.pop()
         below += int(ends[digit - 1]) if digit else 0
         prefix, left = (prefix << DIGIT_BITS) | digit, int(counts[digit])
     if shift == 0:  # every bit known: all the candidates are that value
-        return key_value(prefix, values.dtype)
+        return [key_value(prefix, values.dtype)] * len(ranks)
     keys = _gathered(values, prefix, shift) if shift < bits else ordered_keys(values).ravel()
-    return key_value(np.partition(keys, k - below)[k - below], values.dtype)
+    at = [k - below for k in ranks]
+    keys = np.partition(keys, at)
+    return [key_value(keys[j], values.dtype) for j in at]
 
 
 def exact_median(values: np.ndarray) -> float:
     """``np.median`` of float32 or float64 ``values`` (H, W), of their dtype, read band by
-    band (:func:`kth_smallest`; NaN when one is NaN): the middle value, or the mean of
+    band (:func:`smallest_at`; NaN when one is NaN): the middle value, or the mean of
     the two middle ones."""
     if any(np.isnan(values[band]).any() for band in row_bands(values.shape)):
         return values.dtype.type(np.nan)
     n = int(values.size)
     if n % 2:
         return kth_smallest(values, n // 2)
-    low, high = kth_smallest(values, n // 2 - 1), kth_smallest(values, n // 2)
+    low, high = smallest_at(values, (n // 2 - 1, n // 2))
     return np.mean(np.array([low, high], dtype=values.dtype))
 
 
