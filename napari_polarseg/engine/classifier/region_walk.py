@@ -51,7 +51,7 @@ import numpy as np
 import scipy.sparse as sps
 
 from .. import disk_arrays
-from ..chunks import in_background
+from ..chunks import N_THREADS, chunk_bounds, in_background, run_chunks
 from ..features.pixel_feature_params import MAX_REGION_AREA, PIXELS_PER_REGION_SEED
 from ..features.superpixels import auto_region_area, relabel
 from ..tiles import row_bands
@@ -298,8 +298,8 @@ def node_prediction(
 ) -> PixelPrediction:
     """Every pixel's probabilities, label and uncertainty 1 − (x_(1) − x_(2)) from its
     node's x (m, K), looked up :data:`NODE_BAND_ROWS` rows of ``nodes`` (H, W) at a time
-    into arrays placed by :func:`~..disk_arrays.empty` (in temporary files when the
-    image's full-size arrays do not fit the run's limit)."""
+    (split among the cores) into arrays placed by :func:`~..disk_arrays.empty` (in
+    temporary files when the image's full-size arrays do not fit the run's limit)."""
     ordered = np.sort(x, axis=1)
     margin = ordered[:, -1] - (ordered[:, -2] if x.shape[1] > 1 else 0.0)
     planes = [x[:, k].astype(np.float32) for k in range(x.shape[1])]
@@ -308,13 +308,19 @@ def node_prediction(
     proba = disk_arrays.empty((x.shape[1], *nodes.shape), dtype=np.float32)
     labels = disk_arrays.empty(nodes.shape, dtype=np.int32)
     uncertainty = disk_arrays.empty(nodes.shape, dtype=np.float32)
-    for band in row_bands(nodes.shape[0], NODE_BAND_ROWS):
-        index = nodes[band].astype(np.intp, copy=False)  # converted once, not by every take
-        for k, plane in enumerate(planes):  # "clip": "raise" would buffer a copy
-            np.take(plane, index, out=proba[k, band], mode="clip")
-        np.take(best, index, out=labels[band], mode="clip")
-        np.take(sure, index, out=uncertainty[band], mode="clip")
-        disk_arrays.release(proba, labels, uncertainty)
+    # bands on the cores (np.take frees the GIL), together as many rows as one band
+    bands = list(row_bands(nodes.shape[0], max(1, NODE_BAND_ROWS // N_THREADS)))
+
+    def work(first: int, stop: int) -> None:
+        for band in bands[first:stop]:
+            index = nodes[band].astype(np.intp, copy=False)  # converted once, not per take
+            for k, plane in enumerate(planes):  # "clip": "raise" would buffer a copy
+                np.take(plane, index, out=proba[k, band], mode="clip")
+            np.take(best, index, out=labels[band], mode="clip")
+            np.take(sure, index, out=uncertainty[band], mode="clip")
+            disk_arrays.release(proba, labels, uncertainty)
+
+    run_chunks(chunk_bounds(len(bands), 1), work, nodes.size)
     return PixelPrediction(labels, proba, uncertainty, classes, n_predicted)
 
 

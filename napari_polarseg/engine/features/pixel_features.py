@@ -302,11 +302,15 @@ def _level_features(
 def check_maps(intensity: Any, dop: Any, phase: Any) -> tuple[np.ndarray, ...]:
     """Î, ρ, φ as float32 (H, W) of one shape, non-finite values set to 0 (raises
     PolarsegError on other shapes)."""
-    maps = [np.asarray(a, dtype=np.float32) for a in (intensity, dop, phase)]
+    maps = [np.array(a, dtype=np.float32) for a in (intensity, dop, phase)]  # copies
     if maps[0].ndim != 2 or any(m.shape != maps[0].shape for m in maps):
         shapes = ", ".join(str(m.shape) for m in maps)
         raise PolarsegError(f"intensity, dop and phase must be 2-D of one shape, got {shapes}")
-    return tuple(np.where(np.isfinite(m), m, 0).astype(np.float32) for m in maps)
+    for m in maps:
+        bad = ~np.isfinite(m)
+        if bad.any():
+            m[bad] = 0
+    return tuple(maps)
 
 
 def pixel_features(
