@@ -15,7 +15,12 @@ from sklearn.metrics import adjusted_rand_score
 from napari_polarseg import io as pio
 from napari_polarseg.engine import Pipeline, ScribbleSession
 from napari_polarseg.engine.classifier.pixel_classifier import ClassifierParams
-from napari_polarseg.engine.classifier.region_walk import node_seeds, region_graph, walk
+from napari_polarseg.engine.classifier.region_walk import (
+    node_prediction,
+    node_seeds,
+    region_graph,
+    walk,
+)
 from napari_polarseg.engine.features.superpixels import polarisation_superpixels, superpixel_edges
 from napari_polarseg.truth import TRUTH_DIR, read_truth_file, real_frame_path
 
@@ -168,3 +173,18 @@ def test_the_preview_shows_nearly_the_final_labels():
     final = session.refine().labels
     assert preview.shape == final.shape and np.mean(preview == final) > 0.9
     assert session.n_predicted > 0
+
+
+def test_node_prediction_looks_every_band_up():
+    """Every pixel takes its node's probabilities, most probable class and margin
+    uncertainty, looked up band by band on the cores (1300 rows: several bands)."""
+    rng = np.random.default_rng(7)
+    x = rng.dirichlet(np.ones(3), size=500)
+    nodes = rng.integers(0, 500, (1300, 90)).astype(np.int32)
+    classes = np.array([2, 5, 9])
+    out = node_prediction(x, nodes, classes, 17)
+    np.testing.assert_array_equal(out.probabilities, x.T.astype(np.float32)[:, nodes])
+    np.testing.assert_array_equal(out.labels, np.argmax(x, axis=1)[nodes])
+    top = np.sort(x, axis=1)
+    np.testing.assert_allclose(out.uncertainty, (1 - (top[:, -1] - top[:, -2]))[nodes], rtol=1e-6)
+    assert out.n_predicted == 17

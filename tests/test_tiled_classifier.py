@@ -8,7 +8,11 @@ from sklearn.metrics import adjusted_rand_score
 
 from napari_polarseg.engine import ScribbleSession
 from napari_polarseg.engine.classifier.pixel_classifier import ClassifierParams
-from napari_polarseg.engine.classifier.tiled_features import TiledFeatures
+from napari_polarseg.engine.classifier.tiled_features import (
+    TiledFeatures,
+    block_sums,
+    region_sums,
+)
 from napari_polarseg.engine.classifier.tiled_prediction import scribble_tiles
 from napari_polarseg.engine.features.pixel_features import PixelFeatureParams
 from napari_polarseg.engine.limits import (
@@ -128,3 +132,29 @@ def test_fine_scales_on_the_window_equal_the_whole_box(scene):
         got = made.take((rows - inner[0].start) * width + cols - inner[1].start)
         assert r0 >= inner[0].start and c0 >= inner[1].start
         np.testing.assert_array_equal(got, expected)
+
+
+def test_region_sums_by_blocks_equal_the_pixels_sums():
+    """Superpixels constant on 2 × 2 blocks (the watershed's coarser grid): each
+    feature summed block by block first gives the pixels' sums per superpixel (to
+    float32 rounding); odd sides fall back to the pixels."""
+    a = np.arange(24, dtype=np.float32).reshape(4, 6)
+    np.testing.assert_array_equal(block_sums(a, 2), a.reshape(2, 2, 3, 2).sum(axis=(1, 3)))
+    rng = np.random.default_rng(2)
+    h, w = 64, 80
+    coarse = rng.integers(0, 40, (h // 2, w // 2)) * 3  # ids with gaps
+    core = np.repeat(np.repeat(coarse, 2, axis=0), 2, axis=1)
+    maps = [(rng.random((h, w)) + 0.5, rng.random((h, w)) * 0.3, rng.random((h, w)) * 3)]
+    params = PixelFeatureParams(scales=(1.0, 2.0), groups=("intensity", "polarisation"))
+    inner = (slice(0, h), slice(0, w))
+    ids1, (sums1,) = region_sums(maps, inner, core, params, [0.0], 1)
+    ids2, (sums2,) = region_sums(maps, inner, core, params, [0.0], 2)
+    np.testing.assert_array_equal(ids1, np.unique(core))
+    np.testing.assert_array_equal(ids1, ids2)
+    np.testing.assert_allclose(sums2, sums1, rtol=1e-5, atol=1e-4)
+    odd = ([tuple(m[: h - 1] for m in maps[0])], (slice(0, h - 1), slice(0, w)), core[: h - 1])
+    ids3, (sums3,) = region_sums(*odd, params, [0.0], 2)
+    ids4, (sums4,) = region_sums(*odd, params, [0.0], 1)
+    np.testing.assert_array_equal(ids3, np.unique(core[: h - 1]))
+    np.testing.assert_array_equal(ids3, ids4)
+    np.testing.assert_array_equal(sums3, sums4)  # the pixels' own sums
