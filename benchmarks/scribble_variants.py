@@ -7,8 +7,10 @@ A variant changes the pixel features' parameters (``PixelFeatureParams``: the sc
 cap in object sizes, the feature groups), the classifier's (``ClassifierParams``: the
 region walk's γ) or the region walk's superpixel side in object sizes D (its area
 (q · D)², within 16–1024 px, in place of the image's share), turns the walk off
-where D is under a number of the walk superpixels' sides, or sets the region means'
-superpixel side in object sizes. ``--test-base B`` reads
+where D is under a number of the walk superpixels' sides, sets the region means'
+superpixel side in object sizes, or keeps the classifier's own class means for the
+unseeded nodes where the walk's answer is unsure (its two largest class probabilities
+closer than a margin). ``--test-base B`` reads
 round B's test halves instead, only to check a choice on a test half already read and
 reported.
 
@@ -32,7 +34,7 @@ from families import FAMILIES, Frame, add_check_round, frames, read_half
 from robot_user import run_robot
 
 from napari_polarseg.engine import Pipeline, ScribbleSession
-from napari_polarseg.engine.classifier import pixel_segmentation
+from napari_polarseg.engine.classifier import pixel_segmentation, region_walk
 from napari_polarseg.engine.classifier.pixel_classifier import ClassifierParams
 from napari_polarseg.engine.features.pixel_feature_params import PixelFeatureParams
 from napari_polarseg.engine.params import PRESETS
@@ -53,6 +55,9 @@ class Variant:
     #: no region walk where the object size is under this many walk superpixel sides
     #: (0: the walk everywhere, the default)
     walk_gate: float = 0.0
+    #: the unseeded nodes whose walk answer has its two largest class probabilities
+    #: closer than this keep the classifier's class means (0: the walk's answer)
+    walk_unsure: float = 0.0
 
 
 VARIANTS = {
@@ -68,7 +73,25 @@ VARIANTS = {
     "no walk under 3 walk superpixels": Variant(walk_gate=3.0),
     "region means of side 0.25 D": Variant(means_side=0.25),
     "region means of side 0.5 D": Variant(means_side=0.5),
+    "classifier where the walk is unsure by 0.2": Variant(walk_unsure=0.2),
+    "classifier where the walk is unsure by 0.5": Variant(walk_unsure=0.5),
 }
+
+
+def unsure_walk(margin: float) -> Any:
+    """:func:`~napari_polarseg.engine.classifier.region_walk.walk` whose unseeded nodes
+    with their two largest class probabilities closer than ``margin`` keep their
+    prior (the classifier's class means), renormalised."""
+    walk = region_walk.walk
+
+    def patched(adjacency: Any, prior: np.ndarray, seeds: np.ndarray, weight: Any) -> np.ndarray:
+        x = walk(adjacency, prior, seeds, weight)
+        top = np.sort(x, axis=1)
+        unsure = (top[:, -1] - top[:, -2] < margin) & (seeds < 0)
+        x[unsure] = prior[unsure] / np.maximum(prior[unsure].sum(axis=1, keepdims=True), 1e-12)
+        return x
+
+    return patched
 
 
 def frame_scores(frame: Frame, chosen: dict[str, Variant], rounds: int) -> dict[str, list]:
@@ -93,8 +116,12 @@ def frame_scores(frame: Frame, chosen: dict[str, Variant], rounds: int) -> dict[
         if v.walk_side > 0:
             area = int(np.clip((v.walk_side * size) ** 2, 16, 1024))
         walk_area = pixel_segmentation.walk_region_area
-        with mock.patch.object(
-            pixel_segmentation, "walk_region_area", (lambda s, a=area: a) if area else walk_area
+        walk = unsure_walk(v.walk_unsure) if v.walk_unsure > 0 else region_walk.walk
+        with (
+            mock.patch.object(
+                pixel_segmentation, "walk_region_area", (lambda s, a=area: a) if area else walk_area
+            ),
+            mock.patch.object(region_walk, "walk", walk),
         ):
             session.features()
             run = run_robot(frame.truth, session.update, rounds)
