@@ -150,10 +150,8 @@ def exact_median(values: np.ndarray) -> float:
     if any(np.isnan(values[band]).any() for band in row_bands(values.shape)):
         return values.dtype.type(np.nan)
     n = int(values.size)
-    if n % 2:
-        return kth_smallest(values, n // 2)
-    low, high = smallest_at(values, (n // 2 - 1, n // 2))
-    return np.mean(np.array([low, high], dtype=values.dtype))
+    middle = (n // 2,) if n % 2 else (n // 2 - 1, n // 2)
+    return np.mean(np.array(smallest_at(values, middle), dtype=values.dtype))
 
 
 def banded_gradients(
