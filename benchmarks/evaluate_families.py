@@ -17,6 +17,11 @@ Families and halves: :mod:`families`. Every frame is scored by the adjusted Rand
 - ``bound``: a random forest on the 20 plain features trained on the truth of the left
   half, scored on the right half (:func:`baselines.truth_bound_halves`): what those
   features allow, given labels;
+- ``scribble bound``: the project's scribble classifier given the truth of the left
+  half as its strokes, scored on the right half (:func:`scribble_bound`): what the
+  best classifier here reaches with labels on half the frame, the bound a claim about
+  the data needs; ``default right``: the default scored on the same right-half pixels,
+  to stand beside both bounds;
 - object size: :func:`~napari_polarseg.engine.features.object_size.estimate_object_size`
   against the truth's median object size (their ratio; within a factor 1.5 is the
   target).
@@ -42,14 +47,20 @@ import time
 from pathlib import Path
 
 import numpy as np
-from baselines import intensity_kmeans, plain_features, smoothed_kmeans, truth_bound_halves
+from baselines import (
+    intensity_kmeans,
+    plain_features,
+    right_half_ari,
+    smoothed_kmeans,
+    truth_bound_halves,
+)
 from families import FAMILIES, HALVES, RENDER_SETS, Frame, frames
 from ilastik_features import ilastik_features
 from materials import degenerate, replace_block
 from robot_user import forest_update, product_update, run_robot
 from sklearn.metrics import adjusted_rand_score
 
-from napari_polarseg.engine import Pipeline, Scene
+from napari_polarseg.engine import Pipeline, Scene, ScribbleSession
 from napari_polarseg.engine.features.object_size import estimate_object_size
 from napari_polarseg.engine.methods import register_method
 from napari_polarseg.engine.methods.surface_superpixels import SurfaceSuperpixels
@@ -74,7 +85,8 @@ SUPERVISED = (
     "scribbles robot 5",
     "plain forest robot 5",
 )
-COLUMNS = (*UNSUPERVISED, *SUPERVISED, "bound")
+BOUNDS = ("bound", "scribble bound", "default right")
+COLUMNS = (*UNSUPERVISED, *SUPERVISED, *BOUNDS)
 #: Issue 37's targets on every rendered family's test half.
 TARGET_DEFAULT = 0.5
 TARGET_SCRIBBLES = 0.7
@@ -92,6 +104,19 @@ class EstimatedSize(SurfaceSuperpixels):
 
 
 register_method(EstimatedSize())
+
+
+def scribble_bound(pipe: Pipeline, truth: np.ndarray) -> float:
+    """ARI over the labelled pixels right of the middle (:func:`baselines.right_half_ari`)
+    of the project's scribble classifier (``ScribbleSession``, default parameters) whose
+    strokes are the truth of the columns left of the middle: the truth-trained bound of
+    the best classifier here."""
+    half = truth.shape[1] // 2
+    strokes = np.where(truth > 0, truth, 0).astype(np.int32)
+    strokes[:, half:] = 0
+    session = ScribbleSession.on_pipeline(pipe)
+    session.features()
+    return right_half_ari(session.update(strokes), truth)
 
 
 def score(frame: Frame, rounds: int = ROUNDS, bound: bool = True) -> dict:
@@ -118,9 +143,10 @@ def score(frame: Frame, rounds: int = ROUNDS, bound: bool = True) -> dict:
         runs["at true size"] = lambda: (
             scene.segment(params.replace(object_size=float(frame.object_size))).labels
         )
+    kept = {}
     for column, run in runs.items():
         t1 = time.perf_counter()
-        labels = run()
+        labels = kept[column] = run()
         row["seconds"][column] = time.perf_counter() - t1
         row[column] = float(adjusted_rand_score(truth[scored], labels[scored]))
         if degenerate(labels, truth):
@@ -145,8 +171,12 @@ def score(frame: Frame, rounds: int = ROUNDS, bound: bool = True) -> dict:
     if bound:
         value, seen = truth_bound_halves(pol.intensity, pol.dop, pol.phase, truth, "plain", ~valid)
         row["bound"] = value
+        t1 = time.perf_counter()
+        row["scribble bound"] = scribble_bound(pipe, truth)
+        row["seconds"]["scribble bound"] = time.perf_counter() - t1
+        row["default right"] = right_half_ari(kept["default"], truth)
         if not seen:
-            row["marks"]["bound"] = "†"
+            row["marks"]["bound"] = row["marks"]["scribble bound"] = "†"
     t1 = time.perf_counter()
     estimate = estimate_object_size(pol.intensity, pol.dop, pol.phase, valid)
     row["seconds"]["object size"] = time.perf_counter() - t1
@@ -256,7 +286,9 @@ def report(sets: dict[tuple[str, str], list[dict]], command: str) -> str:
         "*estimated size − default*: the paired difference of the default at the "
         "estimated object size against the default, ± one standard error. *size ratio*: "
         "the median of estimated / true object size, and how many frames lie outside a "
-        f"factor {SIZE_FACTOR}.",
+        f"factor {SIZE_FACTOR}. *bound*, *scribble bound*: a forest on the 20 plain "
+        "features and the scribble classifier, each trained on the truth of the left half "
+        "and scored on the right half; *default right*: the default on those pixels.",
         "",
         summary_table(sets),
         "",
