@@ -202,6 +202,18 @@ VARIANTS: dict[str, Variant] = {
     "tau 0.5": Variant(params={"diffusion_tau": 0.5}),
     "tau 0.75": Variant(params={"diffusion_tau": 0.75}),
     "tau 2": Variant(params={"diffusion_tau": 2.0}),
+    # the projection's kept variance, the clipping, the diffusion's λ, the border
+    # refinement and the clusters beyond k
+    **{f"variance {v:g}": Variant(params={"variance": v}) for v in (0.9, 0.85, 0.8)},
+    "clip 1.5": Variant(params={"clip": 1.5}),
+    "clip 3": Variant(params={"clip": 3.0}),
+    "lambda 0.3": Variant(params={"diffusion": 0.3}),
+    "lambda 0.7": Variant(params={"diffusion": 0.7}),
+    "no refinement": Variant(params={"refine_boundaries": False}),
+    "variance 0.9 no refinement": Variant(params={"variance": 0.9, "refine_boundaries": False}),
+    "clip 1.5 no refinement": Variant(params={"clip": 1.5, "refine_boundaries": False}),
+    "k + 2 merged": Variant({"extra_segments": 2}),
+    "k directly": Variant({"extra_segments": 0}),
     # each of the default's mean node features left out
     **{
         f"without {name}": Variant(

@@ -273,3 +273,33 @@ def test_weakest_border_merges_a_scatter_of_superpixels_first():
     assert cohesion(summed)[2] == 0.0 and cohesion(summed)[0] > COHESION_FLOOR
     assert weakest_border(model(0.0), nodes, 2)[2] in (0, 1)  # the scatter joins a sheet
     np.testing.assert_array_equal(weakest_border(model(100.0), nodes, 2), [0, 0, 2])
+
+
+def test_extra_segments_is_the_clusters_merged_away(monkeypatch):
+    """``extra_segments`` clusters beyond k are clustered, then merged away: the method
+    hands its own to the merge; with 0 the labels are the k clusters themselves, and
+    k + 1 (the default) and k + 2 still find the planted bands."""
+    from napari_polarseg.engine.unsupervised.segmenter import cluster_regions, prepare_regions
+
+    stack, truth = banded_stack(3)
+    pol = Scene(stack, ANGLES).pipeline.get("polarisation")
+    method = valid_superpixels.ValidSuperpixels()
+    models = [prepare_regions(pol.intensity, pol.dop, pol.phase, method.params)]
+    direct = cluster_regions(models[0], 3)
+    asked = []
+    merged = valid_superpixels.merged_clustering
+
+    def spy(model, k, extra, merge):
+        asked.append(extra)
+        return merged(model, k, extra, merge)
+
+    monkeypatch.setattr(valid_superpixels, "merged_clustering", spy)
+    assert method.extra_segments == 1
+    for extra in (0, 1, 2):
+        method.extra_segments = extra
+        result = method.labels(models, 3)
+        assert len(np.unique(result.labels)) == 3
+        assert adjusted_rand_score(truth.ravel(), result.labels.ravel()) > 0.95
+        if extra == 0:
+            np.testing.assert_array_equal(result.node_labels, direct.node_labels)
+    assert asked == [0, 1, 2]

@@ -40,7 +40,7 @@ import numpy as np
 
 from ..params import SegmentParams
 from ..unsupervised.choose_k import K_RANGE, estimate_k
-from ..unsupervised.merge import closest_centroids, merged_clustering
+from ..unsupervised.merge import EXTRA_SEGMENTS, closest_centroids, merged_clustering
 from ..unsupervised.params import REGIONS_PER_OBJECT_SIDE, UnsupervisedParams, UnsupervisedResult
 from ..unsupervised.segmenter import (
     RegionModel,
@@ -105,6 +105,8 @@ class ValidSuperpixels(SuperpixelClustering):
     k_tolerance = 0.0
     #: Which two of the k + 1 segments are merged (:mod:`..unsupervised.merge`)
     merge_rule = staticmethod(closest_centroids)
+    #: Segments clustered beyond k, then merged away by :attr:`merge_rule`
+    extra_segments = EXTRA_SEGMENTS
     #: The superpixel area and the diffusion's reach follow the object size
     #: (``SegmentParams.object_size``) when it is given, and also when it is estimated
     #: (``object_size = 0``) if this is set. Off: on the
@@ -162,9 +164,9 @@ class ValidSuperpixels(SuperpixelClustering):
         return [scene.cached(self.name, (id(pol), params), prepare)]
 
     def labels(self, models: list[RegionModel], k: int) -> UnsupervisedResult:
-        """k segments of the region models: k + 1 clusters of the one model merged to k
-        by :attr:`merge_rule` (:func:`merged_clustering`)."""
-        return merged_clustering(models[0], k, merge=self.merge_rule)
+        """k segments of the region models: k + :attr:`extra_segments` clusters of the
+        one model merged to k by :attr:`merge_rule` (:func:`merged_clustering`)."""
+        return merged_clustering(models[0], k, self.extra_segments, self.merge_rule)
 
     def segment(
         self, scene: Scene, params: SegmentParams, inputs: dict[str, Any], run: MethodRun
