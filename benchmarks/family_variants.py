@@ -121,6 +121,9 @@ class ReachConsensus(SuperpixelConsensus):
 
 #: The node features of the default (``UnsupervisedParams().features``).
 NODE_FEATURES = ("log_intensity", "dop", "dop_spread", "dop_vs_log_intensity_slope")
+#: Light-invariant node features beyond the default's: the AoLP's and the Stokes
+#: vector's coherence and ρ less its image-wide fit on the brightness.
+INVARIANT_POOL = ("aolp_coherence", "dolp_over_dop", "log_dop_given_intensity")
 #: The node parameters of the short reach (``superpixels``' reach and border scale).
 SHORT_REACH = {"diffusion_range": 0.07, "diffusion_tau": 0.75}
 
@@ -183,6 +186,29 @@ VARIANTS: dict[str, Variant] = {
         {"merge_rule": staticmethod(closest_centroids)}, params={"diffusion_range": 0.12}
     ),
     "maf": Variant(params={"projection": "maf"}),
+    "invariant set": Variant(
+        params={
+            "features": (
+                "dop",
+                "dop_spread",
+                "aolp_coherence",
+                "dolp_over_dop",
+                "log_dop_given_intensity",
+                "dop_vs_log_intensity_slope",
+            )
+        }
+    ),
+    # each node feature weighed by its Moran's I in the scene (:mod:`spatial_weights`)
+    **{f"coherence {p:g}": Variant(params={"coherence_power": p}) for p in (1, 2, 4)},
+    **{
+        f"pool coherence {p:g}": Variant(
+            params={
+                "coherence_power": p,
+                "features": (*NODE_FEATURES, *INVARIANT_POOL),
+            }
+        )
+        for p in (1, 2, 4)
+    },
     "estimated size above 10 %": Variant(gate=0.10),
     "short reach above 85 % in one segment": Variant(collapse=0.85),
     "short reach above 80 % in one segment": Variant(collapse=0.80),

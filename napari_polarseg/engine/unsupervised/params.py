@@ -96,6 +96,9 @@ class UnsupervisedParams:
     pixel_groups : tuple of str
         Groups of that stack (:data:`~napari_polarseg.engine.features.pixel_feature_params.GROUPS`,
         without ``regions``).
+    coherence_power : float
+        Each node feature weighed per scene by (its Moran's I over the superpixels'
+        border graph / the largest)^p (:mod:`.spatial_weights`), p >= 0; 0 = off.
     variance : float
         Share of the variance the PCA of the standardised node features keeps, (0, 1].
     clustering : {"gmm", "kmeans", "ncut", "kway"}
@@ -155,6 +158,7 @@ class UnsupervisedParams:
     )
     texture: tuple[str, ...] = ()
     texture_weight: float = 1.0
+    coherence_power: float = 0.0
     pixel_scales: tuple[float, ...] = ()
     pixel_groups: tuple[str, ...] = ("intensity", "polarisation", "invariant")
     variance: float = 0.95
@@ -229,6 +233,8 @@ class UnsupervisedParams:
             raise PolarsegError(f"diffusion_range must be in [0, 1], got {self.diffusion_range}")
         if not (math.isfinite(self.diffusion_tau) and self.diffusion_tau > 0):
             raise PolarsegError(f"diffusion_tau must be positive, got {self.diffusion_tau}")
+        if not (math.isfinite(self.coherence_power) and self.coherence_power >= 0):
+            raise PolarsegError(f"coherence_power must be >= 0, got {self.coherence_power}")
         if not (math.isfinite(self.clip) and self.clip >= 0):
             raise PolarsegError(f"clip must be >= 0, got {self.clip}")
         if not (math.isfinite(self.close_up_share) and 0 <= self.close_up_share <= 1):

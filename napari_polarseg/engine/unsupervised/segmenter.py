@@ -106,6 +106,7 @@ from .shape_trend import (
     region_polarisation,
     surface_trend_share,
 )
+from .spatial_weights import coherence_weights
 from .tiled_region_tasks import Seeds
 
 #: Seedings of the k-means (:func:`.kmeans.weighted_kmeans`; the lowest inertia wins).
@@ -267,17 +268,21 @@ def project_features(
 ) -> np.ndarray:
     """Projected node features z (n, c): standardised and clipped features, diffused over
     the edge-aware region ``graph`` but for the texture group (``p.texture``, the
-    columns after ``p.features``), which is scaled by ``p.texture_weight``, projected
+    columns after ``p.features``), which is scaled by ``p.texture_weight``, each column
+    weighed by its spatial coherence in the scene when ``p.coherence_power`` > 0
+    (:func:`.spatial_weights.coherence_weights`, read before the diffusion), projected
     (PCA or MAF). Independent of k."""
     xs = _standardise(x, weight)
     if p.clip > 0:
         xs = np.clip(xs, -p.clip, p.clip)
     texture = np.zeros(xs.shape[1], dtype=bool)  # the columns of _region_features' order
     texture[len(p.features) : len(p.features) + len(p.texture)] = True
+    coherence = coherence_weights(xs, adjacency, p.coherence_power)
     steps = diffusion_steps(p.diffusion_range, x.shape[0], p.diffusion)
     if steps:  # after the standardising: a column of mere noise shrinks, not rescaled
         xs[:, ~texture] = diffuse(xs[:, ~texture], graph, p.diffusion, steps)
     xs[:, texture] *= p.texture_weight
+    xs *= coherence
     if p.projection == "maf":
         return maf_features(xs, adjacency, weight, p.variance, p.components)
     return pca_features(xs, p.variance).features

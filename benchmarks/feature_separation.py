@@ -1,0 +1,109 @@
+"""Which node features carry the materials, family by family, and whether a criterion
+computed without truth sees it: for every node feature of the unsupervised methods
+(:data:`~napari_polarseg.engine.unsupervised.params.NODE_FEATURES` but the close-up
+trend) on the default's superpixels of each development frame,
+
+- **η²** (read from the truth): the share of the feature's spread over the superpixels
+  that the materials explain, Σ_c w_c (m_c − m)² / Σ_a w_a (x_a − m)², over the
+  superpixels at least 80 % of one material, weighted by their pixels;
+- **Moran's I** (no truth): how alike the feature is on neighbouring superpixels
+  (:func:`~napari_polarseg.engine.unsupervised.spatial_weights.morans_i`), the
+  criterion of ``coherence_power``;
+
+and, per frame, the Spearman correlation of the two over the features (does the
+criterion rank the features as the truth does?), averaged by family.
+
+Usage::
+
+    cd benchmarks && OMP_NUM_THREADS=1 PYTHONPATH=.. python feature_separation.py \\
+        [--families diffuse,small,objects,textured,real]
+"""
+
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+from families import FAMILIES, frames
+from scipy.stats import spearmanr
+
+from napari_polarseg.engine import Pipeline
+from napari_polarseg.engine.methods.surface_superpixels import SurfaceSuperpixels
+from napari_polarseg.engine.params import PRESETS
+from napari_polarseg.engine.unsupervised.params import CLOSE_UP_FEATURES, NODE_FEATURES
+from napari_polarseg.engine.unsupervised.region_features import node_features
+from napari_polarseg.engine.unsupervised.segmenter import prepare_regions
+from napari_polarseg.engine.unsupervised.spatial_weights import morans_i
+
+#: The features compared (the close-up trend is made for one surface, not a scene).
+FEATURES = tuple(n for n in NODE_FEATURES if n not in CLOSE_UP_FEATURES)
+#: A superpixel counts for η² when this share of its labelled pixels is one material.
+PURITY = 0.8
+
+
+def standardised(x: np.ndarray, weight: np.ndarray) -> np.ndarray:
+    """Columns of ``x`` centred and scaled by their ``weight``-ed mean and spread, and
+    clipped at ± 2 as the unsupervised methods' node features are; non-finite → 0."""
+    x = np.where(np.isfinite(x), x, 0.0)
+    mean = np.average(x, axis=0, weights=weight)
+    spread = np.sqrt(np.average((x - mean) ** 2, axis=0, weights=weight))
+    return np.clip((x - mean) / np.where(spread > 1e-12, spread, 1.0), -2, 2)
+
+
+def eta_squared(x: np.ndarray, material: np.ndarray, weight: np.ndarray) -> np.ndarray:
+    """(c,) the share of each column's ``weight``-ed variance that ``material`` explains."""
+    mean = np.average(x, axis=0, weights=weight)
+    total = np.average((x - mean) ** 2, axis=0, weights=weight) * weight.sum()
+    between = np.zeros(x.shape[1])
+    for c in np.unique(material):
+        w = weight[material == c]
+        between += w.sum() * (np.average(x[material == c], axis=0, weights=w) - mean) ** 2
+    return between / np.maximum(total, 1e-12)
+
+
+def frame_figures(frame) -> tuple[np.ndarray, np.ndarray]:
+    """(η², Moran's I) of every feature of :data:`FEATURES` on one frame."""
+    pipe = Pipeline(frame.stack, frame.angles, PRESETS["auto"].replace(n_segments=frame.k))
+    pol = pipe.get("polarisation")
+    model = prepare_regions(pol.intensity, pol.dop, pol.phase, SurfaceSuperpixels().params)
+    regions = model.regions
+    x = node_features(pol.intensity, pol.dop, pol.phase, regions, FEATURES)[: model.n]
+    pixels = np.bincount(regions.ravel(), minlength=model.n)[: model.n].astype(float)
+    xs = standardised(x, np.maximum(pixels, 1.0))
+    truth, flat = frame.truth.ravel(), regions.ravel()
+    scored = (truth > 0) & (flat < model.n)
+    counts = np.zeros((model.n, int(truth.max()) + 1))
+    np.add.at(counts, (flat[scored], truth[scored]), 1)
+    pure = counts.max(axis=1) >= PURITY * np.maximum(counts.sum(axis=1), 1)
+    pure &= counts.sum(axis=1) > 0
+    eta = eta_squared(xs[pure], counts[pure].argmax(axis=1), pixels[pure])
+    return eta, morans_i(xs, model.adjacency)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--families", default=",".join(FAMILIES))
+    args = ap.parse_args(argv)
+    rows: dict[str, tuple[np.ndarray, np.ndarray, float]] = {}
+    for family in args.families.split(","):
+        etas, morans, ranks = [], [], []
+        for frame in frames(family, "dev"):
+            eta, moran = frame_figures(frame)
+            etas.append(eta)
+            morans.append(moran)
+            ranks.append(spearmanr(eta, moran).correlation)
+            print(f"{family} {frame.name}: Spearman {ranks[-1]:+.2f}", flush=True)
+        rows[family] = (np.mean(etas, axis=0), np.mean(morans, axis=0), float(np.nanmean(ranks)))
+    families = list(rows)
+    print("\n| feature | " + " | ".join(f"{f} η² / I" for f in families) + " |")
+    print("|---|" + "---:|" * len(families))
+    for j, name in enumerate(FEATURES):
+        cells = [f"{rows[f][0][j]:.2f} / {rows[f][1][j]:.2f}" for f in families]
+        print(f"| {name} | " + " | ".join(cells) + " |")
+    ranks = " | ".join(f"{rows[f][2]:+.2f}" for f in families)
+    print(f"| Spearman (η², I) per frame | {ranks} |")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
