@@ -13,10 +13,19 @@ trend) on the default's superpixels of each development frame,
 and, per frame, the Spearman correlation of the two over the features (does the
 criterion rank the features as the truth does?), averaged by family.
 
+``--zenith`` asks, on the diffuse family's development scenes (the engine's generator,
+which knows each pixel's true zenith θ), how well the materials could be told apart by
+the physics of diffuse polarisation: ρ = κ · ρ_F(θ; n = 1.5), κ set by the material's
+refractive index, depolarisation and roughness. It prints the η² of a superpixel's
+log κ = log(mean ρ / mean ρ_F(θ)) with the true zenith (what the data hold), with the
+zenith from the shading of a frontal light, cos θ = Î / the 99.9th percentile of the
+superpixels' mean Î (what a method without the zenith reads), and of
+``log_dop_given_intensity`` (the node feature that stands for it), by layout.
+
 Usage::
 
     cd benchmarks && OMP_NUM_THREADS=1 PYTHONPATH=.. python feature_separation.py \\
-        [--families diffuse,small,objects,textured,real]
+        [--families diffuse,small,objects,textured,real] [--zenith]
 """
 
 from __future__ import annotations
@@ -30,6 +39,8 @@ from scipy.stats import spearmanr
 from napari_polarseg.engine import Pipeline
 from napari_polarseg.engine.methods.surface_superpixels import SurfaceSuperpixels
 from napari_polarseg.engine.params import PRESETS
+from napari_polarseg.engine.physics.fresnel import diffuse_dop
+from napari_polarseg.engine.synthetic.scenes import make_scene
 from napari_polarseg.engine.unsupervised.params import CLOSE_UP_FEATURES, NODE_FEATURES
 from napari_polarseg.engine.unsupervised.region_features import node_features
 from napari_polarseg.engine.unsupervised.segmenter import prepare_regions
@@ -80,10 +91,72 @@ def frame_figures(frame) -> tuple[np.ndarray, np.ndarray]:
     return eta, morans_i(xs, model.adjacency)
 
 
+def zenith_figures(scene) -> tuple[float, float, float]:
+    """η² of log κ with the true zenith, with the zenith from a frontal light's shading,
+    and of ``log_dop_given_intensity``, on one synthetic scene's default superpixels
+    (module docstring)."""
+    pipe = Pipeline(scene.stack, scene.angles, PRESETS["auto"])
+    pol = pipe.get("polarisation")
+    model = prepare_regions(pol.intensity, pol.dop, pol.phase, SurfaceSuperpixels().params)
+    flat, n = model.regions.ravel(), model.n
+    pixels = np.bincount(flat, minlength=n)[:n].astype(float)
+
+    def means(a: np.ndarray) -> np.ndarray:
+        return np.bincount(flat, weights=a.ravel(), minlength=n)[:n] / np.maximum(pixels, 1)
+
+    rho, lit = means(pol.dop), means(pol.intensity)
+    true_rho = means(diffuse_dop(np.clip(scene.zenith, 0, np.pi / 2 - 1e-3), 1.5))
+    cos_shade = np.clip(lit / np.percentile(lit[pixels > 0], 99.9), 0.05, 1.0)
+    shade_rho = diffuse_dop(np.minimum(np.arccos(cos_shade), np.pi / 2 - 1e-3), 1.5)
+    given = node_features(
+        pol.intensity, pol.dop, pol.phase, model.regions, ("log_dop_given_intensity",)
+    )
+    columns = np.stack(
+        [
+            np.log(np.maximum(rho, 1e-4) / np.maximum(true_rho, 1e-4)),
+            np.log(np.maximum(rho, 1e-4) / np.maximum(shade_rho, 1e-4)),
+            given[:n, 0],
+        ],
+        axis=1,
+    )
+    truth = scene.labels.ravel()
+    counts = np.zeros((n, int(truth.max()) + 1))
+    inside = flat < n
+    np.add.at(counts, (flat[inside], truth[inside]), 1)
+    pure = (counts.max(axis=1) >= PURITY * np.maximum(counts.sum(axis=1), 1)) & (pixels > 0)
+    xs = standardised(columns, np.maximum(pixels, 1.0))
+    return tuple(eta_squared(xs[pure], counts[pure].argmax(axis=1), pixels[pure]))
+
+
+def zenith_table() -> None:
+    """The ``--zenith`` table (module docstring), by layout of the diffuse family."""
+    from diffuse_family import SEEDS_PER_SIZE, SHAPE, SIZES, scene_seed
+
+    rows: dict[str, list[tuple[float, float, float]]] = {}
+    for layout, sizes in SIZES.items():
+        for s, size in enumerate(sizes):
+            for i in range(SEEDS_PER_SIZE):
+                seed = scene_seed("dev", s * SEEDS_PER_SIZE + i)
+                scene = make_scene(layout, shape=SHAPE, seed=seed, object_size=size)
+                rows.setdefault(layout, []).append(zenith_figures(scene))
+                print(f"{layout} seed {seed}: " + ", ".join(f"{v:.2f}" for v in rows[layout][-1]))
+    print(
+        "\n| layout | log κ, true zenith | log κ, zenith from shading | log_dop_given_intensity |"
+    )
+    print("|---|---:|---:|---:|")
+    for layout, figures in rows.items():
+        cells = " | ".join(f"{v:.2f}" for v in np.mean(figures, axis=0))
+        print(f"| {layout} | {cells} |")
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--families", default=",".join(FAMILIES))
+    ap.add_argument("--zenith", action="store_true", help="the diffuse family's physics table")
     args = ap.parse_args(argv)
+    if args.zenith:
+        zenith_table()
+        return 0
     rows: dict[str, tuple[np.ndarray, np.ndarray, float]] = {}
     for family in args.families.split(","):
         etas, morans, ranks = [], [], []
