@@ -13,10 +13,14 @@ measures that without truth: 1 for a feature constant within large patches, 0 fo
 one with no relation between neighbours. Each column is multiplied by
 (max(I, 0) / max_j I_j)^p, so the most coherent feature keeps its weight and the others
 are weighed down by how much less coherent they are in this scene. On the development
-halves, a feature's I tracked how much of its spread the materials explain (Spearman
-0.6 over the diffuse family's features, 0.2–0.45 over the others'); where the
-materials share their albedo (the diffuse family) log Î's I falls below that of the
-AoLP and ρ features, on large objects of differing albedo it is the highest.
+halves of the scene families, a feature's I tracked how much of its spread the
+materials explain (Spearman +0.59 over the diffuse family's features, +0.15 to +0.44
+over the others'; ``benchmarks/feature_separation.py``): where the materials share
+their albedo (the diffuse family) log Î's I falls below that of the AoLP and ρ
+features, on large objects of differing albedo it is the highest. As weights
+(``UnsupervisedParams.coherence_power``) they were level with the default there at
+p = 1 and cost the real frames 0.06, so the default leaves them off
+(docs/quality.md, *Which node features carry the materials*).
 
 Written with scipy.sparse: no library gives Moran's I on a region graph.
 """
