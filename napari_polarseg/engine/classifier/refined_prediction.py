@@ -292,7 +292,13 @@ def window_probabilities(
     The grid samples are the whole image's when the window starts on a multiple of
     ``stride`` (counted from the image's origin), so away from the window's edges (two
     cells: the interpolation and the 3 × 3 border test read one cell each way) the
-    probabilities equal those of the whole image (to float rounding)."""
+    probabilities equal those of the whole image (to float rounding).
+
+    Both cores are kept busy within the window (a large image's tiles may run one at a
+    time): the grid samples' rows are read in the forest's threads, chunk by chunk, as
+    the border cells' are (:func:`predict_read`; each row is read on its own, so the
+    same values), and the grid's probabilities are interpolated on a thread of their own
+    while the border cells are predicted."""
     h, w = features.shape
     r0, r1 = window[0].start, min(window[0].stop, h)
     c0, c1 = window[1].start, min(window[1].stop, w)
@@ -301,14 +307,18 @@ def window_probabilities(
     s = max(1, int(stride))
     rows = np.minimum(r0 + np.arange(0, size[0], s) + s // 2, r1 - 1)
     cols = np.minimum(c0 + np.arange(0, size[1], s) + s // 2, c1 - 1)
-    grid = predict_rows(model, features.take((rows[:, None] * w + cols[None, :]).ravel()), cancel)
+    samples = (rows[:, None] * w + cols[None, :]).ravel()
+    grid = predict_read(model, samples.size, lambda a, b: features.take(samples[a:b]), cancel)
     coarse = grid.T.reshape(k, rows.size, cols.size)
     if s == 1:
         return RefinedProbabilities(np.ascontiguousarray(coarse), coarse[0].size)
-    proba = upsampled(coarse, s, size)
     flat = border_pixels(border_cells(np.argmax(coarse, axis=0)), s, size)
     pr, pc = np.divmod(flat, size[1])
     image_index = (pr + r0) * w + (pc + c0)
     read = lambda a, b: features.take(image_index[a:b])  # noqa: E731
-    proba.reshape(k, -1)[:, flat] = predict_read(model, flat.size, read, cancel).T
+    with ThreadPoolExecutor(1) as pool:
+        interpolated = pool.submit(upsampled, coarse, s, size)
+        border = predict_read(model, flat.size, read, cancel)
+        proba = interpolated.result()
+    proba.reshape(k, -1)[:, flat] = border.T
     return RefinedProbabilities(proba, int(coarse[0].size + flat.size))
