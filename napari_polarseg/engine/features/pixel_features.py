@@ -379,7 +379,11 @@ def pixel_features(
         for f in sorted({pyramid_factor(s) for s in params.scales}):  # meanwhile: levels
             if f not in levels:  # coarsen from the finest level already built that divides f
                 base = max(q for q in levels if f % q == 0)
-                levels[f] = {q: block_mean(v, f // base) for q, v in levels[base].items()}
+                # a moment a thread where no full-resolution scale keeps the pool busy
+                means = (map if made else pool.map)(
+                    lambda v, n=f // base: block_mean(v, n), levels[base].values()
+                )
+                levels[f] = dict(zip(levels[base], means, strict=True))
         made.update({s: submit(s) for s in params.scales if s not in made})
         parts = []
         for n, sigma in enumerate(params.scales):
