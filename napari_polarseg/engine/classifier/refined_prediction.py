@@ -294,11 +294,10 @@ def window_probabilities(
     cells: the interpolation and the 3 × 3 border test read one cell each way) the
     probabilities equal those of the whole image (to float rounding).
 
-    Both cores are kept busy within the window (a large image's tiles may run one at a
-    time): the grid samples' rows are read in the forest's threads, chunk by chunk, as
-    the border cells' are (:func:`predict_read`; each row is read on its own, so the
-    same values), and the grid's probabilities are interpolated on a thread of their own
-    while the border cells are predicted."""
+    The grid samples' rows are read in the forest's threads, chunk by chunk, as the
+    border cells' are (:func:`predict_read`; each row is read on its own, so the same
+    values): a large image's tiles may run one at a time, and the whole window's read
+    in the calling thread kept the other core idle (10 of a tile's 107 ms)."""
     h, w = features.shape
     r0, r1 = window[0].start, min(window[0].stop, h)
     c0, c1 = window[1].start, min(window[1].stop, w)
@@ -316,9 +315,6 @@ def window_probabilities(
     pr, pc = np.divmod(flat, size[1])
     image_index = (pr + r0) * w + (pc + c0)
     read = lambda a, b: features.take(image_index[a:b])  # noqa: E731
-    with ThreadPoolExecutor(1) as pool:
-        interpolated = pool.submit(upsampled, coarse, s, size)
-        border = predict_read(model, flat.size, read, cancel)
-        proba = interpolated.result()
-    proba.reshape(k, -1)[:, flat] = border.T
+    proba = upsampled(coarse, s, size)
+    proba.reshape(k, -1)[:, flat] = predict_read(model, flat.size, read, cancel).T
     return RefinedProbabilities(proba, int(coarse[0].size + flat.size))
