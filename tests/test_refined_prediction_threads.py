@@ -116,3 +116,17 @@ def test_the_trees_summed_equal_the_forest_to_the_bit(data, kind):
         np.testing.assert_array_equal(summed.predict_proba(bad), want)
     # not a forest of one output: no TreeSum
     assert TreeSum.of(HistGradientBoostingClassifier(max_iter=3).fit(x, y)) is None
+
+
+def test_no_tree_sum_where_scikit_learn_keeps_counts(data, forest, monkeypatch):
+    """Before scikit-learn 1.4 the trees kept class counts, normalised by each tree's
+    ``predict_proba``: the forest is then predicted by its own copy, as before."""
+    import sklearn
+
+    from napari_polarseg.engine.classifier.refined_prediction import TreeSum
+
+    monkeypatch.setattr(sklearn, "__version__", "1.3.2")
+    assert TreeSum.of(forest) is None
+    np.testing.assert_array_equal(
+        predict_rows(forest, data[2]), forest.predict_proba(data[2]).astype(np.float32)
+    )

@@ -20,6 +20,7 @@ new stroke reads them without copying the planes again.
 from __future__ import annotations
 
 import copy
+import re
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
@@ -93,9 +94,15 @@ class TreeSum:
     def of(cls, model: Any) -> TreeSum | None:
         """A :class:`TreeSum` of ``model`` when it is a fitted single-output forest
         classifier of scikit-learn's trees (every estimator has a ``tree_`` with one
-        output of the forest's classes), else None."""
+        output of the forest's classes) and scikit-learn keeps its leaves' class shares
+        (1.4 on; before, counts its trees' ``predict_proba`` normalised), else None."""
         trees = getattr(model, "estimators_", None)
         if not trees or getattr(model, "n_outputs_", None) != 1 or not hasattr(model, "classes_"):
+            return None
+        import sklearn
+
+        version = re.match(r"(\d+)\.(\d+)", sklearn.__version__)
+        if version is None or (int(version[1]), int(version[2])) < (1, 4):
             return None
         k = len(model.classes_)
         for e in trees:
