@@ -89,3 +89,44 @@ def test_border_pixels_are_every_pixel_of_the_cells_sorted(shape, stride):
     pixels = np.kron(cells, np.ones((stride, stride), bool))[: shape[0], : shape[1]]
     np.testing.assert_array_equal(got, np.flatnonzero(pixels))
     assert got.dtype == np.intp
+
+
+@pytest.mark.parametrize("kind", ["extra", "random"])
+def test_the_trees_summed_equal_the_forest_to_the_bit(data, kind):
+    from sklearn.ensemble import RandomForestClassifier
+
+    from napari_polarseg.engine.classifier.refined_prediction import TreeSum, one_thread
+
+    x, y, rows = data
+    model = (ExtraTreesClassifier if kind == "extra" else RandomForestClassifier)(
+        n_estimators=9, max_depth=5, random_state=1
+    ).fit(x, y)
+    summed = one_thread(model)
+    assert isinstance(summed, TreeSum)
+    np.testing.assert_array_equal(summed.predict_proba(rows), model.predict_proba(rows))
+    # rows with a NaN go to the forest itself, which answers (or refuses) as it does
+    bad = rows[:5].copy()
+    bad[2, 1] = np.nan
+    try:
+        want = model.predict_proba(bad)
+    except ValueError:
+        with pytest.raises(ValueError):
+            summed.predict_proba(bad)
+    else:
+        np.testing.assert_array_equal(summed.predict_proba(bad), want)
+    # not a forest of one output: no TreeSum
+    assert TreeSum.of(HistGradientBoostingClassifier(max_iter=3).fit(x, y)) is None
+
+
+def test_no_tree_sum_where_scikit_learn_keeps_counts(data, forest, monkeypatch):
+    """Before scikit-learn 1.4 the trees kept class counts, normalised by each tree's
+    ``predict_proba``: the forest is then predicted by its own copy, as before."""
+    import sklearn
+
+    from napari_polarseg.engine.classifier.refined_prediction import TreeSum
+
+    monkeypatch.setattr(sklearn, "__version__", "1.3.2")
+    assert TreeSum.of(forest) is None
+    got = predict_rows(forest, data[2])
+    monkeypatch.setattr(forest, "n_jobs", 1)  # the trees summed in their order
+    np.testing.assert_array_equal(got, forest.predict_proba(data[2]).astype(np.float32))

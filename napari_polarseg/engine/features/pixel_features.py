@@ -56,6 +56,7 @@ import os
 import threading
 from collections.abc import Callable, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
+from functools import lru_cache
 from typing import Any
 
 import numpy as np
@@ -379,7 +380,11 @@ def pixel_features(
         for f in sorted({pyramid_factor(s) for s in params.scales}):  # meanwhile: levels
             if f not in levels:  # coarsen from the finest level already built that divides f
                 base = max(q for q in levels if f % q == 0)
-                levels[f] = {q: block_mean(v, f // base) for q, v in levels[base].items()}
+                # a moment a thread where no full-resolution scale keeps the pool busy
+                means = (map if made else pool.map)(
+                    lambda v, n=f // base: block_mean(v, n), levels[base].values()
+                )
+                levels[f] = dict(zip(levels[base], means, strict=True))
         made.update({s: submit(s) for s in params.scales if s not in made})
         parts = []
         for n, sigma in enumerate(params.scales):
@@ -475,7 +480,17 @@ def largest_factor(params: PixelFeatureParams) -> int:
 
 def feature_names(params: PixelFeatureParams) -> tuple[str, ...]:
     """Names of the features :func:`pixel_features` computes for ``params`` (no prefix),
-    in order (found by running the groups on a tiny image)."""
+    in order (found by running the groups on a tiny image, 0.4 ms: kept per ``params``,
+    which a large image's every tile asks for)."""
+    try:
+        return _names_of(params)
+    except TypeError:  # unhashable parameters
+        return _names_of.__wrapped__(params)
+
+
+@lru_cache(maxsize=16)
+def _names_of(params: PixelFeatureParams) -> tuple[str, ...]:
+    """:func:`feature_names`, made once per ``params``."""
     tiny = np.ones((8, 8), dtype=np.float32)
     m = _moments(tiny, 0.1 * tiny, 0 * tiny, params.groups)
     names = [
