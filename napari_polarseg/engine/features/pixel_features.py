@@ -377,14 +377,10 @@ def pixel_features(
             return pool.submit(_scale_block, level, sigma, params, i.shape, labels)
 
         made = {s: submit(s) for s in params.scales if pyramid_factor(s) == 1}
-        for f in sorted({pyramid_factor(s) for s in params.scales}):  # meanwhile: levels
-            if f not in levels:  # coarsen from the finest level already built that divides f
-                base = max(q for q in levels if f % q == 0)
-                # a moment a thread where no full-resolution scale keeps the pool busy
-                means = (map if made else pool.map)(
-                    lambda v, n=f // base: block_mean(v, n), levels[base].values()
-                )
-                levels[f] = dict(zip(levels[base], means, strict=True))
+        # meanwhile the coarser levels, a moment a thread where no full-resolution
+        # scale keeps the pool busy
+        factors = {pyramid_factor(s) for s in params.scales}
+        _add_levels(levels, factors, None if made else pool)
         made.update({s: submit(s) for s in params.scales if s not in made})
         parts = []
         for n, sigma in enumerate(params.scales):
@@ -398,6 +394,23 @@ def pixel_features(
         blocks.append(RegionBlock(np.concatenate(means), labels()))
         names += [f"region:{n}" for n in names if _scale_of(n) <= REGION_MAX_SIGMA]
     return FeatureStack(tuple(blocks), tuple(f"{prefix}{n}" for n in names), params)
+
+
+def _add_levels(
+    levels: dict[int, dict[str, np.ndarray]],
+    factors: set[int],
+    pool: ThreadPoolExecutor | None,
+) -> None:
+    """Add to ``levels`` (pyramid factor → moments) every factor of ``factors`` it lacks,
+    each block-averaged from the finest level already there that divides it; with
+    ``pool``, one moment a thread."""
+    for f in sorted(factors):
+        if f not in levels:
+            base = max(q for q in levels if f % q == 0)
+            means = (map if pool is None else pool.map)(
+                lambda v, n=f // base: block_mean(v, n), levels[base].values()
+            )
+            levels[f] = dict(zip(levels[base], means, strict=True))
 
 
 def _once(make: Callable[[], Any]) -> Callable[[], np.ndarray]:
