@@ -199,7 +199,7 @@ VARIANTS: dict[str, Variant] = {
         }
     ),
     # each node feature weighed by its Moran's I in the scene (:mod:`spatial_weights`)
-    **{f"coherence {p:g}": Variant(params={"coherence_power": p}) for p in (1, 2, 4)},
+    **{f"coherence {p:g}": Variant(params={"coherence_power": p}) for p in (0.25, 0.5, 1, 2, 4)},
     **{
         f"pool coherence {p:g}": Variant(
             params={
