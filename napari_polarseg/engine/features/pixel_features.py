@@ -491,19 +491,11 @@ def largest_factor(params: PixelFeatureParams) -> int:
     return max(pyramid_factor(s) for s in params.scales)
 
 
+@lru_cache(maxsize=16)
 def feature_names(params: PixelFeatureParams) -> tuple[str, ...]:
     """Names of the features :func:`pixel_features` computes for ``params`` (no prefix),
     in order (found by running the groups on a tiny image, 0.4 ms: kept per ``params``,
-    which a large image's every tile asks for)."""
-    try:
-        return _names_of(params)
-    except TypeError:  # unhashable parameters
-        return _names_of.__wrapped__(params)
-
-
-@lru_cache(maxsize=16)
-def _names_of(params: PixelFeatureParams) -> tuple[str, ...]:
-    """:func:`feature_names`, made once per ``params``."""
+    a frozen dataclass of hashable fields, which a large image's every tile asks for)."""
     tiny = np.ones((8, 8), dtype=np.float32)
     m = _moments(tiny, 0.1 * tiny, 0 * tiny, params.groups)
     names = [
