@@ -95,13 +95,18 @@ def family_scenes(half: str, test_base: int = 0) -> list[BenchScene]:
         raise ValueError(f"half must be 'dev' or 'test', got {half!r}")
     if int(test_base) < 0:
         raise ValueError(f"test_base must be >= 0, got {test_base!r}")
-    scenes = []
-    for layout, sizes in SIZES.items():
-        for s, size in enumerate(sizes):
-            for i in range(SEEDS_PER_SIZE):
-                seed = scene_seed(half, s * SEEDS_PER_SIZE + i, int(test_base))
-                scenes.append(_bench_scene(layout, size, SIZE_NAMES[s], seed))
-    return scenes
+    return [_bench_scene(*draw) for draw in scene_draws(half, test_base)]
+
+
+def scene_draws(half: str, test_base: int = 0) -> list[tuple[str, float | None, str, int]]:
+    """(layout, object_size knob, size name, seed) of every scene of one half, in layout
+    order (:func:`family_scenes` renders them)."""
+    return [
+        (layout, size, SIZE_NAMES[s], scene_seed(half, s * SEEDS_PER_SIZE + i, int(test_base)))
+        for layout, sizes in SIZES.items()
+        for s, size in enumerate(sizes)
+        for i in range(SEEDS_PER_SIZE)
+    ]
 
 
 def _bench_scene(layout: str, size: float | None, size_name: str, seed: int) -> BenchScene:

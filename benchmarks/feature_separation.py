@@ -72,22 +72,37 @@ def eta_squared(x: np.ndarray, material: np.ndarray, weight: np.ndarray) -> np.n
     return between / np.maximum(total, 1e-12)
 
 
-def frame_figures(frame) -> tuple[np.ndarray, np.ndarray]:
-    """(η², Moran's I) of every feature of :data:`FEATURES` on one frame."""
-    pipe = Pipeline(frame.stack, frame.angles, PRESETS["auto"].replace(n_segments=frame.k))
+def default_superpixels(stack: np.ndarray, angles: np.ndarray, k: int):
+    """(polarisation image, the default's :class:`RegionModel`, pixels a superpixel) of
+    one frame."""
+    pipe = Pipeline(stack, angles, PRESETS["auto"].replace(n_segments=k))
     pol = pipe.get("polarisation")
     model = prepare_regions(pol.intensity, pol.dop, pol.phase, SurfaceSuperpixels().params)
-    regions = model.regions
-    x = node_features(pol.intensity, pol.dop, pol.phase, regions, FEATURES)[: model.n]
-    pixels = np.bincount(regions.ravel(), minlength=model.n)[: model.n].astype(float)
+    pixels = np.bincount(model.regions.ravel(), minlength=model.n)[: model.n].astype(float)
+    return pol, model, pixels
+
+
+def pure_materials(
+    labels: np.ndarray, regions: np.ndarray, n: int, scored: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """(n,) whether each of the n superpixels is at least :data:`PURITY` one material of
+    its ``scored`` pixels' ``labels`` (and has any), and that material."""
+    flat, truth = regions.ravel(), labels.ravel()
+    keep = scored.ravel() & (flat < n)
+    counts = np.zeros((n, int(truth.max()) + 1))
+    np.add.at(counts, (flat[keep], truth[keep]), 1)
+    total = counts.sum(axis=1)
+    pure = (counts.max(axis=1) >= PURITY * np.maximum(total, 1)) & (total > 0)
+    return pure, counts.argmax(axis=1)
+
+
+def frame_figures(frame) -> tuple[np.ndarray, np.ndarray]:
+    """(η², Moran's I) of every feature of :data:`FEATURES` on one frame."""
+    pol, model, pixels = default_superpixels(frame.stack, frame.angles, frame.k)
+    x = node_features(pol.intensity, pol.dop, pol.phase, model.regions, FEATURES)[: model.n]
     xs = standardised(x, np.maximum(pixels, 1.0))
-    truth, flat = frame.truth.ravel(), regions.ravel()
-    scored = (truth > 0) & (flat < model.n)
-    counts = np.zeros((model.n, int(truth.max()) + 1))
-    np.add.at(counts, (flat[scored], truth[scored]), 1)
-    pure = counts.max(axis=1) >= PURITY * np.maximum(counts.sum(axis=1), 1)
-    pure &= counts.sum(axis=1) > 0
-    eta = eta_squared(xs[pure], counts[pure].argmax(axis=1), pixels[pure])
+    pure, material = pure_materials(frame.truth, model.regions, model.n, frame.truth > 0)
+    eta = eta_squared(xs[pure], material[pure], pixels[pure])
     return eta, morans_i(xs, model.adjacency)
 
 
@@ -95,11 +110,8 @@ def zenith_figures(scene) -> tuple[float, float, float]:
     """η² of log κ with the true zenith, with the zenith from a frontal light's shading,
     and of ``log_dop_given_intensity``, on one synthetic scene's default superpixels
     (module docstring)."""
-    pipe = Pipeline(scene.stack, scene.angles, PRESETS["auto"])
-    pol = pipe.get("polarisation")
-    model = prepare_regions(pol.intensity, pol.dop, pol.phase, SurfaceSuperpixels().params)
+    pol, model, pixels = default_superpixels(scene.stack, scene.angles, 2)
     flat, n = model.regions.ravel(), model.n
-    pixels = np.bincount(flat, minlength=n)[:n].astype(float)
 
     def means(a: np.ndarray) -> np.ndarray:
         return np.bincount(flat, weights=a.ravel(), minlength=n)[:n] / np.maximum(pixels, 1)
@@ -119,27 +131,21 @@ def zenith_figures(scene) -> tuple[float, float, float]:
         ],
         axis=1,
     )
-    truth = scene.labels.ravel()
-    counts = np.zeros((n, int(truth.max()) + 1))
-    inside = flat < n
-    np.add.at(counts, (flat[inside], truth[inside]), 1)
-    pure = (counts.max(axis=1) >= PURITY * np.maximum(counts.sum(axis=1), 1)) & (pixels > 0)
+    every = np.ones(scene.labels.shape, dtype=bool)  # every synthetic pixel is labelled
+    pure, material = pure_materials(scene.labels, model.regions, n, every)
     xs = standardised(columns, np.maximum(pixels, 1.0))
-    return tuple(eta_squared(xs[pure], counts[pure].argmax(axis=1), pixels[pure]))
+    return tuple(eta_squared(xs[pure], material[pure], pixels[pure]))
 
 
 def zenith_table() -> None:
     """The ``--zenith`` table (module docstring), by layout of the diffuse family."""
-    from diffuse_family import SEEDS_PER_SIZE, SHAPE, SIZES, scene_seed
+    from diffuse_family import SHAPE, scene_draws
 
     rows: dict[str, list[tuple[float, float, float]]] = {}
-    for layout, sizes in SIZES.items():
-        for s, size in enumerate(sizes):
-            for i in range(SEEDS_PER_SIZE):
-                seed = scene_seed("dev", s * SEEDS_PER_SIZE + i)
-                scene = make_scene(layout, shape=SHAPE, seed=seed, object_size=size)
-                rows.setdefault(layout, []).append(zenith_figures(scene))
-                print(f"{layout} seed {seed}: " + ", ".join(f"{v:.2f}" for v in rows[layout][-1]))
+    for layout, size, _, seed in scene_draws("dev"):
+        scene = make_scene(layout, shape=SHAPE, seed=seed, object_size=size)
+        rows.setdefault(layout, []).append(zenith_figures(scene))
+        print(f"{layout} seed {seed}: " + ", ".join(f"{v:.2f}" for v in rows[layout][-1]))
     print(
         "\n| layout | log κ, true zenith | log κ, zenith from shading | log_dop_given_intensity |"
     )
