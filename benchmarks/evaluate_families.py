@@ -114,10 +114,17 @@ def scribble_bound(pipe: Pipeline, truth: np.ndarray) -> float:
     truth of the columns left of the middle, the better of its default parameters and
     those without the region walk (the walk spreads sparse strokes over the superpixel
     graph; given half the frame's truth it can cost more than it brings): the
-    truth-trained bound of the best classifier here."""
+    truth-trained bound of the best classifier here. Where the left half holds one
+    material, a classifier can name only that one: the right half all of it (as the
+    forest bound, marked † by :func:`score`); none, NaN."""
     half = truth.shape[1] // 2
     strokes = np.where(truth > 0, truth, 0).astype(np.int32)
     strokes[:, half:] = 0
+    named = np.unique(strokes[strokes > 0])
+    if named.size < 2:
+        if named.size == 0:
+            return float("nan")
+        return right_half_ari(np.full(truth.shape, named[0], np.int32), truth)
     session = ScribbleSession.on_pipeline(pipe, classifier_params=ClassifierParams())
     session.features()  # once: both settings read the same features
     scores = []

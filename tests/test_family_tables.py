@@ -115,3 +115,8 @@ def test_scribble_bound_learns_the_left_half_and_scores_the_right():
     assert evaluate_families.scribble_bound(pipe, truth) > 0.9
     noise = rng.integers(1, 3, truth.shape).astype(np.int32)
     assert abs(evaluate_families.scribble_bound(pipe, noise)) < 0.1
+    # One material left of the middle (bands split left and right): only it can be
+    # named, so the right half is all of it (ARI 0), not an error.
+    split = np.where(cols < 64, 1, rows * 2 // 96 + 2).astype(np.int32)
+    assert evaluate_families.scribble_bound(pipe, split) == 0.0
+    assert np.isnan(evaluate_families.scribble_bound(pipe, np.zeros_like(truth)))
