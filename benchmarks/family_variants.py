@@ -186,17 +186,9 @@ VARIANTS: dict[str, Variant] = {
         {"merge_rule": staticmethod(closest_centroids)}, params={"diffusion_range": 0.12}
     ),
     "maf": Variant(params={"projection": "maf"}),
+    # the default's node features but log Î, with the light-invariant pool in its place
     "invariant set": Variant(
-        params={
-            "features": (
-                "dop",
-                "dop_spread",
-                "aolp_coherence",
-                "dolp_over_dop",
-                "log_dop_given_intensity",
-                "dop_vs_log_intensity_slope",
-            )
-        }
+        params={"features": ("dop", "dop_spread", *INVARIANT_POOL, "dop_vs_log_intensity_slope")}
     ),
     # each node feature weighed by its Moran's I in the scene (:mod:`spatial_weights`)
     **{f"coherence {p:g}": Variant(params={"coherence_power": p}) for p in (0.25, 0.5, 1, 2, 4)},
