@@ -6,7 +6,8 @@ most.
 A variant is the default method's class with some attributes changed (its node-feature
 parameters, how far its diffusion reaches in object sizes, how many superpixels span one
 object, whether it follows the estimated object size) or the default with the object
-size set to the truth's (``truth size``: what a perfect estimate would give), or the
+size set to the truth's (``truth size``: what a perfect estimate would give) or
+estimated from ρ and φ alone (``size from polarisation``: :class:`PolarisationSize`), or the
 consensus of the default's run and runs with other node parameters on the same
 superpixels (``consensus …``: :class:`ReachConsensus`). The
 development halves are read; ``--test-base B`` reads round B's test halves instead,
@@ -33,6 +34,7 @@ from families import FAMILIES, Frame, add_check_round, frames, read_half
 from sklearn.metrics import adjusted_rand_score
 
 from napari_polarseg.engine import Pipeline, Scene
+from napari_polarseg.engine.features.object_size import scene_object_size
 from napari_polarseg.engine.methods import register_method
 from napari_polarseg.engine.methods.superpixel_consensus import SuperpixelConsensus
 from napari_polarseg.engine.methods.surface_superpixels import SurfaceSuperpixels
@@ -61,6 +63,8 @@ class Variant:
     #: node-parameter changes of further runs on the same superpixels; the labels are
     #: the runs' consensus with the default (:class:`ReachConsensus`)
     also: tuple[dict[str, Any], ...] = ()
+    #: estimate the object size from ρ, φ alone, without ln Î (:class:`PolarisationSize`)
+    polarisation_size: bool = False
 
 
 class GatedSurface(SurfaceSuperpixels):
@@ -97,6 +101,28 @@ class CollapseFallback(SurfaceSuperpixels):
             return super().segment(scene, params, inputs, run)
         finally:
             self.params = long_reach
+
+
+class PolarisationSize(SurfaceSuperpixels):
+    """The default's class with the object size estimated from the polarisation channels
+    ρ cos 2φ, ρ sin 2φ alone: :func:`scene_object_size` given a constant Î, whose
+    channel ln Î the estimate then leaves out. Followed as the default follows its
+    own estimate (above a tenth of the short side); a size the run gives is kept."""
+
+    def segment(self, scene, params, inputs, run):
+        pol = scene.polarisation(params)
+
+        def estimate():
+            flat = np.ones(pol.intensity.shape, dtype=np.float32)
+            return scene_object_size(flat, pol.dop, pol.phase, pol.invalid, 0.0, scene.region)
+
+        size = scene.cached(f"{self.name}:object_size", id(pol), estimate)
+        own = scene.object_size
+        scene.object_size = lambda p: size if p.object_size <= 0 else own(p)
+        try:
+            return super().segment(scene, params, inputs, run)
+        finally:
+            del scene.object_size
 
 
 class ReachConsensus(SuperpixelConsensus):
@@ -158,6 +184,7 @@ VARIANTS: dict[str, Variant] = {
     ),
     "estimated size": Variant({"follows_estimate": True}),
     "truth size": Variant(truth_size=True),
+    "size from polarisation": Variant(polarisation_size=True),
     "reach 0.25": Variant({"follows_estimate": True, "reach_objects": 0.25}),
     "side 12": Variant({"follows_estimate": True, "regions_per_side": 12.0}),
     "texture": Variant(
@@ -259,6 +286,8 @@ def register(name: str, variant: Variant) -> str:
         base, attrs["collapse"] = CollapseFallback, variant.collapse
     if variant.also:
         base, attrs["others"] = ReachConsensus, variant.also
+    if variant.polarisation_size:
+        base = PolarisationSize
     cls = type("Variant", (base,), {"name": f"variant:{name}", "title": name, **attrs})
     method = cls()
     if variant.params:

@@ -13,7 +13,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 import family_variants  # noqa: E402
 from families import Frame  # noqa: E402
 
+from napari_polarseg.engine import Pipeline, Scene  # noqa: E402
+from napari_polarseg.engine.features.object_size import estimate_object_size  # noqa: E402
 from napari_polarseg.engine.methods import unregister_method  # noqa: E402
+from napari_polarseg.engine.params import PRESETS  # noqa: E402
 from napari_polarseg.engine.synthetic.scenes import make_scene  # noqa: E402
 
 
@@ -36,3 +39,33 @@ def test_a_variant_scores_the_same_after_truth_size():
     assert both["frame-share scales"] == alone["frame-share scales"]
     assert both["truth size"] != both["frame-share scales"]  # the size given matters here
     assert np.isfinite(list(both.values())).all()
+
+
+def test_size_from_polarisation_uses_rho_and_phi_only_and_leaves_the_scene_as_it_was():
+    """``size from polarisation`` runs at the estimate of ρ cos 2φ, ρ sin 2φ alone (the
+    estimate given a constant Î), and the default run after it on the same scene uses
+    the scene's own estimate again and scores as it does alone."""
+    sc = make_scene("fruit", shape=(120, 160), seed=2)  # estimates 38 px and 52 px
+    truth = sc.labels.astype(np.int32) + 1
+    frame = Frame("fruit", sc.stack, sc.angles, truth, int(truth.max()), np.nan, "diffuse", "dev")
+    chosen = {n: family_variants.VARIANTS[n] for n in ("size from polarisation", "default")}
+    methods = {n: family_variants.register(n, v) for n, v in chosen.items()}
+    try:
+        pipe = Pipeline(frame.stack, frame.angles, PRESETS["auto"].replace(n_segments=frame.k))
+        scene, params = Scene(pipeline=pipe), pipe.params
+        polarised = scene.segment(params.replace(method=methods["size from polarisation"]))
+        assert "object_size" not in vars(scene)  # the scene's own method is back
+        default = scene.segment(params.replace(method=methods["default"]))
+        pol = scene.polarisation(params)
+        flat = np.ones(pol.intensity.shape, dtype=np.float32)
+        want = estimate_object_size(flat, pol.dop, pol.phase, ~pol.invalid).size_px
+        own = estimate_object_size(pol.intensity, pol.dop, pol.phase, ~pol.invalid).size_px
+        both = family_variants.frame_scores(frame, chosen, methods)
+        alone = family_variants.frame_scores(frame, {"default": chosen["default"]}, methods)
+    finally:
+        for name in methods.values():
+            unregister_method(name)
+    assert polarised.method_record["object_size"] == round(want, 1)
+    assert default.method_record["object_size"] == round(own, 1)
+    assert abs(want - own) > 5.0  # the two estimates differ on this scene
+    assert both["default"] == alone["default"]
