@@ -7,7 +7,9 @@ A variant is the default method's class with some attributes changed (its node-f
 parameters, how far its diffusion reaches in object sizes, how many superpixels span one
 object, whether it follows the estimated object size) or the default with the object
 size set to the truth's (``truth size``: what a perfect estimate would give) or
-estimated from ρ and φ alone (``size from polarisation``: :class:`PolarisationSize`), or the
+estimated from ρ and φ alone (``size from polarisation``: :class:`PolarisationSize`) or
+chosen between the two estimates by how little the labels change when it is nudged
+(``steadier size``: :class:`SteadierSize`), or the
 consensus of the default's run and runs with other node parameters on the same
 superpixels (``consensus …``: :class:`ReachConsensus`). The
 development halves are read; ``--test-base B`` reads round B's test halves instead,
@@ -34,7 +36,7 @@ from families import FAMILIES, Frame, add_check_round, frames, read_half
 from sklearn.metrics import adjusted_rand_score
 
 from napari_polarseg.engine import Pipeline, Scene
-from napari_polarseg.engine.features.object_size import scene_object_size
+from napari_polarseg.engine.features.object_size import ObjectSize, scene_object_size
 from napari_polarseg.engine.methods import register_method
 from napari_polarseg.engine.methods.superpixel_consensus import SuperpixelConsensus
 from napari_polarseg.engine.methods.surface_superpixels import SurfaceSuperpixels
@@ -65,6 +67,8 @@ class Variant:
     also: tuple[dict[str, Any], ...] = ()
     #: estimate the object size from ρ, φ alone, without ln Î (:class:`PolarisationSize`)
     polarisation_size: bool = False
+    #: choose between the two estimates by the labels' stability (:class:`SteadierSize`)
+    steadier_size: bool = False
 
 
 class GatedSurface(SurfaceSuperpixels):
@@ -103,26 +107,70 @@ class CollapseFallback(SurfaceSuperpixels):
             self.params = long_reach
 
 
+def polarisation_size(scene, params, name: str) -> ObjectSize:
+    """The scene's object size estimated from the polarisation channels ρ cos 2φ,
+    ρ sin 2φ alone: :func:`scene_object_size` given a constant Î, whose channel ln Î
+    the estimate then leaves out (kept in the scene's cache under ``name``)."""
+    pol = scene.polarisation(params)
+
+    def estimate():
+        flat = np.ones(pol.intensity.shape, dtype=np.float32)
+        return scene_object_size(flat, pol.dop, pol.phase, pol.invalid, 0.0, scene.region)
+
+    return scene.cached(f"{name}:object_size", id(pol), estimate)
+
+
 class PolarisationSize(SurfaceSuperpixels):
-    """The default's class with the object size estimated from the polarisation channels
-    ρ cos 2φ, ρ sin 2φ alone: :func:`scene_object_size` given a constant Î, whose
-    channel ln Î the estimate then leaves out. Followed as the default follows its
-    own estimate (above a tenth of the short side); a size the run gives is kept."""
+    """The default's class with the object size estimated from ρ and φ alone
+    (:func:`polarisation_size`). Followed as the default follows its own estimate
+    (above a tenth of the short side); a size the run gives is kept."""
 
     def segment(self, scene, params, inputs, run):
-        pol = scene.polarisation(params)
-
-        def estimate():
-            flat = np.ones(pol.intensity.shape, dtype=np.float32)
-            return scene_object_size(flat, pol.dop, pol.phase, pol.invalid, 0.0, scene.region)
-
-        size = scene.cached(f"{self.name}:object_size", id(pol), estimate)
+        size = polarisation_size(scene, params, self.name)
         own = scene.object_size
         scene.object_size = lambda p: size if p.object_size <= 0 else own(p)
         try:
             return super().segment(scene, params, inputs, run)
         finally:
             del scene.object_size
+
+
+class SteadierSize(SurfaceSuperpixels):
+    """The default's class choosing its object size between the scene's estimate D and
+    the estimate from ρ and φ alone D_p (:func:`polarisation_size`) by how little its
+    labels change when the size is nudged (a stability criterion, no truth): where both
+    are at least :attr:`estimate_floor` of the short side and differ by at least
+    :attr:`nudge`, the labels at each size are compared with those at (1 ∓ nudge) times
+    it (the mean ARI of the two comparisons over every pixel), and the size with the
+    higher agreement is used (a tie keeps D). Six runs of the default where it chooses;
+    elsewhere, and when the run gives a size, the default's one run."""
+
+    nudge = 0.1
+
+    def segment(self, scene, params, inputs, run):
+        if params.object_size > 0:
+            return super().segment(scene, params, inputs, run)
+        sizes = (
+            scene.object_size(params).size_px,
+            polarisation_size(scene, params, self.name).size_px,
+        )
+        floor = self.estimate_floor * min(scene.polarisation(params).intensity.shape)
+        if min(sizes) < floor or abs(sizes[1] / sizes[0] - 1.0) < self.nudge:
+            return super().segment(scene, params, inputs, run)
+        default = super().segment
+        best = None
+        for n, size in enumerate(sizes):
+            own = default(
+                scene, params if n == 0 else params.replace(object_size=size), inputs, run
+            )
+            nudged = [
+                default(scene, params.replace(object_size=f * size), inputs, run).labels.ravel()
+                for f in (1.0 - self.nudge, 1.0 + self.nudge)
+            ]
+            agree = np.mean([adjusted_rand_score(own.labels.ravel(), x) for x in nudged])
+            if best is None or agree > best[0]:
+                best = (agree, own)
+        return best[1]
 
 
 class ReachConsensus(SuperpixelConsensus):
@@ -185,6 +233,7 @@ VARIANTS: dict[str, Variant] = {
     "estimated size": Variant({"follows_estimate": True}),
     "truth size": Variant(truth_size=True),
     "size from polarisation": Variant(polarisation_size=True),
+    "steadier size": Variant(steadier_size=True),
     "reach 0.25": Variant({"follows_estimate": True, "reach_objects": 0.25}),
     "side 12": Variant({"follows_estimate": True, "regions_per_side": 12.0}),
     "texture": Variant(
@@ -288,6 +337,8 @@ def register(name: str, variant: Variant) -> str:
         base, attrs["others"] = ReachConsensus, variant.also
     if variant.polarisation_size:
         base = PolarisationSize
+    if variant.steadier_size:
+        base = SteadierSize
     cls = type("Variant", (base,), {"name": f"variant:{name}", "title": name, **attrs})
     method = cls()
     if variant.params:

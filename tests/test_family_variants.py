@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+from sklearn.metrics import adjusted_rand_score
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 import family_variants  # noqa: E402
@@ -69,3 +70,35 @@ def test_size_from_polarisation_uses_rho_and_phi_only_and_leaves_the_scene_as_it
     assert default.method_record["object_size"] == round(own, 1)
     assert abs(want - own) > 5.0  # the two estimates differ on this scene
     assert both["default"] == alone["default"]
+
+
+def test_steadier_size_keeps_the_size_whose_labels_change_least_when_nudged():
+    """``steadier size`` on a scene whose two estimates differ (38 and 52 px): its labels
+    are the default's at whichever of the two sizes agrees more with its own labels at
+    0.9 and 1.1 times it, computed here run by run."""
+    sc = make_scene("fruit", shape=(120, 160), seed=2)
+    chosen = {"steadier size": family_variants.VARIANTS["steadier size"]}
+    methods = {n: family_variants.register(n, v) for n, v in chosen.items()}
+    try:
+        pipe = Pipeline(sc.stack, sc.angles, PRESETS["auto"].replace(n_segments=2))
+        scene, params = Scene(pipeline=pipe), pipe.params
+        steady = scene.segment(params.replace(method=methods["steadier size"])).labels
+        pol = scene.polarisation(params)
+        flat = np.ones(pol.intensity.shape, dtype=np.float32)
+        sizes = [
+            estimate_object_size(pol.intensity, pol.dop, pol.phase, ~pol.invalid).size_px,
+            estimate_object_size(flat, pol.dop, pol.phase, ~pol.invalid).size_px,
+        ]
+        runs = [
+            [scene.segment(params.replace(object_size=f * d)).labels.ravel() for f in (1, 0.9, 1.1)]
+            for d in sizes
+        ]
+    finally:
+        for name in methods.values():
+            unregister_method(name)
+    agree = [
+        np.mean([adjusted_rand_score(r[0], r[1]), adjusted_rand_score(r[0], r[2])]) for r in runs
+    ]
+    assert abs(sizes[1] / sizes[0] - 1) > 0.1 and min(sizes) > 12  # both count, and differ
+    assert agree[0] != agree[1]
+    np.testing.assert_array_equal(steady.ravel(), runs[int(np.argmax(agree))][0])
