@@ -43,7 +43,7 @@ from napari_polarseg.engine.physics.fresnel import diffuse_dop
 from napari_polarseg.engine.synthetic.scenes import make_scene
 from napari_polarseg.engine.unsupervised.params import CLOSE_UP_FEATURES, NODE_FEATURES
 from napari_polarseg.engine.unsupervised.region_features import node_features
-from napari_polarseg.engine.unsupervised.segmenter import prepare_regions
+from napari_polarseg.engine.unsupervised.segmenter import prepare_regions, standardise_columns
 from napari_polarseg.engine.unsupervised.spatial_weights import morans_i
 
 #: The features compared (the close-up trend is made for one surface, not a scene).
@@ -53,12 +53,11 @@ PURITY = 0.8
 
 
 def standardised(x: np.ndarray, weight: np.ndarray) -> np.ndarray:
-    """Columns of ``x`` centred and scaled by their ``weight``-ed mean and spread, and
-    clipped at ± 2 as the unsupervised methods' node features are; non-finite → 0."""
-    x = np.where(np.isfinite(x), x, 0.0)
-    mean = np.average(x, axis=0, weights=weight)
-    spread = np.sqrt(np.average((x - mean) ** 2, axis=0, weights=weight))
-    return np.clip((x - mean) / np.where(spread > 1e-12, spread, 1.0), -2, 2)
+    """Columns of ``x`` standardised and clipped as the default's node features are
+    (:func:`~napari_polarseg.engine.unsupervised.segmenter.standardise_columns`, its
+    ``clip``); non-finite → 0."""
+    clip = SurfaceSuperpixels().params.clip
+    return np.clip(standardise_columns(np.where(np.isfinite(x), x, 0.0), weight), -clip, clip)
 
 
 def eta_squared(x: np.ndarray, material: np.ndarray, weight: np.ndarray) -> np.ndarray:

@@ -113,8 +113,9 @@ from .tiled_region_tasks import Seeds
 KMEANS_RESTARTS = 10
 
 
-def _standardise(x: np.ndarray, weight: np.ndarray) -> np.ndarray:
-    """Columns centred and scaled to unit spread (weighted by ``weight``)."""
+def standardise_columns(x: np.ndarray, weight: np.ndarray) -> np.ndarray:
+    """Columns of ``x`` (n, c) centred and scaled to unit spread (weighted by ``weight``,
+    (n,)); a constant column is only centred."""
     w = weight / weight.sum()
     mean = w @ x
     std = np.sqrt(w @ (x - mean) ** 2)
@@ -272,7 +273,7 @@ def project_features(
     weighed by its spatial coherence in the scene when ``p.coherence_power`` > 0
     (:func:`.spatial_weights.coherence_weights`, read before the diffusion), projected
     (PCA or MAF). Independent of k."""
-    xs = _standardise(x, weight)
+    xs = standardise_columns(x, weight)
     if p.clip > 0:
         xs = np.clip(xs, -p.clip, p.clip)
     texture = np.zeros(xs.shape[1], dtype=bool)  # the columns of _region_features' order
