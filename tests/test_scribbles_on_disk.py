@@ -50,7 +50,7 @@ def test_the_banded_edge_map_and_superpixels_are_the_whole_images(monkeypatch, b
     np.testing.assert_array_equal(banded, whole)
     no_polarisation = banded_edges.banded_superpixel_edges(*maps, 0.0)
     np.testing.assert_array_equal(no_polarisation, superpixel_edges(*maps, 0.0))
-    for grid in (2, 3):
+    for grid in (2, 3, 4):
         regions = banded_edges.banded_superpixels(whole, 150, grid)
         expected = polarisation_superpixels(*maps, 150, edges=whole, grid=grid)
         assert regions.dtype == expected.dtype == np.int32

@@ -15,6 +15,7 @@ from napari_polarseg.engine.classifier.tiled_features import (
 )
 from napari_polarseg.engine.classifier.tiled_prediction import scribble_tiles
 from napari_polarseg.engine.features.pixel_features import PixelFeatureParams
+from napari_polarseg.engine.features.superpixels import watershed_grid
 from napari_polarseg.engine.limits import (
     KEPT_MAPS,
     estimate_scribble_bytes,
@@ -35,9 +36,12 @@ def scene():
     return scene, scribble_strokes(scene.labels, seed=0)
 
 
-def _run(scene, limit, walk=0.03):
+def _run(scene, limit, walk=0.03, features=None):
     s = ScribbleSession(
-        scene[0].stack, ANGLES, classifier_params=ClassifierParams(region_walk=walk)
+        scene[0].stack,
+        ANGLES,
+        classifier_params=ClassifierParams(region_walk=walk),
+        features_params=features,
     )
     s.segmenter.max_bytes = limit
     labels = s.update(scene[1])
@@ -132,6 +136,30 @@ def test_fine_scales_on_the_window_equal_the_whole_box(scene):
         got = made.take((rows - inner[0].start) * width + cols - inner[1].start)
         assert r0 >= inner[0].start and c0 >= inner[1].start
         np.testing.assert_array_equal(got, expected)
+
+
+def test_the_watershed_grid_keeps_64_cells_a_region():
+    """The coarsest power-of-two grid on which a region spans 64 cells."""
+    assert [watershed_grid(a) for a in (64, 255, 256, 417, 1023, 1024, 4096)] == [
+        1, 1, 2, 2, 2, 4, 8,
+    ]  # fmt: skip
+
+
+def test_tiled_labels_equal_whole_image_labels_on_the_4x_watershed_grid(scene):
+    """Regions of 1024 px (the automatic area from 3.07 MP): superpixels drawn on the 4×
+    coarser grid, constant on its 4 × 4 blocks, the region means summed by those
+    blocks; tiled and whole image agree and score alike against the truth."""
+    features = PixelFeatureParams(region_area=1024)
+    whole, labels = _run(scene, None, features=features)
+    tiled, tiled_labels = _run(scene, SMALL, features=features)
+    feats = tiled.cached_features
+    assert isinstance(feats, TiledFeatures) and feats.region_block == 4
+    blocks = feats.regions[::4, ::4]
+    np.testing.assert_array_equal(np.repeat(np.repeat(blocks, 4, 0), 4, 1), feats.regions)
+    assert np.mean(labels == tiled_labels) > 0.995
+    truth = scene[0].labels.ravel()
+    ari = [adjusted_rand_score(truth, x.ravel()) for x in (labels, tiled_labels)]
+    assert abs(ari[0] - ari[1]) < 0.01
 
 
 def test_region_sums_by_blocks_equal_the_pixels_sums():

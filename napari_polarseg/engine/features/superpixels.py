@@ -167,11 +167,19 @@ def watershed_on_grid(edges: np.ndarray, markers: int | np.ndarray, grid: int = 
 
 def watershed_grid(region_area: int) -> int:
     """Coarsening of :func:`polarisation_superpixels`' watershed for regions of
-    ``region_area`` pixels: 2 once a region still spans :data:`MIN_GRID_CELLS` cells of
-    the coarser grid, else 1 (measured on the labelled camera frames with the robot
-    user, ``benchmarks/robot_user.py``: the 2× coarser watershed of their 417 px
-    regions needs as few corrections, at a quarter of the cost)."""
-    return 2 if region_area >= 4 * MIN_GRID_CELLS else 1
+    ``region_area`` pixels: the coarsest power of two g on whose grid a region still
+    spans :data:`MIN_GRID_CELLS` cells (``region_area`` / g² ≥ 64): 1 under 256 px, 2
+    up to 1023 px, 4 from 1024 px (the largest automatic area, images from 3.07 MP).
+
+    Measured with the robot user: on the labelled camera frames the 2× coarser
+    watershed of their 417 px regions needs as few corrections, at a quarter of the
+    cost; on those frames upsampled to 5 and 11 MP (regions of 1024 px) the 4× coarser
+    one scores level with the 2× and takes 14 % less time on a 100 MP image
+    (``benchmarks/watershed_grid.py``, ``docs/performance.md``)."""
+    g = 1
+    while region_area >= (2 * g) ** 2 * MIN_GRID_CELLS:
+        g *= 2
+    return g
 
 
 def relabel(labels: np.ndarray) -> np.ndarray:
