@@ -14,13 +14,15 @@ consensus of the default's run and runs with other node parameters on the same
 superpixels (``consensus …``: :class:`ReachConsensus`). The
 development halves are read; ``--test-base B`` reads round B's test halves instead,
 only to check a choice on a test half already read and reported (a fresh round's is
-for reporting).
+for reporting). ``--oracle`` also prints, by family, the mean of the best variant of
+each frame, chosen with the truth: how far a perfect per-scene choice among the
+variants could go.
 
 Usage::
 
     cd benchmarks && OMP_NUM_THREADS=1 PYTHONPATH=.. python family_variants.py \\
         [--families objects,small,textured,diffuse,real] [--variants NAME,NAME]
-        [--test-base B]
+        [--test-base B] [--oracle]
 """
 
 from __future__ import annotations
@@ -217,6 +219,7 @@ VARIANTS: dict[str, Variant] = {
         params={"texture": ()},
     ),
     "frame-share scales": Variant({"follows_estimate": False}),
+    "texture weight 0.1": Variant(params={"texture_weight": 0.1}),
     "texture weight 0.5": Variant(params={"texture_weight": 0.5}),
     "texture weight 1": Variant(params={"texture_weight": 1.0}),
     # the merge without its cohesion rule (the weakest border alone decides; the default
@@ -381,6 +384,12 @@ def main(argv: list[str] | None = None) -> int:
         "estimate), 'truth:1' for the truth's size, 'collapse:S' for the short reach "
         "above S in one segment",
     )
+    ap.add_argument(
+        "--oracle",
+        action="store_true",
+        help="also print, by family, the mean of the best variant of each frame (a "
+        "per-frame choice made with the truth: what a perfect criterion could reach)",
+    )
     add_check_round(ap)
     args = ap.parse_args(argv)
     half = read_half(args.test_base)
@@ -431,7 +440,22 @@ def main(argv: list[str] | None = None) -> int:
             worst = ", ".join(f"{s} {d:+.2f}" for d, s in moved[:3])
             best = ", ".join(f"{s} {d:+.2f}" for d, s in moved[::-1][:3])
             print(f"- {n}: most down {worst}; most up {best}")
+    if args.oracle:
+        print_oracle(results, families)
     return 0
+
+
+def print_oracle(results: dict[str, dict[str, list[float]]], families: list[str]) -> None:
+    """By family: the mean over its frames of the best variant's ARI on each (chosen with
+    the truth), and its paired difference to the default. Part of it is the largest of
+    several noisy scores, not a gain a criterion could find."""
+    print("\n| family | best variant of each frame | minus default |\n|---|---:|---:|")
+    for f in families:
+        scores = np.array([results[n][f] for n in results])
+        best = scores.max(axis=0)
+        d = best - np.asarray(results["default"][f]) if "default" in results else best * np.nan
+        se = d.std(ddof=1) / np.sqrt(d.size) if d.size > 1 else float("nan")
+        print(f"| {f} | {best.mean():.3f} | {d.mean():+.3f} ± {se:.3f} |")
 
 
 if __name__ == "__main__":

@@ -102,3 +102,16 @@ def test_steadier_size_keeps_the_size_whose_labels_change_least_when_nudged():
     assert abs(sizes[1] / sizes[0] - 1) > 0.1 and min(sizes) > 12  # both count, and differ
     assert agree[0] != agree[1]
     np.testing.assert_array_equal(steady.ravel(), runs[int(np.argmax(agree))][0])
+
+
+def test_the_oracle_takes_each_frames_best_variant(capsys):
+    """``--oracle``: by family, the mean over frames of the best variant's score, and its
+    paired difference to the default."""
+    results = {
+        "default": {"small": [0.1, 0.5, 0.3]},
+        "other": {"small": [0.4, 0.2, 0.3]},
+    }
+    family_variants.print_oracle(results, ["small"])
+    row = [line for line in capsys.readouterr().out.splitlines() if line.startswith("| small")]
+    # best per frame 0.4, 0.5, 0.3: mean 0.4; minus default 0.3, 0, 0: +0.100 ± 0.100
+    assert row == ["| small | 0.400 | +0.100 ± 0.100 |"]
