@@ -9,7 +9,9 @@ object, whether it follows the estimated object size) or the default with the ob
 size set to the truth's (``truth size``: what a perfect estimate would give) or
 estimated from ρ and φ alone (``size from polarisation``: :class:`PolarisationSize`) or
 chosen between the two estimates by how little the labels change when it is nudged
-(``steadier size``: :class:`SteadierSize`), or the
+(``steadier size``: :class:`SteadierSize`), or with the texture group's weight chosen
+per scene among five by how well each weight's labels agree with the others' (``texture
+weight medoid``: :class:`TextureWeightMedoid`), or the
 consensus of the default's run and runs with other node parameters on the same
 superpixels (``consensus …``: :class:`ReachConsensus`). The
 development halves are read; ``--test-base B`` reads round B's test halves instead,
@@ -71,6 +73,8 @@ class Variant:
     polarisation_size: bool = False
     #: choose between the two estimates by the labels' stability (:class:`SteadierSize`)
     steadier_size: bool = False
+    #: the texture group's weight chosen per scene (:class:`TextureWeightMedoid`)
+    weight_medoid: bool = False
 
 
 class GatedSurface(SurfaceSuperpixels):
@@ -175,6 +179,39 @@ class SteadierSize(SurfaceSuperpixels):
         return best[1]
 
 
+def medoid(labels: list[np.ndarray], prefer: int = 0) -> int:
+    """The index of the label image (all of one shape) whose mean ARI with the others is
+    highest, read on every second pixel of every second row (no truth); a tie keeps
+    ``prefer``."""
+    flat = [np.asarray(x)[::2, ::2].ravel() for x in labels]
+    agree = [
+        np.mean([adjusted_rand_score(a, b) for j, b in enumerate(flat) if j != i])
+        for i, a in enumerate(flat)
+    ]
+    return max(range(len(flat)), key=lambda i: (agree[i], i == prefer))
+
+
+class TextureWeightMedoid(SurfaceSuperpixels):
+    """The default's class run at the texture group's weights :attr:`weights` (a
+    per-scene weight of the texture group, issue 37 point 3, chosen without truth): the
+    labels of the weight whose labels agree best with the others' (:func:`medoid`; a tie
+    keeps the default's weight). Five runs of the default."""
+
+    weights = (0.0, 0.1, 0.3, 0.5, 1.0)
+
+    def segment(self, scene, params, inputs, run):
+        own = self.params
+        outputs = []
+        try:
+            for w in self.weights:
+                self.params = own.replace(texture_weight=w)
+                outputs.append(super().segment(scene, params, inputs, run))
+        finally:
+            self.params = own
+        prefer = self.weights.index(own.texture_weight)
+        return outputs[medoid([o.labels for o in outputs], prefer)]
+
+
 class ReachConsensus(SuperpixelConsensus):
     """The default's run and runs with other node parameters (:attr:`others`: another
     reach, border scale or node features) on the same superpixels, the labels the runs
@@ -220,6 +257,7 @@ VARIANTS: dict[str, Variant] = {
     ),
     "frame-share scales": Variant({"follows_estimate": False}),
     "texture weight 0.1": Variant(params={"texture_weight": 0.1}),
+    "texture weight medoid": Variant(weight_medoid=True),
     "texture weight 0.5": Variant(params={"texture_weight": 0.5}),
     "texture weight 1": Variant(params={"texture_weight": 1.0}),
     # the merge without its cohesion rule (the weakest border alone decides; the default
@@ -342,6 +380,8 @@ def register(name: str, variant: Variant) -> str:
         base = PolarisationSize
     if variant.steadier_size:
         base = SteadierSize
+    if variant.weight_medoid:
+        base = TextureWeightMedoid
     cls = type("Variant", (base,), {"name": f"variant:{name}", "title": name, **attrs})
     method = cls()
     if variant.params:

@@ -115,3 +115,17 @@ def test_the_oracle_takes_each_frames_best_variant(capsys):
     row = [line for line in capsys.readouterr().out.splitlines() if line.startswith("| small")]
     # best per frame 0.4, 0.5, 0.3: mean 0.4; minus default 0.3, 0, 0: +0.100 ± 0.100
     assert row == ["| small | 0.400 | +0.100 ± 0.100 |"]
+
+
+def test_the_medoid_is_the_labelling_the_others_agree_with():
+    """``texture weight medoid`` keeps the label image closest (mean ARI) to the others:
+    of two halves-cuts, one with a corner changed and a checkerboard, the first two
+    agree best; a tie keeps the preferred one."""
+    cut = np.zeros((40, 40), dtype=int)
+    cut[:, 20:] = 1
+    nudged = cut.copy()
+    nudged[:6, :6] = 1
+    noise = np.indices((40, 40)).sum(axis=0) % 2
+    assert family_variants.medoid([noise, nudged, cut]) in (1, 2)
+    assert family_variants.medoid([noise, cut, cut.copy()], prefer=2) == 2
+    assert family_variants.medoid([cut, cut.copy(), cut.copy()], prefer=1) == 1
