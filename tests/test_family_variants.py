@@ -119,8 +119,9 @@ def test_the_oracle_takes_each_frames_best_variant(capsys):
 
 def test_the_medoid_is_the_labelling_the_others_agree_with():
     """``texture weight medoid`` keeps the label image closest (mean ARI) to the others:
-    of two halves-cuts, one with a corner changed and a checkerboard, the first two
-    agree best; a tie keeps the preferred one."""
+    of a cut into halves, the same cut with a corner changed and a checkerboard (read on
+    every second pixel: one label, agreeing with neither), the two cuts agree best; a
+    tie keeps the preferred one."""
     cut = np.zeros((40, 40), dtype=int)
     cut[:, 20:] = 1
     nudged = cut.copy()

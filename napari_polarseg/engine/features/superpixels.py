@@ -174,8 +174,8 @@ def watershed_grid(region_area: int) -> int:
     Measured with the robot user: on the labelled camera frames the 2× coarser
     watershed of their 417 px regions needs as few corrections, at a quarter of the
     cost; on those frames upsampled to 5 and 11 MP (regions of 1024 px) the 4× coarser
-    one scores level with the 2× and takes 14 % less time on a 100 MP image
-    (``benchmarks/watershed_grid.py``, ``docs/performance.md``)."""
+    one scores level with the 2× and takes a fifth less time on a 100 MP image (67.6 s
+    against 84.9 s; ``benchmarks/watershed_grid.py``, ``docs/performance.md``)."""
     g = 1
     while region_area >= (2 * g) ** 2 * MIN_GRID_CELLS:
         g *= 2
