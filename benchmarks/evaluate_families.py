@@ -55,7 +55,7 @@ from baselines import (
     smoothed_kmeans,
     truth_bound_halves,
 )
-from families import FAMILIES, HALVES, RENDER_SETS, Frame, frames
+from families import FAMILIES, HALVES, RENDER_SETS, Frame, frames, standard_error
 from ilastik_features import ilastik_features
 from materials import degenerate, replace_block
 from robot_user import forest_update, product_update, run_robot
@@ -209,9 +209,7 @@ def mean(rows: list[dict], column: str) -> float:
 def paired(rows: list[dict], a: str, b: str) -> tuple[float, float]:
     """Mean of ``a − b`` over the frames and its standard error."""
     d = np.array([r[a] - r[b] for r in rows if a in r and b in r])
-    if d.size < 2:
-        return float(d.mean()) if d.size else float("nan"), float("nan")
-    return float(d.mean()), float(d.std(ddof=1) / np.sqrt(d.size))
+    return (float(d.mean()) if d.size else float("nan")), standard_error(d)
 
 
 def size_ratio(row: dict) -> float:

@@ -180,6 +180,12 @@ def frames(family: str, half: str, test_base: int = 0) -> Iterator[Frame]:
     return render_frames(family, half, test_base)
 
 
+def standard_error(d: np.ndarray) -> float:
+    """Standard error of the mean of the paired differences ``d`` (NaN under two)."""
+    d = np.asarray(d, dtype=float)
+    return float(d.std(ddof=1) / np.sqrt(d.size)) if d.size > 1 else float("nan")
+
+
 def add_check_round(ap: argparse.ArgumentParser) -> None:
     """The option ``--test-base B`` of a bench that chooses on the development halves:
     read round B's test halves instead, only to check a choice on a test half already

@@ -36,7 +36,7 @@ from functools import partial
 from typing import Any
 
 import numpy as np
-from families import FAMILIES, Frame, add_check_round, frames, read_half
+from families import FAMILIES, Frame, add_check_round, frames, read_half, standard_error
 from sklearn.metrics import adjusted_rand_score
 
 from napari_polarseg.engine import Pipeline, Scene
@@ -69,12 +69,9 @@ class Variant:
     #: node-parameter changes of further runs on the same superpixels; the labels are
     #: the runs' consensus with the default (:class:`ReachConsensus`)
     also: tuple[dict[str, Any], ...] = ()
-    #: estimate the object size from ρ, φ alone, without ln Î (:class:`PolarisationSize`)
-    polarisation_size: bool = False
-    #: choose between the two estimates by the labels' stability (:class:`SteadierSize`)
-    steadier_size: bool = False
-    #: the texture group's weight chosen per scene (:class:`TextureWeightMedoid`)
-    weight_medoid: bool = False
+    #: a subclass of the default's class run in its place (None: the default's class):
+    #: :class:`PolarisationSize`, :class:`SteadierSize`, :class:`TextureWeightMedoid`
+    base: type | None = None
 
 
 class GatedSurface(SurfaceSuperpixels):
@@ -257,7 +254,7 @@ VARIANTS: dict[str, Variant] = {
     ),
     "frame-share scales": Variant({"follows_estimate": False}),
     "texture weight 0.1": Variant(params={"texture_weight": 0.1}),
-    "texture weight medoid": Variant(weight_medoid=True),
+    "texture weight medoid": Variant(base=TextureWeightMedoid),
     "texture weight 0.5": Variant(params={"texture_weight": 0.5}),
     "texture weight 1": Variant(params={"texture_weight": 1.0}),
     # the merge without its cohesion rule (the weakest border alone decides; the default
@@ -273,8 +270,8 @@ VARIANTS: dict[str, Variant] = {
     ),
     "estimated size": Variant({"follows_estimate": True}),
     "truth size": Variant(truth_size=True),
-    "size from polarisation": Variant(polarisation_size=True),
-    "steadier size": Variant(steadier_size=True),
+    "size from polarisation": Variant(base=PolarisationSize),
+    "steadier size": Variant(base=SteadierSize),
     "reach 0.25": Variant({"follows_estimate": True, "reach_objects": 0.25}),
     "side 12": Variant({"follows_estimate": True, "regions_per_side": 12.0}),
     "texture": Variant(
@@ -376,12 +373,8 @@ def register(name: str, variant: Variant) -> str:
         base, attrs["collapse"] = CollapseFallback, variant.collapse
     if variant.also:
         base, attrs["others"] = ReachConsensus, variant.also
-    if variant.polarisation_size:
-        base = PolarisationSize
-    if variant.steadier_size:
-        base = SteadierSize
-    if variant.weight_medoid:
-        base = TextureWeightMedoid
+    if variant.base is not None:
+        base = variant.base
     cls = type("Variant", (base,), {"name": f"variant:{name}", "title": name, **attrs})
     method = cls()
     if variant.params:
@@ -464,8 +457,7 @@ def main(argv: list[str] | None = None) -> int:
         cells = [n, *(f"{m:.3f}" for m in means), f"{np.mean(means):.3f}"]
         if base is not None:
             d = np.concatenate([np.subtract(results[n][f], base[f]) for f in families])
-            se = d.std(ddof=1) / np.sqrt(d.size) if d.size > 1 else float("nan")
-            cells.append(f"{d.mean():+.3f} ± {se:.3f}")
+            cells.append(f"{d.mean():+.3f} ± {standard_error(d):.3f}")
         print("| " + " | ".join(cells) + " |")
     if base is not None:
         for n in chosen:
@@ -494,8 +486,7 @@ def print_oracle(results: dict[str, dict[str, list[float]]], families: list[str]
         scores = np.array([results[n][f] for n in results])
         best = scores.max(axis=0)
         d = best - np.asarray(results["default"][f]) if "default" in results else best * np.nan
-        se = d.std(ddof=1) / np.sqrt(d.size) if d.size > 1 else float("nan")
-        print(f"| {f} | {best.mean():.3f} | {d.mean():+.3f} ± {se:.3f} |")
+        print(f"| {f} | {best.mean():.3f} | {d.mean():+.3f} ± {standard_error(d):.3f} |")
 
 
 if __name__ == "__main__":

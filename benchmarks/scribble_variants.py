@@ -30,7 +30,7 @@ from typing import Any
 from unittest import mock
 
 import numpy as np
-from families import FAMILIES, Frame, add_check_round, frames, read_half
+from families import FAMILIES, Frame, add_check_round, frames, read_half, standard_error
 from robot_user import run_robot
 
 from napari_polarseg.engine import Pipeline, ScribbleSession
@@ -158,8 +158,7 @@ def main(argv: list[str] | None = None) -> int:
             cells = [n, *(f"{m:.3f}" for m in means)]
             if "default" in chosen:
                 d = np.array([s[n][c] - s["default"][c] for _, _, s in rows])
-                se = d.std(ddof=1) / np.sqrt(d.size) if d.size > 1 else float("nan")
-                cells.append(f"{d.mean():+.3f} ± {se:.3f}")
+                cells.append(f"{d.mean():+.3f} ± {standard_error(d):.3f}")
             print("| " + " | ".join(cells) + " |")
         if "default" in chosen:
             for n in chosen:
