@@ -10,7 +10,9 @@ shadow's edge a Gaussian penumbra of :data:`PENUMBRA` px), the scene's own noise
 12-bit quantisation, and segmented into the truth's number of classes by:
 
 - intensity k-means and k-means on the 20 smoothed polarisation features (the plain
-  baselines of ``baselines.py``), ``superpixels`` and the default (``auto``);
+  baselines of ``baselines.py``), ``superpixels``, the default (``auto``) and
+  ``polarisation_borders`` (the default's method with its borders weighed on the
+  polarisation edges alone);
 
 and scored against the materials (ARI over every pixel) and, for the default, against
 the shadow (ARI of its labels with the lit / shadowed split: 1 = the segments are the
@@ -55,7 +57,13 @@ SHAPE = (240, 320)
 ANGLES = np.deg2rad([0.0, 30.0, 60.0, 90.0, 120.0, 150.0])
 SCENES = ("planted", "leaves", "camouflage", "scattered_leaves")
 SEEDS = (0, 1, 2)
-METHODS = ("intensity k-means", "smoothed k-means", "superpixels", "default")
+METHODS = (
+    "intensity k-means",
+    "smoothed k-means",
+    "superpixels",
+    "default",
+    "polarisation_borders",
+)
 
 
 def shadow_mask(shape: tuple[int, int], seed: int) -> np.ndarray:
@@ -115,6 +123,7 @@ def segment_all(stack: np.ndarray, k: int) -> dict[str, np.ndarray]:
         "smoothed k-means": smoothed_kmeans(pol.intensity, pol.dop, pol.phase, k),
         "superpixels": scene.segment(params.replace(method="superpixels")).labels,
         "default": scene.segment(params).labels,
+        "polarisation_borders": scene.segment(params.replace(method="polarisation_borders")).labels,
     }
 
 

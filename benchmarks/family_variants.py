@@ -242,6 +242,7 @@ SHORT_REACH = {"diffusion_range": 0.07, "diffusion_tau": 0.75}
 VARIANTS: dict[str, Variant] = {
     "default": Variant(),
     "superpixels": Variant(method="superpixels"),
+    "polarisation borders": Variant(method="polarisation_borders"),
     # the default without its texture group; and without it nor the estimated size
     # (the default before both and before the merge's cohesion rule: ``before texture``)
     "no texture": Variant(params={"texture": ()}),

@@ -41,6 +41,7 @@ BUILT_IN: tuple[tuple[str, str], ...] = (
     ("valid_superpixels", "ValidSuperpixels"),
     ("surface_superpixels", "SurfaceSuperpixels"),
     ("superpixel_consensus", "SuperpixelConsensus"),
+    ("polarisation_borders", "PolarisationBorders"),
 )
 
 _METHODS: dict[str, Segmenter] = {}

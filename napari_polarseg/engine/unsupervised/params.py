@@ -79,6 +79,13 @@ class UnsupervisedParams:
         log Î alone (:func:`~napari_polarseg.engine.features.superpixels.superpixels`).
     polarisation_edge_weight : float
         Weight of the Stokes edge map against the log Î one (``boundary="polarisation"``).
+    border_intensity_weight : float
+        Weight of the log Î edge map in the border strengths of the diffusion and of the
+        merge (:func:`~napari_polarseg.engine.features.superpixels.superpixel_edges`'s
+        a), in [0, 1]; the superpixels follow their own map whatever it is. 1: the
+        superpixels' map; 0: the Stokes edges alone, so the diffusion and the merge cross
+        a step of Î across which ρ and φ run on (a cast shadow's edge, a fold in the
+        shading) as they cross the inside of a surface (``boundary="polarisation"``).
     features : tuple of str
         Node features, names from :data:`NODE_FEATURES` (the default: the measured
         best of the module docstring).
@@ -150,6 +157,7 @@ class UnsupervisedParams:
     region_area: int = 0
     boundary: str = "polarisation"
     polarisation_edge_weight: float = 1.0
+    border_intensity_weight: float = 1.0
     features: tuple[str, ...] = (
         "log_intensity",
         "dop",
@@ -187,12 +195,7 @@ class UnsupervisedParams:
             raise PolarsegError(
                 f"boundary must be 'polarisation' or 'intensity', got {self.boundary!r}"
             )
-        if not (
-            math.isfinite(self.polarisation_edge_weight) and self.polarisation_edge_weight >= 0
-        ):
-            raise PolarsegError(
-                f"polarisation_edge_weight must be >= 0, got {self.polarisation_edge_weight}"
-            )
+        self._check_edges()
         features = tuple(str(f) for f in self.features)
         unknown = [f for f in features if f not in NODE_FEATURES]
         self._check_texture()
@@ -292,6 +295,23 @@ class UnsupervisedParams:
         area = int(round(min(max(side * side, MIN_OBJECT_REGION_AREA), MAX_REGION_AREA)))
         reach = min(reach_objects * float(object_size) / math.sqrt(shape[0] * shape[1]), 1.0)
         return self.replace(region_area=area, diffusion_range=reach)
+
+    def _check_edges(self) -> None:
+        """``polarisation_edge_weight`` >= 0; ``border_intensity_weight`` in [0, 1], below
+        1 only on the polarisation edges."""
+        if not (
+            math.isfinite(self.polarisation_edge_weight) and self.polarisation_edge_weight >= 0
+        ):
+            raise PolarsegError(
+                f"polarisation_edge_weight must be >= 0, got {self.polarisation_edge_weight}"
+            )
+        if not 0.0 <= self.border_intensity_weight <= 1.0:
+            raise PolarsegError(
+                f"border_intensity_weight must be in [0, 1], got {self.border_intensity_weight}"
+            )
+        if self.border_intensity_weight < 1.0 and self.boundary != "polarisation":
+            raise PolarsegError("border_intensity_weight < 1 needs boundary='polarisation'")
+        object.__setattr__(self, "border_intensity_weight", float(self.border_intensity_weight))
 
     def _check_texture(self) -> None:
         """Check and normalise ``texture`` and ``texture_weight``."""

@@ -98,3 +98,14 @@ def pixel_maps(
     terms = in_background(lambda: pixel_terms(i, d, ph, texture=grain))
     edges = superpixel_edges(i, d, ph, edge_weight(p))
     return PixelMaps((i, d, ph), valid, nearest, terms(), edges, edge_weight(p))
+
+
+def border_map(
+    i: np.ndarray, d: np.ndarray, ph: np.ndarray, p: UnsupervisedParams, edges: np.ndarray
+) -> np.ndarray:
+    """The edge map the border strengths are read on: the superpixels' own ``edges``, or
+    with ``p.border_intensity_weight`` < 1 the map with log Î weighed that much
+    (:func:`~napari_polarseg.engine.features.superpixels.superpixel_edges`)."""
+    if p.border_intensity_weight == 1.0:
+        return edges
+    return superpixel_edges(i, d, ph, edge_weight(p), intensity_weight=p.border_intensity_weight)

@@ -98,7 +98,7 @@ from ..features.superpixels import (
 from .boundaries import refine_maps, refined_labels
 from .kmeans import squared_distances, weighted_kmeans
 from .params import UnsupervisedParams, UnsupervisedResult
-from .pixel_maps import PixelMaps, edge_weight, pixel_maps
+from .pixel_maps import PixelMaps, border_map, edge_weight, pixel_maps
 from .region_diffusion import diffuse, diffusion_steps, edge_aware_adjacency
 from .region_features import node_features
 from .region_graph import region_adjacency
@@ -477,6 +477,7 @@ def prepare_regions(
     if n < 2:
         z = np.zeros((n, 0))
     else:  # the border weights serve the diffusion and the merge by weakest border
+        edges = border_map(i, d, ph, q, edges)  # the superpixels' map, or log Î weighed less
         borders = edge_aware_adjacency(regions, edges, q.diffusion_tau)[keep][:, keep].tocsr()
         z = project_features(x[keep], weight, borders, adjacency, q)
     maps = refine_maps(i, d) if q.refine_boundaries else None

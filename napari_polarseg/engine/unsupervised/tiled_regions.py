@@ -267,6 +267,7 @@ def _tile_pass(
     centre, scales = edge_scales(maps, valid, grid, weight > 0)
     seeds = Seeds.of(shape, seed_count(shape, p.area_of(shape)))
     block = p.watershed_grid_of(shape)
+    border = p.border_intensity_weight
     if grid.align % block:
         raise PolarsegError(f"tiles aligned to {grid.align} px, the watershed's blocks {block}")
     outside = seeds.count
@@ -277,7 +278,7 @@ def _tile_pass(
     def payloads() -> Iterator[tuple]:
         for tile in grid:
             box = box_payload(maps, valid, tile.outer)
-            yield (*box, tile, seeds, weight, scales, centre, shape, grain, block)
+            yield (*box, tile, seeds, weight, scales, centre, shape, grain, block, border)
 
     cores = tile_map_for(grid)(region_core, payloads())
     for index, (tile, core) in enumerate(zip(grid, cores, strict=True)):
