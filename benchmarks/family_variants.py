@@ -36,12 +36,13 @@ from functools import partial
 from typing import Any
 
 import numpy as np
+from baselines import smoothed_kmeans
 from families import FAMILIES, Frame, add_check_round, frames, read_half, standard_error
 from sklearn.metrics import adjusted_rand_score
 
 from napari_polarseg.engine import Pipeline, Scene
 from napari_polarseg.engine.features.object_size import ObjectSize, scene_object_size
-from napari_polarseg.engine.methods import register_method
+from napari_polarseg.engine.methods import MethodOutput, register_method
 from napari_polarseg.engine.methods.superpixel_consensus import SuperpixelConsensus
 from napari_polarseg.engine.methods.surface_superpixels import SurfaceSuperpixels
 from napari_polarseg.engine.methods.valid_superpixels import clustered_pixels
@@ -72,6 +73,28 @@ class Variant:
     #: a subclass of the default's class run in its place (None: the default's class):
     #: :class:`PolarisationSize`, :class:`SteadierSize`, :class:`TextureWeightMedoid`
     base: type | None = None
+
+
+class SmoothedKMeans:
+    """The plain unsupervised baseline, k-means on the 20 smoothed polarisation features
+    of the clustered pixels (``baselines.smoothed_kmeans``), as a method: its figures
+    stand beside the variants' in the same run."""
+
+    name = "baseline:smoothed k-means"
+    title = "k-means on 20 smoothed features (baseline)"
+    reads = ("fit", "n_segments")
+    inputs: tuple[str, ...] = ()
+    reads_normals = False
+
+    def stages(self, params) -> tuple[str, ...]:
+        return ("clustering",)
+
+    def segment(self, scene, params, inputs, run) -> MethodOutput:
+        run.begin("clustering")
+        pol = scene.polarisation(params)
+        valid = ~np.asarray(pol.invalid, bool)
+        k = params.n_segments
+        return MethodOutput(smoothed_kmeans(pol.intensity, pol.dop, pol.phase, k, valid))
 
 
 class GatedSurface(SurfaceSuperpixels):
@@ -243,6 +266,7 @@ VARIANTS: dict[str, Variant] = {
     "default": Variant(),
     "superpixels": Variant(method="superpixels"),
     "polarisation borders": Variant(method="polarisation_borders"),
+    "smoothed k-means": Variant(method=SmoothedKMeans.name),
     # the default without its texture group; and without it nor the estimated size
     # (the default before both and before the merge's cohesion rule: ``before texture``)
     "no texture": Variant(params={"texture": ()}),
@@ -371,6 +395,8 @@ VARIANTS: dict[str, Variant] = {
 
 def register(name: str, variant: Variant) -> str:
     """Register the variant as a method of its own; its method name."""
+    if variant.method == SmoothedKMeans.name:
+        register_method(SmoothedKMeans())
     if variant.method:
         return variant.method
     base, attrs = SurfaceSuperpixels, dict(variant.attrs)
