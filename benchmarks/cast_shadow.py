@@ -10,8 +10,9 @@ shadow's edge a Gaussian penumbra of :data:`PENUMBRA` px), the scene's own noise
 12-bit quantisation, and segmented into the truth's number of classes by:
 
 - intensity k-means and k-means on the 20 smoothed polarisation features (the plain
-  baselines of ``baselines.py``), ``superpixels``, the default (``auto``) and
-  ``polarisation_borders`` (the default's method with its borders weighed on the
+  baselines of ``baselines.py``), ``superpixels``, the default (``auto``), the default
+  without its border gate (``border_gate = 0``: a border's log Î edges weigh in full)
+  and ``polarisation_borders`` (the default's method with its borders weighed on the
   polarisation edges alone);
 
 and scored against the materials (ARI over every pixel) and, for the default, against
@@ -39,6 +40,7 @@ from collections.abc import Iterator
 import numpy as np
 from baselines import intensity_kmeans, smoothed_kmeans
 from families import standard_error
+from family_variants import VARIANTS, register
 from scipy import ndimage
 from sklearn.metrics import adjusted_rand_score
 
@@ -47,6 +49,8 @@ from napari_polarseg.engine.params import PRESETS
 from napari_polarseg.engine.synthetic.optics import render_stack
 from napari_polarseg.engine.synthetic.scenes import make_scene
 
+#: The default with its log Î borders ungated (``border_gate = 0``), as registered here.
+UNGATED = register("no border gate", VARIANTS["no border gate"])
 #: σ (px) of the Gaussian penumbra of the shadow's edge.
 PENUMBRA = 2.0
 #: Width of one shadow band, a share of the short side.
@@ -62,6 +66,7 @@ METHODS = (
     "smoothed k-means",
     "superpixels",
     "default",
+    "default without the border gate",
     "polarisation_borders",
 )
 
@@ -123,6 +128,7 @@ def segment_all(stack: np.ndarray, k: int) -> dict[str, np.ndarray]:
         "smoothed k-means": smoothed_kmeans(pol.intensity, pol.dop, pol.phase, k),
         "superpixels": scene.segment(params.replace(method="superpixels")).labels,
         "default": scene.segment(params).labels,
+        "default without the border gate": scene.segment(params.replace(method=UNGATED)).labels,
         "polarisation_borders": scene.segment(params.replace(method="polarisation_borders")).labels,
     }
 

@@ -21,6 +21,7 @@ from napari_polarseg.engine.synthetic.scenes import make_scene
 from napari_polarseg.engine.tiles import TileGrid
 from napari_polarseg.engine.unsupervised.merge import merged_clustering, weakest_border
 from napari_polarseg.engine.unsupervised.params import UnsupervisedParams
+from napari_polarseg.engine.unsupervised.region_diffusion import gated_strength
 from napari_polarseg.engine.unsupervised.segmenter import prepare_regions
 from napari_polarseg.engine.unsupervised.tiled_regions import tile_halo, tiled_prepare_regions
 
@@ -92,3 +93,42 @@ def test_tiled_borders_agree_with_the_whole_image():
 def test_the_weight_is_checked(change):
     with pytest.raises(PolarsegError, match="border_intensity_weight"):
         UnsupervisedParams(**change)
+
+
+def test_the_default_gates_its_intensity_borders_and_crosses_a_shadow():
+    """The default's border gate (``border_gate`` 0.5): on the planted plastics under a
+    shadow of 70 % of the light it keeps them apart (measured 0.999 on seeds 0–2; 0.720
+    without the gate), as ``polarisation_borders`` does."""
+    gated = SurfaceSuperpixels().params
+    assert gated.border_gate > 0.0 and gated.border_intensity_weight == 1.0
+    scores = []
+    for name, _, stack, truth, _ in cast_shadow.scenes([0.7]):
+        if name.startswith("planted"):
+            scene = Scene(stack, cast_shadow.ANGLES)
+            labels = scene.segment(PRESETS["auto"].replace(n_segments=2)).labels
+            scores.append(adjusted_rand_score(truth.ravel(), labels.ravel()))
+    assert min(scores) > 0.95
+
+
+def test_the_gate_weighs_intensity_edges_by_the_polarisation_step():
+    """e = p + c · i, c = 1 − exp(−(Δz / (K · median Δz))²): no polarisation step, no
+    intensity border; a step of several medians, the whole intensity edge."""
+    strength = np.array([[4.0, 1.0], [4.0, 1.0], [4.0, 1.0]])
+    dz = np.array([0.0, 0.1, 1.0])  # median 0.1, K = 0.5: t = 0.05
+    e = gated_strength(strength, dz, 0.5)
+    np.testing.assert_allclose(e, [1.0, 1.0 + 4.0 * (1 - np.exp(-4.0)), 5.0])
+
+
+def test_tiled_gated_borders_agree_with_the_whole_image():
+    shape, core = (480, 600), 200
+    s = make_scene("scattered_leaves", shape=shape, seed=5)
+    pol = Scene(s.stack, s.angles).polarisation(PRESETS["auto"])
+    params = SurfaceSuperpixels().params
+    grid = TileGrid(shape, core, tile_halo(shape, params))
+    maps = (pol.intensity, pol.dop, pol.phase)
+    whole = prepare_regions(*maps, params)
+    tiled = tiled_prepare_regions(*maps, params, None, grid)
+    w, t = whole.borders.toarray(), tiled.borders.toarray()
+    assert np.median(np.abs(t - w)[w > 0] / w[w > 0]) < 0.01
+    ungated = prepare_regions(*maps, params.replace(border_gate=0.0)).borders.toarray()
+    assert np.median(np.abs(ungated - w)[w > 0] / w[w > 0]) > 0.05  # the gate moves them

@@ -27,6 +27,7 @@ def test_auto_preset_is_this_method_with_the_wider_diffusion():
     assert method.params == base.replace(
         diffusion_range=surface_superpixels.REACH,
         diffusion_tau=surface_superpixels.BORDER_SCALE,
+        border_gate=surface_superpixels.BORDER_GATE,
         texture=TEXTURE_FEATURES,
         texture_weight=surface_superpixels.TEXTURE_WEIGHT,
     )

@@ -105,11 +105,33 @@ def superpixel_edges(
     """
     edges, pol = edge_gradients(intensity, dop, phase, polarisation_edge_weight > 0)
     m_log = float(np.median(edges)) if scales is None else float(scales[0])
-    edges *= intensity_weight / max(m_log, 1e-12)
+    edges /= max(m_log, 1e-12)
+    if intensity_weight != 1.0:
+        edges *= intensity_weight
     if pol is not None:
         m_pol = float(np.median(pol)) if scales is None else float(scales[1])
         edges += polarisation_edge_weight * pol / max(m_pol, 1e-12)
     return edges
+
+
+def edge_channels(
+    intensity: np.ndarray,
+    dop: np.ndarray,
+    phase: np.ndarray,
+    polarisation_edge_weight: float = 1.0,
+    scales: tuple[float, float] | None = None,
+    intensity_weight: float = 1.0,
+) -> np.ndarray:
+    """(2, H, W) float32: the two terms of :func:`superpixel_edges` apart, the log Î edges
+    a · |∇(G * log Î)| / m_log and the Stokes edges w · |∇(G * (s1, s2))| / m_s (the
+    same weights and ``scales``), for borders that weigh them differently."""
+    grad, pol = edge_gradients(intensity, dop, phase, True)
+    m_log = float(np.median(grad)) if scales is None else float(scales[0])
+    m_pol = float(np.median(pol)) if scales is None else float(scales[1])
+    out = np.empty((2, *grad.shape), dtype=np.float32)
+    out[0] = grad * (intensity_weight / max(m_log, 1e-12))
+    out[1] = pol * (polarisation_edge_weight / max(m_pol, 1e-12))
+    return out
 
 
 def polarisation_superpixels(

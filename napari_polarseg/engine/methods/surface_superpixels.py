@@ -13,7 +13,12 @@ reaches further and crosses weaker borders:
 - **border scale** (``diffusion_tau``) :data:`BORDER_SCALE` × the median border strength
   instead of 0.75: the border weights exp(−(e / τ)²) let the walk across the faint
   borders inside one surface (a shading gradient, the rim of a soft shadow) and still
-  stop at the strong ones between objects.
+  stop at the strong ones between objects;
+- **gated intensity borders** (``border_gate``) :data:`BORDER_GATE`: a border's log Î
+  edges count only as far as the two superpixels' polarisation differs
+  (:func:`~napari_polarseg.engine.unsupervised.region_diffusion.gated_strength`), so the
+  walk and the merge cross a cast shadow's edge, where Î steps and ρ and φ run on, as
+  they cross a shading gradient; its Stokes edges count in full.
 
 What it is for: on a large surface seen under a changing angle (a floor, a table, a
 wall) ρ and the shading drift across the frame, and a short diffusion leaves that drift
@@ -64,6 +69,10 @@ REACH = 0.20
 REACH_OBJECTS = 0.5
 #: τ of the diffusion's border weights, in units of the median border strength.
 BORDER_SCALE = 1.25
+#: K of the gate on the log Î edges of those borders
+#: (``UnsupervisedParams.border_gate``): a step of Î weighs as a border only where the
+#: two superpixels' polarisation differs by about K × its median difference or more.
+BORDER_GATE = 0.5
 #: Weight of the polarisation-texture node features (:mod:`..unsupervised.texture`)
 #: against the mean ones, which are diffused; the texture ones are not.
 TEXTURE_WEIGHT = 0.3
@@ -93,6 +102,7 @@ class SurfaceSuperpixels(ValidSuperpixels):
             or UnsupervisedParams(
                 diffusion_range=REACH,
                 diffusion_tau=BORDER_SCALE,
+                border_gate=BORDER_GATE,
                 texture=TEXTURE_FEATURES,
                 texture_weight=TEXTURE_WEIGHT,
             )

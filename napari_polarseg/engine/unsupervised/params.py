@@ -86,6 +86,12 @@ class UnsupervisedParams:
         superpixels' map; 0: the Stokes edges alone, so the diffusion and the merge cross
         a step of Î across which ρ and φ run on (a cast shadow's edge, a fold in the
         shading) as they cross the inside of a surface (``boundary="polarisation"``).
+    border_gate : float
+        K of the gate on those log Î edges, >= 0; 0 = off (they weigh in full). Above 0
+        a border's log Î edges weigh c = 1 − exp(−(Δz / (K · median Δz))²), Δz the
+        difference of the two superpixels' complex polarisation
+        (:func:`~.region_diffusion.gated_strength`): an intensity step counts as a
+        border only where the polarisation changes across it (``boundary="polarisation"``).
     features : tuple of str
         Node features, names from :data:`NODE_FEATURES` (the default: the measured
         best of the module docstring).
@@ -158,6 +164,7 @@ class UnsupervisedParams:
     boundary: str = "polarisation"
     polarisation_edge_weight: float = 1.0
     border_intensity_weight: float = 1.0
+    border_gate: float = 0.0
     features: tuple[str, ...] = (
         "log_intensity",
         "dop",
@@ -297,8 +304,9 @@ class UnsupervisedParams:
         return self.replace(region_area=area, diffusion_range=reach)
 
     def _check_edges(self) -> None:
-        """``polarisation_edge_weight`` >= 0; ``border_intensity_weight`` in [0, 1], below
-        1 only on the polarisation edges."""
+        """``polarisation_edge_weight`` >= 0; ``border_intensity_weight`` in [0, 1] and
+        ``border_gate`` >= 0, each away from its neutral value only on the polarisation
+        edges."""
         if not (
             math.isfinite(self.polarisation_edge_weight) and self.polarisation_edge_weight >= 0
         ):
@@ -311,6 +319,11 @@ class UnsupervisedParams:
             )
         if self.border_intensity_weight < 1.0 and self.boundary != "polarisation":
             raise PolarsegError("border_intensity_weight < 1 needs boundary='polarisation'")
+        if not (math.isfinite(self.border_gate) and self.border_gate >= 0.0):
+            raise PolarsegError(f"border_gate must be >= 0, got {self.border_gate}")
+        if self.border_gate > 0.0 and self.boundary != "polarisation":
+            raise PolarsegError("border_gate > 0 needs boundary='polarisation'")
+        object.__setattr__(self, "border_gate", float(self.border_gate))
         object.__setattr__(self, "border_intensity_weight", float(self.border_intensity_weight))
 
     def _check_texture(self) -> None:

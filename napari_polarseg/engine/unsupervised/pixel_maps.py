@@ -10,13 +10,15 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.sparse as sps
 
 from ..chunks import in_background
 from ..errors import PolarsegError
 from ..features.pixel_features import check_maps
-from ..features.superpixels import superpixel_edges
+from ..features.superpixels import edge_channels, superpixel_edges
 from ..physics.pixel_mask import nearest_valid
 from .params import UnsupervisedParams
+from .region_diffusion import edge_aware_adjacency, gated_adjacency
 from .region_features import pixel_terms
 from .texture import reads_grain
 
@@ -100,12 +102,23 @@ def pixel_maps(
     return PixelMaps((i, d, ph), valid, nearest, terms(), edges, edge_weight(p))
 
 
-def border_map(
-    i: np.ndarray, d: np.ndarray, ph: np.ndarray, p: UnsupervisedParams, edges: np.ndarray
-) -> np.ndarray:
-    """The edge map the border strengths are read on: the superpixels' own ``edges``, or
-    with ``p.border_intensity_weight`` < 1 the map with log Î weighed that much
-    (:func:`~napari_polarseg.engine.features.superpixels.superpixel_edges`)."""
-    if p.border_intensity_weight == 1.0:
-        return edges
-    return superpixel_edges(i, d, ph, edge_weight(p), intensity_weight=p.border_intensity_weight)
+def border_graph(
+    maps: tuple[np.ndarray, np.ndarray, np.ndarray],
+    p: UnsupervisedParams,
+    edges: np.ndarray,
+    regions: np.ndarray,
+    z: np.ndarray,
+) -> sps.csr_matrix:
+    """The edge-aware border weights of the superpixels ``regions`` of ``maps`` (Î, ρ, φ)
+    for the diffusion and the merge, τ = ``p.diffusion_tau``: read on the superpixels'
+    own ``edges`` (:func:`~.region_diffusion.edge_aware_adjacency`), on that map with log Î
+    weighed ``p.border_intensity_weight`` < 1, or with ``p.border_gate`` > 0 on its two
+    terms apart, the log Î edges gated by the difference of the regions' complex
+    polarisation ``z`` (:func:`~.region_diffusion.gated_adjacency`)."""
+    if p.border_gate > 0.0:
+        w, a = edge_weight(p), p.border_intensity_weight
+        channels = edge_channels(*maps, w, intensity_weight=a)
+        return gated_adjacency(regions, channels, z, p.border_gate, p.diffusion_tau)
+    if p.border_intensity_weight != 1.0:
+        edges = superpixel_edges(*maps, edge_weight(p), intensity_weight=p.border_intensity_weight)
+    return edge_aware_adjacency(regions, edges, p.diffusion_tau)

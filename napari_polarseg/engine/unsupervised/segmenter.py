@@ -98,8 +98,8 @@ from ..features.superpixels import (
 from .boundaries import refine_maps, refined_labels
 from .kmeans import squared_distances, weighted_kmeans
 from .params import UnsupervisedParams, UnsupervisedResult
-from .pixel_maps import PixelMaps, border_map, edge_weight, pixel_maps
-from .region_diffusion import diffuse, diffusion_steps, edge_aware_adjacency
+from .pixel_maps import PixelMaps, border_graph, edge_weight, pixel_maps
+from .region_diffusion import diffuse, diffusion_steps
 from .region_features import node_features
 from .region_graph import region_adjacency
 from .shape_trend import (
@@ -388,7 +388,7 @@ class RegionModel:
         (:func:`~napari_polarseg.engine.physics.pixel_mask.nearest_valid`), made once.
     borders : scipy.sparse.csr_matrix (n, n) or None
         Edge-aware border weights L_ab · exp(−(e_ab / τ)²) between superpixels
-        (:func:`.region_diffusion.edge_aware_adjacency`, τ = ``diffusion_tau``): the
+        (:func:`.pixel_maps.border_graph`, τ = ``diffusion_tau``): the
         diffusion's graph and the merge's (:func:`.merge.weakest_border`); None below
         two superpixels.
     labeller : callable (model, node labels) -> (labels, node labels), or None
@@ -477,8 +477,7 @@ def prepare_regions(
     if n < 2:
         z = np.zeros((n, 0))
     else:  # the border weights serve the diffusion and the merge by weakest border
-        edges = border_map(i, d, ph, q, edges)  # the superpixels' map, or log Î weighed less
-        borders = edge_aware_adjacency(regions, edges, q.diffusion_tau)[keep][:, keep].tocsr()
+        borders = border_graph((i, d, ph), q, edges, regions, z_region)[keep][:, keep].tocsr()
         z = project_features(x[keep], weight, borders, adjacency, q)
     maps = refine_maps(i, d) if q.refine_boundaries else None
     return RegionModel(

@@ -16,7 +16,12 @@ import numpy as np
 from skimage.util import regular_grid
 
 from ..features.pixel_features import check_maps
-from ..features.superpixels import edge_gradients, superpixel_edges, watershed_on_grid
+from ..features.superpixels import (
+    edge_channels,
+    edge_gradients,
+    superpixel_edges,
+    watershed_on_grid,
+)
 from ..tiles import Box, Tile
 from .region_features import pixel_terms
 from .tile_maps import filled_box
@@ -97,13 +102,15 @@ class Seeds:
 
 
 def border_pairs(a: np.ndarray, b: np.ndarray, ea: np.ndarray, eb: np.ndarray, n: int) -> Pairs:
-    """(keys lo·n + hi, pair counts L, summed edge strengths Σ max(e_a, e_b)) of the
-    pixel pairs (a, b) of two regions that differ, one row per region pair."""
+    """(keys lo·n + hi, pair counts L, summed edge strengths Σ max(e_a, e_b) (m, C)) of
+    the pixel pairs (a, b) of two regions that differ, one row per region pair; ``ea``,
+    ``eb`` hold C edge maps' values (C, *a.shape)."""
     differ = a != b
     a, b = a[differ].astype(np.int64), b[differ].astype(np.int64)
-    e = np.maximum(ea[differ], eb[differ]).astype(np.float64)
+    e = np.maximum(ea[:, differ], eb[:, differ]).astype(np.float64)
     keys, inverse = np.unique(np.minimum(a, b) * n + np.maximum(a, b), return_inverse=True)
-    return keys, np.bincount(inverse).astype(np.float64), np.bincount(inverse, weights=e)
+    sums = np.stack([np.bincount(inverse, weights=c, minlength=keys.size) for c in e], axis=1)
+    return keys, np.bincount(inverse).astype(np.float64), sums
 
 
 @dataclass(frozen=True)
@@ -123,9 +130,9 @@ class CoreSums:
     pairs : list of (keys, L, Σ e)
         The pixel pairs across borders inside the core (:func:`border_pairs`: left-right,
         then up-down).
-    right, below : ndarray (2, h) / (2, w) or None
-        The edge values on both sides of the cut right of / below the core (None at the
-        image's edge).
+    right, below : ndarray (2, C, h) / (2, C, w) or None
+        The border maps' values on both sides of the cut right of / below the core (None
+        at the image's edge).
     """
 
     regions: np.ndarray
@@ -156,9 +163,9 @@ def _sums(core: np.ndarray, box: Box, px: dict[str, np.ndarray], n: int) -> tupl
 
 
 def _cut_edges(tile: Tile, edges: np.ndarray, shape: tuple[int, int]) -> tuple:
-    """(right, below) of :class:`CoreSums`: copies of the edge values on both sides of
-    the cuts right of and below the core (its box reads them: they are the whole
-    image's)."""
+    """(right, below) of :class:`CoreSums`: copies of the values of the C border maps
+    ``edges`` (C, h, w) on both sides of the cuts right of and below the core (its box
+    reads them: they are the whole image's)."""
     (r0, r1), (c0, c1) = (
         (tile.core[0].start, tile.core[0].stop),
         (tile.core[1].start, tile.core[1].stop),
@@ -166,9 +173,11 @@ def _cut_edges(tile: Tile, edges: np.ndarray, shape: tuple[int, int]) -> tuple:
     o_r, o_c = tile.outer[0].start, tile.outer[1].start
     right = below = None
     if c1 < shape[1]:
-        right = np.ascontiguousarray(edges[r0 - o_r : r1 - o_r, c1 - 1 - o_c : c1 + 1 - o_c].T)
+        cut = edges[:, r0 - o_r : r1 - o_r, c1 - 1 - o_c : c1 + 1 - o_c]
+        right = np.ascontiguousarray(np.moveaxis(cut, 2, 0))
     if r1 < shape[0]:
-        below = np.ascontiguousarray(edges[r1 - 1 - o_r : r1 + 1 - o_r, c0 - o_c : c1 - o_c])
+        cut = edges[:, r1 - 1 - o_r : r1 + 1 - o_r, c0 - o_c : c1 - o_c]
+        below = np.ascontiguousarray(np.moveaxis(cut, 1, 0))
     return right, below
 
 
@@ -184,6 +193,7 @@ def region_core(
     grain: bool = False,
     grid: int = 1,
     border: float = 1.0,
+    gate: bool = False,
 ) -> CoreSums:
     """One tile's superpixels and sums (:mod:`.tiled_regions`, steps 1–3): the compact
     watershed from the whole image's ``seeds`` on the edge map of its outer box
@@ -192,7 +202,8 @@ def region_core(
     ``grid``), kept on the core; the outside pixels numbered ``seeds.count``; the
     sums of the per-pixel terms (log Î centred on ``centre``; with ``grain`` the grain
     maps too) over the regions. The border pairs carry the edge map with log Î weighed
-    ``border`` (``UnsupervisedParams.border_intensity_weight``; 1: the watershed's)."""
+    ``border`` (``UnsupervisedParams.border_intensity_weight``; 1: the watershed's), or
+    with ``gate`` its two terms apart (:func:`~..features.superpixels.edge_channels`)."""
     filled, v, _ = filled_box(maps, valid, ALL)
     edges = superpixel_edges(*filled, weight, scales)
     labels = watershed_on_grid(edges, seeds.markers(tile.outer), grid)
@@ -208,14 +219,18 @@ def region_core(
     terms = pixel_terms(*filled, centre=centre, texture=grain)
     px = {name: term[inner] for name, term in terms.items()}
     ids, count, terms, position = _sums(core, tile.core, px, n)
-    if border != 1.0:
-        edges = superpixel_edges(*filled, weight, scales, intensity_weight=border)
-    e = edges[inner]
+    if gate:
+        edges = edge_channels(*filled, weight, scales, intensity_weight=border)
+    elif border != 1.0:
+        edges = superpixel_edges(*filled, weight, scales, intensity_weight=border)[None]
+    else:
+        edges = edges[None]
+    e = edges[:, inner[0], inner[1]]
     pairs = [
         border_pairs(a, b, ea, eb, n)
         for a, b, ea, eb in (
-            (core[:, :-1], core[:, 1:], e[:, :-1], e[:, 1:]),
-            (core[:-1], core[1:], e[:-1], e[1:]),
+            (core[:, :-1], core[:, 1:], e[:, :, :-1], e[:, :, 1:]),
+            (core[:-1], core[1:], e[:, :-1], e[:, 1:]),
         )
         if a.size
     ]

@@ -63,7 +63,7 @@ from ..tile_map import boxes_at_once, tile_map_for, worker_bytes
 from ..tiles import MIN_CORE, Tile, TileGrid
 from .params import UnsupervisedParams
 from .pixel_maps import edge_weight
-from .region_diffusion import border_weights, symmetric
+from .region_diffusion import border_weights, gated_strength, symmetric
 from .region_features import features_of_sums
 from .segmenter import RegionModel, project_features
 from .shape_trend import surface_trend_share
@@ -216,12 +216,15 @@ class RegionSums:
             self.pairs.append(border_pairs(a, b, ea, eb, self.n))
 
     def borders(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """(rows, cols, length L_ab, strength e_ab = mean pair value) of every border."""
+        """(rows, cols, length L_ab, strength e_ab = mean pair value, (m, C): one column
+        per border map) of every border."""
         keys = np.concatenate([p[0] for p in self.pairs]) if self.pairs else np.zeros(0, int)
         merged, inverse = np.unique(keys, return_inverse=True)
         length = np.bincount(inverse, weights=np.concatenate([p[1] for p in self.pairs] or [[]]))
-        strength = np.bincount(inverse, weights=np.concatenate([p[2] for p in self.pairs] or [[]]))
-        return merged // self.n, merged % self.n, length, strength / np.maximum(length, 1e-300)
+        sums = np.concatenate([p[2] for p in self.pairs]) if self.pairs else np.zeros((0, 1))
+        strength = np.stack([np.bincount(inverse, weights=c) for c in sums.T], axis=1)
+        strength /= np.maximum(length, 1e-300)[:, None]
+        return merged // self.n, merged % self.n, length, strength
 
 
 def _keep_cut_lines(tile: Tile, core: CoreSums, lines: dict, shape: tuple[int, int]) -> None:
@@ -232,9 +235,11 @@ def _keep_cut_lines(tile: Tile, core: CoreSums, lines: dict, shape: tuple[int, i
         (tile.core[1].start, tile.core[1].stop),
     )
     if core.right is not None:
-        lines.setdefault(("col", c1), np.zeros((2, shape[0])))[:, r0:r1] = core.right
+        c = core.right.shape[1]
+        lines.setdefault(("col", c1), np.zeros((2, c, shape[0])))[:, :, r0:r1] = core.right
     if core.below is not None:
-        lines.setdefault(("row", r1), np.zeros((2, shape[1])))[:, c0:c1] = core.below
+        c = core.below.shape[1]
+        lines.setdefault(("row", r1), np.zeros((2, c, shape[1])))[:, :, c0:c1] = core.below
 
 
 def _cut_pairs(sums: RegionSums, regions: np.ndarray, lines: dict) -> None:
@@ -267,7 +272,7 @@ def _tile_pass(
     centre, scales = edge_scales(maps, valid, grid, weight > 0)
     seeds = Seeds.of(shape, seed_count(shape, p.area_of(shape)))
     block = p.watershed_grid_of(shape)
-    border = p.border_intensity_weight
+    border, gate = p.border_intensity_weight, p.border_gate > 0.0
     if grid.align % block:
         raise PolarsegError(f"tiles aligned to {grid.align} px, the watershed's blocks {block}")
     outside = seeds.count
@@ -278,7 +283,7 @@ def _tile_pass(
     def payloads() -> Iterator[tuple]:
         for tile in grid:
             box = box_payload(maps, valid, tile.outer)
-            yield (*box, tile, seeds, weight, scales, centre, shape, grain, block, border)
+            yield (*box, tile, seeds, weight, scales, centre, shape, grain, block, border, gate)
 
     cores = tile_map_for(grid)(region_core, payloads())
     for index, (tile, core) in enumerate(zip(grid, cores, strict=True)):
@@ -305,11 +310,13 @@ def _renumber(regions: np.ndarray, sums: RegionSums, outside: bool) -> tuple[np.
 
 
 def _graph(
-    sums: RegionSums, old: np.ndarray, n: int, tau: float
+    sums: RegionSums, old: np.ndarray, n: int, tau: float, z: np.ndarray, gate: float
 ) -> tuple[sps.csr_matrix, sps.csr_matrix | None]:
     """(shared-border lengths L_ab, edge-aware weights L_ab · exp(−(e_ab / τ)²) with
     τ = ``tau`` × the median e_ab over every border, outside pixels' too), both (n, n)
-    over the clustered superpixels (None below two)."""
+    over the clustered superpixels (None below two). With two border maps, e_ab is their
+    :func:`~.region_diffusion.gated_strength` (``gate``; ``z`` the regions' complex
+    polarisation in the new numbering)."""
     rows, cols, length, strength = sums.borders()
     lut = np.zeros(sums.n, dtype=np.int64)
     lut[old] = np.arange(old.size)
@@ -319,6 +326,10 @@ def _graph(
         return adjacency, None
     if rows.size == 0:
         return adjacency, sps.csr_matrix((n, n))
+    if strength.shape[1] == 2:
+        strength = gated_strength(strength, np.abs(z[rows] - z[cols]), gate)
+    else:
+        strength = strength[:, 0]
     scale = max(float(tau) * float(np.median(strength)), 1e-12)
     weights = border_weights(length, strength, scale)
     return adjacency, symmetric(rows, cols, weights, size)[:n][:, :n].tocsr()
@@ -359,7 +370,7 @@ def tiled_prepare_regions(
     x = features_of_sums(terms, count, q.features + q.texture, trend, centroid, shape)
     x = np.where(np.isfinite(x), x, 0.0)
     weight = raw[keep].astype(float)
-    adjacency, borders = _graph(sums, old, n, q.diffusion_tau)
+    adjacency, borders = _graph(sums, old, n, q.diffusion_tau, z_region, q.border_gate)
     if borders is None:
         z = np.zeros((n, 0))
     else:
