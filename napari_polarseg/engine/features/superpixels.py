@@ -115,22 +115,20 @@ def superpixel_edges(
 
 
 def edge_channels(
-    intensity: np.ndarray,
-    dop: np.ndarray,
-    phase: np.ndarray,
-    polarisation_edge_weight: float = 1.0,
+    maps: tuple[np.ndarray, np.ndarray, np.ndarray],
+    weights: tuple[float, float],
     scales: tuple[float, float] | None = None,
-    intensity_weight: float = 1.0,
 ) -> np.ndarray:
-    """(2, H, W) float32: the two terms of :func:`superpixel_edges` apart, the log Î edges
-    a · |∇(G * log Î)| / m_log and the Stokes edges w · |∇(G * (s1, s2))| / m_s (the
-    same weights and ``scales``), for borders that weigh them differently."""
-    grad, pol = edge_gradients(intensity, dop, phase, True)
+    """(2, H, W) float32: the two terms of :func:`superpixel_edges` apart for ``maps``
+    (Î, ρ, φ), the log Î edges a · |∇(G * log Î)| / m_log and the Stokes edges
+    w · |∇(G * (s1, s2))| / m_s, (a, w) = ``weights`` (the same ``scales``), for borders
+    that weigh them differently."""
+    grad, pol = edge_gradients(*maps, True)
     m_log = float(np.median(grad)) if scales is None else float(scales[0])
     m_pol = float(np.median(pol)) if scales is None else float(scales[1])
     out = np.empty((2, *grad.shape), dtype=np.float32)
-    out[0] = grad * (intensity_weight / max(m_log, 1e-12))
-    out[1] = pol * (polarisation_edge_weight / max(m_pol, 1e-12))
+    out[0] = grad * (weights[0] / max(m_log, 1e-12))
+    out[1] = pol * (weights[1] / max(m_pol, 1e-12))
     return out
 
 

@@ -116,8 +116,7 @@ def border_graph(
     terms apart, the log Î edges gated by the difference of the regions' complex
     polarisation ``z`` (:func:`~.region_diffusion.gated_adjacency`)."""
     if p.border_gate > 0.0:
-        w, a = edge_weight(p), p.border_intensity_weight
-        channels = edge_channels(*maps, w, intensity_weight=a)
+        channels = edge_channels(maps, (p.border_intensity_weight, edge_weight(p)))
         return gated_adjacency(regions, channels, z, p.border_gate, p.diffusion_tau)
     if p.border_intensity_weight != 1.0:
         edges = superpixel_edges(*maps, edge_weight(p), intensity_weight=p.border_intensity_weight)

@@ -220,7 +220,7 @@ def region_core(
     px = {name: term[inner] for name, term in terms.items()}
     ids, count, terms, position = _sums(core, tile.core, px, n)
     if gate:
-        edges = edge_channels(*filled, weight, scales, intensity_weight=border)
+        edges = edge_channels(filled, (border, weight), scales)
     elif border != 1.0:
         edges = superpixel_edges(*filled, weight, scales, intensity_weight=border)[None]
     else:
