@@ -13,7 +13,11 @@ from sklearn.metrics import adjusted_rand_score
 
 from napari_polarseg.engine import PRESETS, Scene
 from napari_polarseg.engine.errors import PolarsegError
-from napari_polarseg.engine.features.superpixels import edge_gradients, superpixel_edges
+from napari_polarseg.engine.features.superpixels import (
+    edge_channels,
+    edge_gradients,
+    superpixel_edges,
+)
 from napari_polarseg.engine.methods import get_method
 from napari_polarseg.engine.methods.registry import BUILT_IN
 from napari_polarseg.engine.methods.surface_superpixels import SurfaceSuperpixels
@@ -54,12 +58,13 @@ def test_the_border_map_is_the_stokes_edge_map_at_weight_zero():
     pol = Scene(sc.stack, sc.angles).polarisation(PRESETS["auto"])
     maps = (pol.intensity, pol.dop, pol.phase)
     _, stokes = edge_gradients(*maps, True)
-    np.testing.assert_allclose(
-        superpixel_edges(*maps, 1.0, intensity_weight=0.0), stokes / np.median(stokes)
-    )
+    zero = edge_channels(maps, (0.0, 1.0))
+    np.testing.assert_allclose(zero[1], stokes / np.median(stokes), rtol=1e-6)
+    assert not zero[0].any()
     both = superpixel_edges(*maps, 1.0)
-    half = superpixel_edges(*maps, 1.0, intensity_weight=0.5)
-    assert np.all(half <= both + 1e-12) and np.any(half < both - 1e-6)
+    np.testing.assert_allclose(edge_channels(maps, (1.0, 1.0)).sum(axis=0), both, rtol=1e-5)
+    half = edge_channels(maps, (0.5, 1.0)).sum(axis=0)
+    assert np.all(half <= both + 1e-5) and np.any(half < both - 1e-3)
 
 
 def test_tiled_borders_agree_with_the_whole_image():

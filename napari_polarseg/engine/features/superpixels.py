@@ -90,24 +90,19 @@ def superpixel_edges(
     phase: np.ndarray,
     polarisation_edge_weight: float = 1.0,
     scales: tuple[float, float] | None = None,
-    intensity_weight: float = 1.0,
 ) -> np.ndarray:
-    """Edge map (H, W), dimensionless:
-    a · |∇(G * log Î)| / m_log + w · |∇(G * (s1, s2))| / m_s.
+    """Edge map (H, W), dimensionless: |∇(G * log Î)| / m_log + w · |∇(G * (s1, s2))| / m_s.
 
     s1 = ρ cos 2φ and s2 = ρ sin 2φ are the Stokes components normalised by S0, G a
     Gaussian of :data:`EDGE_SIGMA` px (:func:`edge_gradients`), each gradient divided by
     its median m over the image (so the two edge maps weigh alike whatever the units;
-    ``scales`` = (m_log, m_s) when they are known, e.g. of a whole image cut into tiles),
-    w = ``polarisation_edge_weight`` (0: log Î alone) and a = ``intensity_weight`` (0:
-    the Stokes edges alone, blind to a step of Î across which ρ and φ run on, such as a
-    cast shadow's edge).
+    ``scales`` = (m_log, m_s) when they are known, e.g. of a whole image cut into tiles)
+    and w = ``polarisation_edge_weight`` (0: log Î alone). :func:`edge_channels` gives
+    its two terms apart, each with a weight of its own.
     """
     edges, pol = edge_gradients(intensity, dop, phase, polarisation_edge_weight > 0)
     m_log = float(np.median(edges)) if scales is None else float(scales[0])
     edges /= max(m_log, 1e-12)
-    if intensity_weight != 1.0:
-        edges *= intensity_weight
     if pol is not None:
         m_pol = float(np.median(pol)) if scales is None else float(scales[1])
         edges += polarisation_edge_weight * pol / max(m_pol, 1e-12)
@@ -122,7 +117,8 @@ def edge_channels(
     """(2, H, W) float32: the two terms of :func:`superpixel_edges` apart for ``maps``
     (Î, ρ, φ), the log Î edges a · |∇(G * log Î)| / m_log and the Stokes edges
     w · |∇(G * (s1, s2))| / m_s, (a, w) = ``weights`` (the same ``scales``), for borders
-    that weigh them differently."""
+    that weigh them differently (a = 0: the Stokes edges alone, blind to a step of Î
+    across which ρ and φ run on, such as a cast shadow's edge)."""
     grad, pol = edge_gradients(*maps, True)
     m_log = float(np.median(grad)) if scales is None else float(scales[0])
     m_pol = float(np.median(pol)) if scales is None else float(scales[1])

@@ -111,13 +111,17 @@ def border_graph(
 ) -> sps.csr_matrix:
     """The edge-aware border weights of the superpixels ``regions`` of ``maps`` (Î, ρ, φ)
     for the diffusion and the merge, τ = ``p.diffusion_tau``: read on the superpixels'
-    own ``edges`` (:func:`~.region_diffusion.edge_aware_adjacency`), on that map with log Î
-    weighed ``p.border_intensity_weight`` < 1, or with ``p.border_gate`` > 0 on its two
-    terms apart, the log Î edges gated by the difference of the regions' complex
-    polarisation ``z`` (:func:`~.region_diffusion.gated_adjacency`)."""
-    if p.border_gate > 0.0:
+    own ``edges`` (:func:`~.region_diffusion.edge_aware_adjacency`) or, where
+    :func:`reweighs_borders`, on its two terms apart, the log Î edges weighed
+    ``p.border_intensity_weight`` and gated by the difference of the regions' complex
+    polarisation ``z`` (``p.border_gate``; :func:`~.region_diffusion.gated_adjacency`)."""
+    if reweighs_borders(p):
         channels = edge_channels(maps, (p.border_intensity_weight, edge_weight(p)))
         return gated_adjacency(regions, channels, z, p.border_gate, p.diffusion_tau)
-    if p.border_intensity_weight != 1.0:
-        edges = superpixel_edges(*maps, edge_weight(p), intensity_weight=p.border_intensity_weight)
     return edge_aware_adjacency(regions, edges, p.diffusion_tau)
+
+
+def reweighs_borders(p: UnsupervisedParams) -> bool:
+    """Whether the borders weigh the two terms of the edge map otherwise than the
+    superpixels' map does (a log Î weight below 1 or a gate)."""
+    return p.border_gate > 0.0 or p.border_intensity_weight != 1.0

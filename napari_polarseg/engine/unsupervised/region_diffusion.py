@@ -91,8 +91,10 @@ def gated_strength(strength: np.ndarray, dz: np.ndarray, gate: float) -> np.ndar
     difference of the two superpixels' complex polarisation z = (S1 + iS2) / S0
     (dimensionless). A step of Î across which the polarisation runs on (a cast shadow's
     edge, Δz ≈ 0) weighs as a border only by its Stokes edges; one between superpixels
-    of differing polarisation keeps its log Î edges. Written here: the gate is this
-    package's own rule, no library has it."""
+    of differing polarisation keeps its log Î edges; ``gate`` <= 0: c_ab = 1, the two
+    summed. Written here: the gate is this package's own rule, no library has it."""
+    if gate <= 0.0:
+        return strength[:, 1] + strength[:, 0]
     t = max(float(gate) * float(np.median(dz)), 1e-12) if dz.size else 1.0
     c = 1.0 - np.exp(-np.minimum((dz / t) ** 2, 50.0))
     return strength[:, 1] + c * strength[:, 0]

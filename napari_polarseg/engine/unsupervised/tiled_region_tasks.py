@@ -193,7 +193,7 @@ def region_core(
     grain: bool = False,
     grid: int = 1,
     border: float = 1.0,
-    gate: bool = False,
+    apart: bool = False,
 ) -> CoreSums:
     """One tile's superpixels and sums (:mod:`.tiled_regions`, steps 1–3): the compact
     watershed from the whole image's ``seeds`` on the edge map of its outer box
@@ -201,9 +201,10 @@ def region_core(
     ``scales``; on its ``grid`` × ``grid`` blocks, the box starting on a multiple of
     ``grid``), kept on the core; the outside pixels numbered ``seeds.count``; the
     sums of the per-pixel terms (log Î centred on ``centre``; with ``grain`` the grain
-    maps too) over the regions. The border pairs carry the edge map with log Î weighed
-    ``border`` (``UnsupervisedParams.border_intensity_weight``; 1: the watershed's), or
-    with ``gate`` its two terms apart (:func:`~..features.superpixels.edge_channels`)."""
+    maps too) over the regions. The border pairs carry the watershed's edge map or, with
+    ``apart``, its two terms apart, the log Î one weighed ``border``
+    (``UnsupervisedParams.border_intensity_weight``;
+    :func:`~..features.superpixels.edge_channels`)."""
     filled, v, _ = filled_box(maps, valid, ALL)
     edges = superpixel_edges(*filled, weight, scales)
     labels = watershed_on_grid(edges, seeds.markers(tile.outer), grid)
@@ -219,12 +220,7 @@ def region_core(
     terms = pixel_terms(*filled, centre=centre, texture=grain)
     px = {name: term[inner] for name, term in terms.items()}
     ids, count, terms, position = _sums(core, tile.core, px, n)
-    if gate:
-        edges = edge_channels(filled, (border, weight), scales)
-    elif border != 1.0:
-        edges = superpixel_edges(*filled, weight, scales, intensity_weight=border)[None]
-    else:
-        edges = edges[None]
+    edges = edge_channels(filled, (border, weight), scales) if apart else edges[None]
     e = edges[:, inner[0], inner[1]]
     pairs = [
         border_pairs(a, b, ea, eb, n)

@@ -62,7 +62,7 @@ from ..limits import KEPT_MAPS, memory_limit
 from ..tile_map import boxes_at_once, tile_map_for, worker_bytes
 from ..tiles import MIN_CORE, Tile, TileGrid
 from .params import UnsupervisedParams
-from .pixel_maps import edge_weight
+from .pixel_maps import edge_weight, reweighs_borders
 from .region_diffusion import border_weights, gated_strength, symmetric
 from .region_features import features_of_sums
 from .segmenter import RegionModel, project_features
@@ -272,7 +272,7 @@ def _tile_pass(
     centre, scales = edge_scales(maps, valid, grid, weight > 0)
     seeds = Seeds.of(shape, seed_count(shape, p.area_of(shape)))
     block = p.watershed_grid_of(shape)
-    border, gate = p.border_intensity_weight, p.border_gate > 0.0
+    border, apart = p.border_intensity_weight, reweighs_borders(p)
     if grid.align % block:
         raise PolarsegError(f"tiles aligned to {grid.align} px, the watershed's blocks {block}")
     outside = seeds.count
@@ -283,7 +283,7 @@ def _tile_pass(
     def payloads() -> Iterator[tuple]:
         for tile in grid:
             box = box_payload(maps, valid, tile.outer)
-            yield (*box, tile, seeds, weight, scales, centre, shape, grain, block, border, gate)
+            yield (*box, tile, seeds, weight, scales, centre, shape, grain, block, border, apart)
 
     cores = tile_map_for(grid)(region_core, payloads())
     for index, (tile, core) in enumerate(zip(grid, cores, strict=True)):
@@ -315,8 +315,8 @@ def _graph(
     """(shared-border lengths L_ab, edge-aware weights L_ab · exp(−(e_ab / τ)²) with
     τ = ``tau`` × the median e_ab over every border, outside pixels' too), both (n, n)
     over the clustered superpixels (None below two). With two border maps, e_ab is their
-    :func:`~.region_diffusion.gated_strength` (``gate``; ``z`` the regions' complex
-    polarisation in the new numbering)."""
+    :func:`~.region_diffusion.gated_strength` (``gate``, 0: their sum; ``z`` the regions'
+    complex polarisation in the new numbering)."""
     rows, cols, length, strength = sums.borders()
     lut = np.zeros(sums.n, dtype=np.int64)
     lut[old] = np.arange(old.size)
