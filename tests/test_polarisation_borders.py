@@ -14,8 +14,9 @@ from sklearn.metrics import adjusted_rand_score
 from napari_polarseg.engine import PRESETS, Scene
 from napari_polarseg.engine.errors import PolarsegError
 from napari_polarseg.engine.features.superpixels import (
-    edge_channels,
+    border_channels,
     edge_gradients,
+    edge_terms,
     superpixel_edges,
 )
 from napari_polarseg.engine.methods import get_method
@@ -57,13 +58,22 @@ def test_the_border_map_is_the_stokes_edge_map_at_weight_zero():
     sc = make_scene("leaves", shape=(96, 120), seed=0)
     pol = Scene(sc.stack, sc.angles).polarisation(PRESETS["auto"])
     maps = (pol.intensity, pol.dop, pol.phase)
-    _, stokes = edge_gradients(*maps, True)
-    zero = edge_channels(maps, (0.0, 1.0))
+    log_i, stokes = edge_gradients(*maps, True)
+    terms = edge_terms(maps, 0.5)
+    # each term is its gradient over the gradient's median, the Stokes one weighed w
+    np.testing.assert_allclose(terms[0], log_i / np.median(log_i), rtol=1e-12)
+    np.testing.assert_allclose(terms[1], 0.5 * stokes / np.median(stokes), rtol=1e-12)
+    # the watershed's map is exactly their sum, the one computation serving both
+    np.testing.assert_array_equal(terms.sum(axis=0), superpixel_edges(*maps, 0.5))
+    assert edge_terms(maps, 0.0).shape == (1, *log_i.shape)
+    zero = border_channels(edge_terms(maps, 1.0), 0.0)
     np.testing.assert_allclose(zero[1], stokes / np.median(stokes), rtol=1e-6)
     assert not zero[0].any()
     both = superpixel_edges(*maps, 1.0)
-    np.testing.assert_allclose(edge_channels(maps, (1.0, 1.0)).sum(axis=0), both, rtol=1e-5)
-    half = edge_channels(maps, (0.5, 1.0)).sum(axis=0)
+    np.testing.assert_allclose(border_channels(edge_terms(maps), 1.0).sum(axis=0), both, rtol=1e-5)
+    half = border_channels(edge_terms(maps), 0.5).sum(axis=0)
+    # log Î alone (w = 0): the Stokes channel is zero
+    assert not border_channels(edge_terms(maps, 0.0), 1.0)[1].any()
     assert np.all(half <= both + 1e-5) and np.any(half < both - 1e-3)
 
 

@@ -84,6 +84,27 @@ def edge_gradients(
     return grad, pol
 
 
+def edge_terms(
+    maps: tuple[np.ndarray, np.ndarray, np.ndarray],
+    polarisation_edge_weight: float = 1.0,
+    scales: tuple[float, float] | None = None,
+) -> np.ndarray:
+    """(C, H, W) float64, dimensionless: the terms of :func:`superpixel_edges` of
+    ``maps`` (Î, ρ, φ) apart, |∇(G * log Î)| / m_log and, when w > 0,
+    w · |∇(G * (s1, s2))| / m_s (C = 2; C = 1 when w = 0), so that one computation of
+    the gradients serves the watershed (their sum) and borders that weigh the two
+    differently (:func:`border_channels`)."""
+    grad, pol = edge_gradients(*maps, polarisation_edge_weight > 0)
+    out = np.empty((1 if pol is None else 2, *grad.shape))
+    m_log = float(np.median(grad)) if scales is None else float(scales[0])
+    np.divide(grad, max(m_log, 1e-12), out=out[0])
+    if pol is not None:
+        m_pol = float(np.median(pol)) if scales is None else float(scales[1])
+        # w · pol / m (not pol · (w / m)): the sum rounds as the edge map always has
+        np.divide(polarisation_edge_weight * pol, max(m_pol, 1e-12), out=out[1])
+    return out
+
+
 def superpixel_edges(
     intensity: np.ndarray,
     dop: np.ndarray,
@@ -97,34 +118,21 @@ def superpixel_edges(
     Gaussian of :data:`EDGE_SIGMA` px (:func:`edge_gradients`), each gradient divided by
     its median m over the image (so the two edge maps weigh alike whatever the units;
     ``scales`` = (m_log, m_s) when they are known, e.g. of a whole image cut into tiles)
-    and w = ``polarisation_edge_weight`` (0: log Î alone). :func:`edge_channels` gives
-    its two terms apart, each with a weight of its own.
+    and w = ``polarisation_edge_weight`` (0: log Î alone): the sum of
+    :func:`edge_terms`.
     """
-    edges, pol = edge_gradients(intensity, dop, phase, polarisation_edge_weight > 0)
-    m_log = float(np.median(edges)) if scales is None else float(scales[0])
-    edges /= max(m_log, 1e-12)
-    if pol is not None:
-        m_pol = float(np.median(pol)) if scales is None else float(scales[1])
-        edges += polarisation_edge_weight * pol / max(m_pol, 1e-12)
-    return edges
+    return edge_terms((intensity, dop, phase), polarisation_edge_weight, scales).sum(axis=0)
 
 
-def edge_channels(
-    maps: tuple[np.ndarray, np.ndarray, np.ndarray],
-    weights: tuple[float, float],
-    scales: tuple[float, float] | None = None,
-) -> np.ndarray:
-    """(2, H, W) float32: the two terms of :func:`superpixel_edges` apart for ``maps``
-    (Î, ρ, φ), the log Î edges a · |∇(G * log Î)| / m_log and the Stokes edges
-    w · |∇(G * (s1, s2))| / m_s, (a, w) = ``weights`` (the same ``scales``), for borders
-    that weigh them differently (a = 0: the Stokes edges alone, blind to a step of Î
-    across which ρ and φ run on, such as a cast shadow's edge)."""
-    grad, pol = edge_gradients(*maps, True)
-    m_log = float(np.median(grad)) if scales is None else float(scales[0])
-    m_pol = float(np.median(pol)) if scales is None else float(scales[1])
-    out = np.empty((2, *grad.shape), dtype=np.float32)
-    out[0] = grad * (weights[0] / max(m_log, 1e-12))
-    out[1] = pol * (weights[1] / max(m_pol, 1e-12))
+def border_channels(terms: np.ndarray, intensity_weight: float) -> np.ndarray:
+    """(2, H, W) float32: the log Î and the Stokes edge maps of :func:`edge_terms`
+    ``terms``, the log Î one weighed a = ``intensity_weight`` (a = 0: the Stokes edges
+    alone, blind to a step of Î across which ρ and φ run on, such as a cast shadow's
+    edge; the Stokes map zero where the terms hold the log Î one alone), for borders
+    that weigh the two differently."""
+    out = np.zeros((2, *terms.shape[1:]), dtype=np.float32)
+    np.multiply(terms[0], intensity_weight, out=out[0], casting="same_kind")
+    out[1 : len(terms)] = terms[1:]
     return out
 
 

@@ -81,7 +81,7 @@ class UnsupervisedParams:
         Weight of the Stokes edge map against the log Î one (``boundary="polarisation"``).
     border_intensity_weight : float
         Weight of the log Î edge map in the border strengths of the diffusion and of the
-        merge (:func:`~napari_polarseg.engine.features.superpixels.edge_channels`'
+        merge (:func:`~napari_polarseg.engine.features.superpixels.border_channels`'
         a), in [0, 1]; the superpixels follow their own map whatever it is. 1: the
         superpixels' map; 0: the Stokes edges alone, so the diffusion and the merge cross
         a step of Î across which ρ and φ run on (a cast shadow's edge, a fold in the

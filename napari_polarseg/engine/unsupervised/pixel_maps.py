@@ -15,7 +15,7 @@ import scipy.sparse as sps
 from ..chunks import in_background
 from ..errors import PolarsegError
 from ..features.pixel_features import check_maps
-from ..features.superpixels import edge_channels, superpixel_edges
+from ..features.superpixels import border_channels, edge_terms
 from ..physics.pixel_mask import nearest_valid
 from .params import UnsupervisedParams
 from .region_diffusion import edge_aware_adjacency, gated_adjacency
@@ -44,10 +44,11 @@ class PixelMaps:
         With a mask, the flat index of the nearest valid pixel of every pixel.
     terms : dict of str to ndarray (H, W)
         The per-pixel maps of the node features (:func:`.region_features.pixel_terms`).
-    edges : ndarray (H, W)
-        The superpixels' edge map
-        (:func:`~napari_polarseg.engine.features.superpixels.superpixel_edges`), the
-        polarisation edges weighted ``edge_weight``.
+    edge_terms : ndarray (C, H, W)
+        The terms of the superpixels' edge map apart
+        (:func:`~napari_polarseg.engine.features.superpixels.edge_terms`), the
+        polarisation edges weighted ``edge_weight``: their sum is the map the watershed
+        follows, the borders may weigh them differently (:func:`border_graph`).
     edge_weight : float
     """
 
@@ -55,7 +56,7 @@ class PixelMaps:
     valid: np.ndarray | None
     nearest: np.ndarray | None
     terms: dict[str, np.ndarray]
-    edges: np.ndarray
+    edge_terms: np.ndarray
     edge_weight: float
 
 
@@ -98,27 +99,24 @@ def pixel_maps(
     # the grain maps only for parameters that read them (the other methods skip their cost)
     grain = reads_grain(p.features + p.texture)
     terms = in_background(lambda: pixel_terms(i, d, ph, texture=grain))
-    edges = superpixel_edges(i, d, ph, edge_weight(p))
+    edges = edge_terms((i, d, ph), edge_weight(p))
     return PixelMaps((i, d, ph), valid, nearest, terms(), edges, edge_weight(p))
 
 
 def border_graph(
-    maps: tuple[np.ndarray, np.ndarray, np.ndarray],
-    p: UnsupervisedParams,
-    edges: np.ndarray,
-    regions: np.ndarray,
-    z: np.ndarray,
+    p: UnsupervisedParams, terms: np.ndarray, regions: np.ndarray, z: np.ndarray
 ) -> sps.csr_matrix:
-    """The edge-aware border weights of the superpixels ``regions`` of ``maps`` (Î, ρ, φ)
-    for the diffusion and the merge, τ = ``p.diffusion_tau``: read on the superpixels'
-    own ``edges`` (:func:`~.region_diffusion.edge_aware_adjacency`) or, where
-    :func:`reweighs_borders`, on its two terms apart, the log Î edges weighed
+    """The edge-aware border weights of the superpixels ``regions`` for the diffusion and
+    the merge, τ = ``p.diffusion_tau``, read on the terms of their edge map ``terms``
+    (:func:`~napari_polarseg.engine.features.superpixels.edge_terms`): summed, as the
+    watershed follows them (:func:`~.region_diffusion.edge_aware_adjacency`), or, where
+    :func:`reweighs_borders`, apart, the log Î edges weighed
     ``p.border_intensity_weight`` and gated by the difference of the regions' complex
     polarisation ``z`` (``p.border_gate``; :func:`~.region_diffusion.gated_adjacency`)."""
     if reweighs_borders(p):
-        channels = edge_channels(maps, (p.border_intensity_weight, edge_weight(p)))
+        channels = border_channels(terms, p.border_intensity_weight)
         return gated_adjacency(regions, channels, z, p.border_gate, p.diffusion_tau)
-    return edge_aware_adjacency(regions, edges, p.diffusion_tau)
+    return edge_aware_adjacency(regions, terms.sum(axis=0), p.diffusion_tau)
 
 
 def reweighs_borders(p: UnsupervisedParams) -> bool:

@@ -105,7 +105,7 @@ def gated_adjacency(
 ) -> sps.csr_matrix:
     """:func:`edge_aware_adjacency` with the strengths of :func:`gated_strength`:
     ``channels`` (2, H, W) the log Î and the Stokes edge maps
-    (:func:`~napari_polarseg.engine.features.superpixels.edge_channels`), ``z`` (n,)
+    (:func:`~napari_polarseg.engine.features.superpixels.border_channels`), ``z`` (n,)
     the regions' complex polarisation."""
     rows, cols, length, s_int = border_strength(regions, channels[0])
     s_pol = border_strength(regions, channels[1])[3]

@@ -89,10 +89,10 @@ from ..degenerate import degenerate_result
 from ..errors import PolarsegError
 from ..features.pca import pca_features, whiten
 from ..features.superpixels import (
+    edge_terms,
     polarisation_superpixels,
     relabel,
     seed_count,
-    superpixel_edges,
     watershed_on_grid,
 )
 from .boundaries import refine_maps, refined_labels
@@ -317,10 +317,10 @@ def _superpixels(
     ph: np.ndarray,
     p: UnsupervisedParams,
     progress: Callable[[float], None] | None = None,
-    edges: np.ndarray | None = None,
+    terms: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """(superpixels, their edge map) of ``p.boundary`` (module docstring, step 1); the
-    edge map is made unless given.
+    """(superpixels, the terms of their edge map) of ``p.boundary`` (module docstring,
+    step 1); the terms (:func:`edge_terms`) are made unless given.
 
     ``progress`` is called with 0.25 after the edge map and then every
     :data:`~napari_polarseg.engine.chunks.STOP_POLL_S` during the watershed (one
@@ -328,10 +328,11 @@ def _superpixels(
     run stops at once (:func:`~napari_polarseg.engine.chunks.call_stoppable`).
     """
     area = p.area_of(i.shape)
-    if edges is None:
-        edges = superpixel_edges(i, d, ph, edge_weight(p))
+    if terms is None:
+        terms = edge_terms((i, d, ph), edge_weight(p))
     if p.boundary == "polarisation":
         grid = p.watershed_grid_of(i.shape)
+        edges = terms.sum(axis=0)
 
         def work() -> np.ndarray:
             if grid == 1:
@@ -347,9 +348,9 @@ def _superpixels(
             return relabel(superpixels(i, area))
 
     if progress is None:
-        return work(), edges
+        return work(), terms
     progress(0.25)
-    return call_stoppable(work, lambda: progress(0.25)), edges
+    return call_stoppable(work, lambda: progress(0.25)), terms
 
 
 @dataclass(frozen=True)
@@ -457,8 +458,8 @@ def prepare_regions(
         pixels = pixel_maps(intensity, dop, phase, p, valid)
     step(0.05)
     (i, d, ph), valid, nearest = pixels.maps, pixels.valid, pixels.nearest
-    edges = pixels.edges if pixels.edge_weight == edge_weight(p) else None
-    regions, edges = _superpixels(i, d, ph, p, progress, edges)
+    terms = pixels.edge_terms if pixels.edge_weight == edge_weight(p) else None
+    regions, terms = _superpixels(i, d, ph, p, progress, terms)
     step(0.5)
     regions, n = _masked_regions(regions, valid)
     keep = slice(0, n)
@@ -477,7 +478,7 @@ def prepare_regions(
     if n < 2:
         z = np.zeros((n, 0))
     else:  # the border weights serve the diffusion and the merge by weakest border
-        borders = border_graph((i, d, ph), q, edges, regions, z_region)[keep][:, keep].tocsr()
+        borders = border_graph(q, terms, regions, z_region)[keep][:, keep].tocsr()
         z = project_features(x[keep], weight, borders, adjacency, q)
     maps = refine_maps(i, d) if q.refine_boundaries else None
     return RegionModel(

@@ -17,9 +17,9 @@ from skimage.util import regular_grid
 
 from ..features.pixel_features import check_maps
 from ..features.superpixels import (
-    edge_channels,
+    border_channels,
     edge_gradients,
-    superpixel_edges,
+    edge_terms,
     watershed_on_grid,
 )
 from ..tiles import Box, Tile
@@ -204,9 +204,10 @@ def region_core(
     maps too) over the regions. The border pairs carry the watershed's edge map or, with
     ``apart``, its two terms apart, the log Î one weighed ``border``
     (``UnsupervisedParams.border_intensity_weight``;
-    :func:`~..features.superpixels.edge_channels`)."""
+    :func:`~..features.superpixels.border_channels`)."""
     filled, v, _ = filled_box(maps, valid, ALL)
-    edges = superpixel_edges(*filled, weight, scales)
+    parts = edge_terms(filled, weight, scales)
+    edges = parts.sum(axis=0)
     labels = watershed_on_grid(edges, seeds.markers(tile.outer), grid)
     inner = tile.inner
     core = labels[inner] - 1
@@ -220,7 +221,8 @@ def region_core(
     terms = pixel_terms(*filled, centre=centre, texture=grain)
     px = {name: term[inner] for name, term in terms.items()}
     ids, count, terms, position = _sums(core, tile.core, px, n)
-    edges = edge_channels(filled, (border, weight), scales) if apart else edges[None]
+    edges = border_channels(parts, border) if apart else edges[None]
+    del parts
     e = edges[:, inner[0], inner[1]]
     pairs = [
         border_pairs(a, b, ea, eb, n)

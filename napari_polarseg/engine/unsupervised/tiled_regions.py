@@ -81,8 +81,9 @@ from .tiled_region_tasks import (
 )
 
 #: Bytes a pixel of the whole-image preparation and labelling beyond the pipeline's
-#: kept maps (measured: 134 on a 5 MP frame).
-WHOLE_BYTES_PER_PIXEL = 160
+#: kept maps, the edge map's two terms among them (measured on the 5 MP frame of
+#: ``benchmarks/bench_scale.py``: a peak of 1.13 GiB, 0.09 of it the interpreter's).
+WHOLE_BYTES_PER_PIXEL = 176
 #: Bytes a pixel of one outer box while it is prepared: its filled maps, edge map and
 #: gradients, the watershed's copies and the ten float64 per-pixel terms.
 TILE_BYTES_PER_PIXEL = 200
