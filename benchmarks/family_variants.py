@@ -16,21 +16,25 @@ consensus of the default's run and runs with other node parameters on the same
 superpixels (``consensus …``: :class:`ReachConsensus`). The
 development halves are read; ``--test-base B`` reads round B's test halves instead,
 only to check a choice on a test half already read and reported (a fresh round's is
-for reporting). ``--oracle`` also prints, by family, the mean of the best variant of
-each frame, chosen with the truth: how far a perfect per-scene choice among the
-variants could go.
+for reporting). ``--read-rounds B,B`` adds the test halves of rounds read before to
+the development halves of every rendered family: more development scenes, which the
+small family needs (its 24 development scenes put the default 0.09 above
+``superpixels`` where the fresh rounds have the two level). ``--oracle`` also prints,
+by family, the mean of the best variant of each frame, chosen with the truth: how far a
+perfect per-scene choice among the variants could go.
 
 Usage::
 
     cd benchmarks && OMP_NUM_THREADS=1 PYTHONPATH=.. python family_variants.py \\
         [--families objects,small,textured,diffuse,real] [--variants NAME,NAME]
-        [--test-base B] [--oracle]
+        [--test-base B] [--read-rounds B,B] [--oracle]
 """
 
 from __future__ import annotations
 
 import argparse
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from functools import partial
 from typing import Any
@@ -438,6 +442,18 @@ def frame_scores(
     return {n: score(frame, scene, params, methods[n], v) for n, v in chosen.items()}
 
 
+def development_frames(
+    family: str, half: str, test_base: int, read_rounds: list[int]
+) -> Iterator[Frame]:
+    """The frames of ``family``'s ``half`` and, on the development half of a rendered
+    family, those of the test halves of ``read_rounds`` (read before: development
+    scenes now)."""
+    yield from frames(family, half, test_base)
+    if half == "dev" and family != "real":
+        for b in read_rounds:
+            yield from frames(family, "test", b)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--families", default=",".join(FAMILIES))
@@ -457,9 +473,17 @@ def main(argv: list[str] | None = None) -> int:
         help="also print, by family, the mean of the best variant of each frame (a "
         "per-frame choice made with the truth: what a perfect criterion could reach)",
     )
+    ap.add_argument(
+        "--read-rounds",
+        default="",
+        metavar="B[,B...]",
+        help="add these test rounds, already read and reported, to the development halves "
+        "of every rendered family (more development scenes; never a fresh round)",
+    )
     add_check_round(ap)
     args = ap.parse_args(argv)
     half = read_half(args.test_base)
+    read_rounds = [int(b) for b in args.read_rounds.split(",") if b]
     chosen = {n: VARIANTS[n] for n in args.variants.split(",") if n}
     for text in args.grid:
         name, spec = text.split("=", 1)
@@ -474,7 +498,7 @@ def main(argv: list[str] | None = None) -> int:
     names: dict[str, list[str]] = {}
     t0 = time.perf_counter()
     for family in args.families.split(","):
-        for frame in frames(family, half, args.test_base or 0):
+        for frame in development_frames(family, half, args.test_base or 0, read_rounds):
             names.setdefault(family, []).append(frame.name)
             line = []
             for n, value in frame_scores(frame, chosen, methods).items():

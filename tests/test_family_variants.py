@@ -130,3 +130,19 @@ def test_the_medoid_is_the_labelling_the_others_agree_with():
     assert family_variants.medoid([noise, nudged, cut]) in (1, 2)
     assert family_variants.medoid([noise, cut, cut.copy()], prefer=2) == 2
     assert family_variants.medoid([cut, cut.copy(), cut.copy()], prefer=1) == 1
+
+
+def test_read_rounds_join_the_development_halves_only(monkeypatch):
+    """``--read-rounds``: the test halves of rounds read before follow a rendered
+    family's development half; the real frames and a checked test half get none."""
+
+    def halves(family, half, test_base=0):
+        yield (family, half, test_base)
+
+    monkeypatch.setattr(family_variants, "frames", halves)
+    dev = list(family_variants.development_frames("small", "dev", 0, [18, 19]))
+    assert dev == [("small", "dev", 0), ("small", "test", 18), ("small", "test", 19)]
+    assert list(family_variants.development_frames("real", "dev", 0, [18])) == [("real", "dev", 0)]
+    assert list(family_variants.development_frames("small", "test", 17, [18])) == [
+        ("small", "test", 17)
+    ]
