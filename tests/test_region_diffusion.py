@@ -29,6 +29,21 @@ def test_border_lengths_and_strengths():
     np.testing.assert_allclose(strength, [2.0, 0.0])
 
 
+def test_several_edge_maps_are_read_along_the_same_borders():
+    """A (C, H, W) stack gives one strength column per map, each that map's own."""
+    regions = strip_regions(3)
+    first, second = np.zeros(regions.shape), np.zeros(regions.shape)
+    first[:, 4], second[:, 8] = 2.0, 3.0  # on the 0|1 border, on the 1|2 border
+    rows, cols, length, both = border_strength(regions, np.stack([first, second]))
+    assert both.shape == (2, 2)
+    for column, edges in enumerate((first, second)):
+        r, c, n, alone = border_strength(regions, edges)
+        np.testing.assert_array_equal(both[:, column], alone)
+        assert r.tolist() == rows.tolist() and c.tolist() == cols.tolist()
+        np.testing.assert_array_equal(n, length)
+    np.testing.assert_allclose(both, [[2.0, 0.0], [0.0, 3.0]])
+
+
 def test_diffusion_mixes_across_weak_borders_only():
     """Strips 0-2 and 3-5 are two surfaces split by a strong edge: after diffusion each
     strip holds its surface's mean feature, and the surfaces keep theirs."""

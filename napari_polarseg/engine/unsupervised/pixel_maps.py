@@ -99,8 +99,8 @@ def pixel_maps(
     # the grain maps only for parameters that read them (the other methods skip their cost)
     grain = reads_grain(p.features + p.texture)
     terms = in_background(lambda: pixel_terms(i, d, ph, texture=grain))
-    edges = edge_terms((i, d, ph), edge_weight(p))
-    return PixelMaps((i, d, ph), valid, nearest, terms(), edges, edge_weight(p))
+    parts = edge_terms((i, d, ph), edge_weight(p))
+    return PixelMaps((i, d, ph), valid, nearest, terms(), parts, edge_weight(p))
 
 
 def border_graph(

@@ -34,8 +34,8 @@ def border_strength(
     ----------
     regions : int array (H, W)
         Region of every pixel, 0 … n − 1.
-    edges : float array (H, W)
-        Edge map (any non-negative units).
+    edges : float array (H, W) or (C, H, W)
+        Edge map (any non-negative units), or C of them read along the same borders.
     pair : ufunc
         How a pixel pair's edge value is made of its two pixels' (``np.maximum``: the
         larger; ``np.minimum``: the smaller, which places a blurred edge between the
@@ -47,9 +47,10 @@ def border_strength(
         The two regions of each border, rows < cols.
     length : float array (m,)
         4-neighbour pixel pairs across the border.
-    strength : float array (m,)
-        Mean over those pairs of the pair's edge value (``pair``).
+    strength : float array (m,) or (m, C)
+        Mean over those pairs of the pair's edge value (``pair``), one column per map.
     """
+    maps = edges[None] if edges.ndim == 2 else edges
     a_parts, b_parts, e_parts = [], [], []
     for sl_a, sl_b in (
         ((slice(None), slice(None, -1)), (slice(None), slice(1, None))),
@@ -59,15 +60,18 @@ def border_strength(
         differ = a != b
         a_parts.append(a[differ])
         b_parts.append(b[differ])
-        e_parts.append(pair(edges[sl_a][differ], edges[sl_b][differ]))
+        e_parts.append(
+            pair(maps[(slice(None), *sl_a)][:, differ], maps[(slice(None), *sl_b)][:, differ])
+        )
     a = np.concatenate(a_parts).astype(np.int64)
     b = np.concatenate(b_parts).astype(np.int64)
-    e = np.concatenate(e_parts).astype(np.float64)
+    e = np.concatenate(e_parts, axis=1).astype(np.float64)
     lo, hi = np.minimum(a, b), np.maximum(a, b)
     n = int(regions.max()) + 1
     pair, inverse = np.unique(lo * n + hi, return_inverse=True)
     length = np.bincount(inverse).astype(np.float64)
-    strength = np.bincount(inverse, weights=e) / length
+    strength = np.stack([np.bincount(inverse, weights=c) for c in e], axis=1) / length[:, None]
+    strength = strength[:, 0] if edges.ndim == 2 else strength
     return (pair // n).astype(np.int64), (pair % n).astype(np.int64), length, strength
 
 
@@ -77,7 +81,19 @@ def edge_aware_adjacency(
     """Symmetric (n, n) weights L_ab · exp(−(e_ab / τ)²) of the module docstring,
     τ = ``tau`` × the median border strength."""
     rows, cols, length, strength = border_strength(regions, edges)
-    n = int(regions.max()) + 1
+    return weighted_graph(rows, cols, length, strength, int(regions.max()) + 1, tau)
+
+
+def weighted_graph(
+    rows: np.ndarray,
+    cols: np.ndarray,
+    length: np.ndarray,
+    strength: np.ndarray,
+    n: int,
+    tau: float,
+) -> sps.csr_matrix:
+    """The symmetric (n, n) weights L_ab · exp(−(e_ab / τ)²) of the borders (rows,
+    cols) of ``length`` and ``strength``, τ = ``tau`` × their median strength."""
     if rows.size == 0:
         return sps.csr_matrix((n, n))
     scale = max(float(tau) * float(np.median(strength)), 1e-12)
@@ -107,14 +123,9 @@ def gated_adjacency(
     ``channels`` (2, H, W) the log Î and the Stokes edge maps
     (:func:`~napari_polarseg.engine.features.superpixels.border_channels`), ``z`` (n,)
     the regions' complex polarisation."""
-    rows, cols, length, s_int = border_strength(regions, channels[0])
-    s_pol = border_strength(regions, channels[1])[3]
-    n = int(regions.max()) + 1
-    if rows.size == 0:
-        return sps.csr_matrix((n, n))
-    strength = gated_strength(np.stack([s_int, s_pol], axis=1), np.abs(z[rows] - z[cols]), gate)
-    scale = max(float(tau) * float(np.median(strength)), 1e-12)
-    return symmetric(rows, cols, border_weights(length, strength, scale), n)
+    rows, cols, length, both = border_strength(regions, channels)
+    strength = gated_strength(both, np.abs(z[rows] - z[cols]), gate)
+    return weighted_graph(rows, cols, length, strength, int(regions.max()) + 1, tau)
 
 
 def border_weights(length: np.ndarray, strength: np.ndarray, scale: float) -> np.ndarray:

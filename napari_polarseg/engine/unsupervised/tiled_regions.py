@@ -63,7 +63,7 @@ from ..tile_map import boxes_at_once, tile_map_for, worker_bytes
 from ..tiles import MIN_CORE, Tile, TileGrid
 from .params import UnsupervisedParams
 from .pixel_maps import edge_weight, reweighs_borders
-from .region_diffusion import border_weights, gated_strength, symmetric
+from .region_diffusion import gated_strength, symmetric, weighted_graph
 from .region_features import features_of_sums
 from .segmenter import RegionModel, project_features
 from .shape_trend import surface_trend_share
@@ -325,15 +325,11 @@ def _graph(
     adjacency = symmetric(rows, cols, length, size)[:n][:, :n].tocsr()
     if n < 2:
         return adjacency, None
-    if rows.size == 0:
-        return adjacency, sps.csr_matrix((n, n))
     if strength.shape[1] == 2:
         strength = gated_strength(strength, np.abs(z[rows] - z[cols]), gate)
     else:
         strength = strength[:, 0]
-    scale = max(float(tau) * float(np.median(strength)), 1e-12)
-    weights = border_weights(length, strength, scale)
-    return adjacency, symmetric(rows, cols, weights, size)[:n][:, :n].tocsr()
+    return adjacency, weighted_graph(rows, cols, length, strength, size, tau)[:n][:, :n].tocsr()
 
 
 def tiled_prepare_regions(
